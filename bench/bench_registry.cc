@@ -1,0 +1,41 @@
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "bench.h"
+
+namespace holo::bench {
+
+std::map<std::string, BenchInfo>& Registry() {
+  static std::map<std::string, BenchInfo> registry;
+  return registry;
+}
+
+bool Register(const std::string& name, const std::string& description, BenchFn fn) {
+  Registry()[name] = BenchInfo{description, std::move(fn)};
+  return true;
+}
+
+void EmitFigure(const std::string& bench, const std::string& workload, const std::string& metric, double value,
+                const std::string& unit, const std::map<std::string, std::string>& qualifiers) {
+  nlohmann::ordered_json j;
+  j["bench"] = bench;
+  j["workload"] = workload;
+  j["metric"] = metric;
+  j["value"] = std::isfinite(value) ? std::round(value * 1e4) / 1e4 : 0.0;
+  j["unit"] = unit;
+  for (const auto& [k, v] : qualifiers) j[k] = v;
+  std::printf("%s\n", j.dump().c_str());
+  std::fflush(stdout);
+}
+
+double Median(std::vector<double> values) {
+  if (values.empty()) return 0;
+  std::sort(values.begin(), values.end());
+  const size_t n = values.size();
+  return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+}
+
+}  // namespace holo::bench

@@ -1,0 +1,114 @@
+// The synthetic studio: a deterministic, procedurally animated scene (an
+// articulated figure or two, a moving prop, a textured room, one light that
+// casts shadows) rendered from every pod of a rig, with an active-stereo
+// depth noise model and exact ground truth. It is the default input of every
+// stage and the yardstick of every benchmark.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/camera.h"
+#include "common/image.h"
+#include "common/mesh.h"
+#include "common/rgbd.h"
+#include "common/rig.h"
+#include "common/status.h"
+#include "server/capture/frame_source.h"
+
+namespace holo {
+
+struct DepthNoiseOptions {
+  // Axial noise σ at 1 m, millimetres; σ grows with z² (σ(z) = σ1·z²).
+  float sigma_at_1m_mm = 3.0f;
+  // Pixels whose surface is seen at more than this angle from the normal
+  // drop out (depth 0), with probability ramping up over the last 10°.
+  float grazing_dropout_deg = 78.0f;
+  // Pixels next to a depth edge larger than this get a mixed ("flying")
+  // depth between the two surfaces with probability `flying_pixel_prob`.
+  float flying_edge_mm = 60.0f;
+  float flying_pixel_prob = 0.5f;
+  // Random dropouts anywhere (speckle), probability per pixel.
+  float random_dropout_prob = 0.002f;
+  // Depth beyond this is invalid (sensor range), metres.
+  float max_range_m = 6.0f;
+  Status Check() const;
+};
+
+struct StudioOptions {
+  // Seed of every random choice (noise, colour variations); same seed and
+  // options → byte-identical frames.
+  uint64_t seed = 1;
+  // Articulated figures (1 or 2) and props (0..2).
+  int num_figures = 1;
+  int num_props = 1;
+  double fps = 30.0;
+  // Render the room alone, for background learning.
+  bool empty_room = false;
+  // Apply the depth noise model (off: depth equals ground truth).
+  bool depth_noise = true;
+  DepthNoiseOptions noise;
+  // Per-pod colour gain/offset differences (what colour calibration fixes).
+  bool color_variation = true;
+  // Worker threads for rendering (0 = hardware concurrency).
+  int threads = 0;
+  Status Check() const;
+};
+
+// Exact truth of one frame.
+struct StudioGroundTruth {
+  int64_t frame_index = 0;
+  int64_t timestamp_us = 0;
+  std::vector<ImageDepth16> depth;  // noise-free depth per pod (depth camera), mm
+  std::vector<ImageGray8> mask;     // exact foreground (figures + props) per pod, 255 = foreground
+  // Foreground surface (figures and props) in world coordinates. Same vertex
+  // count and triangles every frame: vertex i of frame t and of frame t+1 are
+  // the same material point, so the true motion of every point is known.
+  Mesh foreground_mesh;
+};
+
+class SyntheticStudio final : public FrameSource {
+ public:
+  // `rig` must pass Rig::Check and `options` StudioOptions::Check (HOLO_CHECK otherwise;
+  // use Create for untrusted values).
+  SyntheticStudio(Rig rig, StudioOptions options);
+  ~SyntheticStudio() override;
+  SyntheticStudio(const SyntheticStudio&) = delete;
+  SyntheticStudio& operator=(const SyntheticStudio&) = delete;
+
+  static StatusOr<std::unique_ptr<SyntheticStudio>> Create(Rig rig, StudioOptions options);
+
+  // Renders frame `frame_index` of every pod into `frames` (reusing its
+  // buffers) and, if `gt` is not null, its ground truth.
+  void RenderFrame(int64_t frame_index, RgbdFrameSet* frames, StudioGroundTruth* gt);
+
+  // The foreground mesh (world coordinates, per-vertex colour) at `frame_index`.
+  Mesh ForegroundMesh(int64_t frame_index) const;
+  // Ground-truth render of the whole scene from any camera: noise-free colour
+  // (no per-pod colour variation), depth in mm and foreground mask. Any
+  // output may be null.
+  void RenderView(int64_t frame_index, const CameraModel& camera, ImageRgb8* color, ImageDepth16* depth,
+                  ImageGray8* mask) const;
+
+  // Capture timestamp of a frame, µs (frame_index / fps).
+  int64_t TimestampUs(int64_t frame_index) const;
+
+  // FrameSource: an endless live source starting at frame 0.
+  const Rig& rig() const override { return rig_; }
+  Status Next(RgbdFrameSet* out) override;
+  int64_t num_frames() const override { return -1; }
+  Status Seek(int64_t index) override;
+
+  const StudioOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  Rig rig_;
+  StudioOptions options_;
+  std::unique_ptr<Impl> impl_;
+  int64_t next_frame_ = 0;
+};
+
+}  // namespace holo
