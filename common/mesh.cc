@@ -7,6 +7,8 @@
 #include <cstring>
 #include <sstream>
 
+#include <Eigen/Geometry>  // Vector3f::cross is defined here, not in <Eigen/Core>
+
 #include "common/file_util.h"
 
 namespace holo {
