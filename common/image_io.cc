@@ -53,10 +53,25 @@ bool IsPng(const uint8_t* data, size_t size) {
   return size >= 8 && std::memcmp(data, kMagic, 8) == 0;
 }
 
+// Larger images are refused before decoding (an untrusted header must not
+// make us allocate gigabytes): 64 Mpixel, e.g. 8192x8192.
+constexpr uint64_t kMaxImagePixels = uint64_t{1} << 26;
+
+uint32_t BigEndian32(const uint8_t* p) {
+  return (uint32_t{p[0]} << 24) | (uint32_t{p[1]} << 16) | (uint32_t{p[2]} << 8) | uint32_t{p[3]};
+}
+
 // Decodes any format imgcodecs knows, unchanged (no channel or depth conversion).
 Status DecodeUnchanged(const uint8_t* data, size_t size, const std::string& name, cv::Mat* out) {
   if (size == 0) return DataLoss(name + ": empty file");
   if (size > static_cast<size_t>(INT_MAX)) return DataLoss(name + ": file too large to decode");
+  // PNG: signature, then the IHDR chunk (length, "IHDR", width, height).
+  if (IsPng(data, size) && size >= 24) {
+    const uint64_t w = BigEndian32(data + 16), h = BigEndian32(data + 20);
+    if (w * h > kMaxImagePixels)
+      return DataLoss(name + ": PNG header says " + std::to_string(w) + "x" + std::to_string(h) +
+                      ", more than the limit of " + std::to_string(kMaxImagePixels) + " pixels");
+  }
   try {
     // imdecode only reads from the buffer; the const_cast is for cv::Mat's constructor.
     const cv::Mat buf(1, static_cast<int>(size), CV_8U, const_cast<uint8_t*>(data));

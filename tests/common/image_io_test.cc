@@ -172,6 +172,25 @@ TEST(ImageIo, ErrorsNameTheFileAndTheProblem) {
   EXPECT_FALSE(WriteImageRgb8(dir + "/empty_image.png", ImageRgb8()).ok());
 }
 
+TEST(ImageIo, HugePngHeaderIsRefusedBeforeDecoding) {
+  const std::string dir = test::MakeTempDir("image_io");
+  ASSERT_TRUE(WriteDepth16(dir + "/d.png", ImageDepth16(4, 4, 1)).ok());
+  auto bytes = ReadFileToString(dir + "/d.png");
+  ASSERT_TRUE(bytes.ok());
+  std::vector<uint8_t> b(bytes->begin(), bytes->end());
+  // IHDR width and height (big-endian at offsets 16 and 20) := 100000 x 100000.
+  for (int off : {16, 20}) {
+    b[off] = 0x00;
+    b[off + 1] = 0x01;
+    b[off + 2] = 0x86;
+    b[off + 3] = 0xA0;
+  }
+  ImageDepth16 out;
+  const Status s = DecodeDepth16(b.data(), b.size(), "huge.png", &out);
+  EXPECT_EQ(s.code(), StatusCode::kDataLoss);
+  EXPECT_TRUE(Contains(s, "huge.png: PNG header says 100000x100000")) << s.message();
+}
+
 TEST(ImageIo, EveryTruncatedPngPrefixIsAnErrorNotACrash) {
   const std::string dir = test::MakeTempDir("image_io");
   ImageDepth16 d(9, 7);
