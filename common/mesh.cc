@@ -7,6 +7,8 @@
 #include <cstring>
 #include <sstream>
 
+#include <Eigen/Geometry>  // Vector3f::cross is defined here, not in <Eigen/Core>
+
 #include "common/file_util.h"
 
 namespace holo {
@@ -224,6 +226,9 @@ StatusOr<Mesh> ReadPly(const std::string& path) {
       elements.back().props.push_back(p);
     }
   }
+  bool has_vertex_element = false;
+  for (const auto& e : elements) has_vertex_element |= e.name == "vertex";
+  if (!has_vertex_element) return bad("no vertex element");
   Mesh mesh;
   PlyValueReader reader(data, body, ascii);
   for (const auto& e : elements) {
@@ -233,6 +238,8 @@ StatusOr<Mesh> ReadPly(const std::string& path) {
     if (ascii) min_item = 2 * e.props.size();
     if (min_item > 0 && e.count > reader.remaining() / min_item)
       return bad("element '" + e.name + "' count " + std::to_string(e.count) + " exceeds the file size");
+    // An element without properties has no bytes: nothing to read, whatever its count says.
+    if (e.props.empty()) continue;
     const bool is_vertex = e.name == "vertex", is_face = e.name == "face";
     int ix = -1, iy = -1, iz = -1, inx = -1, iny = -1, inz = -1, ir = -1, ig = -1, ib = -1;
     for (size_t k = 0; k < e.props.size(); ++k) {
