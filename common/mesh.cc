@@ -7,6 +7,8 @@
 #include <cstring>
 #include <sstream>
 
+#include <Eigen/Geometry>
+
 #include "common/file_util.h"
 
 namespace holo {
