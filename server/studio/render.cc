@@ -15,7 +15,6 @@ constexpr float kNear = 0.05f;
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kShadowTexel = 0.004f;  // metres
 constexpr int kShadowMaxSize = 1536;
-constexpr float kShadowBias = 0.012f;   // metres along the light direction
 constexpr float kNormalOffset = 0.008f; // metres along the surface normal
 
 // Inverse CDF of the standard normal at (i + 0.5) / 4096.
@@ -42,12 +41,12 @@ inline uint8_t ToByte(float v) { return static_cast<uint8_t>(std::clamp(v * 255.
 
 inline uint16_t ToMm(float z) {
   if (!(z > 0.0f) || z > 65.535f) return 0;
-  return static_cast<uint16_t>(std::lround(z * 1000.0f));
+  return static_cast<uint16_t>(z * 1000.0f + 0.5f);
 }
 
 }  // namespace
 
-void ShadowMap::Build(const std::vector<Vector3f>& positions, const std::vector<std::array<uint32_t, 3>>& triangles) {
+void ShadowMap::Prepare(const std::vector<Vector3f>& positions) {
   l = LightDirection();
   e1 = l.cross(Vector3f::UnitZ()).normalized();
   e2 = l.cross(e1).normalized();
@@ -68,6 +67,15 @@ void ShadowMap::Build(const std::vector<Vector3f>& positions, const std::vector<
   w = static_cast<int>((umax - u0) * inv_texel) + 3;
   h = static_cast<int>((vmax - v0) * inv_texel) + 3;
   depth.assign(static_cast<size_t>(w) * h, -kInf);
+}
+
+void ShadowMap::Build(const std::vector<Vector3f>& positions, const std::vector<std::array<uint32_t, 3>>& triangles) {
+  Prepare(positions);
+  Rasterize(positions, triangles, 0, h);
+}
+
+void ShadowMap::Rasterize(const std::vector<Vector3f>& positions,
+                          const std::vector<std::array<uint32_t, 3>>& triangles, int row_begin, int row_end) {
   // Orthographic rasterization, both faces, keeping the surface nearest the light.
   for (const auto& t : triangles) {
     float x[3], y[3], d[3];
@@ -82,8 +90,8 @@ void ShadowMap::Build(const std::vector<Vector3f>& positions, const std::vector<
     const float ia = 1.0f / area;
     const int xa = std::max(0, static_cast<int>(std::ceil(std::min({x[0], x[1], x[2]}))));
     const int xb = std::min(w - 1, static_cast<int>(std::floor(std::max({x[0], x[1], x[2]}))));
-    const int ya = std::max(0, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}))));
-    const int yb = std::min(h - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}))));
+    const int ya = std::max(row_begin, static_cast<int>(std::ceil(std::min({y[0], y[1], y[2]}))));
+    const int yb = std::min(row_end - 1, static_cast<int>(std::floor(std::max({y[0], y[1], y[2]}))));
     for (int py = ya; py <= yb; ++py) {
       float* row = depth.data() + static_cast<size_t>(py) * w;
       for (int px = xa; px <= xb; ++px) {
@@ -96,19 +104,6 @@ void ShadowMap::Build(const std::vector<Vector3f>& positions, const std::vector<
       }
     }
   }
-}
-
-float ShadowMap::Visibility(float u, float v, float d) const {
-  if (w == 0) return 1.0f;
-  const float fx = (u - u0) * inv_texel - 0.5f, fy = (v - v0) * inv_texel - 0.5f;
-  if (!(fx >= 0.0f && fy >= 0.0f && fx < w - 1 && fy < h - 1)) return 1.0f;
-  const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
-  const float ax = fx - ix, ay = fy - iy;
-  const float* r0 = depth.data() + static_cast<size_t>(iy) * w + ix;
-  const float* r1 = r0 + w;
-  const float dd = d + kShadowBias;
-  const float s00 = dd >= r0[0], s01 = dd >= r0[1], s10 = dd >= r1[0], s11 = dd >= r1[1];
-  return (s00 * (1 - ax) + s01 * ax) * (1 - ay) + (s10 * (1 - ax) + s11 * ax) * ay;
 }
 
 void ViewCache::Init(const CameraModel& cam) {
@@ -406,6 +401,10 @@ void WriteNoisyDepth(const ViewCache& view, const RenderScratch& s, const DepthN
   constexpr float kDegF = 3.14159265f / 180.0f;
   const float ramp_start = std::max(0.0f, noise.grazing_dropout_deg - 10.0f);
   const float cos_start = std::cos(ramp_start * kDegF);
+  // Drop when the angle exceeds ramp_start + 10°·u, i.e. cos < cos_drop[u].
+  float cos_drop[1024];
+  for (int i = 0; i < 1024; ++i)
+    cos_drop[i] = std::cos(std::min(90.0f, ramp_start + 10.0f * (i + 0.5f) / 1024.0f) * kDegF);
   const uint32_t dropout_threshold = static_cast<uint32_t>(noise.random_dropout_prob * 1048576.0f);
   const float edge_m = noise.flying_edge_mm * 0.001f;
   const uint32_t fly_threshold = static_cast<uint32_t>(noise.flying_pixel_prob * 1024.0f);
@@ -425,13 +424,9 @@ void WriteNoisyDepth(const ViewCache& view, const RenderScratch& s, const DepthN
         continue;
       }
       const float c = cosg[p];
-      if (c < cos_start) {
-        const float angle = std::acos(std::clamp(c, 0.0f, 1.0f)) / kDegF;
-        const float prob = std::clamp((angle - ramp_start) / 10.0f, 0.0f, 1.0f);
-        if ((static_cast<float>((h >> 20) & 0x3ff) + 0.5f) / 1024.0f < prob) {
-          out[p] = 0;
-          continue;
-        }
+      if (c < cos_start && c < cos_drop[(h >> 20) & 0x3ff]) {
+        out[p] = 0;
+        continue;
       }
       // Mixed pixel at a depth edge: somewhere between the two surfaces.
       float zn = zz, best = 0.0f;

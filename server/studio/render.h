@@ -35,10 +35,28 @@ struct ShadowMap {
   float u0 = 0, v0 = 0, inv_texel = 1;
   int w = 0, h = 0;
   std::vector<float> depth;  // l·p of the surface nearest the light, -inf = none
+  static constexpr float kBias = 0.012f;  // metres along the light direction
+
+  // Sets the map's frame around `positions` and clears it.
+  void Prepare(const std::vector<Eigen::Vector3f>& positions);
+  // Rasterizes `triangles` into texel rows [row_begin, row_end).
+  void Rasterize(const std::vector<Eigen::Vector3f>& positions, const std::vector<std::array<uint32_t, 3>>& triangles,
+                 int row_begin, int row_end);
 
   void Build(const std::vector<Eigen::Vector3f>& positions, const std::vector<std::array<uint32_t, 3>>& triangles);
   // Fraction of light reaching a point with light coordinates (u, v, d), 0..1.
-  float Visibility(float u, float v, float d) const;
+  float Visibility(float u, float v, float d) const {
+    if (w == 0) return 1.0f;
+    const float fx = (u - u0) * inv_texel - 0.5f, fy = (v - v0) * inv_texel - 0.5f;
+    if (!(fx >= 0.0f && fy >= 0.0f && fx < w - 1 && fy < h - 1)) return 1.0f;
+    const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
+    const float ax = fx - ix, ay = fy - iy;
+    const float* r0 = depth.data() + static_cast<size_t>(iy) * w + ix;
+    const float* r1 = r0 + w;
+    const float dd = d + kBias;
+    const float s00 = dd >= r0[0], s01 = dd >= r0[1], s10 = dd >= r1[0], s11 = dd >= r1[1];
+    return (s00 * (1 - ax) + s01 * ax) * (1 - ay) + (s10 * (1 - ax) + s11 * ax) * ay;
+  }
   float Visibility(const Eigen::Vector3f& p) const { return Visibility(e1.dot(p), e2.dot(p), l.dot(p)); }
 };
 

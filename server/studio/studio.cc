@@ -138,10 +138,18 @@ struct SyntheticStudio::Impl {
     scratch.resize(pool.size());
   }
 
-  void PoseFrame(int64_t frame_index, double fps, studio::FrameScene* fs) const {
+  // Poses the scene and builds the shadow map, split into row bands over `pool` if given.
+  void PoseFrame(int64_t frame_index, double fps, studio::FrameScene* fs, WorkerPool* workers) const {
     if (fs->frame == frame_index && frame_index >= 0) return;
     scene.Pose(static_cast<double>(frame_index) / fps, &fs->positions, &fs->normals, &fs->part_poses);
-    fs->shadow.Build(fs->positions, scene.tmpl().triangles);
+    fs->shadow.Prepare(fs->positions);
+    const int bands = workers ? workers->size() : 1;
+    const int rows = fs->shadow.h;
+    auto band = [&](int b, int) {
+      fs->shadow.Rasterize(fs->positions, scene.tmpl().triangles, rows * b / bands, rows * (b + 1) / bands);
+    };
+    if (workers) workers->Run(bands, band);
+    else band(0, 0);
     fs->frame = frame_index;
   }
 
@@ -175,7 +183,7 @@ int64_t SyntheticStudio::TimestampUs(int64_t frame_index) const {
 
 void SyntheticStudio::RenderFrame(int64_t frame_index, RgbdFrameSet* frames, StudioGroundTruth* gt) {
   Impl& im = *impl_;
-  im.PoseFrame(frame_index, options_.fps, &im.frame);
+  im.PoseFrame(frame_index, options_.fps, &im.frame, &im.pool);
   const int num_pods = static_cast<int>(rig_.pods.size());
   const int64_t ts = TimestampUs(frame_index);
   frames->frame_index = frame_index;
@@ -229,7 +237,7 @@ Mesh SyntheticStudio::ForegroundMesh(int64_t frame_index) const {
 void SyntheticStudio::RenderView(int64_t frame_index, const CameraModel& camera, ImageRgb8* color, ImageDepth16* depth,
                                  ImageGray8* mask) const {
   studio::FrameScene fs;
-  impl_->PoseFrame(frame_index, options_.fps, &fs);
+  impl_->PoseFrame(frame_index, options_.fps, &fs, nullptr);
   studio::ViewCache view;
   view.Init(camera);
   studio::RenderScratch s;
