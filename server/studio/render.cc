@@ -261,9 +261,12 @@ void RenderViewCore(const ViewCache& view, const SceneTemplate& tmpl, const Fram
   if (shade_color) s->rgb.resize(n * 3);
   const Vector3f light = LightDirection();
   const ShadowMap& sm = scene.shadow;
+  const Vector3f gx = view.light_g.col(0) / fx;  // change of g per pixel in x
   for (int py = 0; py < H; ++py) {
     const float yn = (py - cy) / fy;
-    for (int px = 0; px < W; ++px) {
+    // g(px) = light_g·(xn, yn, 1), advanced incrementally along the row.
+    Vector3f g = view.light_g * Vector3f(-cx / fx, yn, 1.0f);
+    for (int px = 0; px < W; ++px, g += gx) {
       const size_t p = static_cast<size_t>(py) * W + px;
       const int32_t ti = idb[p];
       if (ti < 0) {
@@ -273,8 +276,6 @@ void RenderViewCore(const ViewCache& view, const SceneTemplate& tmpl, const Fram
         const auto& lit = view.bg_lit[p];
         float vis = 1.0f;
         if (sm.w > 0 && zb[p] < kInf) {
-          const float xn = (px - cx) / fx;
-          const Vector3f g = view.light_g * Vector3f(xn, yn, 1.0f);
           const Vector3f lc = view.light_c + zb[p] * g;
           vis = sm.Visibility(lc.x(), lc.y(), lc.z());
         }
@@ -429,17 +430,24 @@ void WriteNoisyDepth(const ViewCache& view, const RenderScratch& s, const DepthN
         continue;
       }
       // Mixed pixel at a depth edge: somewhere between the two surfaces.
-      float zn = zz, best = 0.0f;
-      auto consider = [&](size_t q) {
-        const float d = std::abs(z[q] - zz);
-        if (z[q] < kInf && d > best) best = d, zn = z[q];
-      };
-      if (x > 0) consider(p - 1);
-      if (x + 1 < W) consider(p + 1);
-      if (y > 0) consider(p - W);
-      if (y + 1 < H) consider(p + W);
-      if (best > edge_m && static_cast<uint32_t>((h >> 30) & 0x3ff) < fly_threshold)
-        zz += (static_cast<float>((h >> 40) & 0x3ff) + 0.5f) / 1024.0f * (zn - zz);
+      // Fast test first (branch-free); the rare edge pixels take the slow path.
+      const float dl = x > 0 ? std::abs(z[p - (x > 0)] - zz) : 0.0f;
+      const float dr = x + 1 < W ? std::abs(z[p + (x + 1 < W)] - zz) : 0.0f;
+      const float du = y > 0 ? std::abs(z[p - (y > 0) * W] - zz) : 0.0f;
+      const float dd = y + 1 < H ? std::abs(z[p + (y + 1 < H) * W] - zz) : 0.0f;
+      if (std::max(std::max(dl, dr), std::max(du, dd)) > edge_m &&
+          static_cast<uint32_t>((h >> 30) & 0x3ff) < fly_threshold) {
+        float zn = zz, best = 0.0f;
+        auto consider = [&](size_t q) {
+          const float d = std::abs(z[q] - zz);
+          if (z[q] < kInf && d > best) best = d, zn = z[q];
+        };
+        if (x > 0) consider(p - 1);
+        if (x + 1 < W) consider(p + 1);
+        if (y > 0) consider(p - W);
+        if (y + 1 < H) consider(p + W);
+        if (best > edge_m) zz += (static_cast<float>((h >> 40) & 0x3ff) + 0.5f) / 1024.0f * (zn - zz);
+      }
       const float mm = zz * 1000.0f + sigma1 * zz * zz * gauss[(h >> 50) & 0xfff];
       out[p] = (mm >= 0.5f && mm < 65535.0f && zz <= max_range) ? static_cast<uint16_t>(mm + 0.5f) : 0;
     }
