@@ -1,0 +1,261 @@
+#include "server/studio/studio.h"
+
+#include <atomic>
+#include <cmath>
+#include <condition_variable>
+#include <functional>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "server/studio/render.h"
+#include "server/studio/scene.h"
+
+namespace holo {
+namespace {
+
+std::string Num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+// A fixed set of workers that run `n` tasks; the calling thread takes part.
+class WorkerPool {
+ public:
+  explicit WorkerPool(int threads) {
+    for (int i = 1; i < threads; ++i) threads_.emplace_back([this, i] { Loop(i); });
+  }
+  ~WorkerPool() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    for (auto& t : threads_) t.join();
+  }
+  int size() const { return static_cast<int>(threads_.size()) + 1; }
+
+  // Runs fn(task, worker) for task in [0, n); returns when all are done.
+  void Run(int n, const std::function<void(int, int)>& fn) {
+    if (threads_.empty() || n <= 1) {
+      for (int i = 0; i < n; ++i) fn(i, 0);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      fn_ = &fn;
+      n_ = n;
+      next_.store(0);
+      active_ = static_cast<int>(threads_.size());
+      ++generation_;
+    }
+    cv_.notify_all();
+    Work(0);
+    std::unique_lock<std::mutex> lock(mu_);
+    done_cv_.wait(lock, [this] { return active_ == 0; });
+    fn_ = nullptr;
+  }
+
+ private:
+  void Work(int worker) {
+    for (int i = next_.fetch_add(1); i < n_; i = next_.fetch_add(1)) (*fn_)(i, worker);
+  }
+  void Loop(int worker) {
+    uint64_t seen = 0;
+    for (;;) {
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock, [&] { return stop_ || generation_ != seen; });
+        if (stop_) return;
+        seen = generation_;
+      }
+      Work(worker);
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (--active_ == 0) done_cv_.notify_one();
+      }
+    }
+  }
+
+  std::vector<std::thread> threads_;
+  std::mutex mu_;
+  std::condition_variable cv_, done_cv_;
+  const std::function<void(int, int)>* fn_ = nullptr;
+  int n_ = 0;
+  std::atomic<int> next_{0};
+  int active_ = 0;
+  uint64_t generation_ = 0;
+  bool stop_ = false;
+};
+
+}  // namespace
+
+Status DepthNoiseOptions::Check() const {
+  if (!(sigma_at_1m_mm >= 0.0f && sigma_at_1m_mm <= 100.0f))
+    return InvalidArgument("noise.sigma_at_1m_mm must be in [0, 100], got " + Num(sigma_at_1m_mm));
+  if (!(grazing_dropout_deg > 0.0f && grazing_dropout_deg <= 90.0f))
+    return InvalidArgument("noise.grazing_dropout_deg must be in (0, 90], got " + Num(grazing_dropout_deg));
+  if (!(flying_edge_mm > 0.0f && std::isfinite(flying_edge_mm)))
+    return InvalidArgument("noise.flying_edge_mm must be > 0, got " + Num(flying_edge_mm));
+  if (!(flying_pixel_prob >= 0.0f && flying_pixel_prob <= 1.0f))
+    return InvalidArgument("noise.flying_pixel_prob must be in [0, 1], got " + Num(flying_pixel_prob));
+  if (!(random_dropout_prob >= 0.0f && random_dropout_prob <= 1.0f))
+    return InvalidArgument("noise.random_dropout_prob must be in [0, 1], got " + Num(random_dropout_prob));
+  if (!(max_range_m > 0.0f && max_range_m <= 65.0f))
+    return InvalidArgument("noise.max_range_m must be in (0, 65], got " + Num(max_range_m));
+  return OkStatus();
+}
+
+Status StudioOptions::Check() const {
+  if (num_figures < 1 || num_figures > 2) return InvalidArgument("num_figures must be 1 or 2, got " + Num(num_figures));
+  if (num_props < 0 || num_props > 2) return InvalidArgument("num_props must be in [0, 2], got " + Num(num_props));
+  if (!(fps > 0.0 && fps <= 1000.0)) return InvalidArgument("fps must be in (0, 1000], got " + Num(fps));
+  if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256], got " + Num(threads));
+  return noise.Check();
+}
+
+struct SyntheticStudio::Impl {
+  struct PodViews {
+    studio::ViewCache depth;
+    studio::ViewCache color;  // used only when the pod is not registered
+    bool registered = true;
+    studio::ColorVariation variation;
+  };
+
+  Impl(const Rig& rig, const StudioOptions& options)
+      : scene(studio::SceneConfig{options.num_figures, options.num_props, options.empty_room}),
+        pool(options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()))) {
+    pods.resize(rig.pods.size());
+    pool.Run(static_cast<int>(rig.pods.size()), [&](int i, int) {
+      const PodCalibration& pod = rig.pods[i];
+      PodViews& v = pods[i];
+      v.registered = pod.IsRegistered();
+      v.depth.Init(pod.DepthCamera());
+      if (!v.registered) v.color.Init(pod.ColorCamera());
+      v.variation = studio::PodColorVariation(options.seed, pod.id);
+    });
+    scratch.resize(pool.size());
+  }
+
+  // Poses the scene and builds the shadow map, split into row bands over `pool` if given.
+  void PoseFrame(int64_t frame_index, double fps, studio::FrameScene* fs, WorkerPool* workers) const {
+    if (fs->frame == frame_index && frame_index >= 0) return;
+    scene.Pose(static_cast<double>(frame_index) / fps, &fs->positions, &fs->normals, &fs->part_poses);
+    fs->shadow.Prepare(fs->positions);
+    const int bands = workers ? workers->size() : 1;
+    const int rows = fs->shadow.h;
+    auto band = [&](int b, int) {
+      fs->shadow.Rasterize(fs->positions, scene.tmpl().triangles, rows * b / bands, rows * (b + 1) / bands);
+    };
+    if (workers) workers->Run(bands, band);
+    else band(0, 0);
+    fs->frame = frame_index;
+  }
+
+  studio::Scene scene;
+  WorkerPool pool;
+  std::vector<PodViews> pods;
+  std::vector<studio::RenderScratch> scratch;  // one per worker
+  studio::FrameScene frame;
+};
+
+SyntheticStudio::SyntheticStudio(Rig rig, StudioOptions options) : rig_(std::move(rig)), options_(options) {
+  const Status rs = rig_.Check();
+  HOLO_CHECK_MSG(rs.ok(), rs.ToString());
+  const Status os = options_.Check();
+  HOLO_CHECK_MSG(os.ok(), os.ToString());
+  impl_ = std::make_unique<Impl>(rig_, options_);
+}
+
+SyntheticStudio::~SyntheticStudio() = default;
+
+StatusOr<std::unique_ptr<SyntheticStudio>> SyntheticStudio::Create(Rig rig, StudioOptions options) {
+  HOLO_RETURN_IF_ERROR(rig.Check().WithContext("rig " + rig.name));
+  if (rig.pods.empty()) return InvalidArgument("rig " + rig.name + " has no pods");
+  HOLO_RETURN_IF_ERROR(options.Check().WithContext("studio options"));
+  return std::make_unique<SyntheticStudio>(std::move(rig), options);
+}
+
+int64_t SyntheticStudio::TimestampUs(int64_t frame_index) const {
+  return static_cast<int64_t>(std::llround(static_cast<double>(frame_index) * 1e6 / options_.fps));
+}
+
+void SyntheticStudio::RenderFrame(int64_t frame_index, RgbdFrameSet* frames, StudioGroundTruth* gt) {
+  Impl& im = *impl_;
+  im.PoseFrame(frame_index, options_.fps, &im.frame, &im.pool);
+  const int num_pods = static_cast<int>(rig_.pods.size());
+  const int64_t ts = TimestampUs(frame_index);
+  frames->frame_index = frame_index;
+  frames->frames.resize(num_pods);
+  if (gt) {
+    gt->frame_index = frame_index;
+    gt->timestamp_us = ts;
+    gt->depth.resize(num_pods);
+    gt->mask.resize(num_pods);
+  }
+  const studio::SceneTemplate& tmpl = im.scene.tmpl();
+  im.pool.Run(num_pods, [&](int i, int worker) {
+    Impl::PodViews& v = im.pods[i];
+    studio::RenderScratch& s = im.scratch[worker];
+    RgbdFrame& f = frames->frames[i];
+    f.pod_id = rig_.pods[i].id;
+    f.timestamp_us = ts;
+    f.mask = ImageGray8();
+    studio::RenderViewCore(v.depth, tmpl, im.frame, v.registered, &s);
+    if (options_.depth_noise) {
+      const uint64_t stream = studio::HashOf(options_.seed, static_cast<uint64_t>(frame_index),
+                                             static_cast<uint64_t>(rig_.pods[i].id), 0xDE9ULL);
+      studio::WriteNoisyDepth(v.depth, s, options_.noise, stream, &f.depth);
+    } else {
+      studio::WriteTruth(v.depth, s, &f.depth, nullptr);
+    }
+    if (gt) studio::WriteTruth(v.depth, s, &gt->depth[i], &gt->mask[i]);
+    if (!v.registered) studio::RenderViewCore(v.color, tmpl, im.frame, true, &s);
+    studio::WriteColor(v.registered ? v.depth : v.color, s, options_.color_variation ? &v.variation : nullptr,
+                       &f.color);
+  });
+  if (gt) {
+    Mesh& m = gt->foreground_mesh;
+    m.positions.assign(im.frame.positions.begin(), im.frame.positions.end());
+    m.normals.assign(im.frame.normals.begin(), im.frame.normals.end());
+    m.colors.assign(tmpl.vertex_albedo.begin(), tmpl.vertex_albedo.end());
+    m.triangles.assign(tmpl.triangles.begin(), tmpl.triangles.end());
+  }
+}
+
+Mesh SyntheticStudio::ForegroundMesh(int64_t frame_index) const {
+  const studio::SceneTemplate& tmpl = impl_->scene.tmpl();
+  Mesh m;
+  std::vector<Eigen::Isometry3f> poses;
+  impl_->scene.Pose(static_cast<double>(frame_index) / options_.fps, &m.positions, &m.normals, &poses);
+  m.colors = tmpl.vertex_albedo;
+  m.triangles = tmpl.triangles;
+  return m;
+}
+
+void SyntheticStudio::RenderView(int64_t frame_index, const CameraModel& camera, ImageRgb8* color, ImageDepth16* depth,
+                                 ImageGray8* mask) const {
+  studio::FrameScene fs;
+  impl_->PoseFrame(frame_index, options_.fps, &fs, nullptr);
+  studio::ViewCache view;
+  view.Init(camera);
+  studio::RenderScratch s;
+  studio::RenderViewCore(view, impl_->scene.tmpl(), fs, color != nullptr, &s);
+  if (color) studio::WriteColor(view, s, nullptr, color);
+  studio::WriteTruth(view, s, depth, mask);
+}
+
+Status SyntheticStudio::Next(RgbdFrameSet* out) {
+  RenderFrame(next_frame_, out, nullptr);
+  ++next_frame_;
+  return OkStatus();
+}
+
+Status SyntheticStudio::Seek(int64_t index) {
+  if (index < 0) return OutOfRange("seek to frame " + std::to_string(index) + " before the start");
+  next_frame_ = index;
+  return OkStatus();
+}
+
+}  // namespace holo
