@@ -70,7 +70,7 @@ ImageRgb8 MakeContactSheet(const RgbdFrameSet& frames, int columns, bool with_ma
   mask_images.reserve(frames.frames.size());
   bool have_masks = with_masks;
   for (const auto& f : frames.frames) {
-    depth_images.push_back(ColorizeDepth(f.depth, 500, 6000));
+    depth_images.push_back(ColorizeDepth(f.depth, 1000, 5500));
     if (f.mask.empty()) have_masks = false;
   }
   if (have_masks)

@@ -18,7 +18,9 @@ std::string StudioExportSummary::ToJson() const {
     << ",\"render_fps\":" << render_fps << ",\"total_seconds\":" << total_seconds
     << ",\"foreground_fraction\":" << foreground_fraction << ",\"depth_valid_fraction\":" << depth_valid_fraction
     << ",\"depth_abs_error_mm\":" << depth_abs_error_mm
-    << ",\"depth_median_abs_error_mm\":" << depth_median_abs_error_mm << ",\"mesh_vertices\":" << mesh_vertices
+    << ",\"depth_median_abs_error_mm\":" << depth_median_abs_error_mm
+    << ",\"fg_depth_valid_fraction\":" << fg_depth_valid_fraction << ",\"fg_depth_abs_error_mm\":" << fg_depth_abs_error_mm
+    << ",\"fg_depth_median_abs_error_mm\":" << fg_depth_median_abs_error_mm << ",\"mesh_vertices\":" << mesh_vertices
     << ",\"mesh_triangles\":" << mesh_triangles << "}";
   return o.str();
 }
@@ -42,7 +44,9 @@ StatusOr<StudioExportSummary> ExportStudio(SyntheticStudio& studio, const Studio
   StudioGroundTruth gt;
   double render_s = 0, fg_sum = 0;
   double valid_sum = 0, valid_count = 0, err_sum = 0, err_count = 0;
+  double fg_valid = 0, fg_count = 0, fg_err_sum = 0, fg_err_count = 0;
   std::vector<uint32_t> err_hist(200, 0);  // |error| histogram, 0.5 mm bins, for the median
+  std::vector<uint32_t> fg_err_hist(200, 0);
   Stopwatch total;
   for (int64_t i = 0; i < options.num_frames; ++i) {
     const int64_t f = options.first_frame + i;
@@ -65,6 +69,16 @@ StatusOr<StudioExportSummary> ExportStudio(SyntheticStudio& studio, const Studio
         err_sum += e;
         err_count += 1;
         err_hist[std::min<size_t>(err_hist.size() - 1, static_cast<size_t>(e * 2))]++;
+      }
+      for (size_t k = 0; k < truth.num_pixels(); ++k) {
+        if (mask.data()[k] == 0 || truth.data()[k] == 0) continue;
+        fg_count += 1;
+        if (noisy.data()[k] == 0) continue;
+        fg_valid += 1;
+        const double e = std::abs(static_cast<double>(noisy.data()[k]) - truth.data()[k]);
+        fg_err_sum += e;
+        fg_err_hist[std::min<size_t>(fg_err_hist.size() - 1, static_cast<size_t>(e * 2))]++;
+        fg_err_count += 1;
       }
       fg_sum += static_cast<double>(fg) / static_cast<double>(std::max<size_t>(1, truth.num_pixels()));
     }
@@ -89,14 +103,18 @@ StatusOr<StudioExportSummary> ExportStudio(SyntheticStudio& studio, const Studio
   summary.foreground_fraction = fg_sum / static_cast<double>(options.num_frames * std::max(1, summary.pods));
   summary.depth_valid_fraction = valid_count > 0 ? valid_sum / valid_count : 0;
   summary.depth_abs_error_mm = err_count > 0 ? err_sum / err_count : 0;
-  double half = err_count / 2, acc = 0;
-  for (size_t b = 0; b < err_hist.size(); ++b) {
-    acc += err_hist[b];
-    if (acc >= half) {
-      summary.depth_median_abs_error_mm = static_cast<double>(b) * 0.5 + 0.25;
-      break;
+  summary.fg_depth_valid_fraction = fg_count > 0 ? fg_valid / fg_count : 0;
+  summary.fg_depth_abs_error_mm = fg_err_count > 0 ? fg_err_sum / fg_err_count : 0;
+  auto median = [](const std::vector<uint32_t>& hist, double count) {
+    double acc = 0;
+    for (size_t b = 0; b < hist.size(); ++b) {
+      acc += hist[b];
+      if (acc >= count / 2) return static_cast<double>(b) * 0.5 + 0.25;
     }
-  }
+    return 0.0;
+  };
+  summary.depth_median_abs_error_mm = median(err_hist, err_count);
+  summary.fg_depth_median_abs_error_mm = median(fg_err_hist, fg_err_count);
   return summary;
 }
 

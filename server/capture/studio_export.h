@@ -35,6 +35,9 @@ struct StudioExportSummary {
   double depth_valid_fraction = 0;       // noisy depth != 0 where truth is valid
   double depth_abs_error_mm = 0;         // mean |noisy - truth| where both valid
   double depth_median_abs_error_mm = 0;  // median of the same
+  double fg_depth_valid_fraction = 0;    // as above, within the ground-truth foreground masks
+  double fg_depth_abs_error_mm = 0;         // mean (flying pixels at silhouettes weigh in)
+  double fg_depth_median_abs_error_mm = 0;
   size_t mesh_vertices = 0, mesh_triangles = 0;
   ImageRgb8 contact_sheet;
   std::string ToJson() const;

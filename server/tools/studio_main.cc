@@ -102,11 +102,13 @@ int main(int argc, char** argv) {
   if (!quiet) {
     std::fprintf(stderr,
                  "rendered %lld frames of %d pods at %.1f frames/s (render only); foreground %.1f%% of pixels;\n"
-                 "depth noise: %.1f%% of true depth valid, mean |error| %.2f mm, median %.2f mm; "
+                 "depth noise: %.1f%% of true depth valid, mean |error| %.2f mm, median %.2f mm (foreground: %.1f%% valid, "
+                 "mean |error| %.2f mm, median %.2f mm);\n"
                  "ground-truth mesh %zu vertices, %zu triangles\n",
                  static_cast<long long>(summary->frames), summary->pods, summary->render_fps,
                  100 * summary->foreground_fraction, 100 * summary->depth_valid_fraction, summary->depth_abs_error_mm,
-                 summary->depth_median_abs_error_mm, summary->mesh_vertices, summary->mesh_triangles);
+                 summary->depth_median_abs_error_mm, 100 * summary->fg_depth_valid_fraction,
+                 summary->fg_depth_abs_error_mm, summary->fg_depth_median_abs_error_mm, summary->mesh_vertices, summary->mesh_triangles);
     if (!sheet_path.empty()) std::fprintf(stderr, "contact sheet: %s\n", sheet_path.c_str());
   }
   return 0;
