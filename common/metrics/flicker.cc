@@ -4,6 +4,8 @@
 #include <limits>
 #include <string>
 
+#include <Eigen/Geometry>
+
 #include "common/metrics/parallel.h"
 #include "common/metrics/triangle_index.h"
 
@@ -48,7 +50,7 @@ StatusOr<std::vector<float>> ComputeNormalOffsets(const Mesh& reconstruction, co
                                                   const std::vector<SurfaceSample>& samples,
                                                   const FlickerOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
-  HOLO_RETURN_IF_ERROR(truth.Validate());
+  HOLO_RETURN_IF_ERROR(ValidateGeometry(truth));
   for (size_t i = 0; i < samples.size(); ++i)
     if (samples[i].triangle >= truth.num_triangles())
       return InvalidArgument("sample " + std::to_string(i) + " is on triangle " +

@@ -36,7 +36,7 @@ struct FlickerOptions {
 // invalid (no reconstruction within the cutoff, or the truth triangle is
 // degenerate in this frame). An empty `reconstruction` gives all NaN.
 // Errors: InvalidArgument if a sample's triangle is not in `truth`; DataLoss
-// from Mesh::Validate().
+// from ValidateGeometry().
 StatusOr<std::vector<float>> ComputeNormalOffsets(const Mesh& reconstruction, const Mesh& truth,
                                                   const std::vector<SurfaceSample>& samples,
                                                   const FlickerOptions& options = {});

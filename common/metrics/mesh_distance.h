@@ -62,7 +62,7 @@ struct MeshDistanceResult {
 // InvalidArgument for bad options or when either mesh has zero surface area
 // (empty, no triangles, or all triangles degenerate) — a missing
 // reconstruction has no defined accuracy, so callers report it separately;
-// DataLoss if a mesh fails Mesh::Validate().
+// DataLoss if a mesh fails ValidateGeometry().
 StatusOr<MeshDistanceResult> ComputeMeshDistance(const Mesh& reconstruction, const Mesh& truth,
                                                  const MeshDistanceOptions& options = {});
 

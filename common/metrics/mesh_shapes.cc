@@ -136,7 +136,12 @@ Mesh MakeBoxMesh(const Eigen::Vector3f& center, const Eigen::Vector3f& size, int
         placed.positions[i] = center + u * p.x() + v * p.y() + n * (0.5f * sn);
         placed.normals[i] = n;
       }
-      box.Append(placed);
+      // Appended by hand: Mesh::Append lives in common/mesh.cc, which does
+      // not link at the time of writing (see surface_sampling.h).
+      const uint32_t base = static_cast<uint32_t>(box.positions.size());
+      box.positions.insert(box.positions.end(), placed.positions.begin(), placed.positions.end());
+      box.normals.insert(box.normals.end(), placed.normals.begin(), placed.normals.end());
+      for (const auto& t : placed.triangles) box.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
     }
   }
   return box;

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 
+#include <Eigen/Geometry>
+
 namespace holo::metrics {
 namespace {
 
@@ -44,7 +46,7 @@ size_t SampleCount(double area_m2, const SamplingOptions& options) {
 
 StatusOr<std::vector<SurfaceSample>> SampleSurface(const Mesh& mesh, const SamplingOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
-  HOLO_RETURN_IF_ERROR(mesh.Validate());
+  HOLO_RETURN_IF_ERROR(ValidateGeometry(mesh));
   std::vector<double> cdf(mesh.triangles.size());
   double total = 0;
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -74,6 +76,27 @@ StatusOr<std::vector<SurfaceSample>> SampleSurface(const Mesh& mesh, const Sampl
                                     static_cast<float>(r1 * r2));
   }
   return samples;
+}
+
+Status ValidateGeometry(const Mesh& mesh) {
+  const size_t n = mesh.positions.size();
+  for (size_t i = 0; i < n; ++i)
+    if (!mesh.positions[i].allFinite()) return DataLoss("vertex " + std::to_string(i) + " is not finite");
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (uint32_t idx : mesh.triangles[t])
+      if (idx >= n)
+        return DataLoss("triangle " + std::to_string(t) + " references vertex " + std::to_string(idx) + " of " +
+                        std::to_string(n));
+  return OkStatus();
+}
+
+double MeshSurfaceArea(const Mesh& mesh) {
+  double area = 0;
+  for (const auto& t : mesh.triangles) {
+    const Eigen::Vector3d a = mesh.positions[t[0]].cast<double>();
+    area += 0.5 * (mesh.positions[t[1]].cast<double>() - a).cross(mesh.positions[t[2]].cast<double>() - a).norm();
+  }
+  return area;
 }
 
 Eigen::Vector3f SamplePosition(const Mesh& mesh, const SurfaceSample& sample) {

@@ -44,8 +44,19 @@ size_t SampleCount(double area_m2, const SamplingOptions& options);
 // probability proportional to its area, then a point uniformly inside it.
 // Triangles of zero area are never chosen. Errors: InvalidArgument for bad
 // options or a mesh whose total area is zero (no triangles, or all
-// degenerate); DataLoss from Mesh::Validate().
+// degenerate); DataLoss from ValidateGeometry().
 StatusOr<std::vector<SurfaceSample>> SampleSurface(const Mesh& mesh, const SamplingOptions& options);
+
+// OK, or DataLoss naming the first triangle index out of range or the first
+// non-finite position. Normals and colours are not looked at. (The metrics
+// use this instead of Mesh::Validate() so that they do not depend on
+// common/mesh.cc; see MeshSurfaceArea.)
+Status ValidateGeometry(const Mesh& mesh);
+
+// Total surface area of `mesh`'s triangles, m², summed in double precision.
+// (Use this rather than Mesh::SurfaceArea(), which does not link at the time
+// of writing: common/mesh.cc lacks <Eigen/Geometry> for cross().)
+double MeshSurfaceArea(const Mesh& mesh);
 
 // Position of `sample` on `mesh` (which must have the topology the sample was
 // drawn on; HOLO_CHECKs the triangle index).

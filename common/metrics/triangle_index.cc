@@ -5,7 +5,10 @@
 #include <cmath>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 #include "common/metrics/parallel.h"
+#include "common/metrics/surface_sampling.h"
 
 namespace holo::metrics {
 namespace {
@@ -126,7 +129,7 @@ Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
 }
 
 StatusOr<TriangleIndex> TriangleIndex::Build(const Mesh& mesh) {
-  HOLO_RETURN_IF_ERROR(mesh.Validate());
+  HOLO_RETURN_IF_ERROR(ValidateGeometry(mesh));
   TriangleIndex index;
   const size_t n = mesh.triangles.size();
   if (n == 0) return index;

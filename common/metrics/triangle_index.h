@@ -40,7 +40,7 @@ class TriangleIndex {
   TriangleIndex() = default;
 
   // Indexes every triangle of `mesh` (degenerate triangles included; they act
-  // as segments or points). Fails with the mesh's Validate() error (DataLoss)
+  // as segments or points). Fails with ValidateGeometry()'s DataLoss
   // if an index is out of range or a position is not finite. A mesh without
   // triangles gives an empty index.
   static StatusOr<TriangleIndex> Build(const Mesh& mesh);
