@@ -152,7 +152,9 @@ Status CheckSsimInputs(const ImageT& a, const ImageT& b, const ImageGray8* mask)
 
 }  // namespace
 
-StatusOr<double> ComputePsnr(const ImageRgb8& a, const ImageRgb8& b, const ImageGray8* mask) { return Psnr(a, b, mask); }
+StatusOr<double> ComputePsnr(const ImageRgb8& a, const ImageRgb8& b, const ImageGray8* mask) {
+  return Psnr(a, b, mask);
+}
 StatusOr<double> ComputePsnr(const ImageGray8& a, const ImageGray8& b, const ImageGray8* mask) {
   return Psnr(a, b, mask);
 }

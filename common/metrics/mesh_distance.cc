@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <thread>
+
+#include "common/metrics/parallel.h"
 
 namespace holo::metrics {
 namespace {
@@ -28,13 +31,29 @@ DirectionStats Summarize(const std::vector<float>& d, double threshold, double p
   return s;
 }
 
-StatusOr<std::vector<Eigen::Vector3f>> SamplePoints(const Mesh& mesh, const SamplingOptions& sampling,
-                                                   bool include_vertices, const char* which) {
+// One side of the comparison: its sample points and its index.
+struct Prepared {
+  Status status;
+  std::vector<Eigen::Vector3f> points;
+  TriangleIndex index;
+};
+
+Prepared Prepare(const Mesh& mesh, const SamplingOptions& sampling, bool include_vertices, const char* which) {
+  Prepared out;
   auto samples = SampleSurface(mesh, sampling);
-  if (!samples.ok()) return samples.status().WithContext(which);
-  std::vector<Eigen::Vector3f> points = SamplePositions(mesh, *samples);
-  if (include_vertices) points.insert(points.end(), mesh.positions.begin(), mesh.positions.end());
-  return points;
+  if (!samples.ok()) {
+    out.status = samples.status().WithContext(which);
+    return out;
+  }
+  out.points = SamplePositions(mesh, *samples);
+  if (include_vertices) out.points.insert(out.points.end(), mesh.positions.begin(), mesh.positions.end());
+  auto index = TriangleIndex::Build(mesh);
+  if (!index.ok()) {
+    out.status = index.status().WithContext(which);
+    return out;
+  }
+  out.index = std::move(index).value();
+  return out;
 }
 
 }  // namespace
@@ -67,12 +86,26 @@ StatusOr<MeshDistanceResult> ComputeMeshDistance(const Mesh& reconstruction, con
   HOLO_RETURN_IF_ERROR(options.Check());
   SamplingOptions truth_sampling = options.sampling;
   truth_sampling.seed = options.sampling.seed + 1;
-  HOLO_ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3f> recon_points,
-                        SamplePoints(reconstruction, options.sampling, options.include_vertices, "reconstruction"));
-  HOLO_ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3f> truth_points,
-                        SamplePoints(truth, truth_sampling, options.include_vertices, "truth"));
-  HOLO_ASSIGN_OR_RETURN(const TriangleIndex recon_index, TriangleIndex::Build(reconstruction));
-  HOLO_ASSIGN_OR_RETURN(const TriangleIndex truth_index, TriangleIndex::Build(truth));
+  // The two sides are independent: sample and index them concurrently.
+  Prepared recon, truth_side;
+  auto prepare_recon = [&] {
+    recon = Prepare(reconstruction, options.sampling, options.include_vertices, "reconstruction");
+  };
+  auto prepare_truth = [&] { truth_side = Prepare(truth, truth_sampling, options.include_vertices, "truth"); };
+  if (ResolveThreadCount(options.num_threads) > 1) {
+    std::thread worker(prepare_truth);
+    prepare_recon();
+    worker.join();
+  } else {
+    prepare_recon();
+    prepare_truth();
+  }
+  HOLO_RETURN_IF_ERROR(recon.status);
+  HOLO_RETURN_IF_ERROR(truth_side.status);
+  const std::vector<Eigen::Vector3f>& recon_points = recon.points;
+  const std::vector<Eigen::Vector3f>& truth_points = truth_side.points;
+  const TriangleIndex& recon_index = recon.index;
+  const TriangleIndex& truth_index = truth_side.index;
 
   const std::vector<float> r2t = DistancesToSurface(recon_points, truth_index, options.num_threads);
   const std::vector<float> t2r = DistancesToSurface(truth_points, recon_index, options.num_threads);

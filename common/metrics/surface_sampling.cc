@@ -32,7 +32,8 @@ class SplitMix64 {
 Status SamplingOptions::Check() const {
   if (!(samples_per_m2 >= 0) || !std::isfinite(samples_per_m2))
     return InvalidArgument("samples_per_m2 must be finite and >= 0, got " + std::to_string(samples_per_m2));
-  if (samples_per_m2 == 0 && num_samples == 0) return InvalidArgument("num_samples must be > 0 when samples_per_m2 is 0");
+  if (samples_per_m2 == 0 && num_samples == 0)
+    return InvalidArgument("num_samples must be > 0 when samples_per_m2 is 0");
   if (max_samples == 0) return InvalidArgument("max_samples must be > 0");
   return OkStatus();
 }
