@@ -1,0 +1,208 @@
+#include "server/pipeline/pipeline.h"
+
+#include <algorithm>
+#include <mutex>
+#include <thread>
+
+#include "common/bounded_queue.h"
+
+namespace holo {
+
+Status PipelineOptions::Check() const {
+  if (queue_capacity < 1 || queue_capacity > 64)
+    return InvalidArgument("queue_capacity must be in [1, 64], got " + std::to_string(queue_capacity));
+  if (pace_fps < 0 || pace_fps > 1000) return InvalidArgument("pace_fps must be in [0, 1000], got " + std::to_string(pace_fps));
+  if (max_frames < -1) return InvalidArgument("max_frames must be >= -1, got " + std::to_string(max_frames));
+  return OkStatus();
+}
+
+Pipeline::Pipeline(PipelineStages stages, PipelineOptions options, Clock& clock)
+    : stages_(std::move(stages)), options_(options), clock_(clock) {}
+
+StatusOr<PipelineStats> Pipeline::Run() {
+  HOLO_RETURN_IF_ERROR(options_.Check());
+  if (!stages_.acquire) return InvalidArgument("pipeline needs an acquire stage");
+  stop_ = false;
+  return options_.serial ? RunSerial() : RunConcurrent();
+}
+
+namespace {
+
+// Runs `fn` on `work` and stores its wall time in `*ms`.
+Status Timed(const std::function<Status(FrameWork&)>& fn, FrameWork& work, double* ms) {
+  if (!fn) return OkStatus();
+  Stopwatch sw;
+  Status s = fn(work);
+  *ms = sw.ElapsedMs();
+  return s;
+}
+
+Status RunFuseMesh(const std::function<Status(FrameWork&)>& fn, FrameWork& work) {
+  if (!fn) return OkStatus();
+  work.timings.fuse_ms = work.timings.mesh_ms = 0;
+  Stopwatch sw;
+  Status s = fn(work);
+  // The stage may split its own time into fuse and mesh; else it all counts as fuse.
+  if (work.timings.fuse_ms == 0 && work.timings.mesh_ms == 0) work.timings.fuse_ms = sw.ElapsedMs();
+  return s;
+}
+
+// Acquire with optional pacing. Returns OutOfRange at the end of the source.
+Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& clock, int64_t seq, int64_t start_us,
+               FrameWork& work, int64_t* late) {
+  if (opt.pace_fps > 0) {
+    const int64_t period_us = static_cast<int64_t>(1e6 / opt.pace_fps);
+    const int64_t slot = start_us + seq * period_us;
+    if (clock.NowUs() > slot + period_us) ++*late;
+    clock.SleepUntilUs(slot);
+  }
+  work.sequence = seq;
+  work.timings = StageTimings{};
+  work.timings.acquired_us = clock.NowUs();
+  return Timed(st.acquire, work, &work.timings.acquire_ms);
+}
+
+}  // namespace
+
+StatusOr<PipelineStats> Pipeline::RunSerial() {
+  PipelineStats stats;
+  FrameWork work;
+  Stopwatch wall;
+  const int64_t start_us = clock_.NowUs();
+  for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
+    if (stop_) break;
+    Status s = Acquire(stages_, options_, clock_, seq, start_us, work, &stats.late_frames);
+    if (s.code() == StatusCode::kOutOfRange) break;
+    HOLO_RETURN_IF_ERROR(s);
+    HOLO_RETURN_IF_ERROR(Timed(stages_.segment, work, &work.timings.segment_ms));
+    HOLO_RETURN_IF_ERROR(RunFuseMesh(stages_.fuse_mesh, work));
+    HOLO_RETURN_IF_ERROR(Timed(stages_.texture, work, &work.timings.texture_ms));
+    work.timings.ready_us = clock_.NowUs();
+    if (stages_.sink) HOLO_RETURN_IF_ERROR(stages_.sink(work));
+    stats.per_frame.push_back(work.timings);
+    ++stats.frames;
+  }
+  stats.wall_seconds = wall.ElapsedMs() * 1e-3;
+  stats.fps = stats.wall_seconds > 0 ? static_cast<double>(stats.frames) / stats.wall_seconds : 0;
+  return stats;
+}
+
+StatusOr<PipelineStats> Pipeline::RunConcurrent() {
+  using Queue = BoundedQueue<FrameWork*>;
+  const size_t cap = static_cast<size_t>(options_.queue_capacity);
+  // Items: one inside each of the 5 threads plus a full queue on each of the 4 hops.
+  const size_t pool_size = 5 + 4 * cap;
+  std::vector<std::unique_ptr<FrameWork>> pool;
+  Queue free_items(pool_size), to_segment(cap), to_fuse(cap), to_texture(cap), to_sink(cap);
+  for (size_t i = 0; i < pool_size; ++i) {
+    pool.push_back(std::make_unique<FrameWork>());
+    free_items.Push(pool.back().get());
+  }
+  std::mutex mu;
+  Status first_error;
+  PipelineStats stats;
+  auto fail = [&](const Status& s) {
+    {
+      std::lock_guard lock(mu);
+      if (first_error.ok()) first_error = s;
+    }
+    for (Queue* q : {&free_items, &to_segment, &to_fuse, &to_texture, &to_sink}) q->Close();
+  };
+
+  Stopwatch wall;
+  const int64_t start_us = clock_.NowUs();
+  std::thread acquire_thread([&] {
+    int64_t late = 0;
+    for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
+      if (stop_) break;
+      auto item = free_items.Pop();
+      if (!item) break;
+      Status s = Acquire(stages_, options_, clock_, seq, start_us, **item, &late);
+      if (s.code() == StatusCode::kOutOfRange) break;
+      if (!s.ok()) {
+        fail(s);
+        break;
+      }
+      if (!to_segment.Push(*item)) break;
+    }
+    {
+      std::lock_guard lock(mu);
+      stats.late_frames = late;
+    }
+    to_segment.Close();
+  });
+  // A middle stage: pop, process, push on; closes its output when its input ends.
+  auto middle = [&](Queue& in, Queue& out, auto process) {
+    return std::thread([&in, &out, process, &fail] {
+      while (auto item = in.Pop()) {
+        Status s = process(**item);
+        if (!s.ok()) {
+          fail(s);
+          break;
+        }
+        if (!out.Push(*item)) break;
+      }
+      out.Close();
+    });
+  };
+  std::thread segment_thread = middle(to_segment, to_fuse, [&](FrameWork& w) {
+    return Timed(stages_.segment, w, &w.timings.segment_ms);
+  });
+  std::thread fuse_thread = middle(to_fuse, to_texture, [&](FrameWork& w) { return RunFuseMesh(stages_.fuse_mesh, w); });
+  std::thread texture_thread = middle(to_texture, to_sink, [&](FrameWork& w) {
+    Status s = Timed(stages_.texture, w, &w.timings.texture_ms);
+    w.timings.ready_us = clock_.NowUs();
+    return s;
+  });
+  std::thread sink_thread([&] {
+    while (auto item = to_sink.Pop()) {
+      if (stages_.sink) {
+        Status s = stages_.sink(**item);
+        if (!s.ok()) {
+          fail(s);
+          break;
+        }
+      }
+      stats.per_frame.push_back((*item)->timings);
+      ++stats.frames;
+      free_items.Push(*item);
+    }
+  });
+  for (std::thread* t : {&acquire_thread, &segment_thread, &fuse_thread, &texture_thread, &sink_thread}) t->join();
+  if (!first_error.ok()) return first_error;
+  stats.wall_seconds = wall.ElapsedMs() * 1e-3;
+  stats.fps = stats.wall_seconds > 0 ? static_cast<double>(stats.frames) / stats.wall_seconds : 0;
+  return stats;
+}
+
+namespace {
+double MedianOf(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+}  // namespace
+
+StageTimings MedianTimings(const PipelineStats& stats) {
+  StageTimings m;
+  auto med = [&](double StageTimings::*field) {
+    std::vector<double> v;
+    for (const auto& t : stats.per_frame) v.push_back(t.*field);
+    return MedianOf(v);
+  };
+  m.acquire_ms = med(&StageTimings::acquire_ms);
+  m.segment_ms = med(&StageTimings::segment_ms);
+  m.fuse_ms = med(&StageTimings::fuse_ms);
+  m.mesh_ms = med(&StageTimings::mesh_ms);
+  m.texture_ms = med(&StageTimings::texture_ms);
+  return m;
+}
+
+double MedianLatencyMs(const PipelineStats& stats) {
+  std::vector<double> v;
+  for (const auto& t : stats.per_frame) v.push_back(t.latency_ms());
+  return MedianOf(v);
+}
+
+}  // namespace holo

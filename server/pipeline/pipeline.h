@@ -1,0 +1,116 @@
+// The capture pipeline: stages that run concurrently on bounded queues
+// (acquire ‖ segment ‖ fuse+mesh ‖ texture ‖ sink), each timed.
+//
+// Work items circulate: a fixed pool of FrameWork objects is created up
+// front; acquire takes a free one, every stage fills its part in place
+// (reusing the buffers of earlier frames), the sink reads it and the item
+// returns to the pool. In steady state nothing is allocated per frame.
+//
+// The pipeline knows nothing of what the stages do: they are functions, so
+// the same scheduler runs the real stages, test doubles, and (in serial mode)
+// the reference order for tests.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/clock.h"
+#include "common/mesh.h"
+#include "common/rgbd.h"
+#include "common/status.h"
+
+namespace holo {
+
+// Per-frame timings, milliseconds of wall time inside each stage.
+struct StageTimings {
+  double acquire_ms = 0;
+  double segment_ms = 0;
+  double fuse_ms = 0;
+  double mesh_ms = 0;
+  double texture_ms = 0;
+  // Clock time when acquire started and when the texture stage finished (µs
+  // on the pipeline's clock): latency = ready - acquired.
+  int64_t acquired_us = 0;
+  int64_t ready_us = 0;
+  double latency_ms() const { return static_cast<double>(ready_us - acquired_us) * 1e-3; }
+};
+
+// One frame's work item: owned by the pipeline, lent to each stage in turn.
+struct FrameWork {
+  int64_t sequence = 0;  // 0, 1, 2, ... in acquisition order
+  RgbdFrameSet frames;   // pods' colour, depth, and (after segment) masks
+  Mesh mesh;             // after fuse+mesh: geometry; after texture: colours
+  StageTimings timings;
+  // Stage-private scratch a stage may keep with the item (e.g. the fused
+  // mesh before clean-up); nothing outside that stage reads it.
+  std::shared_ptr<void> scratch;
+};
+
+// Stage functions. Each returns an error to stop the pipeline (the error is
+// returned by Run). A stage may be empty (skipped). `work` is valid only
+// during the call. `fuse_mesh` sets timings.fuse_ms and timings.mesh_ms
+// itself (the pipeline times the call as a whole into fuse_ms otherwise).
+struct PipelineStages {
+  // Fills work.frames; returns OutOfRange at the end of the source.
+  std::function<Status(FrameWork& work)> acquire;
+  std::function<Status(FrameWork& work)> segment;
+  std::function<Status(FrameWork& work)> fuse_mesh;
+  std::function<Status(FrameWork& work)> texture;
+  // Receives finished frames in order. Runs on its own thread.
+  std::function<Status(const FrameWork& work)> sink;
+};
+
+struct PipelineOptions {
+  // Capacity of each queue between stages (frames in flight per hop).
+  int queue_capacity = 2;
+  // Run all stages one after another on the calling thread (reference order
+  // for tests; also the single-core mode).
+  bool serial = false;
+  // Stop after this many frames (-1: until the source ends).
+  int64_t max_frames = -1;
+  // If > 0, acquire is paced to this rate (a live camera); frames are never
+  // dropped: a slow stage backs up to acquire, and the pacing reports
+  // `late_frames`.
+  double pace_fps = 0;
+  Status Check() const;
+};
+
+struct PipelineStats {
+  int64_t frames = 0;
+  double wall_seconds = 0;
+  double fps = 0;
+  int64_t late_frames = 0;  // paced mode: frames acquired later than their slot
+  std::vector<StageTimings> per_frame;  // in order
+};
+
+// Runs the stages until the source ends, `max_frames` are done, a stage
+// fails, or Stop() is called. Returns the stats, or the first stage error.
+class Pipeline {
+ public:
+  Pipeline(PipelineStages stages, PipelineOptions options, Clock& clock = RealClock::Instance());
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  StatusOr<PipelineStats> Run();
+  // Asks a running pipeline to stop after the frames in flight (thread-safe).
+  void Stop() { stop_ = true; }
+
+ private:
+  StatusOr<PipelineStats> RunSerial();
+  StatusOr<PipelineStats> RunConcurrent();
+
+  PipelineStages stages_;
+  PipelineOptions options_;
+  Clock& clock_;
+  std::atomic<bool> stop_{false};
+};
+
+// Median of each stage's time over `stats.per_frame` (ms).
+StageTimings MedianTimings(const PipelineStats& stats);
+double MedianLatencyMs(const PipelineStats& stats);
+
+}  // namespace holo

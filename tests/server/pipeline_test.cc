@@ -1,0 +1,141 @@
+// The pipeline scheduler with stand-in stages: order, completeness, equality
+// with the serial run, error propagation, pacing.
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "server/pipeline/pipeline.h"
+
+namespace holo {
+namespace {
+
+// Stand-in stages that leave a fingerprint of the frame in the mesh.
+PipelineStages FakeStages(int64_t num_frames, std::vector<std::pair<int64_t, uint32_t>>* out) {
+  PipelineStages st;
+  st.acquire = [num_frames](FrameWork& w) -> Status {
+    if (w.sequence >= num_frames) return OutOfRange("end");
+    w.frames.frame_index = 1000 + w.sequence;
+    w.frames.frames.resize(2);
+    for (auto& f : w.frames.frames) f.depth.Resize(8, 8, static_cast<uint16_t>(w.sequence));
+    return OkStatus();
+  };
+  st.segment = [](FrameWork& w) -> Status {
+    for (auto& f : w.frames.frames) f.mask.Resize(8, 8, static_cast<uint8_t>(w.sequence * 7));
+    // Vary timing so stages overlap in different ways.
+    if (w.sequence % 5 == 0) std::this_thread::sleep_for(std::chrono::microseconds(300));
+    return OkStatus();
+  };
+  st.fuse_mesh = [](FrameWork& w) -> Status {
+    w.mesh.Clear();
+    w.mesh.positions.assign(3, Eigen::Vector3f(static_cast<float>(w.frames.frames[0].depth.at(0, 0)), 0, 0));
+    w.mesh.triangles.push_back({0, 1, 2});
+    return OkStatus();
+  };
+  st.texture = [](FrameWork& w) -> Status {
+    w.mesh.colors.assign(3, {static_cast<uint8_t>(w.frames.frames[1].mask.at(3, 3)), 1, 2});
+    if (w.sequence % 7 == 0) std::this_thread::sleep_for(std::chrono::microseconds(500));
+    return OkStatus();
+  };
+  st.sink = [out](const FrameWork& w) -> Status {
+    const uint32_t fp = static_cast<uint32_t>(w.mesh.positions[0].x()) * 1000u + w.mesh.colors[0][0];
+    out->push_back({w.frames.frame_index, fp});
+    return OkStatus();
+  };
+  return st;
+}
+
+TEST(PipelineTest, ConcurrentRunKeepsOrderLosesNothingAndEqualsSerial) {
+  std::vector<std::pair<int64_t, uint32_t>> serial, concurrent;
+  PipelineOptions so;
+  so.serial = true;
+  auto s = Pipeline(FakeStages(100, &serial), so).Run();
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  PipelineOptions co;
+  co.queue_capacity = 2;
+  auto c = Pipeline(FakeStages(100, &concurrent), co).Run();
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_EQ(s->frames, 100);
+  EXPECT_EQ(c->frames, 100);
+  ASSERT_EQ(concurrent.size(), 100u);
+  for (int64_t i = 0; i < 100; ++i) EXPECT_EQ(concurrent[static_cast<size_t>(i)].first, 1000 + i) << "order";
+  EXPECT_EQ(serial, concurrent);
+  EXPECT_EQ(c->per_frame.size(), 100u);
+}
+
+TEST(PipelineTest, MaxFramesStopsEarly) {
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  PipelineOptions o;
+  o.max_frames = 10;
+  auto r = Pipeline(FakeStages(1000, &out), o).Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->frames, 10);
+  EXPECT_EQ(out.size(), 10u);
+}
+
+TEST(PipelineTest, StageErrorStopsThePipelineAndIsReturned) {
+  for (bool serial : {false, true}) {
+    std::vector<std::pair<int64_t, uint32_t>> out;
+    PipelineStages st = FakeStages(100, &out);
+    st.fuse_mesh = [](FrameWork& w) -> Status {
+      if (w.sequence == 17) return DataLoss("pod 3: depth image is 10x10, rig says 8x8");
+      return OkStatus();
+    };
+    st.texture = nullptr;
+    st.sink = [&out](const FrameWork& w) -> Status {
+      out.push_back({w.sequence, 0});
+      return OkStatus();
+    };
+    PipelineOptions o;
+    o.serial = serial;
+    auto r = Pipeline(st, o).Run();
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), StatusCode::kDataLoss);
+    EXPECT_NE(r.status().message().find("pod 3"), std::string::npos);
+    EXPECT_LE(out.size(), 17u) << "nothing after the failing frame is delivered";
+  }
+}
+
+TEST(PipelineTest, PacedAcquireFollowsTheClock) {
+  SimulatedClock clock(0);
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  PipelineOptions o;
+  o.serial = true;
+  o.pace_fps = 30;
+  auto r = Pipeline(FakeStages(31, &out), o, clock).Run();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->frames, 31);
+  // Frame k is acquired at k periods of 33333 µs; the end of the source is
+  // discovered at the slot of frame 31.
+  EXPECT_EQ(clock.NowUs(), 31 * 33333);
+  EXPECT_EQ(r->late_frames, 0);
+  EXPECT_EQ(r->per_frame[30].acquired_us, 30 * 33333);
+}
+
+TEST(PipelineTest, BadOptionsAreRejected) {
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  PipelineOptions o;
+  o.queue_capacity = 0;
+  auto r = Pipeline(FakeStages(1, &out), o).Run();
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("queue_capacity"), std::string::npos);
+  PipelineStages none;
+  EXPECT_FALSE(Pipeline(none, PipelineOptions{}).Run().ok());
+}
+
+TEST(PipelineTest, MedianTimingsAndLatency) {
+  PipelineStats stats;
+  for (int i = 0; i < 5; ++i) {
+    StageTimings t;
+    t.segment_ms = i;
+    t.acquired_us = 0;
+    t.ready_us = 1000 * (i + 1);
+    stats.per_frame.push_back(t);
+  }
+  EXPECT_EQ(MedianTimings(stats).segment_ms, 2.0);
+  EXPECT_EQ(MedianLatencyMs(stats), 3.0);
+}
+
+}  // namespace
+}  // namespace holo
