@@ -335,7 +335,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   }
 
   // Triangle order for the index codec, then vertices renumbered by first use.
-  if (o.optimize_order && nt > 0) meshopt_optimizeVertexCache(idx.data(), idx.data(), idx.size(), nu);
+  if (o.optimize_order && nt > 0) meshopt_optimizeVertexCacheFifo(idx.data(), idx.data(), idx.size(), nu, 16);
   std::vector<uint32_t> remap(nu);
   const size_t nv = nt > 0 ? meshopt_optimizeVertexFetchRemap(remap.data(), idx.data(), idx.size(), nu) : 0;
   if (nt == 0) std::fill(remap.begin(), remap.end(), UINT32_MAX);
@@ -353,7 +353,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   const size_t ibn = meshopt_encodeIndexBuffer(ib.data(), ib.size(), idx.data(), idx.size());
   if (ibn == 0 && !idx.empty()) return Internal("meshoptimizer index encoding failed");
   ib.resize(ibn);
-  w.Blob32(ib);
+  HOLO_RETURN_IF_ERROR(ZstdAppend(w, out, ib, o.zstd_level));
   if (!idx.empty() && meshopt_decodeIndexBuffer(idx.data(), idx.size(), 4, ib.data(), ib.size()) != 0) {
     return Internal("meshoptimizer index round trip failed");
   }
@@ -419,11 +419,22 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   if (uint64_t{nv} > uint64_t{nt} * 3) {
     return DataLoss("g1.num_vertices: " + Str(nv) + " vertices cannot all be referenced by " + Str(nt) + " triangles");
   }
-  std::span<const uint8_t> ib;
-  HOLO_RETURN_IF_ERROR(r.Blob32("g1.indices", r.remaining(), &ib));
-  // meshoptimizer's index codec spends at least one byte per triangle plus a 17-byte header and table.
-  if (nt > 0 && uint64_t{nt} + 17 > ib.size()) {
-    return DataLoss("g1.num_triangles: " + Str(nt) + " triangles cannot fit in " + Str(ib.size()) + " index bytes");
+  // meshoptimizer's index codec spends at least one byte per triangle plus a
+  // 17-byte header and table, and at most its documented bound.
+  std::vector<uint8_t> ib;
+  {
+    std::span<const uint8_t> z;
+    HOLO_RETURN_IF_ERROR(r.Blob32("g1.indices", r.remaining(), &z));
+    const unsigned long long declared = ZSTD_getFrameContentSize(z.data(), z.size());
+    const uint64_t most = nt > 0 ? meshopt_encodeIndexBufferBound(size_t{nt} * 3, nv) : 0;
+    const uint64_t least = nt > 0 ? uint64_t{nt} + 17 : 0;
+    if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared < least ||
+        declared > most) {
+      return DataLoss("g1.indices: index stream size does not fit " + Str(nt) + " triangles");
+    }
+    ib.resize(declared);
+    const size_t got = ZSTD_decompress(ib.data(), ib.size(), z.data(), z.size());
+    if (ZSTD_isError(got) || got != declared) return DataLoss("g1.indices: zstd data is corrupt");
   }
   std::vector<uint32_t> idx(size_t{nt} * 3);
   if (nt > 0 && meshopt_decodeIndexBuffer(idx.data(), idx.size(), 4, ib.data(), ib.size()) != 0) {

@@ -4,8 +4,8 @@
 //   G1 — our default: positions quantized on a grid in the frame's bounding
 //        box (default step 1 mm), parallelogram-predicted along the triangle
 //        order; octahedral 8-bit normals and RGB8 colours predicted from
-//        neighbours; triangles through meshoptimizer's index codec; residual
-//        streams through zstd.
+//        neighbours; triangles through meshoptimizer's index codec; the index and
+//        residual streams through zstd.
 // Each blob is self-describing (codec id, counts, flags) and decodes without
 // any other state (every frame is a key frame).
 #pragma once
@@ -25,11 +25,12 @@ struct GeometryEncodeOptions {
   // G1: position quantization step, metres. The maximum position error is
   // step/2 per axis (≤ step·√3/2 in 3D). Must be in [1e-5, 0.1].
   float position_step_m = 0.001f;
-  // G1: zstd level for the residual streams (1 = fastest).
-  int zstd_level = 3;
-  // G1: reorder triangles for the index codec (meshoptimizer's vertex cache
-  // optimizer). Off saves ~encode time, costs ~15–25% of index bytes.
-  bool optimize_order = true;
+  // G1: zstd level for the index and residual streams (1 = fastest).
+  int zstd_level = 1;
+  // G1: reorder triangles first (meshoptimizer's FIFO vertex cache
+  // optimizer). Off keeps the extraction order, which is already spatially
+  // coherent for marching-cubes output; on costs encode time.
+  bool optimize_order = false;
   // Send normals and colours when the mesh has them.
   bool normals = true;
   bool colors = true;
