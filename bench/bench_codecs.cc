@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 #include <string>
 #include <unordered_map>
@@ -402,6 +403,20 @@ int RunCodecs(const BenchArgs& args) {
     emit(run.name, "decode_ms", Median(fig.dec), "ms", extra);
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
+  }
+  {
+    // Where G1's bytes go: its four u32-length streams after the 28-byte prefix.
+    std::vector<uint8_t> blob;
+    if (protocol::EncodeGeometry(inputs[0].mesh, {}, &blob).ok()) {
+      size_t off = 28;
+      for (const char* stream : {"indices", "positions", "normals", "colors"}) {
+        if (off + 4 > blob.size()) break;
+        uint32_t n = 0;
+        std::memcpy(&n, blob.data() + off, 4);
+        emit("G1", "stream_bytes", n, "B", {{"stream", stream}});
+        off += 4 + n;
+      }
+    }
   }
   emit("G1", "bytes_ratio_vs_G0", bytes_of["G1"] / bytes_of["G0"], "1");
   emit("draco", "bytes_ratio_vs_G1", bytes_of["draco"] / bytes_of["G1"], "1", {{"peer", "draco"}});

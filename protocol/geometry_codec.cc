@@ -426,7 +426,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
     std::span<const uint8_t> z;
     HOLO_RETURN_IF_ERROR(r.Blob32("g1.indices", r.remaining(), &z));
     const unsigned long long declared = ZSTD_getFrameContentSize(z.data(), z.size());
-    const uint64_t most = nt > 0 ? meshopt_encodeIndexBufferBound(size_t{nt} * 3, nv) : 0;
+    const uint64_t most = meshopt_encodeIndexBufferBound(size_t{nt} * 3, nv);
     const uint64_t least = nt > 0 ? uint64_t{nt} + 17 : 0;
     if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared < least ||
         declared > most) {
