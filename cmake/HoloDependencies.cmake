@@ -14,3 +14,10 @@ endif()
 if(HOLO_BUILD_BENCH)
   find_package(benchmark REQUIRED)
 endif()
+# Wire protocol codecs (protocol/): LZ4 and zstd, meshoptimizer's vertex and
+# index codecs, libturbojpeg; Draco as the geometry peer in benchmarks.
+pkg_check_modules(LZ4 REQUIRED IMPORTED_TARGET liblz4)
+pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
+pkg_check_modules(TURBOJPEG REQUIRED IMPORTED_TARGET libturbojpeg)
+find_package(meshoptimizer REQUIRED)
+find_package(draco REQUIRED)

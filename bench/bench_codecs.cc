@@ -1,0 +1,477 @@
+// holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
+//
+// Geometry codecs G0 (Holoportation's fp16 + LZ4 baseline) and G1 (ours),
+// Draco side by side in the same process on the same meshes at comparable
+// quantization (position step ≤ 1 mm), and colour codecs C0 and C1 on the
+// same per-pod masked images. One core; data prepared outside the timed code.
+//
+// Input: the synthetic studio's frames (ground-truth foreground mesh and
+// per-pod colour + exact mask) when the studio is compiled in; otherwise, or
+// with --synthetic, workload "synthetic-sphere": a bumpy noisy blob extracted
+// by marching tetrahedra at 6 mm voxels (vertices on lattice edges, irregular
+// connectivity, like a TSDF mesh of one person, ~60k vertices) and 8 masked
+// textured images at the workload's resolution.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <random>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "bench.h"
+#include "common/image.h"
+#include "common/mesh.h"
+#include "protocol/color_codec.h"
+#include "protocol/draco_peer.h"
+#include "protocol/geometry_codec.h"
+
+#if __has_include("server/studio/workloads.h") && __has_include("server/studio/studio.cc")
+#define HOLO_BENCH_HAVE_STUDIO 1
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+#else
+#define HOLO_BENCH_HAVE_STUDIO 0
+#endif
+
+namespace holo::bench {
+namespace {
+
+using protocol::ColorCodec;
+using protocol::GeometryCodec;
+
+double NowMs() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+struct PodImageInput {
+  ImageRgb8 color;
+  ImageGray8 mask;
+};
+
+struct FrameInput {
+  Mesh mesh;
+  std::vector<PodImageInput> pods;
+};
+
+// ------------------------------------------------------------ synthetic input
+
+// Smooth value noise on a 3 cm lattice, amplitude ±1.
+struct ValueNoise {
+  explicit ValueNoise(uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-1, 1);
+    for (float& v : table) v = u(rng);
+  }
+  float operator()(const Eigen::Vector3f& p) const {
+    const Eigen::Vector3f q = p / 0.03f;
+    const Eigen::Vector3f f = q.array().floor();
+    const Eigen::Vector3f t = q - f;
+    float r = 0;
+    for (int c = 0; c < 8; ++c) {
+      const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+      const uint32_t h = (static_cast<uint32_t>(static_cast<int>(f.x()) + dx) * 73856093u) ^
+                         (static_cast<uint32_t>(static_cast<int>(f.y()) + dy) * 19349663u) ^
+                         (static_cast<uint32_t>(static_cast<int>(f.z()) + dz) * 83492791u);
+      const float w = (dx ? t.x() : 1 - t.x()) * (dy ? t.y() : 1 - t.y()) * (dz ? t.z() : 1 - t.z());
+      r += w * table[h & 4095];
+    }
+    return r;
+  }
+  float table[4096];
+};
+
+// Marching tetrahedra over a signed distance function sampled at `voxel`.
+Mesh SyntheticBlob(int frame, float voxel) {
+  const Eigen::Vector3f center(0.1f, -0.2f, 1.0f);
+  const float radius = 0.2f;
+  const ValueNoise smooth(7 + frame), fine(1000 + frame);
+  const float phase = 0.2f * frame;
+  auto sdf = [&](const Eigen::Vector3f& p) {
+    const Eigen::Vector3f d = p - center;
+    const float r = d.norm();
+    const float bumps = 0.04f * std::sin(4 * std::atan2(d.y(), d.x()) + phase) * d.z() / (r + 1e-6f);
+    return r - radius * (1 + bumps) + 0.004f * smooth(p) + 0.0008f * fine(p * 5.0f);
+  };
+  const float half = radius * 1.3f;
+  const Eigen::Vector3f lo = center - Eigen::Vector3f::Constant(half);
+  const int n = static_cast<int>(std::ceil(2 * half / voxel)) + 1;
+  std::vector<float> val(static_cast<size_t>(n) * n * n);
+  auto id = [n](int i, int j, int k) { return (static_cast<size_t>(k) * n + j) * n + i; };
+  auto pos = [&](int i, int j, int k) { return Eigen::Vector3f(lo + voxel * Eigen::Vector3f(i, j, k)); };
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) val[id(i, j, k)] = sdf(pos(i, j, k));
+  Mesh m;
+  std::unordered_map<uint64_t, uint32_t> edge_vertex;
+  const ValueNoise tint(99 + frame);
+  auto vertex = [&](size_t a, Eigen::Vector3f pa, size_t b, Eigen::Vector3f pb) {
+    if (a > b) {  // one vertex per lattice edge, whichever tetrahedron reaches it first
+      std::swap(a, b);
+      std::swap(pa, pb);
+    }
+    const uint64_t key = (static_cast<uint64_t>(a) << 32) | b;
+    auto it = edge_vertex.find(key);
+    if (it != edge_vertex.end()) return it->second;
+    const float va = val[a], vb = val[b];
+    const Eigen::Vector3f p = pa + (va / (va - vb)) * (pb - pa);
+    const auto idx = static_cast<uint32_t>(m.positions.size());
+    m.positions.push_back(p);
+    const float t = 0.5f + 0.5f * tint(p * 0.5f);
+    m.colors.push_back({static_cast<uint8_t>(90 + 120 * t), static_cast<uint8_t>(60 + 80 * (p.z() - lo.z()) / (2 * half)),
+                        static_cast<uint8_t>(150 - 90 * t)});
+    edge_vertex.emplace(key, idx);
+    return idx;
+  };
+  static constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+  static constexpr int kTets[6][4] = {{0, 5, 1, 6}, {0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6}, {0, 7, 4, 6}, {0, 4, 5, 6}};
+  for (int k = 0; k + 1 < n; ++k)
+    for (int j = 0; j + 1 < n; ++j)
+      for (int i = 0; i + 1 < n; ++i) {
+        size_t cid[8];
+        Eigen::Vector3f cp[8];
+        int inside = 0;
+        for (int c = 0; c < 8; ++c) {
+          cid[c] = id(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
+          cp[c] = pos(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
+          inside += val[cid[c]] < 0;
+        }
+        if (inside == 0 || inside == 8) continue;
+        for (const auto& tet : kTets) {
+          std::vector<int> in, out;
+          for (int c : tet) (val[cid[c]] < 0 ? in : out).push_back(c);
+          if (in.empty() || out.empty()) continue;
+          Eigen::Vector3f gin = Eigen::Vector3f::Zero(), gout = Eigen::Vector3f::Zero();
+          for (int c : in) gin += cp[c] / static_cast<float>(in.size());
+          for (int c : out) gout += cp[c] / static_cast<float>(out.size());
+          const Eigen::Vector3f outward = gout - gin;
+          auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
+            if (a == b || b == c || a == c) return;
+            const Eigen::Vector3f nrm = (m.positions[b] - m.positions[a]).cross(m.positions[c] - m.positions[a]);
+            if (nrm.dot(outward) < 0) std::swap(b, c);
+            m.triangles.push_back({a, b, c});
+          };
+          auto v = [&](int a, int b) { return vertex(cid[a], cp[a], cid[b], cp[b]); };
+          if (in.size() == 1 || in.size() == 3) {
+            const int s = in.size() == 1 ? in[0] : out[0];
+            const std::vector<int>& o = in.size() == 1 ? out : in;
+            emit(v(s, o[0]), v(s, o[1]), v(s, o[2]));
+          } else {
+            const uint32_t a = v(in[0], out[0]), b = v(in[0], out[1]), c = v(in[1], out[1]), d = v(in[1], out[0]);
+            emit(a, b, c);
+            emit(a, c, d);
+          }
+        }
+      }
+  // Normals from the SDF gradient, as TSDF meshing does.
+  m.normals.resize(m.positions.size());
+  const float e = voxel * 0.5f;
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const Eigen::Vector3f& p = m.positions[i];
+    Eigen::Vector3f g(sdf(p + Eigen::Vector3f(e, 0, 0)) - sdf(p - Eigen::Vector3f(e, 0, 0)),
+                      sdf(p + Eigen::Vector3f(0, e, 0)) - sdf(p - Eigen::Vector3f(0, e, 0)),
+                      sdf(p + Eigen::Vector3f(0, 0, e)) - sdf(p - Eigen::Vector3f(0, 0, e)));
+    m.normals[i] = g.norm() > 0 ? Eigen::Vector3f(g.normalized()) : Eigen::Vector3f::UnitZ();
+  }
+  return m;
+}
+
+// A person-sized textured silhouette (ellipse + head) with mild sensor noise.
+PodImageInput SyntheticPodImage(int w, int h, int pod, int frame) {
+  std::mt19937 rng(static_cast<uint32_t>(pod * 1000 + frame));
+  std::normal_distribution<float> noise(0, 1.5f);
+  PodImageInput in;
+  in.color.Resize(w, h);
+  in.mask.Resize(w, h);
+  const float cx = w * (0.45f + 0.02f * pod), cy = h * 0.58f;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float bx = (x - cx) / (0.16f * w), by = (y - cy) / (0.36f * h);
+      const float hx = (x - cx) / (0.07f * w), hy = (y - h * 0.17f) / (0.09f * h);
+      const bool fg = bx * bx + by * by < 1 || hx * hx + hy * hy < 1;
+      in.mask.at(x, y) = fg ? 255 : 0;
+      const float stripes = 40 * std::sin(0.08f * x + 0.05f * y + pod) + 25 * std::sin(0.21f * y);
+      const float base[3] = {fg ? 150.f : 70.f, fg ? 110.f : 80.f, fg ? 90.f : 95.f};
+      for (int c = 0; c < 3; ++c) {
+        in.color.at(x, y, c) =
+            static_cast<uint8_t>(std::clamp(base[c] + (fg ? stripes * (c == 0 ? 1 : 0.5f) : 0) + noise(rng), 0.f, 255.f));
+      }
+    }
+  return in;
+}
+
+// ------------------------------------------------------------ metrics
+
+struct GeomError {
+  double rms_mm = 0, max_mm = 0;
+};
+
+GeomError ErrorByMap(const Mesh& in, const Mesh& out, const std::vector<uint32_t>& map) {
+  double sum = 0, mx = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < in.num_vertices(); ++i) {
+    if (map[i] == UINT32_MAX) continue;
+    const double d = (in.positions[i] - out.positions[map[i]]).norm() * 1000.0;
+    sum += d * d;
+    mx = std::max(mx, d);
+    ++n;
+  }
+  return {n ? std::sqrt(sum / n) : 0, mx};
+}
+
+// Error to the nearest decoded vertex (for Draco, which renumbers vertices).
+GeomError ErrorByNearest(const Mesh& in, const Mesh& out) {
+  const float cell = 0.004f;
+  auto key = [cell](const Eigen::Vector3f& p, int dx, int dy, int dz) {
+    const auto ix = static_cast<int64_t>(std::floor(p.x() / cell)) + dx;
+    const auto iy = static_cast<int64_t>(std::floor(p.y() / cell)) + dy;
+    const auto iz = static_cast<int64_t>(std::floor(p.z() / cell)) + dz;
+    return static_cast<uint64_t>((ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791));
+  };
+  std::unordered_multimap<uint64_t, uint32_t> grid;
+  grid.reserve(out.num_vertices());
+  for (size_t i = 0; i < out.num_vertices(); ++i) grid.emplace(key(out.positions[i], 0, 0, 0), static_cast<uint32_t>(i));
+  double sum = 0, mx = 0;
+  size_t n = 0;
+  for (const auto& p : in.positions) {
+    float best = 1e9f;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          auto range = grid.equal_range(key(p, dx, dy, dz));
+          for (auto it = range.first; it != range.second; ++it) best = std::min(best, (out.positions[it->second] - p).norm());
+        }
+    const double d = best * 1000.0;
+    sum += d * d;
+    mx = std::max(mx, d);
+    ++n;
+  }
+  return {n ? std::sqrt(sum / n) : 0, mx};
+}
+
+// PSNR over foreground pixels (RGB), capped at 99 dB for lossless results.
+double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
+  double se = 0;
+  size_t n = 0;
+  for (int y = 0; y < in.color.height(); ++y)
+    for (int x = 0; x < in.color.width(); ++x) {
+      if (!in.mask.empty() && in.mask.at(x, y) == 0) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(in.color.at(x, y, c)) - out.at(x, y, c);
+        se += d * d;
+      }
+      n += 3;
+    }
+  if (n == 0 || se == 0) return 99.0;
+  return std::min(99.0, 10 * std::log10(255.0 * 255.0 / (se / n)));
+}
+
+struct Figures {
+  std::vector<double> bytes, enc, dec, a, b;  // a, b: rms/max mm or psnr
+};
+
+int RunCodecs(const BenchArgs& args) {
+  const bool synthetic = !HOLO_BENCH_HAVE_STUDIO ||
+                         std::find(args.extra.begin(), args.extra.end(), "--synthetic") != args.extra.end();
+  const int frames = args.frames > 0 ? args.frames : 4;
+  std::string workload = args.workload;
+  std::map<std::string, std::string> q0;
+  std::vector<FrameInput> inputs(frames);
+  if (synthetic) {
+    int w = 640, h = 480;
+    if (args.workload == "S8-QVGA") {
+      w = 320;
+      h = 240;
+    } else if (args.workload != "S8-VGA") {
+      std::fprintf(stderr, "codecs: unknown workload '%s' (S8-QVGA or S8-VGA)\n", args.workload.c_str());
+      return 2;
+    }
+    workload = "synthetic-sphere";
+    q0["images"] = "8x" + std::to_string(w) + "x" + std::to_string(h);
+    q0["mesh"] = "marching-tetrahedra-6mm";
+    for (int f = 0; f < frames; ++f) {
+      inputs[f].mesh = SyntheticBlob(f, 0.006f);
+      for (int p = 0; p < 8; ++p) inputs[f].pods.push_back(SyntheticPodImage(w, h, p, f));
+    }
+  } else {
+#if HOLO_BENCH_HAVE_STUDIO
+    auto wl = GetWorkload(args.workload);
+    if (!wl.ok()) {
+      std::fprintf(stderr, "codecs: %s\n", wl.status().ToString().c_str());
+      return 2;
+    }
+    SyntheticStudio studio(wl->rig, wl->studio);
+    q0["mesh"] = "studio-ground-truth";
+    RgbdFrameSet fs;
+    StudioGroundTruth gt;
+    for (int f = 0; f < frames; ++f) {
+      studio.RenderFrame(f * 7, &fs, &gt);
+      inputs[f].mesh = gt.foreground_mesh;
+      for (size_t p = 0; p < fs.frames.size(); ++p) {
+        PodImageInput pi;
+        pi.color = fs.frames[p].color;
+        if (p < gt.mask.size() && gt.mask[p].width() == pi.color.width() && gt.mask[p].height() == pi.color.height()) {
+          pi.mask = gt.mask[p];
+        }
+        inputs[f].pods.push_back(std::move(pi));
+      }
+    }
+#endif
+  }
+  if (!args.json) {
+    std::fprintf(stderr, "codecs: %s, %d frames, mesh %zu vertices %zu triangles, %zu pods\n", workload.c_str(), frames,
+                 inputs[0].mesh.num_vertices(), inputs[0].mesh.num_triangles(), inputs[0].pods.size());
+  }
+  q0["vertices"] = std::to_string(inputs[0].mesh.num_vertices());
+
+  auto emit = [&](const std::string& codec, const std::string& metric, double v, const std::string& unit,
+                  std::map<std::string, std::string> extra = {}) {
+    std::map<std::string, std::string> q = q0;
+    q["codec"] = codec;
+    for (auto& [k, val] : extra) q[k] = val;
+    EmitFigure("codecs", workload, metric, v, unit, q);
+  };
+
+  std::map<std::string, double> bytes_of;
+  // ---- geometry
+  struct GeomRun {
+    std::string name;
+    bool draco;
+    protocol::GeometryEncodeOptions g;
+    protocol::DracoOptions d;
+  };
+  std::vector<GeomRun> runs;
+  runs.push_back({"G0", false, {}, {}});
+  runs.back().g.codec = GeometryCodec::kG0;
+  runs.push_back({"G1", false, {}, {}});
+  runs.push_back({"draco", true, {}, {}});
+  runs.push_back({"draco-fast", true, {}, {}});
+  runs.back().d.speed = 10;
+  for (const GeomRun& run : runs) {
+    Figures fig;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      for (const FrameInput& in : inputs) {
+        std::vector<uint8_t> blob;
+        std::vector<uint32_t> map;
+        Mesh out;
+        protocol::DracoOptions dopt = run.d;
+        if (run.draco) {
+          Eigen::Vector3f lo = Eigen::Vector3f::Constant(1e9f), hi = -lo;
+          for (const auto& p : in.mesh.positions) {
+            lo = lo.cwiseMin(p);
+            hi = hi.cwiseMax(p);
+          }
+          dopt.position_bits = protocol::DracoBitsForStep((hi - lo).maxCoeff(), 0.001f);
+        }
+        const double t0 = NowMs();
+        const Status es = run.draco ? protocol::EncodeDraco(in.mesh, dopt, &blob)
+                                    : protocol::EncodeGeometry(in.mesh, run.g, &blob, &map);
+        const double t1 = NowMs();
+        const Status ds = run.draco ? protocol::DecodeDraco(blob, &out) : protocol::DecodeGeometry(blob, &out);
+        const double t2 = NowMs();
+        if (!es.ok() || !ds.ok()) {
+          std::fprintf(stderr, "codecs: %s failed: %s %s\n", run.name.c_str(), es.ToString().c_str(),
+                       ds.ToString().c_str());
+          return 1;
+        }
+        fig.bytes.push_back(static_cast<double>(blob.size()));
+        fig.enc.push_back(t1 - t0);
+        fig.dec.push_back(t2 - t1);
+        if (rep == 0) {
+          const GeomError e = run.draco ? ErrorByNearest(in.mesh, out) : ErrorByMap(in.mesh, out, map);
+          fig.a.push_back(e.rms_mm);
+          fig.b.push_back(e.max_mm);
+        }
+      }
+    }
+    std::map<std::string, std::string> extra;
+    if (run.draco) {
+      extra["peer"] = "draco";
+      extra["error"] = "nearest-vertex";
+      extra["draco_speed"] = std::to_string(run.d.speed);
+    }
+    const double bytes = Median(fig.bytes);
+    bytes_of[run.name] = bytes;
+    emit(run.name, "bytes_per_frame", bytes, "B", extra);
+    emit(run.name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit(run.name, "encode_ms", Median(fig.enc), "ms", extra);
+    emit(run.name, "decode_ms", Median(fig.dec), "ms", extra);
+    emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
+    emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
+  }
+  {
+    // Where G1's bytes go: its four u32-length streams after the 28-byte prefix.
+    std::vector<uint8_t> blob;
+    if (protocol::EncodeGeometry(inputs[0].mesh, {}, &blob).ok()) {
+      size_t off = 28;
+      for (const char* stream : {"indices", "positions", "normals", "colors"}) {
+        if (off + 4 > blob.size()) break;
+        uint32_t n = 0;
+        std::memcpy(&n, blob.data() + off, 4);
+        emit("G1", "stream_bytes", n, "B", {{"stream", stream}});
+        off += 4 + n;
+      }
+    }
+  }
+  emit("G1", "bytes_ratio_vs_G0", bytes_of["G1"] / bytes_of["G0"], "1");
+  emit("draco", "bytes_ratio_vs_G1", bytes_of["draco"] / bytes_of["G1"], "1", {{"peer", "draco"}});
+
+  // ---- colour
+  for (ColorCodec codec : {ColorCodec::kC0, ColorCodec::kC1}) {
+    const std::string name = codec == ColorCodec::kC0 ? "C0" : "C1";
+    protocol::ColorEncodeOptions o;
+    o.codec = codec;
+    Figures fig;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      for (const FrameInput& in : inputs) {
+        double bytes = 0, enc = 0, dec = 0, psnr = 0;
+        for (const PodImageInput& pod : in.pods) {
+          std::vector<uint8_t> blob;
+          ImageRgb8 out;
+          ImageGray8 mask;
+          const double t0 = NowMs();
+          const Status es = protocol::EncodeColor(pod.color, pod.mask, o, &blob);
+          const double t1 = NowMs();
+          const Status ds = protocol::DecodeColor(blob, &out, &mask);
+          const double t2 = NowMs();
+          if (!es.ok() || !ds.ok()) {
+            std::fprintf(stderr, "codecs: %s failed: %s %s\n", name.c_str(), es.ToString().c_str(),
+                         ds.ToString().c_str());
+            return 1;
+          }
+          bytes += static_cast<double>(blob.size());
+          enc += t1 - t0;
+          dec += t2 - t1;
+          if (rep == 0) psnr += ForegroundPsnr(pod, out) / static_cast<double>(in.pods.size());
+        }
+        fig.bytes.push_back(bytes);
+        fig.enc.push_back(enc);
+        fig.dec.push_back(dec);
+        if (rep == 0) fig.a.push_back(psnr);
+      }
+    }
+    const double bytes = Median(fig.bytes);
+    bytes_of[name] = bytes;
+    std::map<std::string, std::string> extra{{"pods", std::to_string(inputs[0].pods.size())}};
+    if (codec == ColorCodec::kC1) extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
+    emit(name, "bytes_per_frame", bytes, "B", extra);
+    emit(name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit(name, "encode_ms", Median(fig.enc), "ms", extra);
+    emit(name, "decode_ms", Median(fig.dec), "ms", extra);
+    emit(name, "color_psnr_db", Median(fig.a), "dB", extra);
+  }
+  emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
+  emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1) codecs: bytes, time, error", RunCodecs);
+
+}  // namespace holo::bench

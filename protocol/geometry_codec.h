@@ -1,0 +1,68 @@
+// Geometry codecs for MeshFrame payloads (PROTOCOL.md §7):
+//   G0 — the Holoportation baseline: deduplicated vertices, fp16 positions and
+//        normals, raw RGB8 colours, LZ4 on 32-bit indices.
+//   G1 — our default: positions quantized on a grid in the frame's bounding
+//        box (default step 1 mm), parallelogram-predicted along the triangle
+//        order; octahedral 8-bit normals and RGB8 colours predicted from
+//        neighbours; triangles through meshoptimizer's index codec; the index and
+//        residual streams through zstd.
+// Each blob is self-describing (codec id, counts, flags) and decodes without
+// any other state (every frame is a key frame).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "common/mesh.h"
+#include "common/status.h"
+#include "protocol/messages.h"
+
+namespace holo::protocol {
+
+struct GeometryEncodeOptions {
+  GeometryCodec codec = GeometryCodec::kG1;
+  // G1: position quantization step, metres. The maximum position error is
+  // step/2 per axis (≤ step·√3/2 in 3D). Must be in [1e-5, 0.1].
+  float position_step_m = 0.001f;
+  // G1: zstd level for the index and residual streams (1 = fastest).
+  int zstd_level = 1;
+  // G1: reorder triangles first (meshoptimizer's FIFO vertex cache
+  // optimizer). Off keeps the extraction order, which is already spatially
+  // coherent for marching-cubes output; on costs encode time.
+  bool optimize_order = false;
+  // Send normals and colours when the mesh has them.
+  bool normals = true;
+  bool colors = true;
+  Status Check() const;
+};
+
+// Encodes `mesh` (must pass Mesh::Validate) into a geometry blob appended to
+// `out`. If `vertex_map` is not null it receives, for every input vertex, the
+// index of the decoded vertex that represents it (UINT32_MAX if the vertex is
+// dropped, e.g. unreferenced by any triangle in G1). InvalidArgument if the
+// mesh is invalid or exceeds the protocol limits.
+Status EncodeGeometry(const Mesh& mesh, const GeometryEncodeOptions& options, std::vector<uint8_t>* out,
+                      std::vector<uint32_t>* vertex_map = nullptr);
+
+// Decodes a geometry blob (any codec) into `mesh`. Safe on untrusted input:
+// DataLoss naming the field on malformed, truncated or over-limit data; the
+// result always passes Mesh::Validate.
+Status DecodeGeometry(std::span<const uint8_t> blob, Mesh* mesh, const Limits& limits = {});
+
+// The codec id of a blob without decoding it (DataLoss if too short/unknown).
+StatusOr<GeometryCodec> PeekGeometryCodec(std::span<const uint8_t> blob);
+
+// OK, or DataLoss naming the problem: attribute counts that do not match the
+// vertices, a non-finite position or normal, a triangle index out of range.
+// (The same checks as Mesh::Validate, kept here so that holo_protocol does
+// not depend on common/mesh.cc.)
+Status CheckMesh(const Mesh& mesh);
+// Empties all of `mesh`'s arrays.
+void ClearMesh(Mesh* mesh);
+
+// Octahedral mapping of a unit vector to [-1, 1]² and back.
+void OctEncode(const Eigen::Vector3f& n, float* u, float* v);
+Eigen::Vector3f OctDecode(float u, float v);
+
+}  // namespace holo::protocol

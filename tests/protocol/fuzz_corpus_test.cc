@@ -1,0 +1,88 @@
+// Replays the fuzz corpus (tests/protocol/corpus/: seeds plus every input a
+// fuzzer run found interesting or crashing) through the same entry point as
+// the libFuzzer target, so it runs under gcc and in the sanitizer build.
+// Regenerate the seeds with: HOLO_WRITE_CORPUS=1 build/tests/protocol_fuzz_corpus_test
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "protocol/fuzz_decoders.h"
+#include "protocol/sample_messages.h"
+
+namespace holo::protocol {
+namespace {
+
+const std::string kCorpusDir = std::string(HOLO_SOURCE_DIR) + "/tests/protocol/corpus";
+
+std::vector<std::pair<std::string, std::vector<uint8_t>>> Seeds() {
+  std::vector<std::pair<std::string, std::vector<uint8_t>>> seeds;
+  std::vector<uint8_t> stream;
+  uint32_t seq = 0;
+  for (const Payload& p : test::SamplePayloads()) {
+    Header h;
+    h.sequence = seq++;
+    const auto m = EncodeMessage(h, p);
+    seeds.emplace_back(std::string("seed-message-") + std::to_string(seq) + "-" + MessageTypeName(TypeOf(p)),
+                       FuzzInput(FuzzTarget::kMessage, m));
+    stream.insert(stream.end(), m.begin(), m.end());
+  }
+  MeshFrame big;
+  big.data.assign(3000, 7);
+  for (const auto& f : EncodeFragmented({}, big, 1000)) stream.insert(stream.end(), f.begin(), f.end());
+  seeds.emplace_back("seed-stream", FuzzInput(FuzzTarget::kStream, stream));
+  const Mesh mesh = test::NoisySphere(6, 9);
+  for (GeometryCodec c : {GeometryCodec::kG0, GeometryCodec::kG1}) {
+    GeometryEncodeOptions o;
+    o.codec = c;
+    std::vector<uint8_t> b;
+    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
+    seeds.emplace_back(c == GeometryCodec::kG0 ? "seed-geometry-g0" : "seed-geometry-g1",
+                       FuzzInput(FuzzTarget::kGeometry, b));
+  }
+  ImageRgb8 im;
+  ImageGray8 mask;
+  test::MaskedImage(24, 18, &im, &mask);
+  for (ColorCodec c : {ColorCodec::kC0, ColorCodec::kC1}) {
+    ColorEncodeOptions o;
+    o.codec = c;
+    std::vector<uint8_t> b;
+    EXPECT_TRUE(EncodeColor(im, mask, o, &b).ok());
+    seeds.emplace_back(c == ColorCodec::kC0 ? "seed-color-c0" : "seed-color-c1", FuzzInput(FuzzTarget::kColor, b));
+  }
+  return seeds;
+}
+
+TEST(FuzzCorpus, SeedsDecode) {
+  if (std::getenv("HOLO_WRITE_CORPUS")) {
+    std::filesystem::create_directories(kCorpusDir);
+    for (const auto& [name, bytes] : Seeds()) {
+      std::ofstream(kCorpusDir + "/" + name, std::ios::binary)
+          .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    }
+  }
+  for (const auto& [name, bytes] : Seeds()) EXPECT_GE(FuzzDecoders(bytes.data(), bytes.size()), 1) << name;
+}
+
+TEST(FuzzCorpus, ReplayCorpusDirectory) {
+  ASSERT_TRUE(std::filesystem::is_directory(kCorpusDir)) << kCorpusDir;
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(kCorpusDir)) {
+    if (!entry.is_regular_file()) continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::unique_ptr<uint8_t[]> buf(new uint8_t[bytes.size() + 1]);
+    std::copy(bytes.begin(), bytes.end(), buf.get());
+    FuzzDecoders(buf.get(), bytes.size());  // must not crash; seeds must decode
+    if (entry.path().filename().string().rfind("seed-", 0) == 0) {
+      EXPECT_GE(FuzzDecoders(buf.get(), bytes.size()), 1) << entry.path();
+    }
+    ++files;
+  }
+  EXPECT_GT(files, 10);
+}
+
+}  // namespace
+}  // namespace holo::protocol

@@ -1,0 +1,104 @@
+// One valid sample of every message type, plus small codec blobs, shared by
+// the protocol tests.
+#pragma once
+
+#include <vector>
+
+#include "common/rig.h"
+#include "protocol/color_codec.h"
+#include "protocol/geometry_codec.h"
+#include "protocol/messages.h"
+#include "protocol/test_meshes.h"
+
+namespace holo::test {
+
+inline Rig SampleRig() {
+  Rig rig;
+  rig.name = "test-rig";
+  for (int i = 0; i < 2; ++i) {
+    PodCalibration p;
+    p.id = i;
+    p.name = "pod" + std::to_string(i);
+    p.depth = Intrinsics::FromFov(320, 240, 70);
+    p.color = Intrinsics::FromFov(640, 480, 70);
+    p.color.distortion = {0.1, -0.02, 0.001, 0, 0.003};
+    p.world_from_depth = Pose::Identity();
+    p.world_from_depth.translation() = Eigen::Vector3f(1.0f * i, 2, 1.5f);
+    p.world_from_depth.linear() = Eigen::AngleAxisf(0.3f * (i + 1), Eigen::Vector3f::UnitZ()).toRotationMatrix();
+    rig.pods.push_back(p);
+  }
+  return rig;
+}
+
+inline std::vector<protocol::Payload> SamplePayloads() {
+  using namespace protocol;
+  std::vector<Payload> v;
+  Hello h;
+  h.role = Role::kPublisher;
+  h.capabilities = {{GeometryCodec::kG0, GeometryCodec::kG1}, {ColorCodec::kC0, ColorCodec::kC1}, {AudioCodec::kOpus}};
+  h.access_token = "publisher-token-123";
+  h.client_name = "site-a";
+  v.push_back(h);
+  Welcome w;
+  w.session_id = 0x1122334455667788ull;
+  w.server_name = "site-b";
+  v.push_back(w);
+  Refuse r;
+  r.reason = RefuseReason::kBadToken;
+  r.message = "access token not accepted for role publisher";
+  v.push_back(r);
+  v.push_back(RigMessage{SampleRig()});
+  MeshFrame mf;
+  mf.frame_index = 42;
+  GeometryEncodeOptions go;
+  (void)EncodeGeometry(NoisySphere(4, 6), go, &mf.data);
+  v.push_back(mf);
+  ColorFrame cf;
+  cf.frame_index = 42;
+  ImageRgb8 im;
+  ImageGray8 mask;
+  MaskedImage(24, 16, &im, &mask);
+  for (uint16_t p = 0; p < 2; ++p) {
+    PodImage pi;
+    pi.pod_id = p;
+    (void)EncodeColor(im, mask, {}, &pi.data);
+    cf.images.push_back(pi);
+  }
+  v.push_back(cf);
+  AudioPose a;
+  a.codec = AudioCodec::kOpus;
+  a.sequence = 7;
+  a.capture_time_us = 123456789;
+  a.pose = {1.0f, 2.0f, 1.6f, 0.5f, -0.1f, 0.02f};
+  a.audio.assign(80, 0xAB);
+  v.push_back(a);
+  AudioPose pcm = a;
+  pcm.codec = AudioCodec::kPcm16;
+  pcm.audio.assign(1920, 0x01);  // 20 ms mono at 48 kHz
+  v.push_back(pcm);
+  ClientPose cp;
+  cp.time_us = 1000;
+  cp.predicted_display_us = 21000;
+  cp.position = {0.1f, 1.6f, 0.3f};
+  cp.rotation = {0.70710678f, 0, 0.70710678f, 0};
+  cp.fov_tan = {1.1f, 1.0f, 0.9f, 0.95f};
+  v.push_back(cp);
+  RenderedFrame rf;
+  rf.frame_index = 9;
+  rf.pose_time_us = 1000;
+  rf.width = 24;
+  rf.height = 16;
+  rf.image = cf.images[0].data;
+  rf.depth = {1, 2, 3, 4};
+  v.push_back(rf);
+  v.push_back(Control{ControlCommand::kSeek, 3, 5000000, 1.0f});
+  v.push_back(Control{ControlCommand::kSetSpeed, 0, 0, 2.0f});
+  v.push_back(Ping{99, 1234});
+  v.push_back(Pong{99, 1234, 2000, 2100});
+  Stats s;
+  s.values = {{"fps", 30.0}, {"encode_ms", 4.5}};
+  v.push_back(s);
+  return v;
+}
+
+}  // namespace holo::test
