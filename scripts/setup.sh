@@ -10,6 +10,7 @@ PACKAGES=(
   libspdlog-dev libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev
+  python3-open3d
 )
 
 missing=()
