@@ -128,46 +128,99 @@ void CollectPairs(const PodCalibration& pod_cal, const PodAverage& pod, const Po
   }
 }
 
-// Robust fit of ref ≈ M · [pod; 1], one channel at a time (Huber IRLS).
-Eigen::Matrix<float, 3, 4> FitMap(const Pairs& pairs, const ColorCalibrationOptions& o) {
-  Eigen::Matrix<float, 3, 4> m = Eigen::Matrix<float, 3, 4>::Zero();
-  const size_t n = pairs.pod.size();
+// Colour pairs between pods i < j: the same surface point seen by both.
+struct Edge {
+  int i = 0, j = 0;
+  Pairs pairs;
+};
+
+// Joint robust fit of every pod's map so that M_i · [c_i; 1] ≈ M_j · [c_j; 1]
+// over all edges, with M_ref fixed to the identity. The channels decouple:
+// per output channel c the unknowns are row c of every non-reference map
+// (4 numbers for a full map, gain and offset otherwise). Huber IRLS; a tiny
+// ridge towards the identity keeps the normal equations regular.
+std::vector<Eigen::Matrix<float, 3, 4>> FitMaps(const std::vector<Edge>& edges, int num_pods, int ref,
+                                                const ColorCalibrationOptions& o) {
+  const int k = o.full_matrix ? 4 : 2;
+  std::vector<int> block(num_pods, -1);
+  int num_blocks = 0;
+  for (int p = 0; p < num_pods; ++p)
+    if (p != ref) block[p] = num_blocks++;
+  std::vector<Eigen::Matrix<float, 3, 4>> maps(num_pods, Eigen::Matrix<float, 3, 4>::Zero());
+  for (auto& m : maps) m.leftCols<3>().setIdentity();
+  const int n = k * num_blocks;
   for (int c = 0; c < 3; ++c) {
-    // Unknowns: full → (m_c0, m_c1, m_c2, m_c3); gain/offset → (m_cc, m_c3).
-    const int k = o.full_matrix ? 4 : 2;
-    auto feature = [&](size_t i, Eigen::Vector4d* f) {
-      const Eigen::Vector3f& a = pairs.pod[i];
+    // Parameters of row c of pod p's map, and the feature of a colour.
+    auto feature = [&](const Eigen::Vector3f& x, Eigen::Vector4d* f) {
       if (o.full_matrix)
-        *f << a.x(), a.y(), a.z(), 1.0;
+        *f << x.x(), x.y(), x.z(), 1.0;
       else
-        *f << a[c], 1.0, 0.0, 0.0;
+        *f << x[c], 1.0, 0.0, 0.0;
     };
-    Eigen::Vector4d params = Eigen::Vector4d::Zero();
+    Eigen::Vector4d identity_row = Eigen::Vector4d::Zero();
+    identity_row[o.full_matrix ? c : 0] = 1.0;
+    Eigen::VectorXd theta(n);
+    for (int b = 0; b < num_blocks; ++b) theta.segment(b * k, k) = identity_row.head(k);
+    auto row_of = [&](int p) -> Eigen::Vector4d {
+      if (p == ref) return identity_row;
+      Eigen::Vector4d r = Eigen::Vector4d::Zero();
+      r.head(k) = theta.segment(block[p] * k, k);
+      return r;
+    };
     for (int it = 0; it <= o.irls_iterations; ++it) {
-      Eigen::Matrix4d ata = Eigen::Matrix4d::Zero();
-      Eigen::Vector4d atb = Eigen::Vector4d::Zero();
-      for (size_t i = 0; i < n; ++i) {
-        Eigen::Vector4d f;
-        feature(i, &f);
-        const double target = pairs.ref[i][c];
-        double w = 1.0;
-        if (it > 0) {
-          const double r = std::abs(f.dot(params) - target);
-          if (r > o.huber_delta) w = o.huber_delta / r;
+      Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(n, n);
+      Eigen::VectorXd atb = Eigen::VectorXd::Zero(n);
+      for (const Edge& e : edges) {
+        const Eigen::Vector4d ri = row_of(e.i), rj = row_of(e.j);
+        const int bi = block[e.i], bj = block[e.j];
+        for (size_t q = 0; q < e.pairs.pod.size(); ++q) {
+          Eigen::Vector4d fi, fj;
+          feature(e.pairs.pod[q], &fi);  // pod[] holds pod i's colour, ref[] pod j's
+          feature(e.pairs.ref[q], &fj);
+          double w = 1.0;
+          if (it > 0) {
+            const double r = std::abs(ri.dot(fi) - rj.dot(fj));
+            if (r > o.huber_delta) w = o.huber_delta / r;
+          }
+          // Residual r = row_i·f_i − row_j·f_j = J θ − y.
+          double y = 0;
+          if (bi < 0) y -= identity_row.dot(fi);
+          if (bj < 0) y += identity_row.dot(fj);
+          if (bi >= 0) {
+            ata.block(bi * k, bi * k, k, k).noalias() += w * fi.head(k) * fi.head(k).transpose();
+            atb.segment(bi * k, k) += w * y * fi.head(k);
+          }
+          if (bj >= 0) {
+            ata.block(bj * k, bj * k, k, k).noalias() += w * fj.head(k) * fj.head(k).transpose();
+            atb.segment(bj * k, k) -= w * y * fj.head(k);
+          }
+          if (bi >= 0 && bj >= 0) {
+            const Eigen::Matrix4d cross = w * fi * fj.transpose();
+            ata.block(bi * k, bj * k, k, k) -= cross.topLeftCorner(k, k);
+            ata.block(bj * k, bi * k, k, k) -= cross.topLeftCorner(k, k).transpose();
+          }
         }
-        ata.noalias() += w * f * f.transpose();
-        atb.noalias() += w * target * f;
       }
-      params.head(k) = ata.topLeftCorner(k, k).ldlt().solve(atb.head(k));
+      const double ridge = 1e-6 * (ata.diagonal().maxCoeff() + 1.0);
+      for (int b = 0; b < num_blocks; ++b)
+        for (int t = 0; t < k; ++t) {
+          ata(b * k + t, b * k + t) += ridge;
+          atb[b * k + t] += ridge * identity_row[t];
+        }
+      theta = ata.ldlt().solve(atb);
     }
-    if (o.full_matrix) {
-      for (int j = 0; j < 4; ++j) m(c, j) = static_cast<float>(params[j]);
-    } else {
-      m(c, c) = static_cast<float>(params[0]);
-      m(c, 3) = static_cast<float>(params[1]);
+    for (int p = 0; p < num_pods; ++p) {
+      if (p == ref) continue;
+      const Eigen::VectorXd row = theta.segment(block[p] * k, k);
+      if (o.full_matrix) {
+        for (int t = 0; t < 4; ++t) maps[p](c, t) = static_cast<float>(row[t]);
+      } else {
+        maps[p](c, c) = static_cast<float>(row[0]);
+        maps[p](c, 3) = static_cast<float>(row[1]);
+      }
     }
   }
-  return m;
+  return maps;
 }
 
 Eigen::Matrix<float, 3, 4> IdentityMap() {
@@ -191,6 +244,7 @@ Status ColorCalibrationOptions::Check() const {
                            std::to_string(max_level));
   if (stride < 1) return InvalidArgument("stride must be >= 1, got " + std::to_string(stride));
   if (min_pairs < 8) return InvalidArgument("min_pairs must be >= 8, got " + std::to_string(min_pairs));
+  if (min_edge_pairs < 1) return InvalidArgument("min_edge_pairs must be >= 1, got " + std::to_string(min_edge_pairs));
   if (!(huber_delta > 0)) return InvalidArgument("huber_delta must be > 0, got " + std::to_string(huber_delta));
   if (irls_iterations < 0 || irls_iterations > 100)
     return InvalidArgument("irls_iterations must be in 0..100, got " + std::to_string(irls_iterations));
@@ -274,25 +328,48 @@ StatusOr<ColorCalibration> EstimateColorCalibration(const Rig& rig, const std::v
     stats->residual_before.assign(num_pods, 0.0);
     stats->residual_after.assign(num_pods, 0.0);
   }
-  const size_t ref = static_cast<size_t>(reference_pod);
+  // Pairs between every two pods that see common surface.
+  std::vector<Edge> edges;
+  std::vector<int> pod_pairs(num_pods, 0);
+  for (size_t i = 0; i < num_pods; ++i)
+    for (size_t j = i + 1; j < num_pods; ++j) {
+      Edge e;
+      e.i = static_cast<int>(i), e.j = static_cast<int>(j);
+      CollectPairs(rig.pods[i], avg[i], rig.pods[j], avg[j], options, &e.pairs);
+      if (e.pairs.pod.size() < static_cast<size_t>(options.min_edge_pairs)) continue;
+      pod_pairs[i] += static_cast<int>(e.pairs.pod.size());
+      pod_pairs[j] += static_cast<int>(e.pairs.pod.size());
+      edges.push_back(std::move(e));
+    }
+  // Every pod must be connected to the reference through overlapping views.
+  std::vector<bool> reached(num_pods, false);
+  reached[reference_pod] = true;
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (const Edge& e : edges)
+      if (reached[e.i] != reached[e.j]) reached[e.i] = reached[e.j] = grew = true;
+  }
   for (size_t p = 0; p < num_pods; ++p) {
-    if (p == ref) continue;
-    Pairs pairs;
-    CollectPairs(rig.pods[p], avg[p], rig.pods[ref], avg[ref], options, &pairs);
-    if (pairs.pod.size() < static_cast<size_t>(options.min_pairs))
+    if (pod_pairs[p] < options.min_pairs || !reached[p])
       return InvalidArgument("EstimateColorCalibration: pod " + std::to_string(p) + " shares " +
-                             std::to_string(pairs.pod.size()) + " usable surface points with reference pod " +
-                             std::to_string(reference_pod) + ", need " + std::to_string(options.min_pairs));
-    calib.pod_to_reference[p] = FitMap(pairs, options);
-    if (stats) {
-      double before = 0, after = 0;
-      for (size_t i = 0; i < pairs.pod.size(); ++i) {
-        before += (pairs.ref[i] - pairs.pod[i]).cwiseAbs().mean();
-        after += (pairs.ref[i] - calib.Map(static_cast<int>(p), pairs.pod[i])).cwiseAbs().mean();
+                             std::to_string(pod_pairs[p]) + " usable surface points with other pods" +
+                             (reached[p] ? "" : " and none connect it to reference pod " +
+                                                    std::to_string(reference_pod)) +
+                             ", need " + std::to_string(options.min_pairs));
+  }
+  calib.pod_to_reference = FitMaps(edges, static_cast<int>(num_pods), reference_pod, options);
+  if (stats) {
+    std::vector<double> before(num_pods, 0.0), after(num_pods, 0.0);
+    for (const Edge& e : edges)
+      for (size_t q = 0; q < e.pairs.pod.size(); ++q) {
+        const double b = (e.pairs.pod[q] - e.pairs.ref[q]).cwiseAbs().mean();
+        const double a = (calib.Map(e.i, e.pairs.pod[q]) - calib.Map(e.j, e.pairs.ref[q])).cwiseAbs().mean();
+        before[e.i] += b, before[e.j] += b, after[e.i] += a, after[e.j] += a;
       }
-      stats->pairs[p] = static_cast<int>(pairs.pod.size());
-      stats->residual_before[p] = before / pairs.pod.size();
-      stats->residual_after[p] = after / pairs.pod.size();
+    for (size_t p = 0; p < num_pods; ++p) {
+      stats->pairs[p] = pod_pairs[p];
+      stats->residual_before[p] = before[p] / std::max(1, pod_pairs[p]);
+      stats->residual_after[p] = after[p] / std::max(1, pod_pairs[p]);
     }
   }
   return calib;

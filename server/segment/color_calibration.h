@@ -1,9 +1,11 @@
 // Colour calibration between pods: a per-pod affine colour map (3×4) into the
 // colour space of a reference pod, estimated without ground truth from the
 // static background seen by two pods (empty-room frames): pod A's depth puts
-// a pixel's surface point into the reference pod's image, the reference
-// pod's depth confirms that the point is visible there, and the colour pairs
-// of all such points are fitted by robust (Huber IRLS) least squares.
+// a pixel's surface point into pod B's image, B's depth confirms that the
+// point is visible there, and the colour pairs of all such points between
+// every two pods are fitted jointly (all maps at once, reference fixed) by
+// robust (Huber IRLS) least squares — so pods facing away from the
+// reference are calibrated through their neighbours.
 //
 // Method and measured figures: docs/segmentation.md.
 #pragma once
@@ -52,21 +54,32 @@ struct ColorCalibrationOptions {
   int max_level = 252;
   // Sample every `stride`-th pixel of pod A in x and y.
   int stride = 2;
-  // Fewer correspondences than this for a pod → InvalidArgument.
+  // Pod pairs with fewer correspondences than this are ignored; a pod with
+  // fewer than `min_pairs` in all, or not connected to the reference through
+  // used pairs → InvalidArgument.
+  int min_edge_pairs = 50;
   int min_pairs = 200;
   // Huber threshold on the residual (0..255 units) and IRLS iterations.
   float huber_delta = 4.0f;
   int irls_iterations = 8;
-  // Fit a full 3×4 map (true) or a per-channel gain and offset (false).
-  bool full_matrix = true;
+  // Fit a full 3×4 map (true) or a per-channel gain and offset (false, the
+  // diagonal of the 3×4 map). The colours of a room's walls and floor are
+  // nearly collinear in RGB, so the cross-channel terms of a full map are
+  // poorly determined by background pairs and extrapolate badly (measured:
+  // docs/segmentation.md); use the full map only with a colourful scene or
+  // chart.
+  bool full_matrix = false;
   Status Check() const;
 };
 
 // Correspondence statistics of one pod, for reports and tests.
 struct ColorCalibrationStats {
-  std::vector<int> pairs;                // per pod: colour pairs used (0 for the reference)
-  std::vector<double> residual_before;   // per pod: mean |ref − pod| over the pairs, 0..255, mean over channels
-  std::vector<double> residual_after;    // per pod: mean |ref − M·pod|
+  // Per pod, over the colour pairs it shares with any other pod (a pair
+  // counts for both of its pods): their number, and the mean |c_a − c_b|
+  // (0..255, mean over channels) before and after mapping both.
+  std::vector<int> pairs;
+  std::vector<double> residual_before;
+  std::vector<double> residual_after;
 };
 
 // Estimates maps from every pod to `reference_pod` from `frames` (frame sets
@@ -74,8 +87,8 @@ struct ColorCalibrationStats {
 // several frames reduce depth noise). InvalidArgument on an empty `frames`,
 // a bad reference index, a pod count or image size mismatch with `rig`, or
 // when a pod shares fewer than options.min_pairs usable surface points with
-// the reference pod (the message names the pod and the count). `stats` may
-// be null.
+// the other pods or is not connected to the reference through them (the
+// message names the pod and the count). `stats` may be null.
 StatusOr<ColorCalibration> EstimateColorCalibration(const Rig& rig, const std::vector<RgbdFrameSet>& frames,
                                                     int reference_pod, const ColorCalibrationOptions& options = {},
                                                     ColorCalibrationStats* stats = nullptr);

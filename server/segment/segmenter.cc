@@ -61,8 +61,7 @@ Status SegmenterOptions::Check() const {
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_margin_min_m", depth_margin_min_m));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_margin_stddevs", depth_margin_stddevs));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_max_logodds", depth_max_logodds));
-  if (!(min_valid_fraction > 0.0f && min_valid_fraction <= 1.0f))
-    return InvalidArgument("min_valid_fraction must be in (0, 1], got " + std::to_string(min_valid_fraction));
+  HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_noise_at_1m_m", depth_noise_at_1m_m));
   HOLO_RETURN_IF_ERROR(CheckPositive("chroma_sigma", chroma_sigma));
   HOLO_RETURN_IF_ERROR(CheckPositive("value_sigma", value_sigma));
   HOLO_RETURN_IF_ERROR(CheckPositive("dark_level", dark_level));
@@ -293,17 +292,20 @@ Status Segmenter::FinishBackground() {
 
 void Segmenter::Impl::Finish(PodState* s, const SegmenterOptions& o) {
   const size_t n = static_cast<size_t>(s->w) * s->h;
-  const double frames = background_frames;
+  const double frames = background_frames;  // colour means
   s->model.resize(n);
   s->bg_depth_m.assign(n, 0.0f);
   const float var_ab0 = o.chroma_sigma * o.chroma_sigma, var_v0 = o.value_sigma * o.value_sigma;
   for (size_t i = 0; i < n; ++i) {
     BgPixel& m = s->model[i];
     const int c = s->depth_count[i];
-    if (c > 0 && c >= o.min_valid_fraction * frames) {
+    if (c > 0) {
+      // Pixels valid in only some frames (grazing surfaces, far floor) keep
+      // the mean of their valid samples; the noise floor covers the few-sample variance.
       const double mean = s->depth_sum[i] / c;
-      const double var = std::max(0.0, s->depth_sum2[i] / c - mean * mean);
-      const double tau = o.depth_margin_min_m + o.depth_margin_stddevs * std::sqrt(var);
+      const double var = c >= 3 ? std::max(0.0, s->depth_sum2[i] / c - mean * mean) : 0.0;
+      const double noise = o.depth_noise_at_1m_m * mean * mean;
+      const double tau = o.depth_margin_min_m + o.depth_margin_stddevs * std::sqrt(std::max(var, noise * noise));
       m.depth_offset_m = static_cast<float>(mean - tau);
       // A surface within the margin of the camera: keep it a (tiny) valid offset.
       if (m.depth_offset_m <= 0) m.depth_offset_m = 1e-4f;
@@ -503,6 +505,12 @@ void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptio
     const float fy = s->row_frac[y];
     for (int x = 0; x < W; ++x) {
       const size_t i = static_cast<size_t>(y) * W + x;
+      // |w (2 q̄ − 1)| ≤ w: where the unary is stronger the pairwise term
+      // cannot flip the label, so the slice is skipped (exact).
+      if (L[i] > w || L[i] < -w) {
+        mask[i] = L[i] > 0 ? 255 : 0;
+        continue;
+      }
       const float gzf = luma[i] * inv_sr;
       const int gzi = static_cast<int>(gzf);
       const size_t base = row_base + s->col_cell[x] + sz * (gzi + 1);

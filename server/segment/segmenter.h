@@ -28,14 +28,15 @@ struct SegmenterOptions {
   // (it grows with z², like the sensor noise).
   float depth_margin_min_m = 0.02f;
   float depth_margin_stddevs = 3.0f;
-  // Log-odds for a valid depth where the empty room had none (wall beyond the
-  // sensor range): something is there.
+  // Floor of σ_bg: sensor noise σ(z) = depth_noise_at_1m_m · z² (a few
+  // empty-room samples underestimate the variance; 3 mm at 1 m is a typical
+  // active-stereo / structured-light sensor).
+  float depth_noise_at_1m_m = 0.003f;
+  // Log-odds for a valid depth where no empty-room frame had one (wall
+  // beyond the sensor range): something is there.
   float depth_appeared_logodds = 4.0f;
   // |L_d| is clamped to this.
   float depth_max_logodds = 6.0f;
-  // A background pixel counts as having depth if at least this fraction of
-  // the empty-room frames had a valid sample there.
-  float min_valid_fraction = 0.25f;
 
   // --- Colour term on HSV: hue and saturation as the chroma vector
   // S·(cos H, sin H) of the hexcone, value V separately; L_c = colour_scale ·
