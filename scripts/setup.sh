@@ -9,6 +9,7 @@ PACKAGES=(
   liblz4-dev libopus-dev libopenal-dev libglfw3-dev libasio-dev
   libspdlog-dev libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
+  python3-open3d
 )
 
 missing=()
