@@ -1,0 +1,471 @@
+#include "server/fusion/marching_cubes.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "common/status.h"
+#include "server/fusion/tsdf_internal.h"
+
+namespace holo {
+namespace {
+
+struct EdgeInfo {
+  int low[12];
+  int axis[12];
+  EdgeInfo() {
+    for (int a = 0; a < 3; ++a) {
+      int k = 0;
+      for (int c = 0; c < 8; ++c)
+        if (!((c >> a) & 1)) {
+          low[4 * a + k] = c;
+          axis[4 * a + k] = a;
+          ++k;
+        }
+    }
+  }
+};
+
+const EdgeInfo& Edges() {
+  static const EdgeInfo info;
+  return info;
+}
+
+Eigen::Vector3f CornerPos(int c) {
+  return Eigen::Vector3f(static_cast<float>(c & 1), static_cast<float>((c >> 1) & 1), static_cast<float>((c >> 2) & 1));
+}
+
+Eigen::Vector3f EdgeMid(int e) {
+  return CornerPos(Edges().low[e]) + 0.5f * Eigen::Vector3f::Unit(Edges().axis[e]);
+}
+
+McCase BuildCase(int index) {
+  const EdgeInfo& E = Edges();
+  auto inside = [&](int c) { return ((index >> c) & 1) != 0; };
+  auto crossed = [&](int e) { return inside(E.low[e]) != inside(E.low[e] | (1 << E.axis[e])); };
+  int next[12];
+  std::fill(next, next + 12, -1);
+  int incoming[12] = {};
+  for (int a = 0; a < 3; ++a) {
+    for (int side = 0; side < 2; ++side) {
+      const Eigen::Vector3f normal = Eigen::Vector3f::Unit(a) * (side ? 1.0f : -1.0f);
+      int face_edges[4], n_face = 0;
+      int cross[4], n_cross = 0;
+      for (int e = 0; e < 12; ++e) {
+        if (E.axis[e] == a || ((E.low[e] >> a) & 1) != side) continue;
+        face_edges[n_face++] = e;
+        if (crossed(e)) cross[n_cross++] = e;
+      }
+      HOLO_CHECK(n_face == 4);
+      // Segments (from, to, reference corner on the side the segment cuts off).
+      struct Segment {
+        int e0, e1, ref;
+      };
+      Segment segs[2];
+      int n_segs = 0;
+      if (n_cross == 2) {
+        segs[n_segs++] = {cross[0], cross[1], E.low[cross[0]]};
+      } else if (n_cross == 4) {
+        // Two diagonal inside corners: cut each one off on its own.
+        for (int c = 0; c < 8; ++c) {
+          if (((c >> a) & 1) != side || !inside(c)) continue;
+          int inc[2], n_inc = 0;
+          for (int e : face_edges)
+            if (E.low[e] == c || (E.low[e] | (1 << E.axis[e])) == c) inc[n_inc++] = e;
+          HOLO_CHECK(n_inc == 2);
+          segs[n_segs++] = {inc[0], inc[1], c};
+        }
+        HOLO_CHECK(n_segs == 2);
+      } else {
+        HOLO_CHECK(n_cross == 0);
+      }
+      for (int k = 0; k < n_segs; ++k) {
+        Segment sg = segs[k];
+        // Orient so that (to − from) × face normal points to the inside side:
+        // the loops then run counter-clockwise seen from outside.
+        const Eigen::Vector3f p = EdgeMid(sg.e0);
+        const Eigen::Vector3f d = EdgeMid(sg.e1) - p;
+        const float s = d.cross(normal).dot(CornerPos(sg.ref) - p);
+        HOLO_CHECK(s != 0.0f);
+        if ((s > 0) != inside(sg.ref)) std::swap(sg.e0, sg.e1);
+        HOLO_CHECK(next[sg.e0] == -1);
+        next[sg.e0] = sg.e1;
+        ++incoming[sg.e1];
+      }
+    }
+  }
+  McCase out;
+  bool used[12] = {};
+  for (int e = 0; e < 12; ++e) {
+    HOLO_CHECK((next[e] != -1) == crossed(e));
+    HOLO_CHECK(incoming[e] == (crossed(e) ? 1 : 0));
+  }
+  for (int start = 0; start < 12; ++start) {
+    if (next[start] == -1 || used[start]) continue;
+    int loop[12], n = 0;
+    for (int e = start; !used[e]; e = next[e]) {
+      used[e] = true;
+      loop[n++] = e;
+    }
+    HOLO_CHECK(n >= 3);
+    // Fan from the loop vertex whose fan folds least, judged on the edge
+    // midpoints: the smallest cosine between a fan triangle's normal and the
+    // loop's vector area (the same for every fan) is largest.
+    Eigen::Vector3f area = Eigen::Vector3f::Zero();
+    for (int k = 1; k + 1 < n; ++k)
+      area += (EdgeMid(loop[k]) - EdgeMid(loop[0])).cross(EdgeMid(loop[k + 1]) - EdgeMid(loop[0]));
+    int best_start = 0;
+    float best_score = -INFINITY;
+    for (int st = 0; st < n; ++st) {
+      float score = INFINITY;
+      const Eigen::Vector3f p0 = EdgeMid(loop[st]);
+      for (int k = 1; k + 1 < n; ++k) {
+        const Eigen::Vector3f nk =
+            (EdgeMid(loop[(st + k) % n]) - p0).cross(EdgeMid(loop[(st + k + 1) % n]) - p0);
+        score = std::min(score, nk.dot(area) / (nk.norm() * area.norm() + 1e-12f));
+      }
+      if (score > best_score + 1e-6f) {
+        best_score = score;
+        best_start = st;
+      }
+    }
+    for (int k = 1; k + 1 < n; ++k) {
+      HOLO_CHECK(out.num_triangles < kMcMaxTriangles);
+      uint8_t* t = out.edges + 3 * out.num_triangles++;
+      t[0] = static_cast<uint8_t>(loop[best_start]);
+      t[1] = static_cast<uint8_t>(loop[(best_start + k) % n]);
+      t[2] = static_cast<uint8_t>(loop[(best_start + k + 1) % n]);
+    }
+  }
+  return out;
+}
+
+struct McTable {
+  McCase cases[256];
+  McTable() {
+    for (int i = 0; i < 256; ++i) cases[i] = BuildCase(i);
+  }
+};
+
+const McTable& Table() {
+  static const McTable table;
+  return table;
+}
+
+}  // namespace
+
+const McCase& McTableCase(int case_index) { return Table().cases[case_index & 255]; }
+int McEdgeAxis(int edge) { return Edges().axis[edge]; }
+int McEdgeLowCorner(int edge) { return Edges().low[edge]; }
+
+// ---------------------------------------------------------------------------
+// Meshing of a TsdfVolume.
+
+namespace {
+
+// A block's voxels plus a one-voxel (low side) and two-voxel (high side)
+// apron from its neighbours: voxel coordinates −1..9 on each axis. Cubes
+// with origins −1..7 and gradients at voxels 0..8 can be read from it.
+constexpr int kCacheSide = kBlockSide + 3;
+constexpr int kCacheVoxels = kCacheSide * kCacheSide * kCacheSide;
+
+inline int CacheIndex(int x, int y, int z) { return (x + 1) + kCacheSide * ((y + 1) + kCacheSide * (z + 1)); }
+inline int NeighbourIndex(int dx, int dy, int dz) { return (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1); }
+
+struct BlockCache {
+  float tsdf[kCacheVoxels];
+  float weight[kCacheVoxels];
+  uint8_t ok[kCacheVoxels];     // usable as a cube corner
+  uint8_t cube_ok[9 * 9 * 9];   // cube with origin (−1..7)³ has all corners usable
+};
+
+inline int CubeIndex(int x, int y, int z) { return (x + 1) + 9 * ((y + 1) + 9 * (z + 1)); }
+
+// Packs a reference to edge `edge` (voxel·3 + axis) of block `block`.
+constexpr int kEdgeBits = 11;
+static_assert(kEdgesPerBlock <= (1 << kEdgeBits));
+inline uint32_t PackEdgeRef(int32_t block, int edge) {
+  return (static_cast<uint32_t>(block) << kEdgeBits) | static_cast<uint32_t>(edge);
+}
+
+void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOptions& o, BlockCache* c) {
+  // Per axis, the three ranges of cache coordinates and where they come from.
+  struct Span {
+    int from, to, block, local0;  // cache coords [from, to], neighbour offset, local coordinate of `from`
+  };
+  static constexpr Span kSpans[3] = {{-1, -1, -1, kBlockSide - 1}, {0, kBlockSide - 1, 0, 0}, {kBlockSide, kBlockSide + 1, 1, 0}};
+  for (const Span& sz : kSpans) {
+    for (int z = sz.from; z <= sz.to; ++z) {
+      const int lz = sz.local0 + (z - sz.from);
+      for (const Span& sy : kSpans) {
+        for (int y = sy.from; y <= sy.to; ++y) {
+          const int ly = sy.local0 + (y - sy.from);
+          for (const Span& sx : kSpans) {
+            const int32_t b = nbr[NeighbourIndex(sx.block, sy.block, sz.block)];
+            const int n = sx.to - sx.from + 1;
+            const int dst = CacheIndex(sx.from, y, z);
+            if (b < 0) {
+              std::fill(c->tsdf + dst, c->tsdf + dst + n, 0.0f);
+              std::fill(c->weight + dst, c->weight + dst + n, 0.0f);
+            } else {
+              const VoxelBlock& vb = map.block(b);
+              const int src = sx.local0 + kBlockSide * (ly + kBlockSide * lz);
+              std::memcpy(c->tsdf + dst, vb.tsdf + src, sizeof(float) * static_cast<size_t>(n));
+              std::memcpy(c->weight + dst, vb.weight + src, sizeof(float) * static_cast<size_t>(n));
+            }
+          }
+        }
+      }
+    }
+  }
+  // Tsdf 1 = free space beyond the truncation band in every view.
+  const float max_tsdf = o.skip_truncated_cubes ? 0.999f : 2.0f;
+  for (int i = 0; i < kCacheVoxels; ++i) c->ok[i] = c->weight[i] >= o.min_weight && c->tsdf[i] < max_tsdf;
+  for (int z = -1; z < kBlockSide; ++z)
+    for (int y = -1; y < kBlockSide; ++y)
+      for (int x = -1; x < kBlockSide; ++x) {
+        const int i = CacheIndex(x, y, z);
+        constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
+        c->cube_ok[CubeIndex(x, y, z)] = c->ok[i] & c->ok[i + 1] & c->ok[i + sy] & c->ok[i + sy + 1] & c->ok[i + sz] &
+                                         c->ok[i + sz + 1] & c->ok[i + sz + sy] & c->ok[i + sz + sy + 1];
+      }
+}
+
+// TSDF gradient at cache voxel (x, y, z) ∈ [0, 8]³: central differences,
+// one-sided next to unobserved voxels.
+Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
+  const int i = CacheIndex(x, y, z);
+  static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
+  Eigen::Vector3f g;
+  for (int a = 0; a < 3; ++a) {
+    const int ip = i + kStride[a], im = i - kStride[a];
+    const bool p = c.weight[ip] > 0, m = c.weight[im] > 0;
+    if (p && m) g[a] = 0.5f * (c.tsdf[ip] - c.tsdf[im]);
+    else if (p) g[a] = c.tsdf[ip] - c.tsdf[i];
+    else if (m) g[a] = c.tsdf[i] - c.tsdf[im];
+    else g[a] = 0;
+  }
+  return g;
+}
+
+// Smallest fraction of an edge between a vertex and the edge's end: keeps
+// vertices of different edges apart when a corner value is exactly 0.
+constexpr float kMinEdgeFraction = 1e-3f;
+
+}  // namespace
+
+void TsdfVolume::ExtractMesh(Mesh* out) const {
+  out->positions.clear();
+  out->normals.clear();
+  out->colors.clear();
+  out->triangles.clear();
+  Scratch& s = *scratch_;
+  const size_t nb = blocks_.size();
+  stats_.mesh_blocks = 0;
+  if (nb == 0) return;
+  HOLO_CHECK_MSG(nb < (size_t{1} << (32 - kEdgeBits)), "too many voxel blocks for marching cubes");
+  const McTable& table = Table();
+  const int threads = s.pool.num_threads();
+  s.thread_vertices.resize(static_cast<size_t>(threads));
+  s.thread_tris.resize(static_cast<size_t>(threads));
+  for (auto& v : s.thread_vertices) v.clear();
+  for (auto& t : s.thread_tris) t.clear();
+  s.block_output.assign(nb, {});
+  if (s.edge_vertex.size() < nb * kEdgesPerBlock) s.edge_vertex.resize(nb * kEdgesPerBlock);
+  const float voxel = options_.voxel_size;
+  const uint8_t both = kBlockHasNegative | kBlockHasPositive;
+  std::vector<size_t> thread_mesh_blocks(static_cast<size_t>(threads), 0);
+
+  // Pass 1 (per block, in parallel): vertices on the block's own edges
+  // (edges starting at its voxels, along +x, +y, +z) and triangles of its own
+  // cubes (origins at its voxels), the latter as (block, edge) references.
+  const size_t num_tasks = (nb + 7) / 8;
+  s.pool.Run(num_tasks, [&](size_t task, int thread) {
+    BlockCache cache;
+    auto& verts = s.thread_vertices[static_cast<size_t>(thread)];
+    auto& tris = s.thread_tris[static_cast<size_t>(thread)];
+    const size_t end = std::min(nb, (task + 1) * 8);
+    for (size_t bi = task * 8; bi < end; ++bi) {
+      const int32_t b = static_cast<int32_t>(bi);
+      const BlockCoord bc = blocks_.coord(b);
+      int32_t nbr[27];
+      // Cheap test first: a surface needs both signs among this block and its
+      // +x/+y/+z neighbours (every owned edge and cube lies in them).
+      uint8_t flags = 0;
+      for (int dz = 0; dz <= 1; ++dz)
+        for (int dy = 0; dy <= 1; ++dy)
+          for (int dx = 0; dx <= 1; ++dx) {
+            const int32_t n = (dx | dy | dz) ? blocks_.Find({bc.x + dx, bc.y + dy, bc.z + dz}) : b;
+            nbr[NeighbourIndex(dx, dy, dz)] = n;
+            if (n >= 0) flags |= blocks_.flags(n);
+          }
+      Scratch::BlockOutput& bo = s.block_output[bi];
+      bo.thread = thread;
+      bo.vertex_begin = static_cast<uint32_t>(verts.size());
+      bo.tri_begin = static_cast<uint32_t>(tris.size());
+      if ((flags & both) != both) continue;
+      ++thread_mesh_blocks[static_cast<size_t>(thread)];
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx)
+            if (dx < 0 || dy < 0 || dz < 0) nbr[NeighbourIndex(dx, dy, dz)] = blocks_.Find({bc.x + dx, bc.y + dy, bc.z + dz});
+      FillCache(blocks_, nbr, options_, &cache);
+
+      // Owned edges.
+      uint16_t* edge_vertex = s.edge_vertex.data() + bi * kEdgesPerBlock;
+      uint32_t local = 0;
+      const Eigen::Vector3f block_origin = Eigen::Vector3f(static_cast<float>(bc.x), static_cast<float>(bc.y),
+                                                           static_cast<float>(bc.z)) * static_cast<float>(kBlockSide);
+      for (int z = 0; z < kBlockSide; ++z)
+        for (int y = 0; y < kBlockSide; ++y)
+          for (int x = 0; x < kBlockSide; ++x) {
+            const int ci = CacheIndex(x, y, z);
+            const float t0 = cache.tsdf[ci];
+            const int v = x + kBlockSide * (y + kBlockSide * z);
+            const int xyz[3] = {x, y, z};
+            for (int a = 0; a < 3; ++a) {
+              static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
+              const float t1 = cache.tsdf[ci + kStride[a]];
+              if ((t0 < 0) == (t1 < 0)) continue;
+              // Needed if one of the four cubes around the edge is usable.
+              const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+              bool needed = false;
+              for (int s2 = 0; s2 <= 1 && !needed; ++s2)
+                for (int s1 = 0; s1 <= 1 && !needed; ++s1) {
+                  int o[3] = {xyz[0], xyz[1], xyz[2]};
+                  o[b1] -= s1;
+                  o[b2] -= s2;
+                  needed = cache.cube_ok[CubeIndex(o[0], o[1], o[2])] != 0;
+                }
+              if (!needed) continue;
+              const float f = std::clamp(t0 / (t0 - t1), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
+              Scratch::MeshVertex mv;
+              Eigen::Vector3f pos(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+              pos[a] += f;
+              mv.position = (block_origin + pos) * voxel;
+              int xyz1[3] = {x, y, z};
+              ++xyz1[a];
+              Eigen::Vector3f n = (1.0f - f) * Gradient(cache, x, y, z) + f * Gradient(cache, xyz1[0], xyz1[1], xyz1[2]);
+              const float len = n.norm();
+              mv.normal = len > 1e-12f ? Eigen::Vector3f(n / len) : Eigen::Vector3f::UnitZ();
+              // Colour: the two end voxels (the second may be in a neighbour).
+              const VoxelBlock& vb0 = blocks_.block(b);
+              int32_t b1i = b;
+              int v1 = v;
+              if (xyz1[a] == kBlockSide) {
+                int d[3] = {0, 0, 0};
+                d[a] = 1;
+                b1i = nbr[NeighbourIndex(d[0], d[1], d[2])];
+                xyz1[a] = 0;
+                v1 = xyz1[0] + kBlockSide * (xyz1[1] + kBlockSide * xyz1[2]);
+              }
+              const VoxelBlock& vb1 = blocks_.block(b1i);
+              auto mix = [f](uint8_t c0, uint8_t c1) {
+                return static_cast<uint8_t>((1.0f - f) * static_cast<float>(c0) + f * static_cast<float>(c1) + 0.5f);
+              };
+              mv.color = {mix(vb0.r[v], vb1.r[v1]), mix(vb0.g[v], vb1.g[v1]), mix(vb0.b[v], vb1.b[v1])};
+              edge_vertex[3 * v + a] = static_cast<uint16_t>(local++);
+              verts.push_back(mv);
+            }
+          }
+      bo.num_vertices = local;
+
+      // Owned cubes.
+      for (int z = 0; z < kBlockSide; ++z)
+        for (int y = 0; y < kBlockSide; ++y)
+          for (int x = 0; x < kBlockSide; ++x) {
+            if (!cache.cube_ok[CubeIndex(x, y, z)]) continue;
+            const int ci = CacheIndex(x, y, z);
+            constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
+            const int code = (cache.tsdf[ci] < 0) | (cache.tsdf[ci + 1] < 0) << 1 | (cache.tsdf[ci + sy] < 0) << 2 |
+                             (cache.tsdf[ci + sy + 1] < 0) << 3 | (cache.tsdf[ci + sz] < 0) << 4 |
+                             (cache.tsdf[ci + sz + 1] < 0) << 5 | (cache.tsdf[ci + sz + sy] < 0) << 6 |
+                             (cache.tsdf[ci + sz + sy + 1] < 0) << 7;
+            const McCase& mc = table.cases[code];
+            for (int t = 0; t < mc.num_triangles; ++t) {
+              std::array<uint32_t, 3> ref;
+              for (int k = 0; k < 3; ++k) {
+                const int e = mc.edges[3 * t + k];
+                const int c = Edges().low[e];
+                int p[3] = {x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)};
+                int d[3];
+                for (int q = 0; q < 3; ++q) {
+                  d[q] = p[q] >= kBlockSide;
+                  p[q] -= d[q] * kBlockSide;
+                }
+                const int32_t owner = nbr[NeighbourIndex(d[0], d[1], d[2])];
+                HOLO_CHECK(owner >= 0);
+                ref[k] = PackEdgeRef(owner, 3 * (p[0] + kBlockSide * (p[1] + kBlockSide * p[2])) + Edges().axis[e]);
+              }
+              tris.push_back(ref);
+            }
+          }
+      bo.num_tris = static_cast<uint32_t>(tris.size()) - bo.tri_begin;
+    }
+  });
+  for (size_t t : thread_mesh_blocks) stats_.mesh_blocks += t;
+
+  // Offsets in block order (deterministic for any thread count).
+  uint32_t num_vertices = 0, num_tris = 0;
+  for (Scratch::BlockOutput& bo : s.block_output) {
+    bo.vertex_base = num_vertices;
+    bo.tri_base = num_tris;
+    num_vertices += bo.num_vertices;
+    num_tris += bo.num_tris;
+  }
+  out->positions.resize(num_vertices);
+  out->normals.resize(num_vertices);
+  out->colors.resize(num_vertices);
+  out->triangles.resize(num_tris);
+
+  // Pass 2 (per block, in parallel): copy vertices.
+  std::vector<uint8_t> thread_degenerate(static_cast<size_t>(threads), 0);
+  s.pool.Run(num_tasks, [&](size_t task, int) {
+    const size_t end = std::min(nb, (task + 1) * 8);
+    for (size_t bi = task * 8; bi < end; ++bi) {
+      const Scratch::BlockOutput& bo = s.block_output[bi];
+      const auto& verts = s.thread_vertices[static_cast<size_t>(bo.thread)];
+      for (uint32_t i = 0; i < bo.num_vertices; ++i) {
+        const Scratch::MeshVertex& mv = verts[bo.vertex_begin + i];
+        out->positions[bo.vertex_base + i] = mv.position;
+        out->normals[bo.vertex_base + i] = mv.normal;
+        out->colors[bo.vertex_base + i] = mv.color;
+      }
+    }
+  });
+  // Pass 3: resolve triangle references (after all vertices are in place: a
+  // triangle may use vertices of a block another thread copies).
+  s.pool.Run(num_tasks, [&](size_t task, int thread) {
+    const size_t end = std::min(nb, (task + 1) * 8);
+    for (size_t bi = task * 8; bi < end; ++bi) {
+      const Scratch::BlockOutput& bo = s.block_output[bi];
+      const auto& tris = s.thread_tris[static_cast<size_t>(bo.thread)];
+      for (uint32_t i = 0; i < bo.num_tris; ++i) {
+        const std::array<uint32_t, 3>& ref = tris[bo.tri_begin + i];
+        std::array<uint32_t, 3>& tri = out->triangles[bo.tri_base + i];
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t block = ref[k] >> kEdgeBits, edge = ref[k] & ((1u << kEdgeBits) - 1);
+          tri[k] = s.block_output[block].vertex_base + s.edge_vertex[block * kEdgesPerBlock + edge];
+        }
+        const Eigen::Vector3f& p0 = out->positions[tri[0]];
+        const Eigen::Vector3f& p1 = out->positions[tri[1]];
+        const Eigen::Vector3f& p2 = out->positions[tri[2]];
+        if ((p1 - p0).cross(p2 - p0).squaredNorm() <= 0.0f) {
+          tri = {0, 0, 0};  // marked, removed below
+          thread_degenerate[static_cast<size_t>(thread)] = 1;
+        }
+      }
+    }
+  });
+  if (std::any_of(thread_degenerate.begin(), thread_degenerate.end(), [](uint8_t d) { return d != 0; })) {
+    auto& t = out->triangles;
+    t.erase(std::remove_if(t.begin(), t.end(), [](const std::array<uint32_t, 3>& tri) { return tri[0] == tri[1]; }),
+            t.end());
+  }
+}
+
+}  // namespace holo

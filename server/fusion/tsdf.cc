@@ -1,0 +1,465 @@
+#include "server/fusion/tsdf.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "common/camera.h"
+#include "server/fusion/tsdf_internal.h"
+
+namespace holo {
+namespace {
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  return buf;
+}
+
+std::string PodName(const Rig& rig, size_t k) {
+  std::string s = "pod " + std::to_string(k);
+  if (k < rig.pods.size() && !rig.pods[k].name.empty()) s += " (" + rig.pods[k].name + ")";
+  return s;
+}
+
+// Blocks handled per task: enough work to amortise the hand-off, small
+// enough to balance two threads.
+constexpr size_t kBlocksPerTask = 8;
+
+// Minimum camera-space depth of a voxel that is projected, metres.
+constexpr float kMinProjectZ = 1e-3f;
+
+}  // namespace
+
+Status TsdfOptions::Check() const {
+  if (!(voxel_size > 0) || !std::isfinite(voxel_size))
+    return InvalidArgument("voxel_size must be > 0, got " + Num(voxel_size));
+  if (!(truncation_voxels >= 1) || !std::isfinite(truncation_voxels))
+    return InvalidArgument("truncation_voxels must be >= 1, got " + Num(truncation_voxels));
+  if (!(max_depth_m > 0) || !(max_depth_m <= 65.535f))
+    return InvalidArgument("max_depth_m must be in (0, 65.535], got " + Num(max_depth_m));
+  if (!(min_depth_m >= 0) || !(min_depth_m < max_depth_m))
+    return InvalidArgument("min_depth_m must be in [0, max_depth_m), got " + Num(min_depth_m));
+  if (!(min_weight > 0) || !std::isfinite(min_weight))
+    return InvalidArgument("min_weight must be > 0, got " + Num(min_weight));
+  if (threads < 0) return InvalidArgument("threads must be >= 0, got " + std::to_string(threads));
+  return OkStatus();
+}
+
+TsdfVolume::TsdfVolume(TsdfOptions options) : options_(options) {
+  const Status s = options_.Check();
+  HOLO_CHECK_MSG(s.ok(), s.ToString());
+  scratch_ = std::make_unique<Scratch>(options_.threads);
+}
+
+StatusOr<std::unique_ptr<TsdfVolume>> TsdfVolume::Create(TsdfOptions options) {
+  HOLO_RETURN_IF_ERROR(options.Check().WithContext("TsdfOptions"));
+  return std::make_unique<TsdfVolume>(options);
+}
+
+TsdfVolume::~TsdfVolume() = default;
+
+void TsdfVolume::Reset() {
+  blocks_.Clear();
+  stats_ = {};
+}
+
+void TsdfVolume::VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* weight) const {
+  *tsdf = 0;
+  *weight = 0;
+  auto fdiv = [](int64_t a) { return a >= 0 ? a / kBlockSide : -((-a + kBlockSide - 1) / kBlockSide); };
+  const int64_t bx = fdiv(x), by = fdiv(y), bz = fdiv(z);
+  if (!BlockCoordInRange(bx, by, bz)) return;
+  const int32_t b = blocks_.Find({static_cast<int32_t>(bx), static_cast<int32_t>(by), static_cast<int32_t>(bz)});
+  if (b == VoxelBlockMap::kNotFound) return;
+  const int i = static_cast<int>((x - bx * kBlockSide) + kBlockSide * (y - by * kBlockSide) +
+                                 kBlockSide * kBlockSide * (z - bz * kBlockSide));
+  *tsdf = blocks_.block(b).tsdf[i];
+  *weight = blocks_.block(b).weight[i];
+}
+
+namespace {
+
+// Masks and range-limits one pod's depth into `out` and computes the
+// maximum depth of every 8×8 tile (0 = no usable pixel in the tile).
+void PrepareDepth(const RgbdFrame& frame, uint16_t min_mm, uint16_t max_mm, std::vector<uint16_t>* out,
+                  std::vector<uint16_t>* tile_max, int tiles_x, int tiles_y) {
+  const int w = frame.depth.width(), h = frame.depth.height();
+  out->resize(static_cast<size_t>(w) * h);
+  tile_max->assign(static_cast<size_t>(tiles_x) * tiles_y, 0);
+  const bool has_mask = !frame.mask.empty();
+  for (int y = 0; y < h; ++y) {
+    const uint16_t* src = frame.depth.row(y);
+    const uint8_t* m = has_mask ? frame.mask.row(y) : nullptr;
+    uint16_t* dst = out->data() + static_cast<size_t>(y) * w;
+    uint16_t* tiles = tile_max->data() + static_cast<size_t>(y / kTileSide) * tiles_x;
+    for (int x = 0; x < w; ++x) {
+      uint16_t d = src[x];
+      if ((m && m[x] == 0) || d < min_mm || d > max_mm) d = 0;
+      dst[x] = d;
+      uint16_t& t = tiles[x / kTileSide];
+      if (d > t) t = d;
+    }
+  }
+}
+
+// Marks usable pixels with a 4-neighbour that is unusable or more than
+// `jump_mm` away (image borders count as edges).
+void FindDepthEdges(const std::vector<uint16_t>& depth, int w, int h, int jump_mm, std::vector<uint8_t>* edge) {
+  edge->resize(depth.size());
+  for (int y = 0; y < h; ++y) {
+    const uint16_t* row = depth.data() + static_cast<size_t>(y) * w;
+    const uint16_t* up = y > 0 ? row - w : nullptr;
+    const uint16_t* down = y + 1 < h ? row + w : nullptr;
+    uint8_t* out = edge->data() + static_cast<size_t>(y) * w;
+    for (int x = 0; x < w; ++x) {
+      const int d = row[x];
+      if (d == 0) {
+        out[x] = 0;
+        continue;
+      }
+      auto far = [&](int n) { return n == 0 || std::abs(n - d) > jump_mm; };
+      out[x] = !up || !down || x == 0 || x + 1 == w || far(up[x]) || far(down[x]) || far(row[x - 1]) || far(row[x + 1]);
+    }
+  }
+}
+
+// Collects the blocks crossed by the truncation band of every usable pixel:
+// the segment of its viewing ray from depth − trunc to depth + trunc, walked
+// through the block grid (Amanatides & Woo). Consecutive pixels mostly hit
+// the same blocks, so a small direct-mapped cache drops most repeats before
+// they reach the (serial) hash insertion.
+void CollectBlocks(const TsdfVolume::PodView& v, const TsdfOptions& o, std::vector<BlockCoord>* out) {
+  out->clear();
+  constexpr int kCacheSize = 4096;
+  std::array<uint64_t, kCacheSize> cache;
+  cache.fill(~uint64_t{0});
+  const float trunc = o.truncation_voxels * o.voxel_size;
+  const float inv_block = 1.0f / (o.voxel_size * kBlockSide);
+  const float half = 0.5f / kBlockSide;  // voxel centres sit on the lattice: block b covers [8b − ½, 8b + 7½) voxels
+  const Eigen::Matrix3f Rt = v.R.transpose();
+  const Eigen::Vector3f c = v.center * inv_block + Eigen::Vector3f::Constant(half);
+  for (int py = 0; py < v.height; ++py) {
+    const uint16_t* row = v.depth + static_cast<size_t>(py) * v.width;
+    for (int px = 0; px < v.width; ++px) {
+      if (row[px] == 0) continue;
+      const float d = row[px] * 0.001f;
+      Eigen::Vector2d n((px - v.cx) / v.fx, (py - v.cy) / v.fy);
+      if (v.distorted) n = Undistort(v.distortion, n);
+      // Ray in block units per metre of camera depth.
+      const Eigen::Vector3f dir = Rt * Eigen::Vector3f(static_cast<float>(n.x()), static_cast<float>(n.y()), 1.0f) * inv_block;
+      const float z0 = std::max(d - trunc, o.min_depth_m * 0.5f);
+      const Eigen::Vector3f q0 = c + dir * z0;
+      const Eigen::Vector3f q1 = c + dir * (d + trunc);
+      if (!BlockCoordInRange(static_cast<int64_t>(std::floor(q0.x())), static_cast<int64_t>(std::floor(q0.y())),
+                             static_cast<int64_t>(std::floor(q0.z()))) ||
+          !BlockCoordInRange(static_cast<int64_t>(std::floor(q1.x())), static_cast<int64_t>(std::floor(q1.y())),
+                             static_cast<int64_t>(std::floor(q1.z()))))
+        continue;
+      int b[3] = {static_cast<int>(std::floor(q0.x())), static_cast<int>(std::floor(q0.y())),
+                  static_cast<int>(std::floor(q0.z()))};
+      const int e[3] = {static_cast<int>(std::floor(q1.x())), static_cast<int>(std::floor(q1.y())),
+                        static_cast<int>(std::floor(q1.z()))};
+      const Eigen::Vector3f delta = q1 - q0;
+      int step[3];
+      float t_max[3], t_delta[3];
+      for (int a = 0; a < 3; ++a) {
+        if (delta[a] > 0) {
+          step[a] = 1;
+          t_delta[a] = 1.0f / delta[a];
+          t_max[a] = (static_cast<float>(b[a]) + 1.0f - q0[a]) * t_delta[a];
+        } else if (delta[a] < 0) {
+          step[a] = -1;
+          t_delta[a] = -1.0f / delta[a];
+          t_max[a] = (q0[a] - static_cast<float>(b[a])) * t_delta[a];
+        } else {
+          step[a] = 0;
+          t_delta[a] = INFINITY;
+          t_max[a] = INFINITY;
+        }
+      }
+      // A segment crosses at most |Δx| + |Δy| + |Δz| + 1 blocks.
+      const int max_steps = std::abs(e[0] - b[0]) + std::abs(e[1] - b[1]) + std::abs(e[2] - b[2]);
+      for (int s = 0;; ++s) {
+        const BlockCoord bc{b[0], b[1], b[2]};
+        const uint64_t key = (static_cast<uint64_t>(static_cast<uint32_t>(b[0] + kMaxBlockCoord)) << 42) |
+                             (static_cast<uint64_t>(static_cast<uint32_t>(b[1] + kMaxBlockCoord)) << 21) |
+                             static_cast<uint64_t>(static_cast<uint32_t>(b[2] + kMaxBlockCoord));
+        uint64_t& slot = cache[(key * 0x9E3779B97F4A7C15ull) >> 52];
+        if (slot != key) {
+          slot = key;
+          out->push_back(bc);
+        }
+        if (s >= max_steps) break;
+        const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+        if (t_max[a] > 1.0f) break;
+        b[a] += step[a];
+        t_max[a] += t_delta[a];
+      }
+    }
+  }
+}
+
+// Accumulators of one block over all views of one frame.
+struct BlockAccumulator {
+  float tsdf[kBlockVoxels];
+  float weight[kBlockVoxels];
+  float r[kBlockVoxels], g[kBlockVoxels], b[kBlockVoxels];
+  void Clear() {
+    std::memset(this, 0, sizeof(*this));
+  }
+};
+
+// Projects the voxels of one block (first voxel centre at `origin`, world)
+// into one view and accumulates their truncated signed distances.
+template <bool kDistorted, bool kRegistered>
+void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
+                   BlockAccumulator* acc) {
+  const Eigen::Vector3f p0 = v.R * origin + v.t;
+  const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
+  const float inv_trunc = 1.0f / trunc;
+  const float wf = static_cast<float>(v.width) , hf = static_cast<float>(v.height);
+  for (int k = 0; k < kBlockSide; ++k) {
+    for (int j = 0; j < kBlockSide; ++j) {
+      Eigen::Vector3f p = p0 + dy * static_cast<float>(j) + dz * static_cast<float>(k);
+      const int row = kBlockSide * j + kBlockSide * kBlockSide * k;
+      for (int i = 0; i < kBlockSide; ++i, p += dx) {
+        if (p.z() <= kMinProjectZ) continue;
+        float u, w;
+        if constexpr (kDistorted) {
+          const Eigen::Vector2d n = Distort(v.distortion, Eigen::Vector2d(p.x() / p.z(), p.y() / p.z()));
+          u = static_cast<float>(v.fx * n.x() + v.cx) + 0.5f;
+          w = static_cast<float>(v.fy * n.y() + v.cy) + 0.5f;
+        } else {
+          const float inv_z = 1.0f / p.z();
+          u = v.fx * p.x() * inv_z + v.cx + 0.5f;
+          w = v.fy * p.y() * inv_z + v.cy + 0.5f;
+        }
+        if (!(u >= 0.0f && u < wf && w >= 0.0f && w < hf)) continue;
+        const size_t pixel = static_cast<size_t>(static_cast<int>(w)) * v.width + static_cast<size_t>(u);
+        const uint16_t d = v.depth[pixel];
+        if (d == 0) continue;
+        const float sdf = static_cast<float>(d) * 0.001f - p.z();
+        if (sdf < -trunc) continue;
+        if (sdf < 0 && v.edge && v.edge[pixel]) continue;
+        const int idx = row + i;
+        acc->tsdf[idx] += std::min(1.0f, sdf * inv_trunc);
+        acc->weight[idx] += 1.0f;
+        const uint8_t* c;
+        if constexpr (kRegistered) {
+          c = v.color + 3 * pixel;
+        } else {
+          const Eigen::Vector3f q = v.Rc * p + v.tc;
+          if (q.z() <= kMinProjectZ) continue;
+          Eigen::Vector2d n(q.x() / q.z(), q.y() / q.z());
+          if (v.color_distorted) n = Distort(v.color_distortion, n);
+          const float cu = static_cast<float>(v.cfx * n.x() + v.ccx) + 0.5f;
+          const float cw = static_cast<float>(v.cfy * n.y() + v.ccy) + 0.5f;
+          // Outside the colour image: keep the depth observation, colour
+          // from the nearest edge pixel.
+          const int iu = std::clamp(static_cast<int>(std::floor(cu)), 0, v.cwidth - 1);
+          const int iw = std::clamp(static_cast<int>(std::floor(cw)), 0, v.cheight - 1);
+          c = v.color + 3 * (static_cast<size_t>(iw) * v.cwidth + iu);
+        }
+        acc->r[idx] += c[0];
+        acc->g[idx] += c[1];
+        acc->b[idx] += c[2];
+      }
+    }
+  }
+}
+
+// True if the block whose voxel centres span [lo, hi] (world) cannot receive
+// any update from view `v`: outside the image, over pixels without usable
+// depth, or entirely more than `trunc` behind the observed surface.
+bool SkipBlockView(const TsdfVolume::PodView& v, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, float trunc) {
+  if (v.distorted) return false;  // projected corners do not bound a distorted image region
+  float umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY, zmin = INFINITY;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3f pw((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
+    const Eigen::Vector3f p = v.R * pw + v.t;
+    if (p.z() <= kMinProjectZ) return false;  // straddles the camera plane: let the voxel loop decide
+    const float u = v.fx * p.x() / p.z() + v.cx, w = v.fy * p.y() / p.z() + v.cy;
+    umin = std::min(umin, u);
+    umax = std::max(umax, u);
+    vmin = std::min(vmin, w);
+    vmax = std::max(vmax, w);
+    zmin = std::min(zmin, p.z());
+  }
+  // Pixels a voxel can round to: [floor(u + ½)] over the projected range.
+  const int x0 = std::max(0, static_cast<int>(std::floor(umin + 0.5f)));
+  const int x1 = std::min(v.width - 1, static_cast<int>(std::floor(umax + 0.5f)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(vmin + 0.5f)));
+  const int y1 = std::min(v.height - 1, static_cast<int>(std::floor(vmax + 0.5f)));
+  if (x0 > x1 || y0 > y1) return true;
+  uint16_t dmax = 0;
+  for (int ty = y0 / kTileSide; ty <= y1 / kTileSide; ++ty)
+    for (int tx = x0 / kTileSide; tx <= x1 / kTileSide; ++tx) dmax = std::max(dmax, v.tile_max[ty * v.tiles_x + tx]);
+  if (dmax == 0) return true;
+  return zmin - trunc > static_cast<float>(dmax) * 0.001f;
+}
+
+}  // namespace
+
+Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
+  // Validate everything before touching the volume.
+  if (rig.pods.empty()) return InvalidArgument("rig has no pods");
+  if (frames.frames.size() != rig.pods.size())
+    return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
+                           std::to_string(rig.pods.size()));
+  for (size_t k = 0; k < rig.pods.size(); ++k) {
+    const PodCalibration& pod = rig.pods[k];
+    const RgbdFrame& f = frames.frames[k];
+    HOLO_RETURN_IF_ERROR(pod.depth.Check().WithContext(PodName(rig, k) + " depth intrinsics"));
+    HOLO_RETURN_IF_ERROR(pod.color.Check().WithContext(PodName(rig, k) + " color intrinsics"));
+    auto size = [](int w, int h) { return std::to_string(w) + "x" + std::to_string(h); };
+    if (f.depth.width() != pod.depth.width || f.depth.height() != pod.depth.height)
+      return InvalidArgument(PodName(rig, k) + ": depth image is " + size(f.depth.width(), f.depth.height()) +
+                             " but the rig says " + size(pod.depth.width, pod.depth.height));
+    if (f.color.width() != pod.color.width || f.color.height() != pod.color.height)
+      return InvalidArgument(PodName(rig, k) + ": color image is " + size(f.color.width(), f.color.height()) +
+                             " but the rig says " + size(pod.color.width, pod.color.height));
+    if (!f.mask.empty() && (f.mask.width() != f.depth.width() || f.mask.height() != f.depth.height()))
+      return InvalidArgument(PodName(rig, k) + ": mask is " + size(f.mask.width(), f.mask.height()) +
+                             " but depth is " + size(f.depth.width(), f.depth.height()));
+  }
+
+  Scratch& s = *scratch_;
+  const size_t num_pods = rig.pods.size();
+  const float trunc = options_.truncation_voxels * options_.voxel_size;
+  const auto min_mm = static_cast<uint16_t>(std::ceil(options_.min_depth_m * 1000.0f));
+  const auto max_mm = static_cast<uint16_t>(std::floor(options_.max_depth_m * 1000.0f));
+  s.views.resize(num_pods);
+  s.masked_depth.resize(num_pods);
+  s.tile_max.resize(num_pods);
+  s.edge.resize(num_pods);
+  s.pod_blocks.resize(num_pods);
+  for (size_t k = 0; k < num_pods; ++k) {
+    const PodCalibration& pod = rig.pods[k];
+    PodView& v = s.views[k];
+    const Pose depth_from_world = pod.world_from_depth.inverse();
+    v.R = depth_from_world.linear();
+    v.t = depth_from_world.translation();
+    v.center = pod.world_from_depth.translation();
+    v.fx = static_cast<float>(pod.depth.fx);
+    v.fy = static_cast<float>(pod.depth.fy);
+    v.cx = static_cast<float>(pod.depth.cx);
+    v.cy = static_cast<float>(pod.depth.cy);
+    v.width = pod.depth.width;
+    v.height = pod.depth.height;
+    v.distorted = pod.depth.HasDistortion();
+    v.distortion = pod.depth.distortion;
+    v.registered = pod.IsRegistered();
+    v.Rc = pod.color_from_depth.linear();
+    v.tc = pod.color_from_depth.translation();
+    v.cfx = static_cast<float>(pod.color.fx);
+    v.cfy = static_cast<float>(pod.color.fy);
+    v.ccx = static_cast<float>(pod.color.cx);
+    v.ccy = static_cast<float>(pod.color.cy);
+    v.cwidth = pod.color.width;
+    v.cheight = pod.color.height;
+    v.color_distorted = pod.color.HasDistortion();
+    v.color_distortion = pod.color.distortion;
+    v.color = frames.frames[k].color.data();
+    v.tiles_x = (v.width + kTileSide - 1) / kTileSide;
+    v.tiles_y = (v.height + kTileSide - 1) / kTileSide;
+  }
+
+  // 1. Per pod (in parallel): mask the depth, tile maxima, candidate blocks.
+  s.pool.Run(num_pods, [&](size_t k, int) {
+    PrepareDepth(frames.frames[k], min_mm, max_mm, &s.masked_depth[k], &s.tile_max[k], s.views[k].tiles_x,
+                 s.views[k].tiles_y);
+    s.views[k].depth = s.masked_depth[k].data();
+    s.views[k].tile_max = s.tile_max[k].data();
+    if (options_.ignore_behind_depth_edges) {
+      FindDepthEdges(s.masked_depth[k], s.views[k].width, s.views[k].height, 1 << 20,
+                     &s.edge[k]);
+      s.views[k].edge = s.edge[k].data();
+    } else {
+      s.views[k].edge = nullptr;
+    }
+    CollectBlocks(s.views[k], options_, &s.pod_blocks[k]);
+  });
+
+  // 2. Serial: allocate the blocks, in pod order so block indices (and the
+  // mesh's vertex order) do not depend on the thread count.
+  ++s.stamp;
+  if (s.stamp == 0) {  // wrapped: forget old stamps
+    std::fill(s.touched_stamp.begin(), s.touched_stamp.end(), 0u);
+    s.stamp = 1;
+  }
+  s.active.clear();
+  stats_ = {};
+  for (size_t k = 0; k < num_pods; ++k) {
+    for (const BlockCoord& c : s.pod_blocks[k]) {
+      bool created = false;
+      const int32_t b = blocks_.FindOrAllocate(c, &created);
+      if (static_cast<size_t>(b) >= s.touched_stamp.size()) s.touched_stamp.resize(static_cast<size_t>(b) + 1, 0u);
+      if (s.touched_stamp[static_cast<size_t>(b)] != s.stamp) {
+        s.touched_stamp[static_cast<size_t>(b)] = s.stamp;
+        s.active.push_back(b);
+        stats_.blocks_allocated += created;
+      }
+    }
+  }
+  stats_.blocks_touched = s.active.size();
+
+  // 3. Per block (in parallel): project its voxels into every view that can
+  // see it, then merge the frame's observations into the stored averages.
+  const float voxel = options_.voxel_size;
+  const int threads = s.pool.num_threads();
+  s.thread_block_views.assign(static_cast<size_t>(threads), 0);
+  s.thread_skipped.assign(static_cast<size_t>(threads), 0);
+  const size_t num_tasks = (s.active.size() + kBlocksPerTask - 1) / kBlocksPerTask;
+  s.pool.Run(num_tasks, [&](size_t task, int thread) {
+    BlockAccumulator acc;
+    const size_t end = std::min(s.active.size(), (task + 1) * kBlocksPerTask);
+    for (size_t a = task * kBlocksPerTask; a < end; ++a) {
+      const int32_t b = s.active[a];
+      const BlockCoord& bc = blocks_.coord(b);
+      const Eigen::Vector3f lo = Eigen::Vector3f(static_cast<float>(bc.x), static_cast<float>(bc.y),
+                                                 static_cast<float>(bc.z)) * (voxel * kBlockSide);
+      const Eigen::Vector3f hi = lo + Eigen::Vector3f::Constant(voxel * (kBlockSide - 1));
+      acc.Clear();
+      for (const PodView& v : s.views) {
+        if (SkipBlockView(v, lo, hi, trunc)) {
+          ++s.thread_skipped[static_cast<size_t>(thread)];
+          continue;
+        }
+        ++s.thread_block_views[static_cast<size_t>(thread)];
+        if (v.distorted) {
+          if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, &acc);
+          else IntegrateView<true, false>(v, lo, voxel, trunc, &acc);
+        } else {
+          if (v.registered) IntegrateView<false, true>(v, lo, voxel, trunc, &acc);
+          else IntegrateView<false, false>(v, lo, voxel, trunc, &acc);
+        }
+      }
+      VoxelBlock& vb = blocks_.block(b);
+      uint8_t flags = 0;
+      for (int i = 0; i < kBlockVoxels; ++i) {
+        const float w_new = acc.weight[i];
+        const float w_old = vb.weight[i];
+        if (w_new > 0) {
+          const float w = w_old + w_new;
+          const float inv = 1.0f / w;
+          vb.tsdf[i] = (vb.tsdf[i] * w_old + acc.tsdf[i]) * inv;
+          vb.r[i] = static_cast<uint8_t>((vb.r[i] * w_old + acc.r[i]) * inv + 0.5f);
+          vb.g[i] = static_cast<uint8_t>((vb.g[i] * w_old + acc.g[i]) * inv + 0.5f);
+          vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i]) * inv + 0.5f);
+          vb.weight[i] = w;
+        }
+        if (vb.weight[i] > 0) flags |= vb.tsdf[i] < 0 ? kBlockHasNegative : kBlockHasPositive;
+      }
+      blocks_.set_flags(b, flags);
+    }
+  });
+  for (int t = 0; t < threads; ++t) {
+    stats_.block_views += s.thread_block_views[static_cast<size_t>(t)];
+    stats_.block_views_skipped += s.thread_skipped[static_cast<size_t>(t)];
+  }
+  return OkStatus();
+}
+
+}  // namespace holo

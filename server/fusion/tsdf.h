@@ -1,0 +1,122 @@
+// Multi-pod TSDF fusion on sparse voxel blocks, and marching-cubes meshing.
+//
+// Integrate() takes one synchronized frame set: every pod's (masked) depth is
+// fused into 8³-voxel blocks that are allocated only where masked depth lands
+// (the truncation band around each measured point). Each block is then
+// integrated by projecting its voxels into every pod that can see it
+// (projective signed distance along the camera z axis, as in KinectFusion and
+// Open3D), with a running weighted average, so integrating into a volume that
+// already holds data is a proper temporal update. ExtractMesh() runs marching
+// cubes over the blocks with shared edge vertices.
+//
+// Threading: Integrate and ExtractMesh use options.threads threads (a
+// persistent pool owned by the volume). A volume is not safe for concurrent
+// calls from several threads.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "common/mesh.h"
+#include "common/rgbd.h"
+#include "common/rig.h"
+#include "common/status.h"
+#include "server/fusion/voxel_blocks.h"
+
+namespace holo {
+
+struct TsdfOptions {
+  // Edge length of one voxel, metres.
+  float voxel_size = 0.005f;
+  // Truncation distance, in voxels (Open3D's sdf_trunc = this · voxel_size).
+  float truncation_voxels = 4.0f;
+  // Depth beyond this is ignored, metres.
+  float max_depth_m = 5.0f;
+  // Depth nearer than this is ignored, metres.
+  float min_depth_m = 0.1f;
+  // Ignore observations behind the surface (negative distance) made through
+  // a pixel on a depth edge: a pixel with a 4-neighbour that has no usable
+  // depth (masked, invalid) or differs by more than the truncation distance.
+  // With nearest-pixel lookup such pixels otherwise mark the space just
+  // behind a silhouette as inside, which grows flaps at object edges.
+  bool ignore_behind_depth_edges = false;
+  // Marching cubes uses a cube only if every corner has at least this
+  // accumulated weight (one observation = weight 1).
+  float min_weight = 1.0f;
+  // Marching cubes skips cubes with a corner that every view saw as free
+  // space beyond the truncation distance (tsdf = +1): such a cube cannot hold
+  // the surface, and skipping it removes spurious sheets where views disagree.
+  bool skip_truncated_cubes = true;
+  // Worker threads; 0 = std::thread::hardware_concurrency().
+  int threads = 0;
+
+  // OK, or InvalidArgument naming the field: "voxel_size must be > 0, got -1".
+  Status Check() const;
+};
+
+// Counters of the last Integrate / ExtractMesh call (for benchmarks and logs).
+struct TsdfStats {
+  size_t blocks_touched = 0;       // blocks the last frame's depth landed in
+  size_t blocks_allocated = 0;     // of those, newly allocated
+  size_t block_views = 0;          // (block, pod) pairs integrated
+  size_t block_views_skipped = 0;  // pairs skipped: outside the image, no valid depth, or occluded
+  size_t mesh_blocks = 0;          // blocks that could hold a surface during meshing
+};
+
+class TsdfVolume {
+ public:
+  // `options` must pass Check() (HOLO_CHECK otherwise; use Create for
+  // untrusted values).
+  explicit TsdfVolume(TsdfOptions options);
+  static StatusOr<std::unique_ptr<TsdfVolume>> Create(TsdfOptions options);
+  ~TsdfVolume();
+  TsdfVolume(const TsdfVolume&) = delete;
+  TsdfVolume& operator=(const TsdfVolume&) = delete;
+
+  const TsdfOptions& options() const { return options_; }
+
+  // Empties the volume but keeps its memory for the next frame, so a
+  // steady-state frame loop allocates nothing.
+  void Reset();
+
+  // Fuses every pod's depth. Only pixels whose mask is nonzero are used when
+  // the frame has a mask (empty mask = all pixels). Colour comes from the
+  // pod's colour camera (which may differ from the depth camera). Errors
+  // (InvalidArgument, naming the pod): pod count differs from the rig, an
+  // image size differs from the calibration, a bad rig. The volume is
+  // unchanged on error.
+  Status Integrate(const Rig& rig, const RgbdFrameSet& frames);
+
+  // Marching cubes over all blocks: vertices shared between triangles (one
+  // per crossed voxel edge, no duplicate positions), triangles
+  // counter-clockwise seen from outside (free space), normals from the TSDF
+  // gradient, per-vertex colour interpolated from the voxels. Reuses `out`'s
+  // buffers. Cubes whose corners are not all observed (min_weight) are skipped.
+  void ExtractMesh(Mesh* out) const;
+
+  size_t num_blocks() const { return blocks_.size(); }
+  const TsdfStats& stats() const { return stats_; }
+
+  // The block storage, for inspection, tests and (later) temporal fusion.
+  const VoxelBlockMap& blocks() const { return blocks_; }
+  VoxelBlockMap& mutable_blocks() { return blocks_; }
+
+  // TSDF value (in [-1, 1]) and weight of the voxel at global voxel index
+  // (x, y, z); weight 0 if its block is not allocated.
+  void VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* weight) const;
+
+ // Implementation details, defined in tsdf_internal.h.
+  struct PodView;
+  struct Scratch;
+
+ private:
+
+  TsdfOptions options_;
+  VoxelBlockMap blocks_;
+  std::unique_ptr<Scratch> scratch_;  // per-frame buffers reused across calls
+  mutable TsdfStats stats_;
+};
+
+}  // namespace holo
