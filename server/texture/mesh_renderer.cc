@@ -12,10 +12,13 @@ using Eigen::Vector3f;
 // Whether a pixel centre exactly on edge a→b belongs to the triangle. The
 // rule is antisymmetric in the edge direction, so of two consistently
 // oriented triangles sharing an edge exactly one owns the centres on it.
-inline bool OwnsTies(float ax, float ay, float bx, float by) {
-  const float dy = by - ay;
-  return dy > 0.0f || (dy == 0.0f && bx - ax < 0.0f);
+inline bool OwnsTies(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
+  const int64_t dy = by - ay;
+  return dy > 0 || (dy == 0 && bx - ax < 0);
 }
+
+constexpr int64_t kSub = 256;            // sub-pixel steps per pixel
+constexpr float kMaxCoord = 1048576.0f;  // |screen coordinate| limit, pixels
 
 inline uint8_t ToByte(float v) { return static_cast<uint8_t>(std::clamp(v + 0.5f, 0.0f, 255.0f)); }
 
@@ -75,54 +78,62 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       const Vector3f normal = (positions[tr[1]] - p0).cross(positions[tr[2]] - p0);
       if (normal.dot(p0 - center) >= 0.0f) continue;
     }
-    // Vertex order on screen made positive; `slot` remembers which original
-    // vertex (0, 1, 2) each screen vertex is, for the barycentrics.
-    int slot[3] = {0, 1, 2};
-    float x[3], y[3], iz[3];
+    // Screen positions snapped to 1/256 px: integer edge functions are exact,
+    // so two triangles sharing an edge agree on every pixel centre (no cracks,
+    // no double coverage). Vertices beyond ±2^20 px are rejected (int64 safe).
+    int64_t x[3], y[3];
+    float iz[3];
+    int slot[3] = {0, 1, 2};  // original vertex of each screen vertex
+    bool far_out = false;
     for (int c = 0; c < 3; ++c) {
-      x[c] = sx_[tr[c]];
-      y[c] = sy_[tr[c]];
+      const float fxp = sx_[tr[c]], fyp = sy_[tr[c]];
+      if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) far_out = true;
+      x[c] = static_cast<int64_t>(std::lround(fxp * kSub));
+      y[c] = static_cast<int64_t>(std::lround(fyp * kSub));
       iz[c] = iz_[tr[c]];
     }
-    float area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
-    if (!(std::abs(area) > 1e-12f)) continue;
-    if (area < 0.0f) {
+    if (far_out) continue;
+    int64_t area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+    if (area == 0) continue;
+    if (area < 0) {
       std::swap(x[1], x[2]);
       std::swap(y[1], y[2]);
       std::swap(iz[1], iz[2]);
       std::swap(slot[1], slot[2]);
       area = -area;
     }
-    const float minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
-    const float miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
-    if (maxx < 0.0f || maxy < 0.0f || minx > width_ - 1 || miny > height_ - 1) continue;
-    const int xa = std::max(0, static_cast<int>(std::ceil(minx)));
-    const int xb = std::min(width_ - 1, static_cast<int>(std::floor(maxx)));
-    const int ya = std::max(0, static_cast<int>(std::ceil(miny)));
-    const int yb = std::min(height_ - 1, static_cast<int>(std::floor(maxy)));
+    const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
+    const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
+    // Pixel centres inside the box: ceil(min / kSub) .. floor(max / kSub).
+    auto ceil_div = [](int64_t v) { return v >= 0 ? (v + kSub - 1) / kSub : -((-v) / kSub); };
+    auto floor_div = [](int64_t v) { return v >= 0 ? v / kSub : -((-v + kSub - 1) / kSub); };
+    const int xa = static_cast<int>(std::max<int64_t>(0, ceil_div(minx)));
+    const int xb = static_cast<int>(std::min<int64_t>(width_ - 1, floor_div(maxx)));
+    const int ya = static_cast<int>(std::max<int64_t>(0, ceil_div(miny)));
+    const int yb = static_cast<int>(std::min<int64_t>(height_ - 1, floor_div(maxy)));
     if (xa > xb || ya > yb) continue;
     box_[0] = std::min(box_[0], xa), box_[1] = std::min(box_[1], ya);
     box_[2] = std::max(box_[2], xb), box_[3] = std::max(box_[3], yb);
-    const float inv_area = 1.0f / area;
+    const float inv_area = 1.0f / static_cast<float>(area);
     // Edge e is opposite vertex e: e0 = 1→2, e1 = 2→0, e2 = 0→1; its function
-    // E(p) = (b−a)×(p−a) is area·(barycentric of vertex e).
+    // E(p) = (b−a)×(p−a) is area·(barycentric of vertex e). A pixel centre
+    // exactly on an edge is covered only if the edge owns ties (bias −1).
     const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
-    float dxp[3], dyp[3], e_row[3];
-    bool tie[3];
+    int64_t dxp[3], dyp[3], e_row[3];
     for (int e = 0; e < 3; ++e) {
       const int a = ea[e], b = eb[e];
-      dxp[e] = -(y[b] - y[a]);  // dE/dx
-      dyp[e] = x[b] - x[a];     // dE/dy
-      e_row[e] = (x[b] - x[a]) * (ya - y[a]) - (y[b] - y[a]) * (xa - x[a]);
-      tie[e] = OwnsTies(x[a], y[a], x[b], y[b]);
+      dxp[e] = -(y[b] - y[a]) * kSub;  // change per pixel step in x
+      dyp[e] = (x[b] - x[a]) * kSub;   // per step in y
+      e_row[e] = (x[b] - x[a]) * (int64_t{ya} * kSub - y[a]) - (y[b] - y[a]) * (int64_t{xa} * kSub - x[a]);
+      if (!OwnsTies(x[a], y[a], x[b], y[b])) e_row[e] -= 1;
     }
     for (int py = ya; py <= yb; ++py) {
-      float e0 = e_row[0], e1 = e_row[1], e2 = e_row[2];
+      int64_t e0 = e_row[0], e1 = e_row[1], e2 = e_row[2];
       const size_t row = static_cast<size_t>(py) * width_;
       for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2]) {
-        if (e0 < 0.0f || e1 < 0.0f || e2 < 0.0f) continue;
-        if ((e0 == 0.0f && !tie[0]) || (e1 == 0.0f && !tie[1]) || (e2 == 0.0f && !tie[2])) continue;
-        const float l0 = e0 * inv_area, l1 = e1 * inv_area, l2 = e2 * inv_area;
+        if ((e0 | e1 | e2) < 0) continue;
+        const float l0 = static_cast<float>(e0) * inv_area, l1 = static_cast<float>(e1) * inv_area;
+        const float l2 = std::max(0.0f, 1.0f - l0 - l1);
         const float izp = l0 * iz[0] + l1 * iz[1] + l2 * iz[2];
         const float zp = 1.0f / izp;
         const size_t idx = row + px;
