@@ -1,0 +1,215 @@
+// holoport-bench texture: Holoportation-style per-vertex texturing of the
+// studio's ground-truth foreground mesh (colours cleared) from the pods'
+// colour images, timed, and scored by novel-view PSNR/SSIM against the
+// studio's ground-truth renders from 4 viewpoints no pod has. Runs the same
+// for two ablations: "no_discontinuity" (discontinuity test off) and "naive"
+// (plain average of every view the vertex projects into: no visibility, no
+// discontinuity test, no normal weighting, no voting).
+//
+// Extra options: --png DIR writes every novel view (ours and truth) of the
+// first frame there; --threads N (default 2: the 2-core budget).
+#include <chrono>
+#include <ctime>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "bench.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+#include "server/texture/novel_view.h"
+#include "server/texture/texturer.h"
+
+namespace {
+
+double ProcessCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+struct Mode {
+  std::string name;
+  holo::TextureOptions options;
+};
+
+int RunTextureBench(const holo::bench::BenchArgs& args) {
+  std::string png_dir;
+  int threads = 2;
+  holo::TextureOptions tuned;  // defaults, or as set by the options below
+  float offset_mm = 0;
+  for (size_t i = 0; i < args.extra.size(); ++i) {
+    if (args.extra[i] == "--png" && i + 1 < args.extra.size()) {
+      png_dir = args.extra[++i];
+    } else if (args.extra[i] == "--threads" && i + 1 < args.extra.size()) {
+      threads = std::atoi(args.extra[++i].c_str());
+      if (threads < 1) {
+        std::fprintf(stderr, "texture: --threads must be >= 1\n");
+        return 2;
+      }
+    } else if (args.extra[i] == "--alpha" && i + 1 < args.extra.size()) {
+      tuned.alpha = std::strtof(args.extra[++i].c_str(), nullptr);
+    } else if (args.extra[i] == "--radius_mm" && i + 1 < args.extra.size()) {
+      tuned.discontinuity_radius_m = 1e-3f * std::strtof(args.extra[++i].c_str(), nullptr);
+    } else if (args.extra[i] == "--no_fallback") {
+      tuned.discontinuity_fallback = false;
+    } else if (args.extra[i] == "--geometry_offset_mm" && i + 1 < args.extra.size()) {
+      offset_mm = std::strtof(args.extra[++i].c_str(), nullptr);
+    } else {
+      std::fprintf(stderr, "texture: unknown option %s\n", args.extra[i].c_str());
+      return 2;
+    }
+  }
+  auto workload = holo::GetWorkload(args.workload);
+  if (!workload.ok()) {
+    std::fprintf(stderr, "texture: %s\n", workload.status().ToString().c_str());
+    return 2;
+  }
+  holo::StudioOptions studio_options = workload->studio;
+  // Colour calibration (stage 2) is not this stage's job: judge texturing on
+  // consistent pod colours.
+  studio_options.color_variation = false;
+  auto studio = holo::SyntheticStudio::Create(workload->rig, studio_options);
+  if (!studio.ok()) {
+    std::fprintf(stderr, "texture: %s\n", studio.status().ToString().c_str());
+    return 1;
+  }
+
+  if (holo::Status s = tuned.Check(); !s.ok()) {
+    std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+    return 2;
+  }
+  std::vector<Mode> modes(3);
+  for (auto& m : modes) m.options = tuned;
+  modes[0].name = "holoportation";
+  modes[1].name = "no_discontinuity";
+  modes[1].options.discontinuity_test = false;
+  modes[2].name = "naive";
+  modes[2].options.visibility_test = false;
+  modes[2].options.discontinuity_test = false;
+  modes[2].options.normal_weighting = false;
+  modes[2].options.voting_levels = 0;
+  for (auto& m : modes) m.options.threads = threads;
+
+  holo::NovelViewOptions nv;
+  nv.intrinsics = workload->rig.pods.front().color;
+  const std::vector<holo::NovelView> views = holo::MakeNovelViews(nv);
+
+  // Frames spread over the walk/turn/wave cycles.
+  const int num_frames = args.frames > 0 ? args.frames : 4;
+  std::vector<int64_t> frame_ids;
+  for (int i = 0; i < num_frames; ++i) frame_ids.push_back(static_cast<int64_t>(i) * 67);
+
+  holo::RgbdFrameSet set;
+  holo::StudioGroundTruth gt;
+  std::map<std::string, std::vector<double>> ms, cpu_ms, psnr, ssim;
+  std::map<std::string, std::map<int, std::vector<double>>> psnr_view;
+  std::map<std::string, holo::TextureStats> last_stats;
+  std::vector<double> albedo_psnr, albedo_ssim;
+  size_t num_vertices = 0;
+  for (int64_t f : frame_ids) {
+    (*studio)->RenderFrame(f, &set, &gt);
+    holo::Mesh mesh = gt.foreground_mesh;
+    // Simulated reconstruction error: every vertex moved along its normal
+    // (positive: an inflated surface, as TSDF meshes of noisy depth tend to be).
+    if (offset_mm != 0.0f)
+      for (size_t v = 0; v < mesh.num_vertices(); ++v) mesh.positions[v] += 1e-3f * offset_mm * mesh.normals[v].normalized();
+    num_vertices = mesh.num_vertices();
+    // Reference: the true per-vertex albedo (unlit), the mesh's own colours.
+    for (size_t v = 0; v < views.size(); ++v) {
+      std::string prefix;
+      if (!png_dir.empty() && f == frame_ids.front())
+        prefix = png_dir + "/" + workload->name + "_gt_albedo_view" + std::to_string(v);
+      auto score = holo::ScoreNovelView(**studio, f, gt.foreground_mesh, views[v], prefix);
+      if (score.ok()) albedo_psnr.push_back(score->psnr_db), albedo_ssim.push_back(score->ssim);
+    }
+    for (const Mode& mode : modes) {
+      holo::Texturer texturer(workload->rig, mode.options);
+      mesh.colors.clear();
+      if (holo::Status s = texturer.Apply(set, &mesh); !s.ok()) {  // warm-up: buffers sized
+        std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+        return 1;
+      }
+      for (int r = 0; r < args.repeats; ++r) {
+        mesh.colors.clear();
+        const double c0 = ProcessCpuMs();
+        const auto t0 = std::chrono::steady_clock::now();
+        const holo::Status s = texturer.Apply(set, &mesh);
+        const double dt = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        cpu_ms[mode.name].push_back(ProcessCpuMs() - c0);
+        if (!s.ok()) {
+          std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+          return 1;
+        }
+        ms[mode.name].push_back(dt);
+      }
+      last_stats[mode.name] = texturer.stats();
+      for (size_t v = 0; v < views.size(); ++v) {
+        std::string prefix;
+        if (!png_dir.empty() && f == frame_ids.front())
+          prefix = png_dir + "/" + workload->name + "_" + mode.name + "_view" + std::to_string(v);
+        auto score = holo::ScoreNovelView(**studio, f, mesh, views[v], prefix);
+        if (!score.ok()) {
+          std::fprintf(stderr, "texture: %s\n", score.status().ToString().c_str());
+          return 1;
+        }
+        psnr[mode.name].push_back(score->psnr_db);
+        ssim[mode.name].push_back(score->ssim);
+        psnr_view[mode.name][static_cast<int>(v)].push_back(score->psnr_db);
+      }
+      if (!args.json) {
+        const holo::TextureStats& st = texturer.stats();
+        std::fprintf(stderr,
+                     "texture %s frame %lld %-16s %zu vertices: %.2f ms (raster %.2f sample %.2f fill %.2f), "
+                     "observed %zu edge-only %zu voted %zu min-variance %zu filled %zu fallback %zu\n",
+                     workload->name.c_str(), static_cast<long long>(f), mode.name.c_str(), st.num_vertices, st.ms_total,
+                     st.ms_raster, st.ms_sample, st.ms_fill, st.observed, st.edge_only, st.voted, st.min_variance,
+                     st.filled_from_neighbours, st.fallback);
+      }
+    }
+  }
+
+  auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return v.empty() ? 0.0 : s / static_cast<double>(v.size());
+  };
+  for (const Mode& mode : modes) {
+    std::map<std::string, std::string> q = {{"stage", "texture"},
+                                            {"mode", mode.name},
+                                            {"threads", std::to_string(threads)},
+                                            {"vertices", std::to_string(num_vertices)},
+                                            {"frames", std::to_string(frame_ids.size())},
+                                            {"color_variation", "0"}};
+    if (offset_mm != 0.0f) q["geometry_offset_mm"] = std::to_string(offset_mm);
+    holo::bench::EmitFigure("texture", workload->name, "ms", holo::bench::Median(ms[mode.name]), "ms", q);
+    // CPU time of all threads per frame: what other load on the machine barely changes.
+    holo::bench::EmitFigure("texture", workload->name, "cpu_ms", holo::bench::Median(cpu_ms[mode.name]), "ms", q);
+    q.erase("stage");
+    q["views"] = std::to_string(views.size());
+    holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", mean(psnr[mode.name]), "dB", q);
+    holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", mean(ssim[mode.name]), "1", q);
+    q.erase("views");
+    for (size_t v = 0; v < views.size(); ++v) {
+      auto qv = q;
+      char az[32];
+      std::snprintf(az, sizeof az, "%.1f", views[v].azimuth_deg);
+      qv["azimuth_deg"] = az;
+      holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db",
+                              mean(psnr_view[mode.name][static_cast<int>(v)]), "dB", qv);
+    }
+  }
+  const std::map<std::string, std::string> qa = {{"mode", "gt_albedo"}, {"views", std::to_string(views.size())},
+                                                 {"frames", std::to_string(frame_ids.size())}};
+  holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", mean(albedo_psnr), "dB", qa);
+  holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", mean(albedo_ssim), "1", qa);
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("texture",
+                    "texturing of the ground-truth mesh: ms, novel-view PSNR/SSIM vs naive and no-discontinuity",
+                    RunTextureBench);

@@ -1,0 +1,532 @@
+#include "server/texture/texturer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "common/metrics/parallel.h"
+#include "server/texture/worker_pool.h"
+
+namespace holo {
+namespace {
+
+using Eigen::Vector3f;
+
+constexpr int kVertexChunk = 1024;
+constexpr float kNear = 0.05f;
+// Chamfer distance transform in thirds of a pixel (3 per axial, 4 per
+// diagonal step), saturating in uint8: distances up to 85 px are exact
+// enough, beyond that they read as "far".
+constexpr uint8_t kFar = 255;
+
+enum VertexState : uint8_t { kUnset = 0, kObserved, kFilled };
+
+double MsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// max(0, x)^alpha, with a fast path for small integer exponents.
+inline float PowWeight(float x, float alpha, int int_alpha) {
+  if (int_alpha >= 0) {
+    float r = 1.0f;
+    for (int i = 0; i < int_alpha; ++i) r *= x;
+    return r;
+  }
+  return std::pow(x, alpha);
+}
+
+inline float Dist2(const float* a, const float* b) {
+  const float d0 = a[0] - b[0], d1 = a[1] - b[1], d2 = a[2] - b[2];
+  return d0 * d0 + d1 * d1 + d2 * d2;
+}
+
+std::string Str(float v) { return std::to_string(v); }
+
+}  // namespace
+
+Status TextureOptions::Check() const {
+  if (!(alpha >= 0.0f && alpha <= 64.0f)) return InvalidArgument("alpha must be in [0, 64], got " + Str(alpha));
+  if (!(discontinuity_radius_m >= 0.0f && discontinuity_radius_m <= 1.0f))
+    return InvalidArgument("discontinuity_radius_m must be in [0, 1], got " + Str(discontinuity_radius_m));
+  if (!(discontinuity_jump_m > 0.0f)) return InvalidArgument("discontinuity_jump_m must be > 0, got " + Str(discontinuity_jump_m));
+  if (!(visibility_tolerance_m >= 0.0f && visibility_tolerance_m <= 1.0f))
+    return InvalidArgument("visibility_tolerance_m must be in [0, 1], got " + Str(visibility_tolerance_m));
+  if (voting_levels < 0 || voting_levels > 8)
+    return InvalidArgument("voting_levels must be in [0, 8], got " + std::to_string(voting_levels));
+  if (!(vote_threshold > 0.0f)) return InvalidArgument("vote_threshold must be > 0, got " + Str(vote_threshold));
+  if (fill_iterations < 0) return InvalidArgument("fill_iterations must be >= 0, got " + std::to_string(fill_iterations));
+  if (threads < 0) return InvalidArgument("threads must be >= 0, got " + std::to_string(threads));
+  return OkStatus();
+}
+
+struct Texturer::PodState {
+  CameraModel color_camera, depth_camera;
+  bool registered = true;
+  Eigen::Matrix3f rot;  // colour camera from world
+  Vector3f trans, center;
+  Eigen::Matrix3f depth_rot;  // depth camera from world
+  Vector3f depth_trans;
+  MeshRasterizer raster;
+  std::vector<uint8_t> dist;  // distance to the nearest discontinuity, 1/3 px
+  int rx0 = 0, ry0 = 0, rx1 = -1, ry1 = -1;  // region where `dist` is valid
+};
+
+struct Texturer::ThreadScratch {
+  struct Sample {
+    float rgb[3];
+    float weight;
+    int pod;
+    int px, py;  // nearest pixel in the pod's colour image
+    bool near_edge;
+  };
+  std::vector<Sample> samples;
+  size_t voted = 0, min_variance = 0, edge_only = 0;
+};
+
+Texturer::Texturer(const Rig& rig, TextureOptions options) : rig_(rig), options_(options) {
+  init_status_ = options_.Check();
+  if (init_status_.ok()) init_status_ = rig_.Check();
+  if (init_status_.ok() && rig_.pods.empty()) init_status_ = InvalidArgument("rig has no pods");
+  if (!init_status_.ok()) init_status_ = init_status_.WithContext("Texturer");
+  threads_ = metrics::ResolveThreadCount(options_.threads);
+  for (const PodCalibration& pod : rig_.pods) {
+    auto s = std::make_unique<PodState>();
+    s->color_camera = pod.ColorCamera();
+    s->depth_camera = pod.DepthCamera();
+    s->registered = pod.IsRegistered();
+    s->rot = s->color_camera.world_from_camera.linear().transpose();
+    s->center = s->color_camera.world_from_camera.translation();
+    s->trans = -s->rot * s->center;
+    s->depth_rot = s->depth_camera.world_from_camera.linear().transpose();
+    s->depth_trans = -s->depth_rot * s->depth_camera.world_from_camera.translation();
+    pods_.push_back(std::move(s));
+  }
+  for (int t = 0; t < threads_; ++t) {
+    scratch_.push_back(std::make_unique<ThreadScratch>());
+    scratch_.back()->samples.reserve(rig_.pods.size());
+  }
+  pool_ = std::make_unique<WorkerPool>(threads_);
+}
+
+Texturer::~Texturer() = default;
+
+const std::vector<float>& Texturer::RasterDepth(int pod) const {
+  HOLO_CHECK(pod >= 0 && pod < static_cast<int>(pods_.size()));
+  return pods_[static_cast<size_t>(pod)]->raster.z();
+}
+
+void Texturer::PreparePod(int pod, const Mesh& mesh) {
+  PodState& s = *pods_[static_cast<size_t>(pod)];
+  // Visibility comes from the mesh itself: the nearest surface along each ray.
+  s.raster.Rasterize(mesh.positions, mesh.triangles, s.color_camera, /*want_attributes=*/false,
+                     options_.cull_back_faces, kNear);
+  if (!options_.discontinuity_test) return;
+  const int w = s.raster.width(), h = s.raster.height();
+  // Only the region around the drawn pixels matters: every vertex projects
+  // into it (2 px margin for vertices whose pixel centre the raster missed).
+  s.rx0 = std::max(0, s.raster.box_x0() - 2);
+  s.ry0 = std::max(0, s.raster.box_y0() - 2);
+  s.rx1 = std::min(w - 1, s.raster.box_x1() + 2);
+  s.ry1 = std::min(h - 1, s.raster.box_y1() + 2);
+  if (s.rx0 > s.rx1 || s.ry0 > s.ry1) return;
+  const std::vector<float>& z = s.raster.z();
+  s.dist.resize(z.size());
+  const float jump = options_.discontinuity_jump_m;
+  constexpr float kEmpty = MeshRasterizer::kEmpty;
+  // Seeds: pixels with a 4-neighbour across a depth jump or a silhouette.
+  auto differs = [jump](float a, float b) {
+    if (a == kEmpty || b == kEmpty) return (a == kEmpty) != (b == kEmpty);
+    return std::abs(a - b) > jump;
+  };
+  for (int y = s.ry0; y <= s.ry1; ++y) {
+    const float* row = z.data() + static_cast<size_t>(y) * w;
+    uint8_t* d = s.dist.data() + static_cast<size_t>(y) * w;
+    for (int x = s.rx0; x <= s.rx1; ++x) {
+      const float v = row[x];
+      const bool edge = (x > 0 && differs(v, row[x - 1])) || (x + 1 < w && differs(v, row[x + 1])) ||
+                        (y > 0 && differs(v, row[x - w])) || (y + 1 < h && differs(v, row[x + w]));
+      d[x] = edge ? 0 : kFar;
+    }
+  }
+  // Two-pass chamfer (3-4) distance transform: the dilated discontinuity map
+  // for every radius at once, so the radius can follow each vertex's depth.
+  auto relax = [](uint8_t& a, uint8_t b, int step) {
+    const int v = b + step;
+    if (v < a) a = static_cast<uint8_t>(v);
+  };
+  uint8_t* d = s.dist.data();
+  for (int y = s.ry0; y <= s.ry1; ++y) {
+    uint8_t* r = d + static_cast<size_t>(y) * w;
+    const uint8_t* up = y > s.ry0 ? r - w : nullptr;
+    for (int x = s.rx0; x <= s.rx1; ++x) {
+      if (x > s.rx0) relax(r[x], r[x - 1], 3);
+      if (up) {
+        relax(r[x], up[x], 3);
+        if (x > s.rx0) relax(r[x], up[x - 1], 4);
+        if (x < s.rx1) relax(r[x], up[x + 1], 4);
+      }
+    }
+  }
+  for (int y = s.ry1; y >= s.ry0; --y) {
+    uint8_t* r = d + static_cast<size_t>(y) * w;
+    const uint8_t* down = y < s.ry1 ? r + w : nullptr;
+    for (int x = s.rx1; x >= s.rx0; --x) {
+      if (x < s.rx1) relax(r[x], r[x + 1], 3);
+      if (down) {
+        relax(r[x], down[x], 3);
+        if (x < s.rx1) relax(r[x], down[x + 1], 4);
+        if (x > s.rx0) relax(r[x], down[x - 1], 4);
+      }
+    }
+  }
+}
+
+namespace {
+
+// Bilinear colour at `(u, v)` (pixel centres at integers), clamped to the image.
+inline void SampleBilinear(const ImageRgb8& img, float u, float v, float* out) {
+  const int w = img.width(), h = img.height();
+  u = std::clamp(u, 0.0f, static_cast<float>(w - 1));
+  v = std::clamp(v, 0.0f, static_cast<float>(h - 1));
+  const int x0 = std::min(static_cast<int>(u), w - 2 < 0 ? 0 : w - 2);
+  const int y0 = std::min(static_cast<int>(v), h - 2 < 0 ? 0 : h - 2);
+  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+  const float ax = u - x0, ay = v - y0;
+  const uint8_t* p00 = img.row(y0) + 3 * x0;
+  const uint8_t* p01 = img.row(y0) + 3 * x1;
+  const uint8_t* p10 = img.row(y1) + 3 * x0;
+  const uint8_t* p11 = img.row(y1) + 3 * x1;
+  for (int c = 0; c < 3; ++c)
+    out[c] = (p00[c] * (1 - ax) + p01[c] * ax) * (1 - ay) + (p10[c] * (1 - ax) + p11[c] * ax) * ay;
+}
+
+// Variance of the luma in the 3×3 neighbourhood of (x, y).
+float LocalVariance(const ImageRgb8& img, int x, int y) {
+  float sum = 0, sum2 = 0;
+  int n = 0;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      if (!img.Contains(x + dx, y + dy)) continue;
+      const uint8_t* p = img.row(y + dy) + 3 * (x + dx);
+      const float l = 0.299f * p[0] + 0.587f * p[1] + 0.114f * p[2];
+      sum += l;
+      sum2 += l * l;
+      ++n;
+    }
+  if (n == 0) return 1e30f;
+  const float mean = sum / n;
+  return sum2 / n - mean * mean;
+}
+
+inline std::array<uint8_t, 3> ToRgb8(const float* c) {
+  std::array<uint8_t, 3> out;
+  for (int k = 0; k < 3; ++k) out[k] = static_cast<uint8_t>(std::clamp(c[k] + 0.5f, 0.0f, 255.0f));
+  return out;
+}
+
+}  // namespace
+
+void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const std::vector<Vector3f>& normals,
+                             size_t begin, size_t end, ThreadScratch* scratch) {
+  using Sample = ThreadScratch::Sample;
+  const TextureOptions& o = options_;
+  const int int_alpha = o.alpha == std::floor(o.alpha) && o.alpha <= 8.0f ? static_cast<int>(o.alpha) : -1;
+  const size_t num_pods = pods_.size();
+  std::vector<Sample>& samples = scratch->samples;
+  for (size_t vi = begin; vi < end; ++vi) {
+    const Vector3f& p = mesh.positions[vi];
+    Vector3f n = normals[vi];
+    const float nn = n.norm();
+    n = nn > 0.0f ? Vector3f(n / nn) : Vector3f::Zero();
+    samples.clear();
+    for (size_t pi = 0; pi < num_pods; ++pi) {
+      const PodState& s = *pods_[pi];
+      const Vector3f pc = s.rot * p + s.trans;
+      if (!(pc.z() > kNear)) continue;
+      const Intrinsics& k = s.color_camera.intrinsics;
+      Eigen::Vector2f uv;
+      if (k.HasDistortion()) {
+        s.color_camera.ProjectCamera(pc, &uv);
+      } else {
+        uv.x() = static_cast<float>(k.fx) * pc.x() / pc.z() + static_cast<float>(k.cx);
+        uv.y() = static_cast<float>(k.fy) * pc.y() / pc.z() + static_cast<float>(k.cy);
+      }
+      if (!(uv.x() > -0.5f && uv.y() > -0.5f && uv.x() < k.width - 0.5f && uv.y() < k.height - 0.5f)) continue;
+      // uv > -0.5, so truncation of uv + 0.5 rounds to nearest.
+      const int ix = std::min(static_cast<int>(uv.x() + 0.5f), k.width - 1);
+      const int iy = std::min(static_cast<int>(uv.y() + 0.5f), k.height - 1);
+      float weight = 1.0f;
+      if (o.normal_weighting) {
+        const float ndv = n.dot((s.center - p).normalized());
+        if (!(ndv > 0.0f)) continue;
+        weight = PowWeight(ndv, o.alpha, int_alpha);
+        if (!(weight > 0.0f)) continue;
+      }
+      const size_t pix = static_cast<size_t>(iy) * k.width + ix;
+      if (o.visibility_test && pc.z() > s.raster.z()[pix] + o.visibility_tolerance_m) continue;
+      bool near_edge = false;
+      if (o.discontinuity_test) {
+        const float radius_px = o.discontinuity_radius_m * static_cast<float>(k.fx) / pc.z();
+        // Outside the valid region means off the mesh's raster: a silhouette.
+        const bool in_region = ix >= s.rx0 && ix <= s.rx1 && iy >= s.ry0 && iy <= s.ry1;
+        near_edge = !in_region || s.dist[pix] <= 3.0f * radius_px;
+        if (near_edge && !o.discontinuity_fallback) continue;
+      }
+      const RgbdFrame& frame = frames.frames[pi];
+      if (o.use_masks && !frame.mask.empty()) {
+        int mx = ix, my = iy;
+        if (!s.registered) {
+          Eigen::Vector2f muv;
+          if (!s.depth_camera.ProjectCamera(s.depth_rot * p + s.depth_trans, &muv)) continue;
+          mx = static_cast<int>(std::lround(muv.x()));
+          my = static_cast<int>(std::lround(muv.y()));
+          if (!frame.mask.Contains(mx, my)) continue;
+        }
+        if (frame.mask.at(mx, my) == 0) continue;
+      }
+      Sample& smp = samples.emplace_back();
+      SampleBilinear(frame.color, uv.x(), uv.y(), smp.rgb);
+      smp.weight = weight;
+      smp.pod = static_cast<int>(pi);
+      smp.px = ix;
+      smp.py = iy;
+      smp.near_edge = near_edge;
+    }
+    if (o.discontinuity_test && o.discontinuity_fallback) {
+      // Views near a discontinuity only count when no other view remains.
+      size_t clean = 0;
+      for (const Sample& smp : samples) clean += !smp.near_edge;
+      if (clean > 0 && clean < samples.size()) {
+        size_t out = 0;
+        for (size_t j = 0; j < samples.size(); ++j)
+          if (!samples[j].near_edge) samples[out++] = samples[j];
+        samples.resize(out);
+      } else if (clean == 0 && !samples.empty()) {
+        ++scratch->edge_only;
+      }
+    }
+
+    const size_t m = samples.size();
+    if (m == 0) {
+      state_[vi] = kUnset;
+      continue;
+    }
+    state_[vi] = kObserved;
+    // Default: weighted average of every kept sample.
+    auto average = [&](auto&& include) {
+      float acc[3] = {0, 0, 0}, wsum = 0;
+      for (size_t j = 0; j < m; ++j) {
+        if (!include(j)) continue;
+        const float w = samples[j].weight;
+        for (int c = 0; c < 3; ++c) acc[c] += w * samples[j].rgb[c];
+        wsum += w;
+      }
+      if (!(wsum > 0.0f)) {  // all weights underflowed: plain mean
+        int cnt = 0;
+        for (size_t j = 0; j < m; ++j) {
+          if (!include(j)) continue;
+          for (int c = 0; c < 3; ++c) acc[c] += samples[j].rgb[c];
+          ++cnt;
+        }
+        wsum = static_cast<float>(std::max(cnt, 1));
+      }
+      std::array<float, 3> out;
+      for (int c = 0; c < 3; ++c) out[c] = acc[c] / wsum;
+      return out;
+    };
+    std::array<float, 3> result;
+    bool decided = false;
+    if (o.voting_levels > 0 && m >= 2) {
+      float tau = o.vote_threshold;
+      for (int level = 0; level < o.voting_levels && !decided; ++level, tau *= 2.0f) {
+        const float tau2 = tau * tau;
+        size_t best = 0, best_count = 0;
+        float best_w = -1.0f;
+        for (size_t i = 0; i < m; ++i) {
+          size_t count = 0;
+          float wsum = 0;
+          for (size_t j = 0; j < m; ++j)
+            if (Dist2(samples[i].rgb, samples[j].rgb) <= tau2) ++count, wsum += samples[j].weight;
+          if (count > best_count || (count == best_count && wsum > best_w)) best = i, best_count = count, best_w = wsum;
+        }
+        if (2 * best_count > m) {
+          const float* ref = samples[best].rgb;
+          result = average([&](size_t j) { return Dist2(ref, samples[j].rgb) <= tau2; });
+          if (best_count < m) ++scratch->voted;
+          decided = true;
+        }
+      }
+      if (!decided) {
+        // No majority at any level: trust the view whose image is smoothest
+        // around the vertex (least likely to straddle an edge or occluder).
+        size_t best = 0;
+        float best_var = 3e38f;
+        for (size_t j = 0; j < m; ++j) {
+          const float var = LocalVariance(frames.frames[static_cast<size_t>(samples[j].pod)].color, samples[j].px,
+                                          samples[j].py);
+          if (var < best_var) best_var = var, best = j;
+        }
+        result = {samples[best].rgb[0], samples[best].rgb[1], samples[best].rgb[2]};
+        ++scratch->min_variance;
+        decided = true;
+      }
+    }
+    if (!decided) result = average([](size_t) { return true; });
+    accum_[vi] = result;
+  }
+}
+
+void Texturer::FillUnobserved(const RgbdFrameSet& frames, Mesh* mesh, const std::vector<Vector3f>& normals) {
+  const size_t n = mesh->num_vertices();
+  frontier_.clear();
+  for (size_t v = 0; v < n; ++v)
+    if (state_[v] == kUnset) frontier_.push_back(static_cast<uint32_t>(v));
+  if (frontier_.empty()) return;
+
+  // Vertex adjacency (CSR) from the triangles' edges; duplicates are harmless.
+  adj_offsets_.assign(n + 1, 0);
+  for (const auto& t : mesh->triangles)
+    for (int k = 0; k < 3; ++k) adj_offsets_[t[k] + 1] += 2;
+  for (size_t v = 0; v < n; ++v) adj_offsets_[v + 1] += adj_offsets_[v];
+  adj_.resize(adj_offsets_[n]);
+  {
+    // Reuse next_frontier_ as the per-vertex write cursor.
+    next_frontier_.assign(adj_offsets_.begin(), adj_offsets_.end() - 1);
+    for (const auto& t : mesh->triangles)
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t a = t[k];
+        adj_[next_frontier_[a]++] = t[(k + 1) % 3];
+        adj_[next_frontier_[a]++] = t[(k + 2) % 3];
+      }
+  }
+  // Rounds of neighbour averaging, Jacobi style (a vertex filled in this
+  // round is not used before the next), so the result is order-independent.
+  for (int it = 0; it < options_.fill_iterations && !frontier_.empty(); ++it) {
+    next_frontier_.clear();
+    size_t filled_now = 0;
+    for (uint32_t v : frontier_) {
+      float acc[3] = {0, 0, 0};
+      int cnt = 0;
+      for (uint32_t a = adj_offsets_[v]; a < adj_offsets_[v + 1]; ++a) {
+        const uint32_t u = adj_[a];
+        if (state_[u] == kObserved || state_[u] == kFilled) {
+          for (int c = 0; c < 3; ++c) acc[c] += accum_[u][c];
+          ++cnt;
+        }
+      }
+      if (cnt == 0) {
+        next_frontier_.push_back(v);
+        continue;
+      }
+      // Stash the result in the mesh colour; committed below.
+      for (int c = 0; c < 3; ++c) acc[c] /= static_cast<float>(cnt);
+      mesh->colors[v] = ToRgb8(acc);
+      frontier_[filled_now++] = v;  // compact: filled vertices at the front
+    }
+    for (size_t i = 0; i < filled_now; ++i) {
+      const uint32_t v = frontier_[i];
+      state_[v] = kFilled;
+      for (int c = 0; c < 3; ++c) accum_[v][c] = mesh->colors[v][c];
+    }
+    stats_.filled_from_neighbours += filled_now;
+    frontier_.swap(next_frontier_);
+  }
+
+  // Last resort for parts no view observed at all: the facing view with the
+  // smoothest image around the vertex, visibility and discontinuities ignored.
+  for (uint32_t v : frontier_) {
+    const Vector3f& p = mesh->positions[v];
+    const Vector3f nrm = normals[v];
+    int best_pod = -1;
+    float best_var = 3e38f, best_uv[2] = {0, 0};
+    for (size_t pi = 0; pi < pods_.size(); ++pi) {
+      const PodState& s = *pods_[pi];
+      Eigen::Vector2f uv;
+      if (!s.color_camera.ProjectCamera(s.rot * p + s.trans, &uv)) continue;
+      const Intrinsics& k = s.color_camera.intrinsics;
+      if (!(uv.x() > -0.5f && uv.y() > -0.5f && uv.x() < k.width - 0.5f && uv.y() < k.height - 0.5f)) continue;
+      if (nrm.dot(s.center - p) <= 0.0f) continue;
+      const float var = LocalVariance(frames.frames[pi].color, static_cast<int>(std::lround(uv.x())),
+                                      static_cast<int>(std::lround(uv.y())));
+      if (var < best_var) best_var = var, best_pod = static_cast<int>(pi), best_uv[0] = uv.x(), best_uv[1] = uv.y();
+    }
+    if (best_pod < 0) {
+      mesh->colors[v] = {128, 128, 128};
+      ++stats_.uncoloured;
+      continue;
+    }
+    float rgb[3];
+    SampleBilinear(frames.frames[static_cast<size_t>(best_pod)].color, best_uv[0], best_uv[1], rgb);
+    mesh->colors[v] = ToRgb8(rgb);
+    ++stats_.fallback;
+  }
+}
+
+Status Texturer::Apply(const RgbdFrameSet& frames, Mesh* mesh) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!init_status_.ok()) return init_status_;
+  if (mesh == nullptr) return InvalidArgument("Texturer::Apply: mesh is null");
+  if (frames.frames.size() != pods_.size())
+    return InvalidArgument("Texturer::Apply: " + std::to_string(frames.frames.size()) + " frames for a rig of " +
+                           std::to_string(pods_.size()) + " pods");
+  for (size_t i = 0; i < pods_.size(); ++i) {
+    const RgbdFrame& f = frames.frames[i];
+    const Intrinsics& c = rig_.pods[i].color;
+    const Intrinsics& d = rig_.pods[i].depth;
+    if (f.color.width() != c.width || f.color.height() != c.height)
+      return InvalidArgument("Texturer::Apply: pod " + std::to_string(i) + " colour image is " +
+                             std::to_string(f.color.width()) + "x" + std::to_string(f.color.height()) +
+                             ", calibration says " + std::to_string(c.width) + "x" + std::to_string(c.height));
+    if (!f.mask.empty() && (f.mask.width() != d.width || f.mask.height() != d.height))
+      return InvalidArgument("Texturer::Apply: pod " + std::to_string(i) + " mask is " + std::to_string(f.mask.width()) +
+                             "x" + std::to_string(f.mask.height()) + ", depth camera is " + std::to_string(d.width) +
+                             "x" + std::to_string(d.height));
+  }
+  if (Status s = mesh->Validate(); !s.ok()) return s.WithContext("Texturer::Apply");
+
+  const size_t n = mesh->num_vertices();
+  stats_ = TextureStats{};
+  stats_.num_vertices = n;
+  const std::vector<Vector3f>* normals = &mesh->normals;
+  if (mesh->normals.size() != n) {
+    // Area-weighted face normals (the cross product's length is twice the area).
+    normals_.assign(n, Vector3f::Zero());
+    for (const auto& t : mesh->triangles) {
+      const Vector3f fn =
+          (mesh->positions[t[1]] - mesh->positions[t[0]]).cross(mesh->positions[t[2]] - mesh->positions[t[0]]);
+      for (int k = 0; k < 3; ++k) normals_[t[k]] += fn;
+    }
+    normals = &normals_;
+  }
+  state_.resize(n);
+  accum_.resize(n);
+  mesh->colors.resize(n);
+
+  pool_->Run(static_cast<int>(pods_.size()), [&](int pod, int) { PreparePod(pod, *mesh); });
+  stats_.ms_raster = MsSince(t0);
+
+  const auto t1 = std::chrono::steady_clock::now();
+  for (auto& s : scratch_) s->voted = s->min_variance = s->edge_only = 0;
+  const int chunks = static_cast<int>((n + kVertexChunk - 1) / kVertexChunk);
+  pool_->Run(chunks, [&](int chunk, int thread) {
+    const size_t begin = static_cast<size_t>(chunk) * kVertexChunk;
+    ColorVertices(frames, *mesh, *normals, begin, std::min(n, begin + kVertexChunk),
+                  scratch_[static_cast<size_t>(thread)].get());
+  });
+  for (size_t v = 0; v < n; ++v)
+    if (state_[v] == kObserved) {
+      mesh->colors[v] = ToRgb8(accum_[v].data());
+      ++stats_.observed;
+    }
+  for (auto& s : scratch_) stats_.voted += s->voted, stats_.min_variance += s->min_variance, stats_.edge_only += s->edge_only;
+  stats_.ms_sample = MsSince(t1);
+
+  const auto t2 = std::chrono::steady_clock::now();
+  FillUnobserved(frames, mesh, *normals);
+  stats_.ms_fill = MsSince(t2);
+  stats_.ms_total = MsSince(t0);
+  return OkStatus();
+}
+
+}  // namespace holo
