@@ -61,6 +61,8 @@ Status SegmenterOptions::Check() const {
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_margin_min_m", depth_margin_min_m));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_margin_stddevs", depth_margin_stddevs));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_max_logodds", depth_max_logodds));
+  HOLO_RETURN_IF_ERROR(CheckPositive("depth_edge_m", depth_edge_m));
+  HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_edge_max_logodds", depth_edge_max_logodds));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_noise_at_1m_m", depth_noise_at_1m_m));
   HOLO_RETURN_IF_ERROR(CheckPositive("chroma_sigma", chroma_sigma));
   HOLO_RETURN_IF_ERROR(CheckPositive("value_sigma", value_sigma));
@@ -68,6 +70,7 @@ Status SegmenterOptions::Check() const {
   HOLO_RETURN_IF_ERROR(CheckNonNegative("colour_threshold", colour_threshold));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("colour_scale", colour_scale));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("colour_max_logodds", colour_max_logodds));
+  HOLO_RETURN_IF_ERROR(CheckNonNegative("colour_bg_max_logodds", colour_bg_max_logodds));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_weight", depth_weight));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("colour_weight", colour_weight));
   if (!std::isfinite(prior_logodds) || !std::isfinite(depth_appeared_logodds))
@@ -423,9 +426,11 @@ void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptio
   float* L = s->unary.data();
   uint8_t* luma = s->luma.data();
   const float inv_sd = 1.0f / o.depth_sigma_m;
-  const float dmax = o.depth_max_logodds, cmax = o.colour_max_logodds;
+  const float dmax = o.depth_max_logodds, cmax = o.colour_max_logodds, cmin = -o.colour_bg_max_logodds;
   const float wd = o.depth_weight, wc = o.colour_weight;
   const float appeared = std::clamp(o.depth_appeared_logodds, -dmax, dmax);
+  const int edge_mm = static_cast<int>(o.depth_edge_m * 1000.0f);
+  const float edge_cap = o.depth_edge_max_logodds;
   for (size_t i = 0; i < n; ++i) {
     const int r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
     luma[i] = Luma(r, g, b);
@@ -433,11 +438,19 @@ void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptio
     const Hsv c = ToHsv(r, g, b, o.dark_level);
     const float da = c.a - m.a, db = c.b - m.b, dv = c.v - m.v;
     const float dist = std::sqrt((da * da + db * db) * m.inv_var_ab + dv * dv * m.inv_var_v);
-    const float lc = std::clamp(o.colour_scale * (dist - o.colour_threshold), -cmax, cmax);
+    const float lc = std::clamp(o.colour_scale * (dist - o.colour_threshold), cmin, cmax);
     float ld = 0.0f;
     if (depth[i] > 0) {
       ld = m.depth_offset_m < 0 ? appeared
                                 : std::clamp((m.depth_offset_m - depth[i] * 0.001f) * inv_sd, -dmax, dmax);
+      if (ld > edge_cap) {
+        const int x = static_cast<int>(i % W), y = static_cast<int>(i / W);
+        const int d = depth[i];
+        auto edge = [&](size_t j) { return depth[j] > 0 && std::abs(depth[j] - d) > edge_mm; };
+        if ((x > 0 && edge(i - 1)) || (x + 1 < W && edge(i + 1)) || (y > 0 && edge(i - W)) ||
+            (y + 1 < H && edge(i + W)))
+          ld = edge_cap;
+      }
     }
     L[i] = o.prior_logodds + wd * ld + wc * lc;
   }

@@ -37,6 +37,12 @@ struct SegmenterOptions {
   float depth_appeared_logodds = 4.0f;
   // |L_d| is clamped to this.
   float depth_max_logodds = 6.0f;
+  // Depth at a depth edge (a 4-neighbour differs by more than
+  // `depth_edge_m`) is unreliable: sensors produce "flying pixels" with a
+  // depth between the two surfaces there. Foreground evidence from such
+  // pixels is capped at `depth_edge_max_logodds`, so colour decides.
+  float depth_edge_m = 0.06f;
+  float depth_edge_max_logodds = 2.0f;
 
   // --- Colour term on HSV: hue and saturation as the chroma vector
   // S·(cos H, sin H) of the hexcone, value V separately; L_c = colour_scale ·
@@ -53,7 +59,12 @@ struct SegmenterOptions {
   float dark_level = 24.0f;
   float colour_threshold = 2.5f;
   float colour_scale = 1.5f;
+  // L_c is clamped to [−colour_bg_max_logodds, colour_max_logodds]. The
+  // background side is weaker: a colour that differs from the background is
+  // strong evidence of foreground, but a matching colour is weak evidence of
+  // background (a grey object in front of a grey wall), so depth decides.
   float colour_max_logodds = 4.0f;
+  float colour_bg_max_logodds = 2.0f;
   // Weights of the two terms in the unary log-odds, and a constant prior
   // (negative: background is more likely a priori).
   float depth_weight = 1.0f;
@@ -66,12 +77,12 @@ struct SegmenterOptions {
   // × `grid_range` (luma levels 0..255). 0 iterations = unary only.
   int crf_iterations = 3;
   int downsample = 2;
-  float grid_spatial_px = 8.0f;
+  float grid_spatial_px = 4.0f;
   float grid_range = 16.0f;
   // Weight of the pairwise term in log-odds: each iteration uses
   // L + crf_weight · (2 q̄ − 1), q̄ the bilateral average of the foreground
   // probability around the pixel.
-  float crf_weight = 5.0f;
+  float crf_weight = 3.0f;
 
   // --- Clean-up: foreground components smaller than this many pixels are
   // removed, background holes smaller than this are filled (0 = off).
