@@ -66,7 +66,6 @@ bool SetOption(SegmenterOptions* o, const std::string& kv) {
   };
   const std::map<std::string, int*> ints = {{"crf_iterations", &o->crf_iterations},
                                             {"downsample", &o->downsample},
-                                            {"min_component_px", &o->min_component_px},
                                             {"threads", &o->threads}};
   if (auto it = floats.find(key); it != floats.end()) {
     *it->second = static_cast<float>(v);

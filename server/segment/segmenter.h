@@ -75,7 +75,7 @@ struct SegmenterOptions {
   // mean-field on an image downsampled by `downsample` (1, 2 or 4), with a
   // bilateral grid of cell size `grid_spatial_px` (full-resolution pixels)
   // × `grid_range` (luma levels 0..255). 0 iterations = unary only.
-  int crf_iterations = 3;
+  int crf_iterations = 2;
   int downsample = 2;
   float grid_spatial_px = 4.0f;
   float grid_range = 16.0f;
@@ -83,10 +83,6 @@ struct SegmenterOptions {
   // L + crf_weight · (2 q̄ − 1), q̄ the bilateral average of the foreground
   // probability around the pixel.
   float crf_weight = 3.0f;
-
-  // --- Clean-up: foreground components smaller than this many pixels are
-  // removed, background holes smaller than this are filled (0 = off).
-  int min_component_px = 0;
 
   // Worker threads across pods (0 = hardware concurrency).
   int threads = 2;

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include "common/image_io.h"
@@ -257,6 +258,73 @@ TEST(SegmenterTest, SameMasksForAnyThreadCountAndRepeatedCalls) {
     EXPECT_TRUE(fa.frames[p].mask == fb.frames[p].mask) << p;
     EXPECT_TRUE(again.frames[p].mask == fb.frames[p].mask) << p;
   }
+}
+
+// Pods whose colour camera is offset from the depth camera (a real
+// Kinect-like pod): colour is sampled into the depth camera through depth.
+double SmallRigIou(const Rig& rig) {
+  Segmenter seg(rig, SegmenterOptions{});
+  SyntheticStudio empty(rig, QvgaStudio(true)), studio(rig, QvgaStudio(false));
+  RgbdFrameSet fs;
+  StudioGroundTruth gt;
+  for (int k = 0; k < 8; ++k) {
+    empty.RenderFrame(k, &fs, nullptr);
+    HOLO_CHECK(seg.AddBackgroundFrame(fs).ok());
+  }
+  HOLO_CHECK(seg.FinishBackground().ok());
+  double iou = 0;
+  int n = 0;
+  for (int id : {50, 120}) {
+    studio.RenderFrame(id, &fs, &gt);
+    HOLO_CHECK(seg.Segment(&fs).ok());
+    for (size_t p = 0; p < fs.frames.size(); ++p) {
+      HOLO_CHECK(fs.frames[p].mask.width() == rig.pods[p].depth.width);
+      auto o = metrics::CompareMasks(fs.frames[p].mask, gt.mask[p]);
+      HOLO_CHECK(o.ok());
+      iou += o->iou;
+      ++n;
+    }
+    if (const char* dir = DumpDir()) {
+      std::vector<ImageRgb8> tiles;
+      for (size_t p = 0; p < fs.frames.size(); ++p) {
+        ImageRgb8 t(gt.mask[p].width(), gt.mask[p].height());
+        for (int y = 0; y < t.height(); ++y)
+          for (int x = 0; x < t.width(); ++x) {
+            const bool m = fs.frames[p].mask.at(x, y) != 0, g = gt.mask[p].at(x, y) != 0;
+            t.at(x, y, 0) = m && !g ? 255 : 0;
+            t.at(x, y, 1) = m && g ? 200 : 0;
+            t.at(x, y, 2) = !m && g ? 255 : 0;
+          }
+        tiles.push_back(std::move(t));
+      }
+      std::vector<const ImageRgb8*> ptrs;
+      for (const auto& t : tiles) ptrs.push_back(&t);
+      (void)WriteImageRgb8(std::string(dir) + "/small_" + rig.name + std::to_string(rig.pods[0].IsRegistered()) +
+                               "_f" + std::to_string(id) + ".png",
+                           TileImages(ptrs, 4));
+    }
+  }
+  return iou / n;
+}
+
+TEST(SegmenterTest, NonRegisteredPods) {
+  const Rig registered = QvgaRig().Scaled(0.5);  // 160x120
+  Rig rig = registered;
+  for (auto& pod : rig.pods) {
+    pod.color_from_depth = Pose::Identity();
+    pod.color_from_depth.translation() = Eigen::Vector3f(-0.025f, 0.0f, 0.0f);
+    pod.color = pod.color.Scaled(2.0);  // colour at 320x240, depth at 160x120
+  }
+  ASSERT_TRUE(rig.Check().ok());
+  ASSERT_FALSE(rig.pods[0].IsRegistered());
+  const double iou_registered = SmallRigIou(registered), iou = SmallRigIou(rig);
+  std::printf("160x120 depth: IoU registered %.4f, non-registered (320x240 colour, 2.5 cm baseline) %.4f\n",
+              iou_registered, iou);
+  // Measured: registered 0.932, non-registered 0.881 (0.900 with the same
+  // 2× colour but no baseline). The gap is a known limitation
+  // (docs/segmentation.md); this bound catches a broken registration.
+  EXPECT_GE(iou, iou_registered - 0.07);
+  EXPECT_GE(iou, 0.86);
 }
 
 TEST(SegmenterTest, BadInputsGiveClearErrors) {
