@@ -72,9 +72,11 @@ struct SegmenterOptions {
   float prior_logodds = 0.0f;
 
   // --- Fully connected CRF (Potts, bilateral appearance kernel) solved by
-  // mean-field on an image downsampled by `downsample` (1, 2 or 4), with a
-  // bilateral grid of cell size `grid_spatial_px` (full-resolution pixels)
-  // × `grid_range` (luma levels 0..255). 0 iterations = unary only.
+  // `crf_iterations` mean-field updates: all but the last on the image
+  // downsampled by `downsample` (1, 2 or 4), the last at full resolution
+  // so mask edges follow image edges. The bilateral filter is a grid of
+  // cell size `grid_spatial_px` (full-resolution pixels) × `grid_range`
+  // (luma levels 0..255). 0 updates = unary only.
   int crf_iterations = 2;
   int downsample = 2;
   float grid_spatial_px = 4.0f;
