@@ -1,8 +1,10 @@
 #include "server/texture/texturer.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <new>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -13,6 +15,19 @@
 #include "server/studio/workloads.h"
 #include "server/texture/mesh_renderer.h"
 #include "server/texture/novel_view.h"
+
+namespace holo {
+// Counts heap allocations in this test binary (steady-state check below).
+std::atomic<size_t> g_allocations{0};
+}  // namespace holo
+
+void* operator new(std::size_t size) {
+  holo::g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace holo {
 namespace {
@@ -358,6 +373,18 @@ TEST(TexturerTest, ResultIndependentOfThreadCountAndRepeatable) {
   }
   EXPECT_EQ(results[0], results[1]);
   EXPECT_EQ(results[0], results[2]);
+}
+
+TEST(TexturerTest, SteadyStateApplyDoesNotAllocate) {
+  const GhostScene g = MakeGhostScene();
+  TextureOptions o;
+  o.threads = 2;
+  Texturer t(g.rig, o);
+  Mesh m = g.scene;
+  ASSERT_TRUE(t.Apply(g.frames, &m).ok());  // sizes the buffers
+  const size_t before = g_allocations.load();
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(t.Apply(g.frames, &m).ok());
+  EXPECT_EQ(g_allocations.load() - before, 0u);
 }
 
 TEST(TexturerTest, BadInputsGiveErrors) {
