@@ -359,6 +359,31 @@ TEST(TexturerTest, MajorityVotingRejectsAnOutlierView) {
   EXPECT_GT(ColorDistance(m.colors[m.num_vertices() / 2], {200, 180, 60}), 50.0);
 }
 
+TEST(TexturerTest, ForegroundMasksExcludeViews) {
+  // Pod 1's image is corrupted but its mask says "background everywhere":
+  // with masks in use (default) only pod 0 colours the patch.
+  Rig rig;
+  rig.name = "two";
+  rig.pods.push_back(MakePod(0, {0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  rig.pods.push_back(MakePod(1, {-0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  Mesh plane = metrics::MakePlaneMesh({0, 0, 0}, 0.5f, 0.5f, 10, 10);
+  Paint(&plane, {90, 160, 220});
+  RgbdFrameSet frames = RenderPods(rig, plane);
+  frames.frames[1].color.Fill(255);
+  frames.frames[1].mask.Resize(160, 120, 0);
+  TextureOptions o;
+  o.voting_levels = 0;
+  Texturer t(rig, o);
+  Mesh m = plane;
+  ASSERT_TRUE(t.Apply(frames, &m).ok());
+  const size_t centre = m.num_vertices() / 2;
+  EXPECT_LT(ColorDistance(m.colors[centre], {90, 160, 220}), 4.0);
+  o.use_masks = false;
+  Texturer unmasked(rig, o);
+  ASSERT_TRUE(unmasked.Apply(frames, &m).ok());
+  EXPECT_GT(ColorDistance(m.colors[centre], {90, 160, 220}), 50.0);
+}
+
 TEST(TexturerTest, ResultIndependentOfThreadCountAndRepeatable) {
   const GhostScene g = MakeGhostScene();
   std::vector<std::vector<Rgb>> results;
