@@ -129,18 +129,29 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       e_row[e] = (x[b] - x[a]) * (int64_t{ya} * kSub - y[a]) - (y[b] - y[a]) * (int64_t{xa} * kSub - x[a]);
       if (!OwnsTies(x[a], y[a], x[b], y[b])) e_row[e] -= 1;
     }
+    // 1/z is affine on screen: stepped per pixel in the depth-only path.
+    const float diz_dx = (static_cast<float>(dxp[0]) * iz[0] + static_cast<float>(dxp[1]) * iz[1] +
+                          static_cast<float>(dxp[2]) * iz[2]) * inv_area;
     for (int py = ya; py <= yb; ++py) {
       int64_t e0 = e_row[0], e1 = e_row[1], e2 = e_row[2];
       const size_t row = static_cast<size_t>(py) * width_;
-      for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2]) {
-        if ((e0 | e1 | e2) < 0) continue;
-        const float l0 = static_cast<float>(e0) * inv_area, l1 = static_cast<float>(e1) * inv_area;
-        const float l2 = std::max(0.0f, 1.0f - l0 - l1);
-        const float izp = l0 * iz[0] + l1 * iz[1] + l2 * iz[2];
-        const size_t idx = row + px;
-        if (izp <= iz_buf_[idx]) continue;  // not nearer
-        iz_buf_[idx] = izp;
-        if (want_attributes) {
+      if (!want_attributes) {
+        float izp = (static_cast<float>(e0) * iz[0] + static_cast<float>(e1) * iz[1] + static_cast<float>(e2) * iz[2]) *
+                    inv_area;
+        float* buf = iz_buf_.data() + row;
+        for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2], izp += diz_dx) {
+          if ((e0 | e1 | e2) < 0) continue;
+          if (izp > buf[px]) buf[px] = izp;
+        }
+      } else {
+        for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2]) {
+          if ((e0 | e1 | e2) < 0) continue;
+          const float l0 = static_cast<float>(e0) * inv_area, l1 = static_cast<float>(e1) * inv_area;
+          const float l2 = std::max(0.0f, 1.0f - l0 - l1);
+          const float izp = l0 * iz[0] + l1 * iz[1] + l2 * iz[2];
+          const size_t idx = row + px;
+          if (izp <= iz_buf_[idx]) continue;  // not nearer
+          iz_buf_[idx] = izp;
           const float zp = 1.0f / izp;
           tri_[idx] = static_cast<int32_t>(ti);
           // Perspective-correct weight of each original vertex.
