@@ -47,6 +47,8 @@ bool SetOption(SegmenterOptions* o, const std::string& kv) {
       {"depth_margin_stddevs", &o->depth_margin_stddevs},
       {"depth_appeared_logodds", &o->depth_appeared_logodds},
       {"depth_max_logodds", &o->depth_max_logodds},
+      {"depth_edge_m", &o->depth_edge_m},
+      {"depth_edge_max_logodds", &o->depth_edge_max_logodds},
       {"depth_noise_at_1m_m", &o->depth_noise_at_1m_m},
       {"chroma_sigma", &o->chroma_sigma},
       {"value_sigma", &o->value_sigma},
@@ -54,6 +56,7 @@ bool SetOption(SegmenterOptions* o, const std::string& kv) {
       {"colour_threshold", &o->colour_threshold},
       {"colour_scale", &o->colour_scale},
       {"colour_max_logodds", &o->colour_max_logodds},
+      {"colour_bg_max_logodds", &o->colour_bg_max_logodds},
       {"depth_weight", &o->depth_weight},
       {"colour_weight", &o->colour_weight},
       {"prior_logodds", &o->prior_logodds},
@@ -63,7 +66,6 @@ bool SetOption(SegmenterOptions* o, const std::string& kv) {
   };
   const std::map<std::string, int*> ints = {{"crf_iterations", &o->crf_iterations},
                                             {"downsample", &o->downsample},
-                                            {"min_component_px", &o->min_component_px},
                                             {"threads", &o->threads}};
   if (auto it = floats.find(key); it != floats.end()) {
     *it->second = static_cast<float>(v);

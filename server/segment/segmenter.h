@@ -37,6 +37,12 @@ struct SegmenterOptions {
   float depth_appeared_logodds = 4.0f;
   // |L_d| is clamped to this.
   float depth_max_logodds = 6.0f;
+  // Depth at a depth edge (a 4-neighbour differs by more than
+  // `depth_edge_m`) is unreliable: sensors produce "flying pixels" with a
+  // depth between the two surfaces there. Foreground evidence from such
+  // pixels is capped at `depth_edge_max_logodds`, so colour decides.
+  float depth_edge_m = 0.06f;
+  float depth_edge_max_logodds = 2.0f;
 
   // --- Colour term on HSV: hue and saturation as the chroma vector
   // S·(cos H, sin H) of the hexcone, value V separately; L_c = colour_scale ·
@@ -53,7 +59,12 @@ struct SegmenterOptions {
   float dark_level = 24.0f;
   float colour_threshold = 2.5f;
   float colour_scale = 1.5f;
+  // L_c is clamped to [−colour_bg_max_logodds, colour_max_logodds]. The
+  // background side is weaker: a colour that differs from the background is
+  // strong evidence of foreground, but a matching colour is weak evidence of
+  // background (a grey object in front of a grey wall), so depth decides.
   float colour_max_logodds = 4.0f;
+  float colour_bg_max_logodds = 2.0f;
   // Weights of the two terms in the unary log-odds, and a constant prior
   // (negative: background is more likely a priori).
   float depth_weight = 1.0f;
@@ -61,21 +72,19 @@ struct SegmenterOptions {
   float prior_logodds = 0.0f;
 
   // --- Fully connected CRF (Potts, bilateral appearance kernel) solved by
-  // mean-field on an image downsampled by `downsample` (1, 2 or 4), with a
-  // bilateral grid of cell size `grid_spatial_px` (full-resolution pixels)
-  // × `grid_range` (luma levels 0..255). 0 iterations = unary only.
-  int crf_iterations = 3;
+  // `crf_iterations` mean-field updates: all but the last on the image
+  // downsampled by `downsample` (1, 2 or 4), the last at full resolution
+  // so mask edges follow image edges. The bilateral filter is a grid of
+  // cell size `grid_spatial_px` (full-resolution pixels) × `grid_range`
+  // (luma levels 0..255). 0 updates = unary only.
+  int crf_iterations = 2;
   int downsample = 2;
-  float grid_spatial_px = 8.0f;
+  float grid_spatial_px = 4.0f;
   float grid_range = 16.0f;
   // Weight of the pairwise term in log-odds: each iteration uses
   // L + crf_weight · (2 q̄ − 1), q̄ the bilateral average of the foreground
   // probability around the pixel.
-  float crf_weight = 5.0f;
-
-  // --- Clean-up: foreground components smaller than this many pixels are
-  // removed, background holes smaller than this are filled (0 = off).
-  int min_component_px = 0;
+  float crf_weight = 3.0f;
 
   // Worker threads across pods (0 = hardware concurrency).
   int threads = 2;

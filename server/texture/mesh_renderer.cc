@@ -31,7 +31,8 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   width_ = k.width;
   height_ = k.height;
   const size_t num_pixels = static_cast<size_t>(width_) * height_;
-  z_.assign(num_pixels, kEmpty);
+  iz_buf_.assign(num_pixels, 0.0f);
+  max_iz_ = 0.0f;
   box_[0] = width_, box_[1] = height_, box_[2] = -1, box_[3] = -1;
   if (want_attributes) {
     tri_.assign(num_pixels, -1);
@@ -59,6 +60,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
     }
     ok_[i] = 1;
     iz_[i] = 1.0f / p.z();
+    max_iz_ = std::max(max_iz_, iz_[i]);
     if (distorted) {
       Eigen::Vector2f px;
       camera.ProjectCamera(p, &px);
@@ -88,8 +90,8 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
     for (int c = 0; c < 3; ++c) {
       const float fxp = sx_[tr[c]], fyp = sy_[tr[c]];
       if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) far_out = true;
-      x[c] = static_cast<int64_t>(std::lround(fxp * kSub));
-      y[c] = static_cast<int64_t>(std::lround(fyp * kSub));
+      x[c] = static_cast<int64_t>(std::floor(fxp * kSub + 0.5f));
+      y[c] = static_cast<int64_t>(std::floor(fyp * kSub + 0.5f));
       iz[c] = iz_[tr[c]];
     }
     if (far_out) continue;
@@ -127,19 +129,30 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       e_row[e] = (x[b] - x[a]) * (int64_t{ya} * kSub - y[a]) - (y[b] - y[a]) * (int64_t{xa} * kSub - x[a]);
       if (!OwnsTies(x[a], y[a], x[b], y[b])) e_row[e] -= 1;
     }
+    // 1/z is affine on screen: stepped per pixel in the depth-only path.
+    const float diz_dx = (static_cast<float>(dxp[0]) * iz[0] + static_cast<float>(dxp[1]) * iz[1] +
+                          static_cast<float>(dxp[2]) * iz[2]) * inv_area;
     for (int py = ya; py <= yb; ++py) {
       int64_t e0 = e_row[0], e1 = e_row[1], e2 = e_row[2];
       const size_t row = static_cast<size_t>(py) * width_;
-      for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2]) {
-        if ((e0 | e1 | e2) < 0) continue;
-        const float l0 = static_cast<float>(e0) * inv_area, l1 = static_cast<float>(e1) * inv_area;
-        const float l2 = std::max(0.0f, 1.0f - l0 - l1);
-        const float izp = l0 * iz[0] + l1 * iz[1] + l2 * iz[2];
-        const float zp = 1.0f / izp;
-        const size_t idx = row + px;
-        if (zp >= z_[idx]) continue;
-        z_[idx] = zp;
-        if (want_attributes) {
+      if (!want_attributes) {
+        float izp = (static_cast<float>(e0) * iz[0] + static_cast<float>(e1) * iz[1] + static_cast<float>(e2) * iz[2]) *
+                    inv_area;
+        float* buf = iz_buf_.data() + row;
+        for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2], izp += diz_dx) {
+          if ((e0 | e1 | e2) < 0) continue;
+          if (izp > buf[px]) buf[px] = izp;
+        }
+      } else {
+        for (int px = xa; px <= xb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2]) {
+          if ((e0 | e1 | e2) < 0) continue;
+          const float l0 = static_cast<float>(e0) * inv_area, l1 = static_cast<float>(e1) * inv_area;
+          const float l2 = std::max(0.0f, 1.0f - l0 - l1);
+          const float izp = l0 * iz[0] + l1 * iz[1] + l2 * iz[2];
+          const size_t idx = row + px;
+          if (izp <= iz_buf_[idx]) continue;  // not nearer
+          iz_buf_[idx] = izp;
+          const float zp = 1.0f / izp;
           tri_[idx] = static_cast<int32_t>(ti);
           // Perspective-correct weight of each original vertex.
           float w[3];
@@ -165,19 +178,19 @@ Status RenderMesh(const Mesh& mesh, const CameraModel& camera, ImageRgb8* color,
   MeshRasterizer raster;
   raster.Rasterize(mesh.positions, mesh.triangles, camera, color != nullptr, options.cull_back_faces, options.near_m);
   const int w = raster.width(), h = raster.height();
-  const std::vector<float>& z = raster.z();
+  const std::vector<float>& iz = raster.inv_z();
   if (depth) {
     depth->Resize(w, h);
     uint16_t* d = depth->data();
-    for (size_t i = 0; i < z.size(); ++i) {
-      const float mm = z[i] * 1000.0f + 0.5f;
-      d[i] = z[i] == MeshRasterizer::kEmpty || mm >= 65536.0f ? 0 : static_cast<uint16_t>(mm);
+    for (size_t i = 0; i < iz.size(); ++i) {
+      const float mm = iz[i] > 0.0f ? 1000.0f / iz[i] + 0.5f : 0.0f;
+      d[i] = mm >= 65536.0f ? 0 : static_cast<uint16_t>(mm);
     }
   }
   if (mask) {
     mask->Resize(w, h);
     uint8_t* m = mask->data();
-    for (size_t i = 0; i < z.size(); ++i) m[i] = z[i] == MeshRasterizer::kEmpty ? 0 : 255;
+    for (size_t i = 0; i < iz.size(); ++i) m[i] = iz[i] > 0.0f ? 255 : 0;
   }
   if (color) {
     color->Resize(w, h);
@@ -186,7 +199,7 @@ Status RenderMesh(const Mesh& mesh, const CameraModel& camera, ImageRgb8* color,
     const auto& ids = raster.triangle_ids();
     const auto& b1 = raster.bary1();
     const auto& b2 = raster.bary2();
-    for (size_t i = 0; i < z.size(); ++i, c += 3) {
+    for (size_t i = 0; i < iz.size(); ++i, c += 3) {
       const int32_t t = ids[i];
       if (t < 0) {
         c[0] = options.background[0], c[1] = options.background[1], c[2] = options.background[2];

@@ -39,7 +39,6 @@ struct MeshRenderOptions {
 // triangles a few pixels wide. Buffers are kept from call to call.
 class MeshRasterizer {
  public:
-  static constexpr float kEmpty = 3.0e38f;  // z of uncovered pixels
 
   // Rasterizes `triangles` over `positions` (world coordinates) seen by
   // `camera`. `want_attributes` also records the triangle id and perspective-
@@ -50,13 +49,17 @@ class MeshRasterizer {
 
   int width() const { return width_; }
   int height() const { return height_; }
-  // Camera z (metres) per pixel, row-major; kEmpty where nothing is drawn.
-  const std::vector<float>& z() const { return z_; }
+  // Inverse camera depth 1/z (1/metres) per pixel, row-major; 0 where
+  // nothing is drawn. (Inverse depth: the z-test needs no division, and it
+  // is what interpolates linearly on screen.)
+  const std::vector<float>& inv_z() const { return iz_buf_; }
   // With `want_attributes`: triangle index (-1 = none) and the barycentric
   // weights of its 2nd and 3rd vertices per pixel.
   const std::vector<int32_t>& triangle_ids() const { return tri_; }
   const std::vector<float>& bary1() const { return b1_; }
   const std::vector<float>& bary2() const { return b2_; }
+  // Largest 1/z over the projected vertices (those past the near plane), 0 if none.
+  float max_inv_z() const { return max_iz_; }
   // Inclusive pixel box holding every drawn pixel; empty (x0 > x1) if none.
   int box_x0() const { return box_[0]; }
   int box_y0() const { return box_[1]; }
@@ -67,9 +70,10 @@ class MeshRasterizer {
   int width_ = 0, height_ = 0;
   std::vector<float> sx_, sy_, iz_;  // projected vertices: pixel x, y and 1/z
   std::vector<uint8_t> ok_;          // vertex in front of the near plane
-  std::vector<float> z_, b1_, b2_;
+  std::vector<float> iz_buf_, b1_, b2_;
   std::vector<int32_t> tri_;
   int box_[4] = {0, 0, -1, -1};
+  float max_iz_ = 0;
 };
 
 // Renders `mesh` (per-vertex colours Gouraud-interpolated, perspective-correct)

@@ -15,10 +15,10 @@ using Eigen::Vector3f;
 
 constexpr int kVertexChunk = 1024;
 constexpr float kNear = 0.05f;
-// Chamfer distance transform in thirds of a pixel (3 per axial, 4 per
-// diagonal step), saturating in uint8: distances up to 85 px are exact
-// enough, beyond that they read as "far".
+// Distance map value of pixels farther than the largest radius needed.
 constexpr uint8_t kFar = 255;
+// Cap on the dilation rounds (pixels of radius) per view.
+constexpr int kMaxRounds = 32;
 
 enum VertexState : uint8_t { kUnset = 0, kObserved, kFilled };
 
@@ -68,8 +68,10 @@ struct Texturer::PodState {
   Eigen::Matrix3f depth_rot;  // depth camera from world
   Vector3f depth_trans;
   MeshRasterizer raster;
-  std::vector<uint8_t> dist;  // distance to the nearest discontinuity, 1/3 px
+  std::vector<uint8_t> dist;  // chessboard distance to the nearest discontinuity, px (capped)
+  std::vector<uint8_t> tmp;   // region-sized scratch of the dilation
   int rx0 = 0, ry0 = 0, rx1 = -1, ry1 = -1;  // region where `dist` is valid
+  std::vector<uint8_t> hedge, vedge, vedge_prev;  // seed scratch, one row
 };
 
 struct Texturer::ThreadScratch {
@@ -111,9 +113,9 @@ Texturer::Texturer(const Rig& rig, TextureOptions options) : rig_(rig), options_
 
 Texturer::~Texturer() = default;
 
-const std::vector<float>& Texturer::RasterDepth(int pod) const {
+const std::vector<float>& Texturer::RasterInverseDepth(int pod) const {
   HOLO_CHECK(pod >= 0 && pod < static_cast<int>(pods_.size()));
-  return pods_[static_cast<size_t>(pod)]->raster.z();
+  return pods_[static_cast<size_t>(pod)]->raster.inv_z();
 }
 
 void Texturer::PreparePod(int pod, const Mesh& mesh) {
@@ -130,53 +132,59 @@ void Texturer::PreparePod(int pod, const Mesh& mesh) {
   s.rx1 = std::min(w - 1, s.raster.box_x1() + 2);
   s.ry1 = std::min(h - 1, s.raster.box_y1() + 2);
   if (s.rx0 > s.rx1 || s.ry0 > s.ry1) return;
-  const std::vector<float>& z = s.raster.z();
-  s.dist.resize(z.size());
-  const float jump = options_.discontinuity_jump_m;
-  constexpr float kEmpty = MeshRasterizer::kEmpty;
+  const std::vector<float>& iz = s.raster.inv_z();
+  s.dist.resize(iz.size());
   // Seeds: pixels with a 4-neighbour across a depth jump or a silhouette.
-  auto differs = [jump](float a, float b) {
-    if (a == kEmpty || b == kEmpty) return (a == kEmpty) != (b == kEmpty);
-    return std::abs(a - b) > jump;
-  };
+  // In inverse depth (0 = empty): |1/a − 1/b| > jump ⇔ |a − b| > jump·a·b,
+  // which is also true for exactly one empty side and false for two: no
+  // branches, no divisions, so the row loops vectorize.
+  const float jump = options_.discontinuity_jump_m;
+  const int rw = s.rx1 - s.rx0 + 1;
+  s.hedge.resize(static_cast<size_t>(rw));
+  s.vedge_prev.resize(static_cast<size_t>(rw));
+  s.vedge.resize(static_cast<size_t>(rw));
+  auto jumps = [jump](float a, float b) -> uint8_t { return std::abs(a - b) > jump * a * b; };
   for (int y = s.ry0; y <= s.ry1; ++y) {
-    const float* row = z.data() + static_cast<size_t>(y) * w;
-    uint8_t* d = s.dist.data() + static_cast<size_t>(y) * w;
-    for (int x = s.rx0; x <= s.rx1; ++x) {
-      const float v = row[x];
-      const bool edge = (x > 0 && differs(v, row[x - 1])) || (x + 1 < w && differs(v, row[x + 1])) ||
-                        (y > 0 && differs(v, row[x - w])) || (y + 1 < h && differs(v, row[x + w]));
-      d[x] = edge ? 0 : kFar;
-    }
+    const float* row = iz.data() + static_cast<size_t>(y) * w + s.rx0;
+    const float* below = y + 1 < h ? row + w : row;  // last row: compares with itself, no edge
+    uint8_t* he = s.hedge.data();
+    uint8_t* ve = s.vedge.data();
+    for (int x = 0; x + 1 < rw; ++x) he[x] = jumps(row[x], row[x + 1]);
+    he[rw - 1] = 0;
+    for (int x = 0; x < rw; ++x) ve[x] = jumps(row[x], below[x]);
+    const uint8_t* vp = s.vedge_prev.data();
+    uint8_t* d = s.dist.data() + static_cast<size_t>(y) * w + s.rx0;
+    const bool first = y == s.ry0;
+    d[0] = (he[0] | ve[0] | (first ? 0 : vp[0])) ? 0 : kFar;
+    for (int x = 1; x < rw; ++x) d[x] = (he[x] | he[x - 1] | ve[x] | (first ? 0 : vp[x])) ? 0 : kFar;
+    s.vedge_prev.swap(s.vedge);
   }
-  // Two-pass chamfer (3-4) distance transform: the dilated discontinuity map
-  // for every radius at once, so the radius can follow each vertex's depth.
-  auto relax = [](uint8_t& a, uint8_t b, int step) {
-    const int v = b + step;
-    if (v < a) a = static_cast<uint8_t>(v);
-  };
-  uint8_t* d = s.dist.data();
-  for (int y = s.ry0; y <= s.ry1; ++y) {
-    uint8_t* r = d + static_cast<size_t>(y) * w;
-    const uint8_t* up = y > s.ry0 ? r - w : nullptr;
-    for (int x = s.rx0; x <= s.rx1; ++x) {
-      if (x > s.rx0) relax(r[x], r[x - 1], 3);
-      if (up) {
-        relax(r[x], up[x], 3);
-        if (x > s.rx0) relax(r[x], up[x - 1], 4);
-        if (x < s.rx1) relax(r[x], up[x + 1], 4);
-      }
+  // The dilated discontinuity map, as a chessboard distance to the nearest
+  // seed capped past the largest radius any vertex of this view needs (the
+  // radius in pixels follows each vertex's depth, so one map serves all).
+  // Each round is a separable 3×3 min filter + 1: plain row loops that
+  // vectorize, a few rounds at our resolutions.
+  const float max_radius_px = options_.discontinuity_radius_m * static_cast<float>(s.color_camera.intrinsics.fx) *
+                              s.raster.max_inv_z();
+  const int rounds = std::min(kMaxRounds, static_cast<int>(std::floor(max_radius_px)));
+  const int rh = s.ry1 - s.ry0 + 1;
+  s.tmp.resize(static_cast<size_t>(rw) * rh);
+  for (int round = 0; round < rounds; ++round) {
+    for (int y = 0; y < rh; ++y) {
+      const uint8_t* r = s.dist.data() + static_cast<size_t>(y + s.ry0) * w + s.rx0;
+      uint8_t* t = s.tmp.data() + static_cast<size_t>(y) * rw;
+      t[0] = std::min(r[0], r[rw > 1 ? 1 : 0]);
+      for (int x = 1; x + 1 < rw; ++x) t[x] = std::min(std::min(r[x - 1], r[x]), r[x + 1]);
+      if (rw > 1) t[rw - 1] = std::min(r[rw - 2], r[rw - 1]);
     }
-  }
-  for (int y = s.ry1; y >= s.ry0; --y) {
-    uint8_t* r = d + static_cast<size_t>(y) * w;
-    const uint8_t* down = y < s.ry1 ? r + w : nullptr;
-    for (int x = s.rx1; x >= s.rx0; --x) {
-      if (x < s.rx1) relax(r[x], r[x + 1], 3);
-      if (down) {
-        relax(r[x], down[x], 3);
-        if (x < s.rx1) relax(r[x], down[x + 1], 4);
-        if (x > s.rx0) relax(r[x], down[x - 1], 4);
+    for (int y = 0; y < rh; ++y) {
+      const uint8_t* t0 = s.tmp.data() + static_cast<size_t>(y > 0 ? y - 1 : y) * rw;
+      const uint8_t* t1 = s.tmp.data() + static_cast<size_t>(y) * rw;
+      const uint8_t* t2 = s.tmp.data() + static_cast<size_t>(y + 1 < rh ? y + 1 : y) * rw;
+      uint8_t* r = s.dist.data() + static_cast<size_t>(y + s.ry0) * w + s.rx0;
+      for (int x = 0; x < rw; ++x) {
+        const int m = std::min(std::min(t0[x], t1[x]), t2[x]) + 1;
+        r[x] = static_cast<uint8_t>(std::min<int>(r[x], std::min(m, 255)));
       }
     }
   }
@@ -264,13 +272,18 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
         if (!(weight > 0.0f)) continue;
       }
       const size_t pix = static_cast<size_t>(iy) * k.width + ix;
-      if (o.visibility_test && pc.z() > s.raster.z()[pix] + o.visibility_tolerance_m) continue;
+      // Hidden if the rasterized surface at the pixel is nearer by more than
+      // the tolerance (1/iz: the raster's depth; empty pixels never hide).
+      if (o.visibility_test) {
+        const float izr = s.raster.inv_z()[pix];
+        if (izr > 0.0f && pc.z() * izr > 1.0f + o.visibility_tolerance_m * izr) continue;
+      }
       bool near_edge = false;
       if (o.discontinuity_test) {
         const float radius_px = o.discontinuity_radius_m * static_cast<float>(k.fx) / pc.z();
         // Outside the valid region means off the mesh's raster: a silhouette.
         const bool in_region = ix >= s.rx0 && ix <= s.rx1 && iy >= s.ry0 && iy <= s.ry1;
-        near_edge = !in_region || s.dist[pix] <= 3.0f * radius_px;
+        near_edge = !in_region || s.dist[pix] <= radius_px;
         if (near_edge && !o.discontinuity_fallback) continue;
       }
       const RgbdFrame& frame = frames.frames[pi];

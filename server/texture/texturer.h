@@ -49,7 +49,7 @@ struct TextureOptions {
   // Assumed reconstruction error, metres: a vertex closer than this (measured
   // on the image at the vertex's depth) to a depth discontinuity of a view is
   // not coloured from that view.
-  float discontinuity_radius_m = 0.015f;
+  float discontinuity_radius_m = 0.01f;
   // When every view that sees a vertex is near a discontinuity, use them
   // anyway (instead of leaving the vertex to neighbour filling). Matters at
   // low resolution, where thin limbs are only a few pixels wide in every view.
@@ -119,9 +119,9 @@ class Texturer {
 
   const TextureStats& stats() const { return stats_; }
   const TextureOptions& options() const { return options_; }
-  // Rasterized depth of the last Apply in pod `pod`'s colour camera (camera
-  // z, metres, MeshRasterizer::kEmpty where empty), for debugging.
-  const std::vector<float>& RasterDepth(int pod) const;
+  // Rasterized inverse depth of the last Apply in pod `pod`'s colour camera
+  // (1/z, 1/metres, 0 where empty), for debugging.
+  const std::vector<float>& RasterInverseDepth(int pod) const;
 
  private:
   struct PodState;

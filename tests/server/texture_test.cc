@@ -1,8 +1,10 @@
 #include "server/texture/texturer.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <new>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -13,6 +15,19 @@
 #include "server/studio/workloads.h"
 #include "server/texture/mesh_renderer.h"
 #include "server/texture/novel_view.h"
+
+namespace holo {
+// Counts heap allocations in this test binary (steady-state check below).
+std::atomic<size_t> g_allocations{0};
+}  // namespace holo
+
+void* operator new(std::size_t size) {
+  holo::g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace holo {
 namespace {
@@ -344,6 +359,31 @@ TEST(TexturerTest, MajorityVotingRejectsAnOutlierView) {
   EXPECT_GT(ColorDistance(m.colors[m.num_vertices() / 2], {200, 180, 60}), 50.0);
 }
 
+TEST(TexturerTest, ForegroundMasksExcludeViews) {
+  // Pod 1's image is corrupted but its mask says "background everywhere":
+  // with masks in use (default) only pod 0 colours the patch.
+  Rig rig;
+  rig.name = "two";
+  rig.pods.push_back(MakePod(0, {0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  rig.pods.push_back(MakePod(1, {-0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  Mesh plane = metrics::MakePlaneMesh({0, 0, 0}, 0.5f, 0.5f, 10, 10);
+  Paint(&plane, {90, 160, 220});
+  RgbdFrameSet frames = RenderPods(rig, plane);
+  frames.frames[1].color.Fill(255);
+  frames.frames[1].mask.Resize(160, 120, 0);
+  TextureOptions o;
+  o.voting_levels = 0;
+  Texturer t(rig, o);
+  Mesh m = plane;
+  ASSERT_TRUE(t.Apply(frames, &m).ok());
+  const size_t centre = m.num_vertices() / 2;
+  EXPECT_LT(ColorDistance(m.colors[centre], {90, 160, 220}), 4.0);
+  o.use_masks = false;
+  Texturer unmasked(rig, o);
+  ASSERT_TRUE(unmasked.Apply(frames, &m).ok());
+  EXPECT_GT(ColorDistance(m.colors[centre], {90, 160, 220}), 50.0);
+}
+
 TEST(TexturerTest, ResultIndependentOfThreadCountAndRepeatable) {
   const GhostScene g = MakeGhostScene();
   std::vector<std::vector<Rgb>> results;
@@ -358,6 +398,18 @@ TEST(TexturerTest, ResultIndependentOfThreadCountAndRepeatable) {
   }
   EXPECT_EQ(results[0], results[1]);
   EXPECT_EQ(results[0], results[2]);
+}
+
+TEST(TexturerTest, SteadyStateApplyDoesNotAllocate) {
+  const GhostScene g = MakeGhostScene();
+  TextureOptions o;
+  o.threads = 2;
+  Texturer t(g.rig, o);
+  Mesh m = g.scene;
+  ASSERT_TRUE(t.Apply(g.frames, &m).ok());  // sizes the buffers
+  const size_t before = g_allocations.load();
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(t.Apply(g.frames, &m).ok());
+  EXPECT_EQ(g_allocations.load() - before, 0u);
 }
 
 TEST(TexturerTest, BadInputsGiveErrors) {
