@@ -11,7 +11,7 @@
 #include "common/mesh.h"
 #include "server/fusion/tsdf.h"
 #include "server/fusion/voxel_blocks.h"
-#include "server/fusion/worker_pool.h"
+#include "common/worker_pool.h"
 
 namespace holo {
 

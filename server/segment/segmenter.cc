@@ -8,7 +8,7 @@
 
 #include <Eigen/Core>
 
-#include "server/segment/worker_pool.h"
+#include "common/worker_pool.h"
 
 namespace holo {
 namespace {

@@ -6,7 +6,7 @@
 #include <string>
 
 #include "common/metrics/parallel.h"
-#include "server/texture/worker_pool.h"
+#include "common/worker_pool.h"
 
 namespace holo {
 namespace {

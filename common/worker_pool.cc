@@ -1,11 +1,12 @@
-#include "server/texture/worker_pool.h"
+#include "common/worker_pool.h"
 
 #include <algorithm>
 
 namespace holo {
 
 WorkerPool::WorkerPool(int num_threads) {
-  const int workers = std::max(1, num_threads) - 1;
+  if (num_threads <= 0) num_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int workers = num_threads - 1;
   workers_.reserve(static_cast<size_t>(workers));
   for (int t = 0; t < workers; ++t) workers_.emplace_back([this, t] { WorkerLoop(t + 1); });
 }

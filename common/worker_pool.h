@@ -1,5 +1,6 @@
 // A fixed set of worker threads that run batches of small tasks, so a stage
-// called every frame starts no threads and allocates nothing per call.
+// called every frame starts no threads and allocates nothing per call. Shared
+// by segmentation, fusion and texturing (each stage owns its own pool).
 #pragma once
 
 #include <atomic>
@@ -14,7 +15,8 @@ namespace holo {
 
 class WorkerPool {
  public:
-  // `num_threads` ≥ 1 counts the calling thread: 2 starts one worker.
+  // `num_threads` counts the calling thread: 2 starts one worker; 0 means
+  // std::thread::hardware_concurrency().
   explicit WorkerPool(int num_threads);
   ~WorkerPool();
   WorkerPool(const WorkerPool&) = delete;
@@ -26,10 +28,18 @@ class WorkerPool {
   // out dynamically, `thread` in [0, num_threads()) naming the calling thread
   // (for per-thread scratch). Returns when all tasks are done. `fn` must not
   // throw. Not reentrant: one Run at a time.
-  template <typename F>
-  void Run(int num_tasks, F&& fn) {
-    RunImpl(num_tasks, [](void* ctx, int task, int thread) { (*static_cast<std::remove_reference_t<F>*>(ctx))(task, thread); },
+  template <typename N, typename F>
+  void Run(N num_tasks, F&& fn) {
+    static_assert(std::is_integral_v<N>);
+    RunImpl(static_cast<int>(num_tasks),
+            [](void* ctx, int task, int thread) { (*static_cast<std::remove_reference_t<F>*>(ctx))(task, thread); },
             &fn);
+  }
+
+  // Calls `fn(i)` for every i in [0, n).
+  template <typename F>
+  void ParallelFor(int n, F&& fn) {
+    Run(n, [&fn](int i, int) { fn(i); });
   }
 
  private:

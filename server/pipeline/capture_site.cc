@@ -1,0 +1,141 @@
+#include "server/pipeline/capture_site.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "common/clock.h"
+
+namespace holo {
+
+StatusOr<MaskSource> ParseMaskSource(const std::string& name) {
+  if (name == "segment") return MaskSource::kSegment;
+  if (name == "truth") return MaskSource::kTruth;
+  if (name == "dataset") return MaskSource::kDataset;
+  if (name == "none") return MaskSource::kNone;
+  return InvalidArgument("masks must be one of segment, truth, dataset, none; got '" + name + "'");
+}
+
+const char* MaskSourceName(MaskSource m) {
+  switch (m) {
+    case MaskSource::kSegment: return "segment";
+    case MaskSource::kTruth: return "truth";
+    case MaskSource::kDataset: return "dataset";
+    case MaskSource::kNone: return "none";
+  }
+  return "?";
+}
+
+Status CaptureSiteOptions::Check() const {
+  if (background_frames < 1 || background_frames > 1000)
+    return InvalidArgument("background_frames must be in [1, 1000], got " + std::to_string(background_frames));
+  HOLO_RETURN_IF_ERROR(segment.Check().WithContext("segment"));
+  HOLO_RETURN_IF_ERROR(tsdf.Check().WithContext("tsdf"));
+  HOLO_RETURN_IF_ERROR(cleanup.Check().WithContext("cleanup"));
+  HOLO_RETURN_IF_ERROR(texture_options.Check().WithContext("texture"));
+  HOLO_RETURN_IF_ERROR(pipeline.Check().WithContext("pipeline"));
+  return OkStatus();
+}
+
+CaptureSite::~CaptureSite() = default;
+
+StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, FrameSource* background,
+                                                           SyntheticStudio* studio, CaptureSiteOptions options) {
+  if (source == nullptr) return InvalidArgument("capture site needs a frame source");
+  HOLO_RETURN_IF_ERROR(options.Check());
+  HOLO_RETURN_IF_ERROR(source->rig().Check().WithContext("source rig"));
+  std::unique_ptr<CaptureSite> site(new CaptureSite());
+  site->rig_ = source->rig();
+  site->options_ = options;
+  site->source_ = source;
+  site->studio_ = studio;
+  if (options.masks == MaskSource::kTruth && studio == nullptr)
+    return InvalidArgument("masks=truth needs the synthetic studio as the source");
+
+  const bool need_background = options.masks == MaskSource::kSegment || options.color_calibration;
+  if (need_background) {
+    if (background == nullptr)
+      return InvalidArgument(std::string("masks=") + MaskSourceName(options.masks) +
+                             (options.color_calibration ? " with colour calibration" : "") +
+                             " needs empty-room background frames");
+    if (background->rig().pods.size() != site->rig_.pods.size())
+      return InvalidArgument("background has " + std::to_string(background->rig().pods.size()) + " pods, source has " +
+                             std::to_string(site->rig_.pods.size()));
+    std::vector<RgbdFrameSet> empty;
+    empty.reserve(static_cast<size_t>(options.background_frames));
+    for (int i = 0; i < options.background_frames; ++i) {
+      RgbdFrameSet f;
+      Status s = background->Next(&f);
+      if (s.code() == StatusCode::kOutOfRange) break;
+      HOLO_RETURN_IF_ERROR(s.WithContext("background frame " + std::to_string(i)));
+      empty.push_back(std::move(f));
+    }
+    if (empty.empty()) return InvalidArgument("background source delivered no frames");
+    if (options.color_calibration) {
+      HOLO_ASSIGN_OR_RETURN(ColorCalibration cal, EstimateColorCalibration(site->rig_, empty, 0));
+      site->calibration_ = std::make_unique<ColorCalibration>(std::move(cal));
+      for (auto& f : empty) site->calibration_->Apply(&f);
+    }
+    if (options.masks == MaskSource::kSegment) {
+      site->segmenter_ = std::make_unique<Segmenter>(site->rig_, options.segment);
+      for (const auto& f : empty) HOLO_RETURN_IF_ERROR(site->segmenter_->AddBackgroundFrame(f));
+      HOLO_RETURN_IF_ERROR(site->segmenter_->FinishBackground());
+    }
+  }
+  HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(options.tsdf));
+  if (options.texture) site->texturer_ = std::make_unique<Texturer>(site->rig_, options.texture_options);
+  return site;
+}
+
+PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> sink) {
+  PipelineStages st;
+  // Ground-truth masks are rendered with the frame (same frame index).
+  auto truth = std::make_shared<StudioGroundTruth>();
+  st.acquire = [this, truth](FrameWork& w) -> Status {
+    if (options_.masks == MaskSource::kTruth) {
+      // Frames in acquisition order starting at the studio's current position.
+      w.frames.frame_index = w.sequence;
+      studio_->RenderFrame(w.sequence, &w.frames, truth.get());
+      for (size_t p = 0; p < w.frames.frames.size(); ++p) w.frames.frames[p].mask = truth->mask[p];
+    } else {
+      HOLO_RETURN_IF_ERROR(source_->Next(&w.frames));
+      if (w.frames.frames.size() != rig_.pods.size())
+        return DataLoss("frame set " + std::to_string(w.frames.frame_index) + " has " +
+                        std::to_string(w.frames.frames.size()) + " pods, rig has " + std::to_string(rig_.pods.size()));
+      if (options_.masks == MaskSource::kNone)
+        for (auto& f : w.frames.frames) f.mask = ImageGray8();
+      if (options_.masks == MaskSource::kDataset)
+        for (size_t p = 0; p < w.frames.frames.size(); ++p)
+          if (w.frames.frames[p].mask.empty())
+            return DataLoss("masks=dataset but frame set " + std::to_string(w.frames.frame_index) + " pod " +
+                            std::to_string(p) + " has no mask");
+    }
+    if (calibration_) calibration_->Apply(&w.frames);
+    return OkStatus();
+  };
+  if (segmenter_) st.segment = [this](FrameWork& w) { return segmenter_->Segment(&w.frames); };
+  st.fuse_mesh = [this](FrameWork& w) -> Status {
+    Stopwatch sw;
+    volume_->Reset();
+    HOLO_RETURN_IF_ERROR(volume_->Integrate(rig_, w.frames));
+    w.timings.fuse_ms = sw.ElapsedMs();
+    sw.Restart();
+    volume_->ExtractMesh(&w.mesh);
+    HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.mesh));
+    w.timings.mesh_ms = std::max(1e-6, sw.ElapsedMs());
+    return OkStatus();
+  };
+  if (texturer_) st.texture = [this](FrameWork& w) { return texturer_->Apply(w.frames, &w.mesh); };
+  st.sink = std::move(sink);
+  return st;
+}
+
+StatusOr<PipelineStats> CaptureSite::Run(std::function<Status(const FrameWork&)> sink) {
+  pipeline_ = std::make_unique<Pipeline>(MakeStages(std::move(sink)), options_.pipeline);
+  return pipeline_->Run();
+}
+
+void CaptureSite::Stop() {
+  if (pipeline_) pipeline_->Stop();
+}
+
+}  // namespace holo

@@ -1,0 +1,86 @@
+// The capture site: composes the real stages on the pipeline scheduler.
+//
+//   acquire  FrameSource::Next, then the per-pod colour calibration
+//   segment  Segmenter (background learned at start-up), or ground-truth /
+//            dataset masks, or none
+//   fuse     TsdfVolume::Integrate of the masked depth (fresh volume per frame)
+//   mesh     marching cubes + CleanupMesh (fragments, optional decimation)
+//   texture  Texturer (Holoportation per-vertex colours)
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "common/rig.h"
+#include "common/status.h"
+#include "server/capture/frame_source.h"
+#include "server/fusion/mesh_cleanup.h"
+#include "server/fusion/tsdf.h"
+#include "server/pipeline/pipeline.h"
+#include "server/segment/color_calibration.h"
+#include "server/segment/segmenter.h"
+#include "server/studio/studio.h"
+#include "server/texture/texturer.h"
+
+namespace holo {
+
+enum class MaskSource {
+  kSegment,  // our segmentation, background learned from empty-room frames
+  kTruth,    // the studio's exact masks (synthetic source only; for evaluation)
+  kDataset,  // masks stored with the frames (dataset source)
+  kNone,     // fuse every valid depth pixel
+};
+// "segment" | "truth" | "dataset" | "none".
+StatusOr<MaskSource> ParseMaskSource(const std::string& name);
+const char* MaskSourceName(MaskSource m);
+
+struct CaptureSiteOptions {
+  MaskSource masks = MaskSource::kSegment;
+  // Empty-room frame sets used to learn the background and the colour calibration.
+  int background_frames = 30;
+  // Estimate a per-pod colour mapping to pod 0 from the empty room and apply it.
+  bool color_calibration = true;
+  SegmenterOptions segment;
+  TsdfOptions tsdf;
+  MeshCleanupOptions cleanup;
+  bool texture = true;
+  TextureOptions texture_options;
+  PipelineOptions pipeline;
+  Status Check() const;
+};
+
+class CaptureSite {
+ public:
+  // `source` delivers the frames (borrowed for the site's lifetime).
+  // `background` delivers empty-room frames for MaskSource::kSegment and
+  // colour calibration (borrowed; read only in Create; may be null otherwise).
+  // `studio` is needed for MaskSource::kTruth (borrowed; may be null otherwise).
+  static StatusOr<std::unique_ptr<CaptureSite>> Create(FrameSource* source, FrameSource* background,
+                                                       SyntheticStudio* studio, CaptureSiteOptions options);
+  ~CaptureSite();
+
+  // Runs the pipeline; `sink` sees every finished frame in order (its mesh
+  // is textured, its frames carry the masks used).
+  StatusOr<PipelineStats> Run(std::function<Status(const FrameWork&)> sink);
+  void Stop();
+
+  const Rig& rig() const { return rig_; }
+  const ColorCalibration* color_calibration() const { return calibration_ ? calibration_.get() : nullptr; }
+
+ private:
+  CaptureSite() = default;
+  PipelineStages MakeStages(std::function<Status(const FrameWork&)> sink);
+
+  Rig rig_;
+  CaptureSiteOptions options_;
+  FrameSource* source_ = nullptr;
+  SyntheticStudio* studio_ = nullptr;
+  std::unique_ptr<ColorCalibration> calibration_;
+  std::unique_ptr<Segmenter> segmenter_;
+  std::unique_ptr<TsdfVolume> volume_;
+  std::unique_ptr<Texturer> texturer_;
+  std::unique_ptr<Pipeline> pipeline_;
+};
+
+}  // namespace holo
