@@ -1,9 +1,14 @@
 #include "server/fusion/tsdf.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <string>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "common/camera.h"
 #include "server/fusion/tsdf_internal.h"
@@ -201,25 +206,49 @@ void CollectBlocks(const TsdfVolume::PodView& v, const TsdfOptions& o, std::vect
   }
 }
 
-// Accumulators of one block over all views of one frame.
-struct BlockAccumulator {
+// Accumulators of one block over all views of one frame. Colour is
+// accumulated only inside the truncation band (|sdf| < trunc): voxels further
+// in front see whatever surface lies behind them.
+struct alignas(16) BlockAccumulator {
   float tsdf[kBlockVoxels];
   float weight[kBlockVoxels];
+  float color_weight[kBlockVoxels];
   float r[kBlockVoxels], g[kBlockVoxels], b[kBlockVoxels];
-  void Clear() {
-    std::memset(this, 0, sizeof(*this));
-  }
+  void Clear() { std::memset(static_cast<void*>(this), 0, sizeof(*this)); }
 };
 
+inline void AddColor(BlockAccumulator* acc, int idx, const uint8_t* c) {
+  acc->r[idx] += c[0];
+  acc->g[idx] += c[1];
+  acc->b[idx] += c[2];
+  acc->color_weight[idx] += 1.0f;
+}
+
+// Colour of the voxel at `p` (depth-camera coordinates) in a pod whose colour
+// camera differs from its depth camera; the nearest edge pixel if it falls
+// outside the colour image.
+const uint8_t* NonRegisteredColor(const TsdfVolume::PodView& v, const Eigen::Vector3f& p) {
+  const Eigen::Vector3f q = v.Rc * p + v.tc;
+  if (q.z() <= kMinProjectZ) return nullptr;
+  Eigen::Vector2d n(q.x() / q.z(), q.y() / q.z());
+  if (v.color_distorted) n = Distort(v.color_distortion, n);
+  const float cu = static_cast<float>(v.cfx * n.x() + v.ccx) + 0.5f;
+  const float cw = static_cast<float>(v.cfy * n.y() + v.ccy) + 0.5f;
+  const int iu = std::clamp(static_cast<int>(std::floor(cu)), 0, v.cwidth - 1);
+  const int iw = std::clamp(static_cast<int>(std::floor(cw)), 0, v.cheight - 1);
+  return v.color + 3 * (static_cast<size_t>(iw) * v.cwidth + iu);
+}
+
 // Projects the voxels of one block (first voxel centre at `origin`, world)
-// into one view and accumulates their truncated signed distances.
+// into one view and accumulates their truncated signed distances. General
+// path: any camera, optional edge filter.
 template <bool kDistorted, bool kRegistered>
 void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
                    BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const float inv_trunc = 1.0f / trunc;
-  const float wf = static_cast<float>(v.width) , hf = static_cast<float>(v.height);
+  const float wf = static_cast<float>(v.width), hf = static_cast<float>(v.height);
   for (int k = 0; k < kBlockSide; ++k) {
     for (int j = 0; j < kBlockSide; ++j) {
       Eigen::Vector3f p = p0 + dy * static_cast<float>(j) + dz * static_cast<float>(k);
@@ -246,29 +275,73 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
         const int idx = row + i;
         acc->tsdf[idx] += std::min(1.0f, sdf * inv_trunc);
         acc->weight[idx] += 1.0f;
-        const uint8_t* c;
-        if constexpr (kRegistered) {
-          c = v.color + 3 * pixel;
-        } else {
-          const Eigen::Vector3f q = v.Rc * p + v.tc;
-          if (q.z() <= kMinProjectZ) continue;
-          Eigen::Vector2d n(q.x() / q.z(), q.y() / q.z());
-          if (v.color_distorted) n = Distort(v.color_distortion, n);
-          const float cu = static_cast<float>(v.cfx * n.x() + v.ccx) + 0.5f;
-          const float cw = static_cast<float>(v.cfy * n.y() + v.ccy) + 0.5f;
-          // Outside the colour image: keep the depth observation, colour
-          // from the nearest edge pixel.
-          const int iu = std::clamp(static_cast<int>(std::floor(cu)), 0, v.cwidth - 1);
-          const int iw = std::clamp(static_cast<int>(std::floor(cw)), 0, v.cheight - 1);
-          c = v.color + 3 * (static_cast<size_t>(iw) * v.cwidth + iu);
-        }
-        acc->r[idx] += c[0];
-        acc->g[idx] += c[1];
-        acc->b[idx] += c[2];
+        if (sdf >= trunc) continue;
+        const uint8_t* c = kRegistered ? v.color + 3 * pixel : NonRegisteredColor(v, p);
+        if (c) AddColor(acc, idx, c);
       }
     }
   }
 }
+
+#if defined(__SSE2__)
+// The hot path (undistorted, registered, no edge filter), four voxels at a
+// time with SSE2 (part of every x86-64 CPU). Same arithmetic as the general
+// path up to float rounding order.
+void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
+                       BlockAccumulator* acc) {
+  const Eigen::Vector3f p0 = v.R * origin + v.t;
+  const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
+  const __m128 lane = _mm_setr_ps(0, 1, 2, 3);
+  const __m128 dxx = _mm_set1_ps(dx.x()), dxy = _mm_set1_ps(dx.y()), dxz = _mm_set1_ps(dx.z());
+  const __m128 fx = _mm_set1_ps(v.fx), fy = _mm_set1_ps(v.fy);
+  const __m128 cx = _mm_set1_ps(v.cx + 0.5f), cy = _mm_set1_ps(v.cy + 0.5f);
+  const __m128 wf = _mm_set1_ps(static_cast<float>(v.width)), hf = _mm_set1_ps(static_cast<float>(v.height));
+  const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), min_z = _mm_set1_ps(kMinProjectZ);
+  const __m128 mm = _mm_set1_ps(0.001f), neg_trunc = _mm_set1_ps(-trunc), pos_trunc = _mm_set1_ps(trunc);
+  const __m128 inv_trunc = _mm_set1_ps(1.0f / trunc);
+  alignas(16) int32_t pix[4];
+  alignas(16) float depth[4];
+  for (int k = 0; k < kBlockSide; ++k) {
+    for (int j = 0; j < kBlockSide; ++j) {
+      const Eigen::Vector3f pr = p0 + dy * static_cast<float>(j) + dz * static_cast<float>(k);
+      const int row = kBlockSide * j + kBlockSide * kBlockSide * k;
+      for (int half = 0; half < kBlockSide; half += 4) {
+        const __m128 li = _mm_add_ps(lane, _mm_set1_ps(static_cast<float>(half)));
+        const __m128 px = _mm_add_ps(_mm_set1_ps(pr.x()), _mm_mul_ps(li, dxx));
+        const __m128 py = _mm_add_ps(_mm_set1_ps(pr.y()), _mm_mul_ps(li, dxy));
+        const __m128 pz = _mm_add_ps(_mm_set1_ps(pr.z()), _mm_mul_ps(li, dxz));
+        __m128 ok = _mm_cmpgt_ps(pz, min_z);
+        const __m128 inv_z = _mm_div_ps(one, pz);
+        const __m128 u = _mm_add_ps(_mm_mul_ps(_mm_mul_ps(fx, px), inv_z), cx);
+        const __m128 w = _mm_add_ps(_mm_mul_ps(_mm_mul_ps(fy, py), inv_z), cy);
+        ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpge_ps(u, zero), _mm_cmplt_ps(u, wf)));
+        ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpge_ps(w, zero), _mm_cmplt_ps(w, hf)));
+        const int ok_bits = _mm_movemask_ps(ok);
+        if (ok_bits == 0) continue;
+        // Pixel index in float arithmetic (exact below 2^24 pixels): SSE2 has
+        // no 32-bit integer multiply.
+        const __m128 fu = _mm_cvtepi32_ps(_mm_cvttps_epi32(_mm_and_ps(ok, u)));
+        const __m128 fw = _mm_cvtepi32_ps(_mm_cvttps_epi32(_mm_and_ps(ok, w)));
+        _mm_store_si128(reinterpret_cast<__m128i*>(pix), _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(fw, wf), fu)));
+        for (int l = 0; l < 4; ++l) depth[l] = (ok_bits >> l) & 1 ? static_cast<float>(v.depth[pix[l]]) : 0.0f;
+        const __m128 d = _mm_load_ps(depth);
+        const __m128 sdf = _mm_sub_ps(_mm_mul_ps(d, mm), pz);
+        const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, neg_trunc));
+        const int upd_bits = _mm_movemask_ps(upd);
+        if (upd_bits == 0) continue;
+        const __m128 t = _mm_min_ps(one, _mm_mul_ps(sdf, inv_trunc));
+        float* at = acc->tsdf + row + half;
+        float* aw = acc->weight + row + half;
+        _mm_store_ps(at, _mm_add_ps(_mm_load_ps(at), _mm_and_ps(upd, t)));
+        _mm_store_ps(aw, _mm_add_ps(_mm_load_ps(aw), _mm_and_ps(upd, one)));
+        const int near_bits = upd_bits & _mm_movemask_ps(_mm_cmplt_ps(sdf, pos_trunc));
+        for (int l = 0; l < 4; ++l)
+          if ((near_bits >> l) & 1) AddColor(acc, row + half + l, v.color + 3 * static_cast<size_t>(pix[l]));
+      }
+    }
+  }
+}
+#endif
 
 // True if the block whose voxel centres span [lo, hi] (world) cannot receive
 // any update from view `v`: outside the image, over pixels without usable
@@ -367,6 +440,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   }
 
   // 1. Per pod (in parallel): mask the depth, tile maxima, candidate blocks.
+  const auto t0 = std::chrono::steady_clock::now();
   s.pool.Run(num_pods, [&](size_t k, int) {
     PrepareDepth(frames.frames[k], min_mm, max_mm, &s.masked_depth[k], &s.tile_max[k], s.views[k].tiles_x,
                  s.views[k].tiles_y);
@@ -382,6 +456,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
     CollectBlocks(s.views[k], options_, &s.pod_blocks[k]);
   });
 
+  const auto t1 = std::chrono::steady_clock::now();
   // 2. Serial: allocate the blocks, in pod order so block indices (and the
   // mesh's vertex order) do not depend on the thread count.
   ++s.stamp;
@@ -404,6 +479,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
     }
   }
   stats_.blocks_touched = s.active.size();
+  const auto t2 = std::chrono::steady_clock::now();
 
   // 3. Per block (in parallel): project its voxels into every view that can
   // see it, then merge the frame's observations into the stored averages.
@@ -428,6 +504,12 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
           continue;
         }
         ++s.thread_block_views[static_cast<size_t>(thread)];
+#if defined(__SSE2__)
+        if (!v.distorted && v.registered && !v.edge) {
+          IntegrateViewSse2(v, lo, voxel, trunc, &acc);
+          continue;
+        }
+#endif
         if (v.distorted) {
           if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, &acc);
           else IntegrateView<true, false>(v, lo, voxel, trunc, &acc);
@@ -445,16 +527,25 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
           const float w = w_old + w_new;
           const float inv = 1.0f / w;
           vb.tsdf[i] = (vb.tsdf[i] * w_old + acc.tsdf[i]) * inv;
-          vb.r[i] = static_cast<uint8_t>((vb.r[i] * w_old + acc.r[i]) * inv + 0.5f);
-          vb.g[i] = static_cast<uint8_t>((vb.g[i] * w_old + acc.g[i]) * inv + 0.5f);
-          vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i]) * inv + 0.5f);
           vb.weight[i] = w;
+          if (acc.color_weight[i] > 0) {
+            // This frame's mean colour, with the frame's weight; an unobserved
+            // old colour (w_old = 0) is simply replaced.
+            const float s = w_new / acc.color_weight[i];
+            vb.r[i] = static_cast<uint8_t>((vb.r[i] * w_old + acc.r[i] * s) * inv + 0.5f);
+            vb.g[i] = static_cast<uint8_t>((vb.g[i] * w_old + acc.g[i] * s) * inv + 0.5f);
+            vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i] * s) * inv + 0.5f);
+          }
         }
         if (vb.weight[i] > 0) flags |= vb.tsdf[i] < 0 ? kBlockHasNegative : kBlockHasPositive;
       }
       blocks_.set_flags(b, flags);
     }
   });
+  const auto t3 = std::chrono::steady_clock::now();
+  stats_.prepare_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  stats_.allocate_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
+  stats_.integrate_ms = std::chrono::duration<double, std::milli>(t3 - t2).count();
   for (int t = 0; t < threads; ++t) {
     stats_.block_views += s.thread_block_views[static_cast<size_t>(t)];
     stats_.block_views_skipped += s.thread_skipped[static_cast<size_t>(t)];

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "common/status.h"
+
 namespace holo {
 
 WorkerPool::WorkerPool(int num_threads) {
@@ -19,11 +21,19 @@ WorkerPool::~WorkerPool() {
   for (auto& w : workers_) w.join();
 }
 
-void WorkerPool::Drain(int thread) {
+void WorkerPool::Drain(uint32_t gen, size_t num_tasks, const std::function<void(size_t, int)>& fn, int thread) {
+  uint64_t s = state_.load(std::memory_order_acquire);
   for (;;) {
-    const size_t task = next_task_.fetch_add(1, std::memory_order_relaxed);
-    if (task >= num_tasks_) return;
-    (*fn_)(task, thread);
+    if (static_cast<uint32_t>(s >> 32) != gen) return;
+    const size_t task = static_cast<size_t>(s & 0xFFFFFFFFu);
+    if (task >= num_tasks) return;
+    if (!state_.compare_exchange_weak(s, s + 1, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+    fn(task, thread);
+    if (done_count_.fetch_add(1, std::memory_order_acq_rel) + 1 == num_tasks) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      done_.notify_all();
+    }
+    s = state_.load(std::memory_order_acquire);
   }
 }
 
@@ -33,36 +43,39 @@ void WorkerPool::Run(size_t num_tasks, const std::function<void(size_t, int)>& f
     for (size_t t = 0; t < num_tasks; ++t) fn(t, 0);
     return;
   }
+  HOLO_CHECK(num_tasks < 0xFFFFFFFFu);
+  uint32_t gen;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    gen = ++generation_;
     fn_ = &fn;
     num_tasks_ = num_tasks;
-    next_task_.store(0, std::memory_order_relaxed);
-    busy_workers_ = static_cast<int>(workers_.size());
-    ++generation_;
+    done_count_.store(0, std::memory_order_relaxed);
+    state_.store(static_cast<uint64_t>(gen) << 32, std::memory_order_release);
   }
   wake_.notify_all();
-  Drain(0);
-  std::unique_lock<std::mutex> lock(mutex_);
-  done_.wait(lock, [this] { return busy_workers_ == 0; });
-  fn_ = nullptr;
+  Drain(gen, num_tasks, fn, 0);
+  if (done_count_.load(std::memory_order_acquire) != num_tasks) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [&] { return done_count_.load(std::memory_order_acquire) == num_tasks; });
+  }
 }
 
 void WorkerPool::WorkerLoop(int thread) {
-  uint64_t seen = 0;
+  uint32_t seen = 0;
   for (;;) {
+    uint32_t gen;
+    size_t num_tasks;
+    const std::function<void(size_t, int)>* fn;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
       if (stop_) return;
-      seen = generation_;
+      seen = gen = generation_;
+      num_tasks = num_tasks_;
+      fn = fn_;
     }
-    Drain(thread);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      --busy_workers_;
-    }
-    done_.notify_one();
+    Drain(gen, num_tasks, *fn, thread);
   }
 }
 

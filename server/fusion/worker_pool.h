@@ -28,13 +28,15 @@ class WorkerPool {
   // Calls `fn(task, thread)` once for every task in [0, num_tasks), spread
   // over the threads (tasks are claimed dynamically; `thread` in
   // [0, num_threads()) names the thread, for per-thread scratch). Returns
-  // when all tasks are done. `fn` must not throw. Not re-entrant: one Run at
-  // a time per pool.
+  // when all tasks are done. The caller works too and never waits for a
+  // worker that has not started (on a loaded machine a descheduled worker
+  // simply gets no tasks). `fn` must not throw. One Run at a time per pool.
   void Run(size_t num_tasks, const std::function<void(size_t task, int thread)>& fn);
 
  private:
   void WorkerLoop(int thread);
-  void Drain(int thread);
+  // Claims and runs tasks of generation `gen` until none is left.
+  void Drain(uint32_t gen, size_t num_tasks, const std::function<void(size_t, int)>& fn, int thread);
 
   std::vector<std::thread> workers_;
   std::mutex mutex_;
@@ -42,10 +44,12 @@ class WorkerPool {
   std::condition_variable done_;
   const std::function<void(size_t, int)>* fn_ = nullptr;
   size_t num_tasks_ = 0;
-  std::atomic<size_t> next_task_{0};
-  int busy_workers_ = 0;
-  uint64_t generation_ = 0;
+  uint32_t generation_ = 0;
   bool stop_ = false;
+  // High 32 bits: generation; low 32 bits: next task. A worker that wakes
+  // late cannot claim a task of a later Run with a stale function.
+  std::atomic<uint64_t> state_{0};
+  std::atomic<size_t> done_count_{0};
 };
 
 }  // namespace holo
