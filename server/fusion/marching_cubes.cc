@@ -233,15 +233,19 @@ void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOption
   // Tsdf 1 = free space beyond the truncation band in every view.
   const float max_tsdf = o.skip_truncated_cubes ? 0.999f : 2.0f;
   for (int i = 0; i < kCacheVoxels; ++i) c->ok[i] = c->weight[i] >= o.min_weight && c->tsdf[i] < max_tsdf;
+  // All eight corners usable, separably: pairs along x, then y, then z.
+  constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
+  uint8_t okx[kCacheVoxels], okxy[kCacheVoxels];
+  for (int i = 0; i + 1 < kCacheVoxels; ++i) okx[i] = c->ok[i] & c->ok[i + 1];
+  for (int i = 0; i + sy < kCacheVoxels - 1; ++i) okxy[i] = okx[i] & okx[i + sy];
   for (int z = -1; z < kBlockSide; ++z)
-    for (int y = -1; y < kBlockSide; ++y)
-      for (int x = -1; x < kBlockSide; ++x) {
-        const int i = CacheIndex(x, y, z);
-        constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
-        c->cube_ok[CubeIndex(x, y, z)] = c->ok[i] & c->ok[i + 1] & c->ok[i + sy] & c->ok[i + sy + 1] & c->ok[i + sz] &
-                                         c->ok[i + sz + 1] & c->ok[i + sz + sy] & c->ok[i + sz + sy + 1];
-      }
+    for (int y = -1; y < kBlockSide; ++y) {
+      const int i = CacheIndex(-1, y, z);
+      uint8_t* out = c->cube_ok + CubeIndex(-1, y, z);
+      for (int x = 0; x <= kBlockSide; ++x) out[x] = okxy[i + x] & okxy[i + x + sz];
+    }
 }
+
 
 // TSDF gradient at cache voxel (x, y, z) ∈ [0, 8]³: central differences,
 // one-sided next to unobserved voxels.

@@ -28,6 +28,21 @@ std::string PodName(const Rig& rig, size_t k) {
   return s;
 }
 
+// Interleaves the low 21 bits of the three (offset) block coordinates.
+uint64_t MortonCode(const BlockCoord& c) {
+  auto spread = [](uint64_t v) {
+    v &= 0x1FFFFF;
+    v = (v | v << 32) & 0x1F00000000FFFFull;
+    v = (v | v << 16) & 0x1F0000FF0000FFull;
+    v = (v | v << 8) & 0x100F00F00F00F00Full;
+    v = (v | v << 4) & 0x10C30C30C30C30C3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+  };
+  return spread(static_cast<uint32_t>(c.x + kMaxBlockCoord)) | spread(static_cast<uint32_t>(c.y + kMaxBlockCoord)) << 1 |
+         spread(static_cast<uint32_t>(c.z + kMaxBlockCoord)) << 2;
+}
+
 // Blocks handled per task: enough work to amortise the hand-off, small
 // enough to balance two threads.
 constexpr size_t kBlocksPerTask = 8;
@@ -87,24 +102,29 @@ void TsdfVolume::VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* we
 namespace {
 
 // Masks and range-limits one pod's depth into `out` and computes the
-// maximum depth of every 8×8 tile (0 = no usable pixel in the tile).
+// maximum depth of every 8×8 tile (0 = no usable pixel in the tile) and the
+// minimum (0 = some pixel of the tile is unusable).
 void PrepareDepth(const RgbdFrame& frame, uint16_t min_mm, uint16_t max_mm, std::vector<uint16_t>* out,
-                  std::vector<uint16_t>* tile_max, int tiles_x, int tiles_y) {
+                  std::vector<uint16_t>* tile_max, std::vector<uint16_t>* tile_min, int tiles_x, int tiles_y) {
   const int w = frame.depth.width(), h = frame.depth.height();
   out->resize(static_cast<size_t>(w) * h);
   tile_max->assign(static_cast<size_t>(tiles_x) * tiles_y, 0);
+  tile_min->assign(static_cast<size_t>(tiles_x) * tiles_y, 0xFFFF);
   const bool has_mask = !frame.mask.empty();
   for (int y = 0; y < h; ++y) {
     const uint16_t* src = frame.depth.row(y);
     const uint8_t* m = has_mask ? frame.mask.row(y) : nullptr;
     uint16_t* dst = out->data() + static_cast<size_t>(y) * w;
     uint16_t* tiles = tile_max->data() + static_cast<size_t>(y / kTileSide) * tiles_x;
+    uint16_t* mins = tile_min->data() + static_cast<size_t>(y / kTileSide) * tiles_x;
     for (int x = 0; x < w; ++x) {
       uint16_t d = src[x];
       if ((m && m[x] == 0) || d < min_mm || d > max_mm) d = 0;
       dst[x] = d;
       uint16_t& t = tiles[x / kTileSide];
       if (d > t) t = d;
+      uint16_t& m = mins[x / kTileSide];
+      if (d < m) m = d;  // 0 (an unusable pixel) sticks
     }
   }
 }
@@ -323,8 +343,10 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
         const __m128 fu = _mm_cvtepi32_ps(_mm_cvttps_epi32(_mm_and_ps(ok, u)));
         const __m128 fw = _mm_cvtepi32_ps(_mm_cvttps_epi32(_mm_and_ps(ok, w)));
         _mm_store_si128(reinterpret_cast<__m128i*>(pix), _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(fw, wf), fu)));
-        for (int l = 0; l < 4; ++l) depth[l] = (ok_bits >> l) & 1 ? static_cast<float>(v.depth[pix[l]]) : 0.0f;
-        const __m128 d = _mm_load_ps(depth);
+        // Lanes outside the image read pixel 0 (always valid) and are masked
+        // out afterwards: no unpredictable branch per lane.
+        for (int l = 0; l < 4; ++l) depth[l] = static_cast<float>(v.depth[pix[l]]);
+        const __m128 d = _mm_and_ps(ok, _mm_load_ps(depth));
         const __m128 sdf = _mm_sub_ps(_mm_mul_ps(d, mm), pz);
         const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, neg_trunc));
         const int upd_bits = _mm_movemask_ps(upd);
@@ -343,34 +365,50 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
 }
 #endif
 
-// True if the block whose voxel centres span [lo, hi] (world) cannot receive
-// any update from view `v`: outside the image, over pixels without usable
-// depth, or entirely more than `trunc` behind the observed surface.
-bool SkipBlockView(const TsdfVolume::PodView& v, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, float trunc) {
-  if (v.distorted) return false;  // projected corners do not bound a distorted image region
-  float umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY, zmin = INFINITY;
+enum class BlockView { kSkip, kFreeSpace, kProject };
+
+// How view `v` sees the block whose voxel centres span [lo, hi] (world):
+// kSkip if no voxel can receive an update (outside the image, over pixels
+// without usable depth, or entirely more than `trunc` behind the observed
+// surface); kFreeSpace if every voxel projects onto a usable pixel more than
+// `trunc` behind it (each voxel gets tsdf +1, weight 1, no colour: exactly
+// what projecting them would give); kProject otherwise.
+BlockView ClassifyBlockView(const TsdfVolume::PodView& v, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi,
+                            float trunc) {
+  if (v.distorted) return BlockView::kProject;  // projected corners do not bound a distorted image region
+  float umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY, zmin = INFINITY, zmax = -INFINITY;
   for (int c = 0; c < 8; ++c) {
     const Eigen::Vector3f pw((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
     const Eigen::Vector3f p = v.R * pw + v.t;
-    if (p.z() <= kMinProjectZ) return false;  // straddles the camera plane: let the voxel loop decide
+    if (p.z() <= kMinProjectZ) return BlockView::kProject;  // straddles the camera plane
     const float u = v.fx * p.x() / p.z() + v.cx, w = v.fy * p.y() / p.z() + v.cy;
     umin = std::min(umin, u);
     umax = std::max(umax, u);
     vmin = std::min(vmin, w);
     vmax = std::max(vmax, w);
     zmin = std::min(zmin, p.z());
+    zmax = std::max(zmax, p.z());
   }
-  // Pixels a voxel can round to: [floor(u + ½)] over the projected range.
-  const int x0 = std::max(0, static_cast<int>(std::floor(umin + 0.5f)));
-  const int x1 = std::min(v.width - 1, static_cast<int>(std::floor(umax + 0.5f)));
-  const int y0 = std::max(0, static_cast<int>(std::floor(vmin + 0.5f)));
-  const int y1 = std::min(v.height - 1, static_cast<int>(std::floor(vmax + 0.5f)));
-  if (x0 > x1 || y0 > y1) return true;
-  uint16_t dmax = 0;
+  // Pixels a voxel can round to: [floor(u + ½)] over the projected range
+  // (the projection of the box is convex and holds every voxel's projection).
+  const int ux0 = static_cast<int>(std::floor(umin + 0.5f)), ux1 = static_cast<int>(std::floor(umax + 0.5f));
+  const int uy0 = static_cast<int>(std::floor(vmin + 0.5f)), uy1 = static_cast<int>(std::floor(vmax + 0.5f));
+  const int x0 = std::max(0, ux0), x1 = std::min(v.width - 1, ux1);
+  const int y0 = std::max(0, uy0), y1 = std::min(v.height - 1, uy1);
+  if (x0 > x1 || y0 > y1) return BlockView::kSkip;
+  uint16_t dmax = 0, dmin = 0xFFFF;
   for (int ty = y0 / kTileSide; ty <= y1 / kTileSide; ++ty)
-    for (int tx = x0 / kTileSide; tx <= x1 / kTileSide; ++tx) dmax = std::max(dmax, v.tile_max[ty * v.tiles_x + tx]);
-  if (dmax == 0) return true;
-  return zmin - trunc > static_cast<float>(dmax) * 0.001f;
+    for (int tx = x0 / kTileSide; tx <= x1 / kTileSide; ++tx) {
+      dmax = std::max(dmax, v.tile_max[ty * v.tiles_x + tx]);
+      dmin = std::min(dmin, v.tile_min[ty * v.tiles_x + tx]);
+    }
+  if (dmax == 0) return BlockView::kSkip;
+  if (zmin - trunc > static_cast<float>(dmax) * 0.001f) return BlockView::kSkip;
+  const bool inside = ux0 >= 0 && ux1 < v.width && uy0 >= 0 && uy1 < v.height;
+  // A small margin keeps float rounding in the per-voxel path from making a
+  // voxel's distance fall just short of the truncation.
+  if (inside && dmin > 0 && static_cast<float>(dmin) * 0.001f - zmax > trunc * 1.001f + 1e-4f) return BlockView::kFreeSpace;
+  return BlockView::kProject;
 }
 
 }  // namespace
@@ -406,6 +444,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   s.views.resize(num_pods);
   s.masked_depth.resize(num_pods);
   s.tile_max.resize(num_pods);
+  s.tile_min.resize(num_pods);
   s.edge.resize(num_pods);
   s.pod_blocks.resize(num_pods);
   for (size_t k = 0; k < num_pods; ++k) {
@@ -442,10 +481,11 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   // 1. Per pod (in parallel): mask the depth, tile maxima, candidate blocks.
   const auto t0 = std::chrono::steady_clock::now();
   s.pool.Run(num_pods, [&](size_t k, int) {
-    PrepareDepth(frames.frames[k], min_mm, max_mm, &s.masked_depth[k], &s.tile_max[k], s.views[k].tiles_x,
+    PrepareDepth(frames.frames[k], min_mm, max_mm, &s.masked_depth[k], &s.tile_max[k], &s.tile_min[k], s.views[k].tiles_x,
                  s.views[k].tiles_y);
     s.views[k].depth = s.masked_depth[k].data();
     s.views[k].tile_max = s.tile_max[k].data();
+    s.views[k].tile_min = s.tile_min[k].data();
     if (options_.ignore_behind_depth_edges) {
       FindDepthEdges(s.masked_depth[k], s.views[k].width, s.views[k].height, 1 << 20,
                      &s.edge[k]);
@@ -479,6 +519,15 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
     }
   }
   stats_.blocks_touched = s.active.size();
+  // Integrate in Morton order: neighbouring blocks project to neighbouring
+  // pixels in every view, so consecutive blocks reuse cached depth and colour.
+  s.order.resize(s.active.size());
+  for (size_t a = 0; a < s.active.size(); ++a) {
+    const BlockCoord& c = blocks_.coord(s.active[a]);
+    s.order[a] = {MortonCode(c), s.active[a]};
+  }
+  std::sort(s.order.begin(), s.order.end());
+  for (size_t a = 0; a < s.active.size(); ++a) s.active[a] = s.order[a].second;
   const auto t2 = std::chrono::steady_clock::now();
 
   // 3. Per block (in parallel): project its voxels into every view that can
@@ -487,6 +536,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   const int threads = s.pool.num_threads();
   s.thread_block_views.assign(static_cast<size_t>(threads), 0);
   s.thread_skipped.assign(static_cast<size_t>(threads), 0);
+  s.thread_free.assign(static_cast<size_t>(threads), 0);
   const size_t num_tasks = (s.active.size() + kBlocksPerTask - 1) / kBlocksPerTask;
   s.pool.Run(num_tasks, [&](size_t task, int thread) {
     BlockAccumulator acc;
@@ -499,8 +549,17 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
       const Eigen::Vector3f hi = lo + Eigen::Vector3f::Constant(voxel * (kBlockSide - 1));
       acc.Clear();
       for (const PodView& v : s.views) {
-        if (SkipBlockView(v, lo, hi, trunc)) {
+        const BlockView kind = ClassifyBlockView(v, lo, hi, trunc);
+        if (kind == BlockView::kSkip) {
           ++s.thread_skipped[static_cast<size_t>(thread)];
+          continue;
+        }
+        if (kind == BlockView::kFreeSpace) {
+          ++s.thread_free[static_cast<size_t>(thread)];
+          for (int i = 0; i < kBlockVoxels; ++i) {
+            acc.tsdf[i] += 1.0f;
+            acc.weight[i] += 1.0f;
+          }
           continue;
         }
         ++s.thread_block_views[static_cast<size_t>(thread)];
@@ -549,6 +608,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   for (int t = 0; t < threads; ++t) {
     stats_.block_views += s.thread_block_views[static_cast<size_t>(t)];
     stats_.block_views_skipped += s.thread_skipped[static_cast<size_t>(t)];
+    stats_.block_views_free += s.thread_free[static_cast<size_t>(t)];
   }
   return OkStatus();
 }
