@@ -7,7 +7,7 @@
 //   holoport-bench fusion --dataset DIR [--voxel-mm 10] [--depth-max-m 3] ...
 //   options: --no-peer (skip Open3D), --keep DIR (write the peer's input and
 //            meshes there and keep them), --decimate N (triangle budget for the
-//            decimation figure; 0 = off)
+//            decimation figure; 0 = off), --min-weight W (TsdfOptions::min_weight)
 //
 // Stages are computed by functions returning figures (RunOurFusion,
 // RunOpen3dPeer) so that segmentation, texturing and the pipeline can add
@@ -227,7 +227,7 @@ std::string MakeWorkDir(const std::string& keep) {
 struct ExtraArgs {
   std::string dataset, keep;
   bool peer = true;
-  double voxel_mm = 0, depth_max_m = 0;
+  double voxel_mm = 0, depth_max_m = 0, min_weight = 0;
   long decimate = -1;
   bool ok = true;
 };
@@ -248,6 +248,7 @@ ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--no-peer") a.peer = false;
     else if (extra[i] == "--voxel-mm") a.voxel_mm = std::atof(value().c_str());
     else if (extra[i] == "--depth-max-m") a.depth_max_m = std::atof(value().c_str());
+    else if (extra[i] == "--min-weight") a.min_weight = std::atof(value().c_str());
     else if (extra[i] == "--decimate") a.decimate = std::atol(value().c_str());
     else {
       std::fprintf(stderr, "fusion: unknown option %s\n", extra[i].c_str());
@@ -277,6 +278,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   FusionConfig cfg;
   cfg.tsdf.voxel_size = extra.voxel_mm > 0 ? static_cast<float>(extra.voxel_mm / 1000) : workload->voxel_size_m;
   cfg.tsdf.max_depth_m = extra.depth_max_m > 0 ? static_cast<float>(extra.depth_max_m) : 5.0f;
+  if (extra.min_weight > 0) cfg.tsdf.min_weight = static_cast<float>(extra.min_weight);
   cfg.repeats = args.repeats;
   if (extra.decimate >= 0) cfg.decimate_to = static_cast<size_t>(extra.decimate);
   const int frames = args.frames > 0 ? args.frames : 10;
