@@ -192,32 +192,40 @@ inline uint32_t PackEdgeRef(int32_t block, int edge) {
   return (static_cast<uint32_t>(block) << kEdgeBits) | static_cast<uint32_t>(edge);
 }
 
+// Copies `N` voxels (compile-time count, so no library call) of a row.
+template <int N>
+inline void CopyRow(const VoxelBlock* vb, int src, float* tsdf, float* weight) {
+  if (vb == nullptr) {
+    for (int i = 0; i < N; ++i) tsdf[i] = weight[i] = 0.0f;
+  } else {
+    for (int i = 0; i < N; ++i) {
+      tsdf[i] = vb->tsdf[src + i];
+      weight[i] = vb->weight[src + i];
+    }
+  }
+}
+
 void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOptions& o, BlockCache* c) {
-  // Per axis, the three ranges of cache coordinates and where they come from.
+  // Per axis, the three ranges of cache coordinates and where they come from:
+  // cache coords [from, to], neighbour offset, local coordinate of `from`.
   struct Span {
-    int from, to, block, local0;  // cache coords [from, to], neighbour offset, local coordinate of `from`
+    int from, to, block, local0;
   };
   static constexpr Span kSpans[3] = {{-1, -1, -1, kBlockSide - 1}, {0, kBlockSide - 1, 0, 0}, {kBlockSide, kBlockSide + 1, 1, 0}};
+  const VoxelBlock* blocks[27];
+  for (int i = 0; i < 27; ++i) blocks[i] = nbr[i] >= 0 ? &map.block(nbr[i]) : nullptr;
   for (const Span& sz : kSpans) {
     for (int z = sz.from; z <= sz.to; ++z) {
       const int lz = sz.local0 + (z - sz.from);
       for (const Span& sy : kSpans) {
         for (int y = sy.from; y <= sy.to; ++y) {
           const int ly = sy.local0 + (y - sy.from);
-          for (const Span& sx : kSpans) {
-            const int32_t b = nbr[NeighbourIndex(sx.block, sy.block, sz.block)];
-            const int n = sx.to - sx.from + 1;
-            const int dst = CacheIndex(sx.from, y, z);
-            if (b < 0) {
-              std::fill(c->tsdf + dst, c->tsdf + dst + n, 0.0f);
-              std::fill(c->weight + dst, c->weight + dst + n, 0.0f);
-            } else {
-              const VoxelBlock& vb = map.block(b);
-              const int src = sx.local0 + kBlockSide * (ly + kBlockSide * lz);
-              std::memcpy(c->tsdf + dst, vb.tsdf + src, sizeof(float) * static_cast<size_t>(n));
-              std::memcpy(c->weight + dst, vb.weight + src, sizeof(float) * static_cast<size_t>(n));
-            }
-          }
+          const int row = kBlockSide * (ly + kBlockSide * lz);
+          const int dst = CacheIndex(-1, y, z);
+          CopyRow<1>(blocks[NeighbourIndex(-1, sy.block, sz.block)], row + kBlockSide - 1, c->tsdf + dst, c->weight + dst);
+          CopyRow<kBlockSide>(blocks[NeighbourIndex(0, sy.block, sz.block)], row, c->tsdf + dst + 1, c->weight + dst + 1);
+          CopyRow<2>(blocks[NeighbourIndex(1, sy.block, sz.block)], row, c->tsdf + dst + 1 + kBlockSide,
+                     c->weight + dst + 1 + kBlockSide);
         }
       }
     }
@@ -225,15 +233,19 @@ void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOption
   // Tsdf 1 = free space beyond the truncation band in every view.
   const float max_tsdf = o.skip_truncated_cubes ? 0.999f : 2.0f;
   for (int i = 0; i < kCacheVoxels; ++i) c->ok[i] = c->weight[i] >= o.min_weight && c->tsdf[i] < max_tsdf;
+  // All eight corners usable, separably: pairs along x, then y, then z.
+  constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
+  uint8_t okx[kCacheVoxels], okxy[kCacheVoxels];
+  for (int i = 0; i + 1 < kCacheVoxels; ++i) okx[i] = c->ok[i] & c->ok[i + 1];
+  for (int i = 0; i + sy < kCacheVoxels - 1; ++i) okxy[i] = okx[i] & okx[i + sy];
   for (int z = -1; z < kBlockSide; ++z)
-    for (int y = -1; y < kBlockSide; ++y)
-      for (int x = -1; x < kBlockSide; ++x) {
-        const int i = CacheIndex(x, y, z);
-        constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
-        c->cube_ok[CubeIndex(x, y, z)] = c->ok[i] & c->ok[i + 1] & c->ok[i + sy] & c->ok[i + sy + 1] & c->ok[i + sz] &
-                                         c->ok[i + sz + 1] & c->ok[i + sz + sy] & c->ok[i + sz + sy + 1];
-      }
+    for (int y = -1; y < kBlockSide; ++y) {
+      const int i = CacheIndex(-1, y, z);
+      uint8_t* out = c->cube_ok + CubeIndex(-1, y, z);
+      for (int x = 0; x <= kBlockSide; ++x) out[x] = okxy[i + x] & okxy[i + x + sz];
+    }
 }
+
 
 // TSDF gradient at cache voxel (x, y, z) ∈ [0, 8]³: central differences,
 // one-sided next to unobserved voxels.

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/System/omstream.hh>
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 
@@ -63,6 +64,9 @@ Status Decimate(size_t target, Mesh* mesh, MeshCleanupStats* stats) {
     handles[v] = om.add_vertex(OMesh::Point(p.x(), p.y(), p.z()));
     om.property(source, handles[v]) = static_cast<uint32_t>(v);
   }
+  // OpenMesh reports every refused face on its error stream; we count them instead.
+  const bool err_was_enabled = omerr().is_enabled();
+  omerr().disable();
   for (const auto& tri : mesh->triangles) {
     const OMesh::FaceHandle f = om.add_face(handles[tri[0]], handles[tri[1]], handles[tri[2]]);
     if (f.is_valid()) continue;
@@ -76,6 +80,7 @@ Status Decimate(size_t target, Mesh* mesh, MeshCleanupStats* stats) {
     }
     (void)om.add_face(copy[0], copy[1], copy[2]);
   }
+  if (err_was_enabled) omerr().enable();
   OpenMesh::Decimater::DecimaterT<OMesh> decimater(om);
   OpenMesh::Decimater::ModQuadricT<OMesh>::Handle quadric;
   decimater.add(quadric);

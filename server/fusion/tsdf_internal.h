@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <utility>
 #include <cstdint>
 #include <vector>
 
@@ -38,6 +39,7 @@ struct TsdfVolume::PodView {
   // Masked depth (mm, 0 = unused) and the maximum of each 8×8 pixel tile.
   const uint16_t* depth = nullptr;
   const uint16_t* tile_max = nullptr;
+  const uint16_t* tile_min = nullptr;  // 0 = the tile has an unusable pixel
   // Nonzero where a pixel sits on a depth edge (null = no edge filtering).
   const uint8_t* edge = nullptr;
   int tiles_x = 0, tiles_y = 0;
@@ -54,12 +56,14 @@ struct TsdfVolume::Scratch {
   std::vector<PodView> views;
   std::vector<std::vector<uint16_t>> masked_depth;
   std::vector<std::vector<uint16_t>> tile_max;
+  std::vector<std::vector<uint16_t>> tile_min;
   std::vector<std::vector<uint8_t>> edge;
   std::vector<std::vector<BlockCoord>> pod_blocks;  // candidate blocks per pod, locally de-duplicated
   std::vector<uint32_t> touched_stamp;              // per block: frame stamp of the last touch
   uint32_t stamp = 0;
   std::vector<int32_t> active;                      // blocks touched this frame
-  std::vector<size_t> thread_block_views, thread_skipped;
+  std::vector<std::pair<uint64_t, int32_t>> order;  // (Morton code, block) for sorting
+  std::vector<size_t> thread_block_views, thread_skipped, thread_free;
 
   // Meshing.
   struct MeshVertex {

@@ -1,0 +1,518 @@
+// holoport-bench fusion: TSDF fusion (server/fusion) of a workload's masked
+// depth, timed per stage and scored against the studio's ground truth, and
+// the identical input fused by Open3D (bench/peers/open3d_fusion.py) in the
+// same run.
+//
+//   holoport-bench fusion --workload S8-QVGA|S8-VGA [--frames N] [--repeats N] [--json]
+//   holoport-bench fusion --dataset DIR [--voxel-mm 10] [--depth-max-m 3] ...
+//   options: --no-peer (skip Open3D), --keep DIR (write the peer's input and
+//            meshes there and keep them), --decimate N (triangle budget for the
+//            decimation figure; 0 = off), --min-weight W (TsdfOptions::min_weight)
+//
+// Stages are computed by functions returning figures (RunOurFusion,
+// RunOpen3dPeer) so that segmentation, texturing and the pipeline can add
+// their own lines to the same benchmark.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <time.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "bench.h"
+#include "common/image_io.h"
+#include "common/metrics/mesh_distance.h"
+#include "server/capture/importers.h"
+#include "server/fusion/mesh_cleanup.h"
+#include "server/fusion/tsdf.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+
+namespace holo::bench {
+namespace {
+
+namespace fs = std::filesystem;
+
+double Ms(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+double ProcessCpuMs() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+double Mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0 : s / static_cast<double>(v.size());
+}
+
+struct FusionConfig {
+  TsdfOptions tsdf;
+  MeshCleanupOptions cleanup;
+  size_t decimate_to = 30000;  // triangle budget of the decimation figure; 0 = off
+  int repeats = 3;
+  bool verbose = true;
+};
+
+// Writes what the Open3D peer needs for one frame: masked depth and colour PNGs.
+Status WritePeerFrame(const std::string& dir, int frame, const RgbdFrameSet& set) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "frame_%03d", frame);
+  const fs::path fdir = fs::path(dir) / name;
+  fs::create_directories(fdir);
+  ImageWriteOptions fast;
+  fast.png_compression = 1;
+  for (size_t k = 0; k < set.frames.size(); ++k) {
+    const RgbdFrame& f = set.frames[k];
+    ImageDepth16 depth = f.depth;
+    if (!f.mask.empty())
+      for (size_t i = 0; i < depth.num_pixels(); ++i)
+        if (f.mask.data()[i] == 0) depth.data()[i] = 0;
+    HOLO_RETURN_IF_ERROR(WriteDepth16((fdir / ("pod" + std::to_string(k) + "_depth.png")).string(), depth, fast));
+    HOLO_RETURN_IF_ERROR(WriteImageRgb8((fdir / ("pod" + std::to_string(k) + "_color.png")).string(), f.color, fast));
+  }
+  return OkStatus();
+}
+
+Status WritePeerCameras(const std::string& dir, const Rig& rig, int frames) {
+  nlohmann::json j;
+  j["frames"] = frames;
+  for (const PodCalibration& pod : rig.pods) {
+    if (!pod.IsRegistered() || pod.depth.HasDistortion())
+      return InvalidArgument("the Open3D peer needs registered, undistorted pods; " + pod.name + " is not");
+    nlohmann::json p;
+    p["width"] = pod.depth.width;
+    p["height"] = pod.depth.height;
+    p["fx"] = pod.depth.fx;
+    p["fy"] = pod.depth.fy;
+    p["cx"] = pod.depth.cx;
+    p["cy"] = pod.depth.cy;
+    const Eigen::Matrix4f e = pod.world_from_depth.inverse().matrix();
+    std::vector<double> m;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) m.push_back(e(r, c));
+    p["extrinsic"] = m;
+    j["pods"].push_back(p);
+  }
+  std::ofstream f(fs::path(dir) / "cameras.json");
+  f << j.dump(1);
+  return f ? OkStatus() : Internal("cannot write " + dir + "/cameras.json");
+}
+
+// Our fusion of one frame set, `repeats` times: fuse, mesh, clean up.
+struct OurFrameResult {
+  std::vector<double> fuse_ms, mesh_ms, cleanup_ms;
+  std::vector<double> fuse_cpu_ms, mesh_cpu_ms;  // CPU time of all threads (barely changed by other load)
+  Mesh raw, cleaned;
+  TsdfStats stats;
+};
+
+Status FuseFrame(TsdfVolume* vol, const Rig& rig, const RgbdFrameSet& set, const FusionConfig& cfg,
+                 OurFrameResult* out) {
+  Mesh raw, cleaned;
+  for (int r = 0; r < cfg.repeats; ++r) {
+    vol->Reset();
+    const double c0 = ProcessCpuMs();
+    const auto t0 = std::chrono::steady_clock::now();
+    HOLO_RETURN_IF_ERROR(vol->Integrate(rig, set));
+    const auto t1 = std::chrono::steady_clock::now();
+    const double c1 = ProcessCpuMs();
+    vol->ExtractMesh(&raw);
+    const auto t2 = std::chrono::steady_clock::now();
+    const double c2 = ProcessCpuMs();
+    out->fuse_cpu_ms.push_back(c1 - c0);
+    out->mesh_cpu_ms.push_back(c2 - c1);
+    cleaned = raw;  // copy outside the timed region
+    const auto t3 = std::chrono::steady_clock::now();
+    HOLO_RETURN_IF_ERROR(CleanupMesh(cfg.cleanup, &cleaned));
+    const auto t4 = std::chrono::steady_clock::now();
+    out->fuse_ms.push_back(Ms(t0, t1));
+    out->mesh_ms.push_back(Ms(t1, t2));
+    out->cleanup_ms.push_back(Ms(t3, t4));
+  }
+  out->stats = vol->stats();
+  out->raw = std::move(raw);
+  out->cleaned = std::move(cleaned);
+  return OkStatus();
+}
+
+struct PeerResult {
+  bool ok = false;
+  std::string error;
+  std::string version;
+  std::vector<double> integrate_ms, extract_ms, total_ms;  // all frames × repeats
+  std::vector<Mesh> meshes;                                 // one per frame
+};
+
+// Runs bench/peers/open3d_fusion.py on `dir` and reads back its timings and meshes.
+PeerResult RunOpen3dPeer(const std::string& dir, const TsdfOptions& o, int repeats) {
+  PeerResult r;
+  const std::string python = "/usr/bin/python3";
+  const std::string script = std::string(HOLO_SOURCE_DIR) + "/bench/peers/open3d_fusion.py";
+  if (!fs::exists(python)) {
+    r.error = python + " not found";
+    return r;
+  }
+  char cmd[2048];
+  std::snprintf(cmd, sizeof(cmd), "OMP_WAIT_POLICY=PASSIVE %s '%s' '%s' --voxel %.6f --trunc %.6f --depth-max %.3f --repeats %d", python.c_str(),
+                script.c_str(), dir.c_str(), o.voxel_size, o.voxel_size * o.truncation_voxels, o.max_depth_m, repeats);
+  FILE* p = popen(cmd, "r");
+  if (!p) {
+    r.error = "cannot run " + python;
+    return r;
+  }
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
+  const int rc = pclose(p);
+  nlohmann::json j = nlohmann::json::parse(out, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) {
+    r.error = "peer exited with status " + std::to_string(rc) + " and no JSON output";
+    return r;
+  }
+  if (j.contains("error")) {
+    r.error = j["error"].get<std::string>();
+    return r;
+  }
+  r.version = j.value("open3d_version", "");
+  for (const auto& f : j["frames"]) {
+    const std::vector<double> in = f["integrate_ms"].get<std::vector<double>>();
+    const std::vector<double> ex = f["extract_ms"].get<std::vector<double>>();
+    for (size_t i = 0; i < in.size() && i < ex.size(); ++i) {
+      r.integrate_ms.push_back(in[i]);
+      r.extract_ms.push_back(ex[i]);
+      r.total_ms.push_back(in[i] + ex[i]);
+    }
+    auto mesh = ReadPly(f["ply"].get<std::string>());
+    if (!mesh.ok()) {
+      r.error = "reading the peer's mesh: " + mesh.status().ToString();
+      return r;
+    }
+    r.meshes.push_back(std::move(mesh).value());
+  }
+  r.ok = rc == 0;
+  if (!r.ok) r.error = "peer exited with status " + std::to_string(rc);
+  return r;
+}
+
+void EmitPeerMissing(const std::string& workload, const std::string& why) {
+  std::fprintf(stderr, "fusion: Open3D peer unavailable: %s (install python3-open3d; run with /usr/bin/python3)\n",
+               why.c_str());
+  EmitFigure("fusion", workload, "peer_missing", 1, "bool", {{"peer", "open3d"}, {"reason", why}});
+}
+
+std::string MakeWorkDir(const std::string& keep) {
+  if (!keep.empty()) {
+    fs::create_directories(keep);
+    return keep;
+  }
+  const fs::path dir = fs::temp_directory_path() / ("holoport_fusion_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+struct ExtraArgs {
+  std::string dataset, keep;
+  bool peer = true;
+  double voxel_mm = 0, depth_max_m = 0, min_weight = 0;
+  long decimate = -1;
+  bool ok = true;
+};
+
+ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
+  ExtraArgs a;
+  for (size_t i = 0; i < extra.size(); ++i) {
+    auto value = [&]() -> std::string {
+      if (i + 1 >= extra.size()) {
+        std::fprintf(stderr, "fusion: %s needs a value\n", extra[i].c_str());
+        a.ok = false;
+        return "";
+      }
+      return extra[++i];
+    };
+    if (extra[i] == "--dataset") a.dataset = value();
+    else if (extra[i] == "--keep") a.keep = value();
+    else if (extra[i] == "--no-peer") a.peer = false;
+    else if (extra[i] == "--voxel-mm") a.voxel_mm = std::atof(value().c_str());
+    else if (extra[i] == "--depth-max-m") a.depth_max_m = std::atof(value().c_str());
+    else if (extra[i] == "--min-weight") a.min_weight = std::atof(value().c_str());
+    else if (extra[i] == "--decimate") a.decimate = std::atol(value().c_str());
+    else {
+      std::fprintf(stderr, "fusion: unknown option %s\n", extra[i].c_str());
+      a.ok = false;
+    }
+  }
+  return a;
+}
+
+std::map<std::string, std::string> Q(std::initializer_list<std::pair<const std::string, std::string>> q) { return q; }
+
+// ---------------------------------------------------------------------------
+// Studio workloads: ground-truth masks, ground-truth mesh.
+
+int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
+  auto workload = GetWorkload(args.workload);
+  if (!workload.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", workload.status().ToString().c_str());
+    return 2;
+  }
+  auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
+  if (!studio.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", studio.status().ToString().c_str());
+    return 1;
+  }
+  const std::string& wl = workload->name;
+  FusionConfig cfg;
+  cfg.tsdf.voxel_size = extra.voxel_mm > 0 ? static_cast<float>(extra.voxel_mm / 1000) : workload->voxel_size_m;
+  cfg.tsdf.max_depth_m = extra.depth_max_m > 0 ? static_cast<float>(extra.depth_max_m) : 5.0f;
+  if (extra.min_weight > 0) cfg.tsdf.min_weight = static_cast<float>(extra.min_weight);
+  cfg.repeats = args.repeats;
+  if (extra.decimate >= 0) cfg.decimate_to = static_cast<size_t>(extra.decimate);
+  const int frames = args.frames > 0 ? args.frames : 10;
+  auto vol = TsdfVolume::Create(cfg.tsdf);
+  if (!vol.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", vol.status().ToString().c_str());
+    return 2;
+  }
+  const std::string dir = extra.peer ? MakeWorkDir(extra.keep) : "";
+  if (extra.peer) {
+    if (Status s = WritePeerCameras(dir, workload->rig, frames); !s.ok()) {
+      std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+      return 1;
+    }
+  }
+
+  RgbdFrameSet set;
+  StudioGroundTruth gt;
+  std::vector<Mesh> truth;
+  std::vector<double> fuse_ms, mesh_ms, cleanup_ms, total_ms, decimate_ms, fuse_cpu_ms, mesh_cpu_ms;
+  std::vector<double> chamfer, chamfer_raw, completeness, hausdorff, hausdorff95, triangles, blocks;
+  std::vector<double> chamfer_decimated;
+  metrics::MeshDistanceOptions mdo;
+  for (int f = 0; f < frames; ++f) {
+    (*studio)->RenderFrame(f, &set, &gt);
+    for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
+    truth.push_back(gt.foreground_mesh);
+    OurFrameResult r;
+    if (Status s = FuseFrame(vol->get(), workload->rig, set, cfg, &r); !s.ok()) {
+      std::fprintf(stderr, "fusion: frame %d: %s\n", f, s.ToString().c_str());
+      return 1;
+    }
+    for (size_t i = 0; i < r.fuse_ms.size(); ++i) {
+      fuse_ms.push_back(r.fuse_ms[i]);
+      mesh_ms.push_back(r.mesh_ms[i]);
+      cleanup_ms.push_back(r.cleanup_ms[i]);
+      total_ms.push_back(r.fuse_ms[i] + r.mesh_ms[i] + r.cleanup_ms[i]);
+      fuse_cpu_ms.push_back(r.fuse_cpu_ms[i]);
+      mesh_cpu_ms.push_back(r.mesh_cpu_ms[i]);
+    }
+    auto d = metrics::ComputeMeshDistance(r.cleaned, gt.foreground_mesh, mdo);
+    auto draw = metrics::ComputeMeshDistance(r.raw, gt.foreground_mesh, mdo);
+    if (!d.ok() || !draw.ok()) {
+      std::fprintf(stderr, "fusion: frame %d: no surface: %s\n", f, (d.ok() ? draw : d).status().ToString().c_str());
+      return 1;
+    }
+    chamfer.push_back(d->chamfer_mm);
+    chamfer_raw.push_back(draw->chamfer_mm);
+    completeness.push_back(d->completeness);
+    hausdorff.push_back(d->hausdorff_mm);
+    hausdorff95.push_back(d->hausdorff_percentile_mm);
+    triangles.push_back(static_cast<double>(r.cleaned.num_triangles()));
+    blocks.push_back(static_cast<double>(r.stats.blocks_touched));
+    // Decimation cost and added error, on the first frame (OpenMesh's
+    // decimater takes seconds on a 150k-triangle mesh).
+    if (cfg.decimate_to > 0 && f == 0) {
+      Mesh dec = r.cleaned;
+      MeshCleanupOptions co;
+      co.min_component_triangles = 0;
+      co.target_triangles = cfg.decimate_to;
+      const auto t0 = std::chrono::steady_clock::now();
+      if (Status s = CleanupMesh(co, &dec); !s.ok()) {
+        std::fprintf(stderr, "fusion: decimation: %s\n", s.ToString().c_str());
+        return 1;
+      }
+      decimate_ms.push_back(Ms(t0, std::chrono::steady_clock::now()));
+      auto dd = metrics::ComputeMeshDistance(dec, gt.foreground_mesh, mdo);
+      if (dd.ok()) chamfer_decimated.push_back(dd->chamfer_mm);
+    }
+    if (extra.peer) {
+      if (Status s = WritePeerFrame(dir, f, set); !s.ok()) {
+        std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+        return 1;
+      }
+    }
+    if (!args.json)
+      std::fprintf(stderr,
+                   "fusion %s frame %d: fuse %.1f ms, mesh %.1f ms, cleanup %.1f ms; %zu blocks, %zu block-views (%zu "
+                   "skipped, %zu free), %zu triangles; chamfer %.2f mm (raw %.2f), completeness %.3f; cpu fuse %.1f mesh %.1f ms; prepare %.1f allocate %.1f integrate %.1f ms\n",
+                   wl.c_str(), f, Median(r.fuse_ms), Median(r.mesh_ms), Median(r.cleanup_ms), r.stats.blocks_touched,
+                   r.stats.block_views, r.stats.block_views_skipped, r.stats.block_views_free, r.cleaned.num_triangles(), d->chamfer_mm,
+                   draw->chamfer_mm, d->completeness, Median(r.fuse_cpu_ms), Median(r.mesh_cpu_ms),
+                   r.stats.prepare_ms, r.stats.allocate_ms, r.stats.integrate_ms);
+  }
+  const std::string voxel_mm = std::to_string(static_cast<int>(std::lround(cfg.tsdf.voxel_size * 1000)));
+  const int threads = (*vol)->options().threads;
+  const auto q = [&](const std::string& stage) {
+    return Q({{"stage", stage}, {"voxel_mm", voxel_mm}, {"threads", std::to_string(threads)}, {"frames", std::to_string(frames)}});
+  };
+  EmitFigure("fusion", wl, "ms", Median(fuse_ms), "ms", q("fuse"));
+  EmitFigure("fusion", wl, "ms", Median(mesh_ms), "ms", q("mesh"));
+  EmitFigure("fusion", wl, "ms", Median(cleanup_ms), "ms", q("cleanup"));
+  std::vector<double> fuse_mesh;
+  for (size_t i = 0; i < fuse_ms.size(); ++i) fuse_mesh.push_back(fuse_ms[i] + mesh_ms[i]);
+  EmitFigure("fusion", wl, "ms", Median(fuse_mesh), "ms", q("fuse_mesh"));
+  EmitFigure("fusion", wl, "ms", Median(total_ms), "ms", q("fuse_mesh_cleanup"));
+  EmitFigure("fusion", wl, "cpu_ms", Median(fuse_cpu_ms), "ms", q("fuse"));
+  EmitFigure("fusion", wl, "cpu_ms", Median(mesh_cpu_ms), "ms", q("mesh"));
+  EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm", Q({{"voxel_mm", voxel_mm}, {"mesh", "cleaned"}}));
+  EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer_raw), "mm", Q({{"voxel_mm", voxel_mm}, {"mesh", "raw"}}));
+  EmitFigure("fusion", wl, "completeness", Mean(completeness), "fraction", Q({{"voxel_mm", voxel_mm}, {"threshold_mm", "10"}}));
+  EmitFigure("fusion", wl, "hausdorff_mm", Mean(hausdorff), "mm", Q({{"voxel_mm", voxel_mm}}));
+  EmitFigure("fusion", wl, "hausdorff95_mm", Mean(hausdorff95), "mm", Q({{"voxel_mm", voxel_mm}}));
+  EmitFigure("fusion", wl, "triangles", Mean(triangles), "count", Q({{"mesh", "cleaned"}}));
+  EmitFigure("fusion", wl, "blocks", Mean(blocks), "count", Q({{"voxel_mm", voxel_mm}}));
+  if (!decimate_ms.empty()) {
+    const std::string budget = std::to_string(cfg.decimate_to);
+    EmitFigure("fusion", wl, "ms", Median(decimate_ms), "ms", Q({{"stage", "decimate"}, {"target_triangles", budget}}));
+    EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer_decimated), "mm",
+               Q({{"mesh", "decimated"}, {"target_triangles", budget}}));
+  }
+
+  if (!extra.peer) return 0;
+  PeerResult peer = RunOpen3dPeer(dir, cfg.tsdf, cfg.repeats);
+  if (!peer.ok) {
+    EmitPeerMissing(wl, peer.error);
+  } else {
+    std::vector<double> peer_chamfer, peer_completeness;
+    for (size_t f = 0; f < peer.meshes.size() && f < truth.size(); ++f) {
+      auto d = metrics::ComputeMeshDistance(peer.meshes[f], truth[f], mdo);
+      if (d.ok()) {
+        peer_chamfer.push_back(d->chamfer_mm);
+        peer_completeness.push_back(d->completeness);
+      }
+    }
+    const auto pq = [&](const std::string& stage) {
+      return Q({{"peer", "open3d"}, {"stage", stage}, {"voxel_mm", voxel_mm}, {"open3d", peer.version}});
+    };
+    EmitFigure("fusion", wl, "ms", Median(peer.integrate_ms), "ms", pq("fuse"));
+    EmitFigure("fusion", wl, "ms", Median(peer.extract_ms), "ms", pq("mesh"));
+    EmitFigure("fusion", wl, "ms", Median(peer.total_ms), "ms", pq("fuse_mesh"));
+    EmitFigure("fusion", wl, "chamfer_mm", Mean(peer_chamfer), "mm", Q({{"peer", "open3d"}, {"voxel_mm", voxel_mm}, {"mesh", "raw"}}));
+    EmitFigure("fusion", wl, "completeness", Mean(peer_completeness), "fraction",
+               Q({{"peer", "open3d"}, {"voxel_mm", voxel_mm}, {"threshold_mm", "10"}}));
+    EmitFigure("fusion", wl, "speedup_vs_open3d", Median(peer.total_ms) / Median(fuse_mesh), "x",
+               Q({{"stage", "fuse_mesh"}, {"voxel_mm", voxel_mm}}));
+  }
+  if (extra.keep.empty()) fs::remove_all(dir);
+  return 0;
+}
+
+// ---------------------------------------------------------------------------
+// A Redwood-layout folder: frames as pods of a static scene, no masks, no
+// ground truth; ours against Open3D.
+
+int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
+  RedwoodImportOptions ro;
+  if (!fs::exists(fs::path(extra.dataset) / ro.intrinsic_file) && fs::exists(fs::path(extra.dataset) / "camera_primesense.json"))
+    ro.intrinsic_file = "camera_primesense.json";
+  auto scene = ImportRedwood(extra.dataset, ro);
+  if (!scene.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", scene.status().ToString().c_str());
+    return 1;
+  }
+  if (!scene->has_poses) {
+    std::fprintf(stderr, "fusion: %s has no camera poses (trajectory.log); cannot fuse its frames as pods\n",
+                 extra.dataset.c_str());
+    return 1;
+  }
+  const std::string wl = "redwood:" + fs::path(extra.dataset).lexically_normal().filename().string() + ":" +
+                         std::to_string(scene->rig.pods.size()) + "pods";
+  FusionConfig cfg;
+  cfg.tsdf.voxel_size = static_cast<float>((extra.voxel_mm > 0 ? extra.voxel_mm : 10.0) / 1000);
+  cfg.tsdf.max_depth_m = static_cast<float>(extra.depth_max_m > 0 ? extra.depth_max_m : 3.0);
+  cfg.repeats = args.repeats;
+  cfg.cleanup.min_component_triangles = 0;
+  auto vol = TsdfVolume::Create(cfg.tsdf);
+  if (!vol.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", vol.status().ToString().c_str());
+    return 2;
+  }
+  OurFrameResult r;
+  if (Status s = FuseFrame(vol->get(), scene->rig, scene->frames, cfg, &r); !s.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    return 1;
+  }
+  std::vector<double> fuse_mesh;
+  for (size_t i = 0; i < r.fuse_ms.size(); ++i) fuse_mesh.push_back(r.fuse_ms[i] + r.mesh_ms[i]);
+  const std::string voxel_mm = std::to_string(static_cast<int>(std::lround(cfg.tsdf.voxel_size * 1000)));
+  char depth_max[16];
+  std::snprintf(depth_max, sizeof(depth_max), "%.2f", cfg.tsdf.max_depth_m);
+  const auto q = [&](const std::string& stage) { return Q({{"stage", stage}, {"voxel_mm", voxel_mm}, {"depth_max_m", depth_max}}); };
+  EmitFigure("fusion", wl, "ms", Median(r.fuse_ms), "ms", q("fuse"));
+  EmitFigure("fusion", wl, "ms", Median(r.mesh_ms), "ms", q("mesh"));
+  EmitFigure("fusion", wl, "ms", Median(fuse_mesh), "ms", q("fuse_mesh"));
+  EmitFigure("fusion", wl, "triangles", static_cast<double>(r.raw.num_triangles()), "count", Q({{"mesh", "raw"}}));
+  if (!args.json)
+    std::fprintf(stderr, "fusion %s: fuse %.1f ms, mesh %.1f ms, %zu blocks, %zu triangles\n", wl.c_str(),
+                 Median(r.fuse_ms), Median(r.mesh_ms), r.stats.blocks_touched, r.raw.num_triangles());
+  if (!extra.peer) return 0;
+  const std::string dir = MakeWorkDir(extra.keep);
+  if (Status s = WritePeerCameras(dir, scene->rig, 1); !s.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    return 1;
+  }
+  if (Status s = WritePeerFrame(dir, 0, scene->frames); !s.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    return 1;
+  }
+  PeerResult peer = RunOpen3dPeer(dir, cfg.tsdf, cfg.repeats);
+  if (!peer.ok || peer.meshes.empty()) {
+    EmitPeerMissing(wl, peer.ok ? "no mesh" : peer.error);
+    return 0;
+  }
+  const auto pq = [&](const std::string& stage) {
+    return Q({{"peer", "open3d"}, {"stage", stage}, {"voxel_mm", voxel_mm}, {"open3d", peer.version}});
+  };
+  EmitFigure("fusion", wl, "ms", Median(peer.integrate_ms), "ms", pq("fuse"));
+  EmitFigure("fusion", wl, "ms", Median(peer.extract_ms), "ms", pq("mesh"));
+  EmitFigure("fusion", wl, "ms", Median(peer.total_ms), "ms", pq("fuse_mesh"));
+  EmitFigure("fusion", wl, "triangles", static_cast<double>(peer.meshes[0].num_triangles()), "count",
+             Q({{"peer", "open3d"}, {"mesh", "raw"}}));
+  EmitFigure("fusion", wl, "speedup_vs_open3d", Median(peer.total_ms) / Median(fuse_mesh), "x", Q({{"stage", "fuse_mesh"}}));
+  // No ground truth: the distance between the two reconstructions.
+  auto d = metrics::ComputeMeshDistance(r.raw, peer.meshes[0]);
+  if (d.ok()) {
+    EmitFigure("fusion", wl, "chamfer_mm", d->chamfer_mm, "mm", Q({{"reference", "open3d"}, {"voxel_mm", voxel_mm}}));
+    EmitFigure("fusion", wl, "hausdorff95_mm", d->hausdorff_percentile_mm, "mm", Q({{"reference", "open3d"}}));
+    EmitFigure("fusion", wl, "completeness", d->completeness, "fraction", Q({{"reference", "open3d"}, {"threshold_mm", "10"}}));
+  } else {
+    std::fprintf(stderr, "fusion: mesh distance: %s\n", d.status().ToString().c_str());
+  }
+  if (extra.keep.empty()) fs::remove_all(dir);
+  return 0;
+}
+
+int RunFusionBench(const BenchArgs& args) {
+  const ExtraArgs extra = ParseExtra(args.extra);
+  if (!extra.ok) return 2;
+  return extra.dataset.empty() ? RunWorkload(args, extra) : RunDataset(args, extra);
+}
+
+HOLO_REGISTER_BENCH("fusion", "TSDF fusion + marching cubes vs ground truth and Open3D (--dataset DIR for Redwood)",
+                    RunFusionBench);
+
+}  // namespace
+}  // namespace holo::bench
