@@ -1,5 +1,7 @@
 #include "server/studio/studio.h"
 
+#include "common/worker_pool.h"
+
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
@@ -20,74 +22,6 @@ std::string Num(double v) {
   return s.str();
 }
 
-// A fixed set of workers that run `n` tasks; the calling thread takes part.
-class WorkerPool {
- public:
-  explicit WorkerPool(int threads) {
-    for (int i = 1; i < threads; ++i) threads_.emplace_back([this, i] { Loop(i); });
-  }
-  ~WorkerPool() {
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    for (auto& t : threads_) t.join();
-  }
-  int size() const { return static_cast<int>(threads_.size()) + 1; }
-
-  // Runs fn(task, worker) for task in [0, n); returns when all are done.
-  void Run(int n, const std::function<void(int, int)>& fn) {
-    if (threads_.empty() || n <= 1) {
-      for (int i = 0; i < n; ++i) fn(i, 0);
-      return;
-    }
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      fn_ = &fn;
-      n_ = n;
-      next_.store(0);
-      active_ = static_cast<int>(threads_.size());
-      ++generation_;
-    }
-    cv_.notify_all();
-    Work(0);
-    std::unique_lock<std::mutex> lock(mu_);
-    done_cv_.wait(lock, [this] { return active_ == 0; });
-    fn_ = nullptr;
-  }
-
- private:
-  void Work(int worker) {
-    for (int i = next_.fetch_add(1); i < n_; i = next_.fetch_add(1)) (*fn_)(i, worker);
-  }
-  void Loop(int worker) {
-    uint64_t seen = 0;
-    for (;;) {
-      {
-        std::unique_lock<std::mutex> lock(mu_);
-        cv_.wait(lock, [&] { return stop_ || generation_ != seen; });
-        if (stop_) return;
-        seen = generation_;
-      }
-      Work(worker);
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        if (--active_ == 0) done_cv_.notify_one();
-      }
-    }
-  }
-
-  std::vector<std::thread> threads_;
-  std::mutex mu_;
-  std::condition_variable cv_, done_cv_;
-  const std::function<void(int, int)>* fn_ = nullptr;
-  int n_ = 0;
-  std::atomic<int> next_{0};
-  int active_ = 0;
-  uint64_t generation_ = 0;
-  bool stop_ = false;
-};
 
 }  // namespace
 
@@ -135,7 +69,7 @@ struct SyntheticStudio::Impl {
       if (!v.registered) v.color.Init(pod.ColorCamera());
       v.variation = studio::PodColorVariation(options.seed, pod.id);
     });
-    scratch.resize(pool.size());
+    scratch.resize(static_cast<size_t>(pool.num_threads()));
   }
 
   // Poses the scene and builds the shadow map, split into row bands over `pool` if given.
@@ -143,7 +77,7 @@ struct SyntheticStudio::Impl {
     if (fs->frame == frame_index && frame_index >= 0) return;
     scene.Pose(static_cast<double>(frame_index) / fps, &fs->positions, &fs->normals, &fs->part_poses);
     fs->shadow.Prepare(fs->positions);
-    const int bands = workers ? workers->size() : 1;
+    const int bands = workers ? workers->num_threads() : 1;
     const int rows = fs->shadow.h;
     auto band = [&](int b, int) {
       fs->shadow.Rasterize(fs->positions, scene.tmpl().triangles, rows * b / bands, rows * (b + 1) / bands);
