@@ -28,6 +28,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench.h"
+#include "fusion_pipeline.h"
 #include "common/image_io.h"
 #include "common/metrics/mesh_distance.h"
 #include "server/capture/importers.h"
@@ -230,6 +231,9 @@ struct ExtraArgs {
   double voxel_mm = 0, depth_max_m = 0, min_weight = 0;
   long decimate = -1;
   bool ok = true;
+  // Whole-pipeline figures (our segmentation + texturing), see fusion_pipeline.h.
+  bool pipeline = true, pipeline_only = false;
+  PipelineBenchOptions pipeline_options;
 };
 
 ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
@@ -250,6 +254,10 @@ ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--depth-max-m") a.depth_max_m = std::atof(value().c_str());
     else if (extra[i] == "--min-weight") a.min_weight = std::atof(value().c_str());
     else if (extra[i] == "--decimate") a.decimate = std::atol(value().c_str());
+    else if (extra[i] == "--no-pipeline") a.pipeline = false;
+    else if (extra[i] == "--pipeline-only") a.pipeline_only = true;
+    else if (extra[i] == "--pipeline-frames") a.pipeline_options.frames = std::max(1, std::atoi(value().c_str()));
+    else if (extra[i] == "--png") a.pipeline_options.png_dir = value();
     else {
       std::fprintf(stderr, "fusion: unknown option %s\n", extra[i].c_str());
       a.ok = false;
@@ -508,7 +516,10 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
 int RunFusionBench(const BenchArgs& args) {
   const ExtraArgs extra = ParseExtra(args.extra);
   if (!extra.ok) return 2;
-  return extra.dataset.empty() ? RunWorkload(args, extra) : RunDataset(args, extra);
+  if (!extra.dataset.empty()) return RunDataset(args, extra);
+  const int rc = extra.pipeline_only ? 0 : RunWorkload(args, extra);
+  if (rc != 0 || !extra.pipeline) return rc;
+  return RunPipelineFigures(args, extra.pipeline_options);
 }
 
 HOLO_REGISTER_BENCH("fusion", "TSDF fusion + marching cubes vs ground truth and Open3D (--dataset DIR for Redwood)",
