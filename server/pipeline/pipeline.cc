@@ -120,7 +120,10 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
       Status s = Acquire(stages_, options_, clock_, seq, start_us, **item, &late);
       if (s.code() == StatusCode::kOutOfRange) break;
       if (!s.ok()) {
-        fail(s);
+        // A bad input frame ends the stream: frames already acquired still go
+        // through and reach the sink (as in serial mode), then Run fails.
+        std::lock_guard lock(mu);
+        if (first_error.ok()) first_error = s;
         break;
       }
       if (!to_segment.Push(*item)) break;

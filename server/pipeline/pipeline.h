@@ -51,7 +51,8 @@ struct FrameWork {
 };
 
 // Stage functions. Each returns an error to stop the pipeline (the error is
-// returned by Run). A stage may be empty (skipped). `work` is valid only
+// returned by Run). An acquire error ends the stream after the frames already
+// acquired have reached the sink; an error in a later stage stops at once. A stage may be empty (skipped). `work` is valid only
 // during the call. `fuse_mesh` sets timings.fuse_ms and timings.mesh_ms
 // itself (the pipeline times the call as a whole into fuse_ms otherwise).
 struct PipelineStages {

@@ -113,6 +113,25 @@ TEST(PipelineTest, PacedAcquireFollowsTheClock) {
   EXPECT_EQ(r->per_frame[30].acquired_us, 30 * 33333);
 }
 
+TEST(PipelineTest, AcquireErrorDeliversEarlierFramesThenFails) {
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  PipelineStages st = FakeStages(100, &out);
+  auto ok_acquire = st.acquire;
+  st.acquire = [ok_acquire](FrameWork& w) -> Status {
+    if (w.sequence == 5) return NotFound("pod1/depth/000005.png: no such file");
+    return ok_acquire(w);
+  };
+  for (bool serial : {false, true}) {
+    out.clear();
+    PipelineOptions o;
+    o.serial = serial;
+    auto r = Pipeline(st, o).Run();
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("000005.png"), std::string::npos);
+    EXPECT_EQ(out.size(), 5u) << "frames 0-4 were good and reach the sink (serial=" << serial << ")";
+  }
+}
+
 TEST(PipelineTest, BadOptionsAreRejected) {
   std::vector<std::pair<int64_t, uint32_t>> out;
   PipelineOptions o;
