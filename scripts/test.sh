@@ -23,7 +23,16 @@ if ((QUICK)); then
 else
   ctest --test-dir build --output-on-failure --parallel "$(nproc)"
   echo "== sanitizer build (ASan+UBSan) for parsing tests =="
-  HOLO_BUILD_DIR=build-asan ./scripts/build.sh -DHOLO_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHOLO_BUILD_BENCH=OFF
-  ASAN_OPTIONS=detect_leaks=0 ctest --test-dir build-asan --output-on-failure --parallel "$(nproc)" -L parsing
+  # Configure, then build only the test programs labelled "parsing".
+  GENERATOR=()
+  if command -v ninja > /dev/null; then GENERATOR=(-G Ninja); fi
+  [[ -f build-asan/CMakeCache.txt ]] || cmake -S . -B build-asan "${GENERATOR[@]}" -DHOLO_SANITIZE=ON \
+    -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHOLO_BUILD_BENCH=OFF > /dev/null
+  cmake -S . -B build-asan > /dev/null
+  mapfile -t targets < <(ctest --test-dir build-asan -N -L parsing | sed -n 's/^ *Test *#[0-9]*: //p')
+  echo "sanitizer build of ${#targets[@]} test programs: ${targets[*]}"
+  cmake --build build-asan --parallel "$(nproc)" --target "${targets[@]}"
+  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+    ctest --test-dir build-asan --output-on-failure --parallel "$(nproc)" -L parsing
 fi
 echo "test.sh: all tests passed in $(( $(date +%s) - start )) s"
