@@ -195,6 +195,7 @@ constexpr uint32_t kProbScale = 1u << kProbBits;
 constexpr uint32_t kMaxFreq = kProbScale - 64;
 constexpr uint64_t kMaxSymbolsPerByte = 353;  // 8 / 0.0227, rounded up
 constexpr uint32_t kRansLow = 1u << 23;
+__extension__ typedef unsigned __int128 U128;  // GCC and Clang
 
 inline void Tokenize(uint32_t z, uint32_t* tok, uint32_t* nbits) {
   if (z < 16) {
@@ -213,7 +214,10 @@ inline int32_t UnZigZag(uint32_t z) { return static_cast<int32_t>(z >> 1) ^ -sta
 // Collects tokens per context, then writes tables, the rANS bytes and the raw bits.
 class TokenWriter {
  public:
-  explicit TokenWriter(uint32_t contexts) : contexts_(contexts), counts_(size_t{contexts} * kTokens, 0) {}
+  explicit TokenWriter(uint32_t contexts, size_t expected_symbols = 0)
+      : contexts_(contexts), counts_(size_t{contexts} * kTokens, 0) {
+    syms_.reserve(expected_symbols);
+  }
 
   void Put(uint32_t ctx, uint32_t tok) {
     const auto s = static_cast<uint16_t>(ctx * kTokens + tok);
@@ -263,6 +267,12 @@ class TokenWriter {
       }
     }
     // rANS runs backwards: fill a buffer from its end.
+    // x / f by multiplication: x < 2^31 after renormalisation and f ≤ 2^12, so
+    // m = ceil(2^44 / f) gives floor(x·m / 2^44) = floor(x / f) exactly
+    // (m·f − 2^44 < f ≤ 2^(44−31); Granlund & Montgomery 1994).
+    std::vector<uint64_t> recip(freq.size(), 0);
+    for (size_t i = 0; i < freq.size(); ++i)
+      if (freq[i]) recip[i] = ((uint64_t{1} << 44) + freq[i] - 1) / freq[i];
     std::vector<uint8_t> rans(syms_.size() * 4 + 16);
     uint8_t* p = rans.data() + rans.size();
     uint32_t x = kRansLow;
@@ -274,7 +284,8 @@ class TokenWriter {
         *--p = static_cast<uint8_t>(x);
         x >>= 8;
       }
-      x = ((x / fr) << kProbBits) + (x % fr) + start[s];
+      const auto q = static_cast<uint32_t>((static_cast<U128>(x) * recip[s]) >> 44);
+      x = (q << kProbBits) + (x - q * fr) + start[s];
     }
     p -= 4;
     for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(x >> (8 * i));
@@ -391,13 +402,21 @@ class TokenReader {
     const uint32_t slot = x_ & (kProbScale - 1);
     const uint32_t s = tb.sym[slot];
     x_ = tb.freq[s] * (x_ >> kProbBits) + slot - tb.start[s];
-    while (x_ < kRansLow) {
-      if (rpos_ >= rans_.size()) {
-        ok_ = false;
-        x_ = kRansLow;
-        break;
+    // x ≥ 2^11 here (x ≥ 2^23 before, freq ≥ 1), so at most two bytes come in.
+    if (x_ < kRansLow) {
+      if (rpos_ + 2 <= rans_.size()) {
+        x_ = (x_ << 8) | rans_[rpos_++];
+        if (x_ < kRansLow) x_ = (x_ << 8) | rans_[rpos_++];
+      } else {
+        while (x_ < kRansLow) {
+          if (rpos_ >= rans_.size()) {
+            ok_ = false;
+            x_ = kRansLow;
+            break;
+          }
+          x_ = (x_ << 8) | rans_[rpos_++];
+        }
       }
-      x_ = (x_ << 8) | rans_[rpos_++];
     }
     return s;
   }
@@ -634,20 +653,32 @@ inline void SeedPreds(uint32_t num_before, const uint32_t* corner_ids, int new_i
 void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter* tw, std::vector<uint32_t>* order,
                         std::vector<uint32_t>* tris, std::vector<VertexPred>* preds) {
   const size_t nt = idx.size() / 3;
-  // Corners by origin vertex.
-  std::vector<uint32_t> off(nu + 1, 0), corners(idx.size());
+  // Outgoing edges by origin vertex: (target, third vertex, triangle), so the
+  // search for the triangle across a gate reads one contiguous run.
+  struct Out {
+    uint32_t target, third, tri;
+  };
+  std::vector<uint32_t> off(nu + 1, 0);
+  std::vector<Out> outs(idx.size());
   for (uint32_t v : idx) ++off[v + 1];
   for (size_t i = 0; i < nu; ++i) off[i + 1] += off[i];
   {
     std::vector<uint32_t> fill(off.begin(), off.end() - 1);
-    for (size_t k = 0; k < idx.size(); ++k) corners[fill[idx[k]]++] = static_cast<uint32_t>(k);
+    for (size_t t = 0; t < nt; ++t) {
+      const uint32_t* tri = &idx[t * 3];
+      outs[fill[tri[0]]++] = {tri[1], tri[2], static_cast<uint32_t>(t)};
+      outs[fill[tri[1]]++] = {tri[2], tri[0], static_cast<uint32_t>(t)};
+      outs[fill[tri[2]]++] = {tri[0], tri[1], static_cast<uint32_t>(t)};
+    }
   }
   std::vector<uint8_t> coded(nt, 0);
   std::vector<uint32_t> newid(nu, kNil);
   order->clear();
+  order->reserve(nu);
   tris->clear();
   tris->reserve(idx.size());
   preds->clear();
+  preds->reserve(nu);
   Border border;
   border.Reset(0);
   uint32_t prev_sym = 0;
@@ -685,10 +716,10 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     const uint32_t oa = (*order)[a], ob = (*order)[b];
     uint32_t found = kNil, oc = kNil;
     for (uint32_t k = off[ob]; k < off[ob + 1]; ++k) {
-      const uint32_t corner = corners[k], t = corner / 3, i = corner % 3;
-      if (coded[t] || idx[t * 3 + (i + 1) % 3] != oa) continue;
-      found = t;
-      oc = idx[t * 3 + (i + 2) % 3];
+      const Out& e = outs[k];
+      if (e.target != oa || coded[e.tri]) continue;
+      found = e.tri;
+      oc = e.third;
       break;
     }
     if (found == kNil) {
@@ -706,6 +737,9 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       order->push_back(oc);
       preds->push_back({a, b, gn.opp});
       border.GrowVertices(order->size());
+      // The gate a→c will scan c's outgoing edges a few steps from now: start
+      // that (likely cache-missing) load early.
+      __builtin_prefetch(&outs[off[oc]]);
     } else if (c == border.node(gn.prev).origin) {
       sym = kLeft;
     } else if (c == border.node(gn.next).target) {
@@ -864,23 +898,33 @@ Status DecodeResiduals(TokenReader& tr, const std::vector<VertexPred>& preds, in
       const int32_t pc = std::clamp(p[c], 0, range - 1);
       const uint32_t z = tr.GetValue(static_cast<uint32_t>(c) * 4 + prev_class);
       prev_class = MagClass(z);
-      int64_t x = int64_t{pc} + UnZigZag(z);
-      x %= range;
-      if (x < 0) x += range;
-      (*vals)[v][c] = static_cast<T>(x);
+      // range is a power of two: wrap by masking.
+      (*vals)[v][c] = static_cast<T>(static_cast<uint32_t>(pc + UnZigZag(z)) & static_cast<uint32_t>(range - 1));
     }
   }
   return tr.Finish();
 }
 
-// Area-weighted vertex normals of `mesh` (unit length; +Z where undefined).
-void AreaWeightedNormals(Mesh* mesh) {
+// Vertex normals of `mesh` from its triangles (unit length; +Z where undefined).
+void SmoothedAreaWeightedNormals(Mesh* mesh) {
   mesh->normals.assign(mesh->num_vertices(), Eigen::Vector3f::Zero());
   for (const auto& t : mesh->triangles) {
     const Eigen::Vector3f& p0 = mesh->positions[t[0]];
     const Eigen::Vector3f n = (mesh->positions[t[1]] - p0).cross(mesh->positions[t[2]] - p0);
     for (uint32_t v : t) mesh->normals[v] += n;
   }
+  // One smoothing pass over the unnormalized sums: each vertex takes the sum
+  // over its triangles of their corners' sums. Marching-cubes meshes have
+  // clusters of sliver triangles (a vertex next to a lattice corner) whose
+  // quantized normals are noise; their small areas let the neighbouring large
+  // triangles decide. Measured on the 6 mm blob: mean error vs the SDF normals
+  // 8.0° → 4.0°, 99th percentile 70° → 12° (unquantized area-weighted: 3.4°, 11°).
+  std::vector<Eigen::Vector3f> sum(mesh->num_vertices(), Eigen::Vector3f::Zero());
+  for (const auto& t : mesh->triangles) {
+    const Eigen::Vector3f n = mesh->normals[t[0]] + mesh->normals[t[1]] + mesh->normals[t[2]];
+    for (uint32_t v : t) sum[v] += n;
+  }
+  mesh->normals.swap(sum);
   for (auto& n : mesh->normals) {
     const float len = n.norm();
     n = len > 0 ? Eigen::Vector3f(n / len) : Eigen::Vector3f::UnitZ();
@@ -901,17 +945,19 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   const bool recompute = o.normals == NormalMode::kRecompute && !mesh.normals.empty();
   const bool colors = o.colors && !mesh.colors.empty();
   const size_t nt = mesh.num_triangles();
-  std::vector<uint32_t> idx(nt * 3);
-  for (size_t t = 0; t < nt; ++t)
-    for (int c = 0; c < 3; ++c) idx[t * 3 + c] = weld[mesh.triangles[t][c]];
   const size_t nu = unique.size();
+  std::vector<uint32_t> idx(nt * 3);
+  std::vector<uint8_t> referenced(nu, 0);
+  for (size_t t = 0; t < nt; ++t)
+    for (int c = 0; c < 3; ++c) referenced[idx[t * 3 + c] = weld[mesh.triangles[t][c]]] = 1;
 
   // Bounding box and grid of the referenced vertices.
   Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::max());
   Eigen::Vector3f hi = -lo;
-  for (uint32_t i : idx) {
-    lo = lo.cwiseMin(mesh.positions[unique[i]]);
-    hi = hi.cwiseMax(mesh.positions[unique[i]]);
+  for (size_t u = 0; u < nu; ++u) {
+    if (!referenced[u]) continue;
+    lo = lo.cwiseMin(mesh.positions[unique[u]]);
+    hi = hi.cwiseMax(mesh.positions[unique[u]]);
   }
   if (nt == 0) lo = hi = Eigen::Vector3f::Zero();
   const float step = o.position_step_m;
@@ -921,7 +967,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
                            std::to_string(extent / 65535.0f) + " m");
   }
 
-  TokenWriter conn(kConnContexts);
+  TokenWriter conn(kConnContexts, nt + nt / 4);
   std::vector<uint32_t> order, tris;
   std::vector<VertexPred> preds;
   EncodeConnectivity(idx, nu, &conn, &order, &tris, &preds);
@@ -938,36 +984,42 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   conn.Finish(&buf);
   AppendBlob32(out, buf);
 
-  std::vector<std::array<uint16_t, 3>> q(nv);
+  // Gather every attribute in traversal order in one pass (the reads are scattered).
+  std::vector<std::array<uint16_t, 3>> q(nv), ycc(colors ? nv : 0);
+  std::vector<std::array<uint8_t, 2>> oct(send_normals ? nv : 0);
+  const float inv_step = 1.0f / step;
   for (size_t v = 0; v < nv; ++v) {
-    const Eigen::Vector3f& p = mesh.positions[unique[order[v]]];
-    for (int c = 0; c < 3; ++c) q[v][c] = static_cast<uint16_t>(std::lround((p[c] - lo[c]) / step));
+    const uint32_t src = unique[order[v]];
+    if (v + 16 < nv) __builtin_prefetch(&mesh.positions[unique[order[v + 16]]]);
+    const Eigen::Vector3f& p = mesh.positions[src];
+    for (int c = 0; c < 3; ++c) {
+      // (p − lo) ≥ 0: adding ½ and truncating rounds to the nearest grid point.
+      q[v][c] = static_cast<uint16_t>(std::min(65535.0f, (p[c] - lo[c]) * inv_step + 0.5f));
+    }
+    if (colors) ycc[v] = ToYCoCg(mesh.colors[src]);
+    if (send_normals) {
+      float a, b;
+      OctEncode(mesh.normals[src], &a, &b);
+      oct[v] = {static_cast<uint8_t>(std::lround((a * 0.5f + 0.5f) * 255.0f)),
+                static_cast<uint8_t>(std::lround((b * 0.5f + 0.5f) * 255.0f))};
+    }
   }
   {
-    TokenWriter tw(kPosContexts);
+    TokenWriter tw(kPosContexts, nv * 3);
     EncodeResiduals(q, preds, 65536, true, &tw);
     buf.clear();
     tw.Finish(&buf);
     AppendBlob32(out, buf);
   }
   if (send_normals) {
-    std::vector<std::array<uint8_t, 2>> oct(nv);
-    for (size_t v = 0; v < nv; ++v) {
-      float a, b;
-      OctEncode(mesh.normals[unique[order[v]]], &a, &b);
-      oct[v] = {static_cast<uint8_t>(std::lround((a * 0.5f + 0.5f) * 255.0f)),
-                static_cast<uint8_t>(std::lround((b * 0.5f + 0.5f) * 255.0f))};
-    }
-    TokenWriter tw(kNrmContexts);
+    TokenWriter tw(kNrmContexts, nv * 2);
     EncodeResiduals(oct, preds, 256, false, &tw);
     buf.clear();
     tw.Finish(&buf);
     AppendBlob32(out, buf);
   }
   if (colors) {
-    std::vector<std::array<uint16_t, 3>> ycc(nv);
-    for (size_t v = 0; v < nv; ++v) ycc[v] = ToYCoCg(mesh.colors[unique[order[v]]]);
-    TokenWriter tw(kColContexts);
+    TokenWriter tw(kColContexts, nv * 3);
     EncodeResiduals(ycc, preds, 512, kColorParallelogram, &tw);
     buf.clear();
     tw.Finish(&buf);
@@ -1042,7 +1094,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   }
   mesh->triangles.resize(nt);
   if (nt > 0) std::memcpy(mesh->triangles.data(), tris.data(), tris.size() * 4);
-  if (recompute) AreaWeightedNormals(mesh);
+  if (recompute) SmoothedAreaWeightedNormals(mesh);
   return OkStatus();
 }
 
@@ -1074,7 +1126,7 @@ Status CheckMesh(const Mesh& mesh) {
   return OkStatus();
 }
 
-void RecomputeNormals(Mesh* mesh) { AreaWeightedNormals(mesh); }
+void RecomputeNormals(Mesh* mesh) { SmoothedAreaWeightedNormals(mesh); }
 
 void ClearMesh(Mesh* mesh) {
   mesh->positions.clear();

@@ -65,9 +65,10 @@ Status CheckMesh(const Mesh& mesh);
 // Empties all of `mesh`'s arrays.
 void ClearMesh(Mesh* mesh);
 
-// Replaces `mesh`'s normals by area-weighted vertex normals of its triangles
-// (unit length; +Z for a vertex without a non-degenerate triangle). This is
-// what the G1 decoder does when normals are flagged as recomputed.
+// Replaces `mesh`'s normals by normals computed from its triangles, as the G1
+// decoder does when normals are flagged as recomputed (PROTOCOL.md §7): the
+// area-weighted sum of face normals at each vertex, smoothed once over the
+// one-ring, normalized (+Z for a vertex without a non-degenerate triangle).
 void RecomputeNormals(Mesh* mesh);
 
 // Octahedral mapping of a unit vector to [-1, 1]² and back.

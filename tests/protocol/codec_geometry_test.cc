@@ -196,27 +196,32 @@ TEST(GeometryCodec, G1RecomputedNormalsWithinAngleBound) {
   const Status s = DecodeGeometry(recomputed, &out);
   ASSERT_TRUE(s.ok()) << s.ToString();
   ASSERT_EQ(out.normals.size(), out.num_vertices());
-  // Triangles are 1-2 cm here (≈3 mm near the poles) with 2 mm noise; a 1 mm
-  // grid tilts a 2 cm triangle by up to ~2.5°, a pole triangle by far more.
-  const Errors e = Compare(in, out, map);
-  EXPECT_LT(e.max_normal_deg, 25.0);
+  // The decoder's normals are RecomputeNormals of the decoded mesh; against
+  // RecomputeNormals of the unquantized input they differ by the effect of
+  // the 1 mm grid alone. Triangles here are 1-2 cm (3 mm near the poles): a
+  // 1 mm grid tilts a 2 cm face by up to ~2.5°, a pole face by far more.
+  Mesh ref = in;
+  RecomputeNormals(&ref);
   std::vector<double> deg;
   for (size_t i = 0; i < in.num_vertices(); ++i) {
-    const float c = std::clamp(in.normals[i].dot(out.normals[map[i]]), -1.0f, 1.0f);
+    const float c = std::clamp(ref.normals[i].dot(out.normals[map[i]]), -1.0f, 1.0f);
     deg.push_back(std::acos(c) * 180.0 / M_PI);
   }
   std::sort(deg.begin(), deg.end());
   double sum = 0;
   for (double d : deg) sum += d;
-  EXPECT_LT(sum / deg.size(), 1.5);
-  EXPECT_LT(deg[deg.size() * 99 / 100], 10.0);
+  std::printf("recomputed normals vs unquantized: mean %.2f°, p99 %.2f°, max %.2f°\n", sum / deg.size(),
+              deg[deg.size() * 99 / 100], deg.back());
+  EXPECT_LT(sum / deg.size(), 1.0);
+  EXPECT_LT(deg[deg.size() * 99 / 100], 4.0);
+  EXPECT_LT(deg.back(), 10.0);
   for (const auto& n : out.normals) EXPECT_NEAR(n.norm(), 1.0f, 1e-5f);
   ExpectSameConnectivity(in, out, map);
 
-  // RecomputeNormals on the input reproduces its own area-weighted normals.
-  Mesh copy = in;
+  // RecomputeNormals is what the decoder does: on the decoded mesh it reproduces the decoded normals.
+  Mesh copy = out;
   RecomputeNormals(&copy);
-  for (size_t i = 0; i < in.num_vertices(); ++i) EXPECT_GT(copy.normals[i].dot(in.normals[i]), 0.99999f);
+  for (size_t i = 0; i < out.num_vertices(); ++i) EXPECT_GT(copy.normals[i].dot(out.normals[i]), 0.99999f);
 }
 
 TEST(GeometryCodec, G1RecomputeFlagWithoutInputNormalsSendsNone) {
