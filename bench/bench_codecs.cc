@@ -511,6 +511,7 @@ int RunCodecs(const BenchArgs& args) {
     protocol::ColorEncodeOptions o;
     o.codec = codec;
     o.jpeg_quality = IntFlag(args, "--jpeg-quality", o.jpeg_quality);
+    if (HasFlag(args, "--chroma444")) o.chroma_420 = false;
     Figures fig;
     for (int rep = 0; rep < args.repeats; ++rep) {
       for (const FrameInput& in : inputs) {
@@ -543,7 +544,10 @@ int RunCodecs(const BenchArgs& args) {
     const double bytes = Median(fig.bytes);
     bytes_of[name] = bytes;
     std::map<std::string, std::string> extra{{"pods", std::to_string(inputs[0].pods.size())}};
-    if (codec == ColorCodec::kC1) extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
+    if (codec == ColorCodec::kC1) {
+      extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
+      extra["chroma"] = o.chroma_420 ? "420" : "444";
+    }
     emit(name, "bytes_per_frame", bytes, "B", extra);
     emit(name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
     emit(name, "encode_ms", Median(fig.enc), "ms", extra);

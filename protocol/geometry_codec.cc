@@ -16,8 +16,7 @@ namespace {
 constexpr uint8_t kHasNormals = 1u << 0;
 constexpr uint8_t kHasColors = 1u << 1;
 constexpr uint8_t kRecomputeNormals = 1u << 2;
-// Colours predicted by parallelogram (true) or by the mean of the gate's two vertices.
-constexpr bool kColorParallelogram = true;
+constexpr uint8_t kColorsByMean = 1u << 3;  // G1: colours predicted by the mean, not the parallelogram
 constexpr size_t kPrefixBytes = 12;
 
 std::string Str(uint64_t v) { return std::to_string(v); }
@@ -976,6 +975,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   const uint8_t flags = static_cast<uint8_t>((send_normals ? kHasNormals : 0) | (colors ? kHasColors : 0) |
                                              (recompute ? kRecomputeNormals : 0));
   ByteWriter w(out);
+  const size_t prefix_at = out->size();
   WritePrefix(w, GeometryCodec::kG1, flags, nv, nt);
   for (int c = 0; c < 3; ++c) w.F32(lo[c]);
   w.F32(step);
@@ -1019,8 +1019,19 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
     AppendBlob32(out, buf);
   }
   if (colors) {
+    // Smooth colour fields favour the parallelogram, noisy ones the mean:
+    // estimate both on every 4th vertex (bit lengths of the residuals) and flag the choice.
+    uint64_t cost[2] = {0, 0};
+    for (size_t v = 0; v < nv; v += 4) {
+      for (int m = 0; m < 2; ++m) {
+        const auto p = PredictValue(ycc, preds[v], m == 0);
+        for (int c = 0; c < 3; ++c) cost[m] += std::bit_width(ZigZag(int32_t{ycc[v][c]} - std::clamp(p[c], 0, 511)));
+      }
+    }
+    const bool color_by_mean = cost[1] < cost[0];
+    if (color_by_mean) (*out)[prefix_at + 1] |= kColorsByMean;
     TokenWriter tw(kColContexts, nv * 3);
-    EncodeResiduals(ycc, preds, 512, kColorParallelogram, &tw);
+    EncodeResiduals(ycc, preds, 512, !color_by_mean, &tw);
     buf.clear();
     tw.Finish(&buf);
     AppendBlob32(out, buf);
@@ -1038,6 +1049,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
 Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* mesh) {
   const bool normals = flags & kHasNormals, colors = flags & kHasColors, recompute = flags & kRecomputeNormals;
   if (normals && recompute) return DataLoss("geometry.flags: normals both sent and recomputed");
+  if ((flags & kColorsByMean) && !colors) return DataLoss("geometry.flags: colour prediction flagged without colours");
   float origin[3], step = 0;
   for (float& f : origin) HOLO_RETURN_IF_ERROR(r.F32("g1.origin", &f));
   HOLO_RETURN_IF_ERROR(r.F32("g1.step", &step));
@@ -1088,7 +1100,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
     TokenReader tr;
     HOLO_RETURN_IF_ERROR(tr.Init(col_b, kColContexts, "g1.colors"));
     std::vector<std::array<uint16_t, 3>> ycc;
-    HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 512, kColorParallelogram, &ycc));
+    HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 512, !(flags & kColorsByMean), &ycc));
     mesh->colors.resize(nv);
     for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v]);
   }
@@ -1187,7 +1199,12 @@ Status DecodeGeometry(std::span<const uint8_t> blob, Mesh* mesh, const Limits& l
   HOLO_RETURN_IF_ERROR(r.U16("geometry.reserved", &reserved));
   HOLO_RETURN_IF_ERROR(r.U32("geometry.num_vertices", &nv));
   HOLO_RETURN_IF_ERROR(r.U32("geometry.num_triangles", &nt));
-  if (flags & ~(kHasNormals | kHasColors | kRecomputeNormals)) return DataLoss("geometry.flags: unknown flag bits set");
+  if (flags & ~(kHasNormals | kHasColors | kRecomputeNormals | kColorsByMean)) {
+    return DataLoss("geometry.flags: unknown flag bits set");
+  }
+  if (codec != static_cast<uint8_t>(GeometryCodec::kG1) && (flags & (kRecomputeNormals | kColorsByMean))) {
+    return DataLoss("geometry.flags: bits 2-3 are G1 only");
+  }
   if (reserved != 0) return DataLoss("geometry.reserved: must be zero");
   if (nv > limits.max_vertices) {
     return DataLoss("geometry.num_vertices: " + Str(nv) + " exceeds limit " + Str(limits.max_vertices));

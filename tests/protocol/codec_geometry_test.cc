@@ -331,6 +331,29 @@ TEST(GeometryCodec, G1CountsBeyondWhatTheBytesCanHoldAreRefused) {
   EXPECT_TRUE(out.empty());
 }
 
+TEST(GeometryCodec, G1ColourPredictorFollowsTheColours) {
+  // Flag bit 3: colours predicted by the mean (noisy colours) or by the
+  // parallelogram (smooth colours). Both are lossless.
+  Mesh smooth = test::NoisySphere(30, 40);
+  for (size_t i = 0; i < smooth.num_vertices(); ++i) {
+    const Eigen::Vector3f& p = smooth.positions[i];
+    smooth.colors[i] = {static_cast<uint8_t>(100 + 300 * (p.x() - 0.2f)), static_cast<uint8_t>(120 + 300 * (p.y() + 0.1f)),
+                        static_cast<uint8_t>(100 + 300 * (p.z() - 1.1f))};
+  }
+  Mesh noisy = smooth;
+  std::mt19937 rng(9);
+  for (auto& c : noisy.colors) c = {static_cast<uint8_t>(rng()), static_cast<uint8_t>(rng()), static_cast<uint8_t>(rng())};
+  for (const auto& [mesh, by_mean] : {std::pair{smooth, false}, std::pair{noisy, true}}) {
+    std::vector<uint8_t> blob;
+    std::vector<uint32_t> map;
+    ASSERT_TRUE(EncodeGeometry(mesh, {}, &blob, &map).ok());
+    EXPECT_EQ((blob[1] & 0x08) != 0, by_mean);
+    Mesh out;
+    ASSERT_TRUE(DecodeGeometry(blob, &out).ok());
+    EXPECT_EQ(Compare(mesh, out, map).color_max, 0);
+  }
+}
+
 TEST(GeometryCodec, OctahedralRoundTrip) {
   std::mt19937 rng(3);
   std::normal_distribution<float> g;
