@@ -232,6 +232,7 @@ struct GeomError {
   double rms_mm = 0, max_mm = 0;
   // Angle between input and decoded normals (-1 when either has none).
   double normal_mean_deg = -1, normal_p99_deg = -1, normal_max_deg = -1;
+  double color_psnr_db = -1;  // vertex colours (RGB), capped at 99 dB; -1 without colours
 };
 
 GeomError ErrorByMap(const Mesh& in, const Mesh& out, const std::vector<uint32_t>& map) {
@@ -251,6 +252,19 @@ GeomError ErrorByMap(const Mesh& in, const Mesh& out, const std::vector<uint32_t
     }
   }
   GeomError e{n ? std::sqrt(sum / n) : 0, mx};
+  if (!in.colors.empty() && !out.colors.empty()) {
+    double se = 0;
+    size_t k = 0;
+    for (size_t i = 0; i < in.num_vertices(); ++i) {
+      if (map[i] == UINT32_MAX) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(in.colors[i][c]) - out.colors[map[i]][c];
+        se += d * d;
+      }
+      k += 3;
+    }
+    e.color_psnr_db = se == 0 || k == 0 ? 99.0 : std::min(99.0, 10 * std::log10(255.0 * 255.0 / (se / k)));
+  }
   if (!angles.empty()) {
     double s = 0;
     for (double a : angles) s += a;
@@ -312,6 +326,7 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
 struct Figures {
   std::vector<double> bytes, enc, dec, enc_cpu, dec_cpu, a, b;  // a, b: rms/max mm or psnr
   std::vector<double> n_mean, n_p99, n_max;                      // normal angle errors, degrees
+  std::vector<double> vcol_psnr;                                 // vertex colour PSNR
 };
 
 int RunCodecs(const BenchArgs& args) {
@@ -386,9 +401,14 @@ int RunCodecs(const BenchArgs& args) {
   std::vector<GeomRun> runs;
   runs.push_back({"G0", false, {}, {}});
   runs.back().g.codec = GeometryCodec::kG0;
+  const int chroma_shift = IntFlag(args, "--chroma-shift", protocol::GeometryEncodeOptions{}.chroma_shift);
   runs.push_back({"G1", false, {}, {}});
+  runs.back().g.chroma_shift = chroma_shift;
   runs.push_back({"G1-normals", false, {}, {}});  // normals sent instead of recomputed
   runs.back().g.normals = protocol::NormalMode::kTransmit;
+  runs.back().g.chroma_shift = chroma_shift;
+  runs.push_back({"G1-lossless-color", false, {}, {}});  // chroma not quantized
+  runs.back().g.chroma_shift = 0;
   runs.push_back({"draco", true, {}, {}});
   runs.push_back({"draco-fast", true, {}, {}});
   runs.back().d.speed = 10;
@@ -437,6 +457,7 @@ int RunCodecs(const BenchArgs& args) {
           const GeomError e = run.draco ? ErrorByNearest(in.mesh, out) : ErrorByMap(in.mesh, out, map);
           fig.a.push_back(e.rms_mm);
           fig.b.push_back(e.max_mm);
+          if (e.color_psnr_db >= 0) fig.vcol_psnr.push_back(e.color_psnr_db);
           if (e.normal_mean_deg >= 0) {
             fig.n_mean.push_back(e.normal_mean_deg);
             fig.n_p99.push_back(e.normal_p99_deg);
@@ -461,6 +482,7 @@ int RunCodecs(const BenchArgs& args) {
     emit(run.name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
+    if (!fig.vcol_psnr.empty()) emit(run.name, "vertex_color_psnr_db", Median(fig.vcol_psnr), "dB", extra);
     if (!fig.n_mean.empty()) {  // vs the input's normals; G1 recomputes them from the decoded triangles
       emit(run.name, "normal_mean_deg", Median(fig.n_mean), "deg", extra);
       emit(run.name, "normal_p99_deg", Median(fig.n_p99), "deg", extra);
@@ -468,15 +490,15 @@ int RunCodecs(const BenchArgs& args) {
     }
   }
   for (const GeomRun& run : runs) {
-    // Where G1's bytes go: its u32-length streams after the 28-byte prefix
+    // Where G1's bytes go: its u32-length streams after the 29 bytes of prefix and G1 header
     // (flags: bit 0 normals sent, bit 1 colours).
     if (run.draco || run.g.codec != GeometryCodec::kG1) continue;
     std::vector<uint8_t> blob;
-    if (!protocol::EncodeGeometry(inputs[0].mesh, run.g, &blob).ok() || blob.size() < 28) continue;
+    if (!protocol::EncodeGeometry(inputs[0].mesh, run.g, &blob).ok() || blob.size() < 29) continue;
     std::vector<const char*> streams{"connectivity", "positions"};
     if (blob[1] & 1) streams.push_back("normals");
     if (blob[1] & 2) streams.push_back("colors");
-    size_t off = 28;
+    size_t off = 29;
     for (const char* stream : streams) {
       if (off + 4 > blob.size()) break;
       uint32_t n = 0;

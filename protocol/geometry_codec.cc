@@ -279,9 +279,13 @@ class TokenWriter {
       const uint16_t s = syms_[i];
       const uint32_t fr = freq[s];
       const uint32_t x_max = ((kRansLow >> kProbBits) << 8) * fr;
-      while (x >= x_max) {
-        *--p = static_cast<uint8_t>(x);
-        x >>= 8;
+      // At most two bytes go out (x < 2^31, x_max ≥ 2^19); branch-free, as
+      // the condition is a coin toss for a symbol of a few bits.
+      for (int k = 0; k < 2; ++k) {
+        const bool out = x >= x_max;
+        p[-1] = static_cast<uint8_t>(x);
+        p -= out;
+        x = out ? x >> 8 : x;
       }
       const auto q = static_cast<uint32_t>((static_cast<U128>(x) * recip[s]) >> 44);
       x = (q << kProbBits) + (x - q * fr) + start[s];
@@ -381,7 +385,10 @@ class TokenReader {
     for (int i = 0; i < 4; ++i) n |= uint32_t{data[pos + i]} << (8 * i);
     pos += 4;
     if (n < 4 || n > data.size() - pos) return DataLoss(field + ": rANS length out of range");
-    rans_ = data.subspan(pos, n);
+    rans_.assign(data.begin() + static_cast<std::ptrdiff_t>(pos), data.begin() + static_cast<std::ptrdiff_t>(pos + n));
+    rans_end_ = n;
+    rans_.push_back(0);
+    rans_.push_back(0);
     bits_ = data.subspan(pos + n);
     x_ = 0;
     for (int i = 0; i < 4; ++i) x_ |= uint32_t{rans_[i]} << (8 * i);
@@ -390,7 +397,7 @@ class TokenReader {
     return OkStatus();
   }
   // Symbols the rANS bytes can hold at most (each costs ≥ 0.0227 bits).
-  uint64_t MaxSymbols() const { return (uint64_t{rans_.size()} + 1) * kMaxSymbolsPerByte; }
+  uint64_t MaxSymbols() const { return (uint64_t{rans_end_} + 1) * kMaxSymbolsPerByte; }
 
   uint32_t Get(uint32_t ctx) {
     const Table& tb = tables_[ctx];
@@ -401,21 +408,17 @@ class TokenReader {
     const uint32_t slot = x_ & (kProbScale - 1);
     const uint32_t s = tb.sym[slot];
     x_ = tb.freq[s] * (x_ >> kProbBits) + slot - tb.start[s];
-    // x ≥ 2^11 here (x ≥ 2^23 before, freq ≥ 1), so at most two bytes come in.
-    if (x_ < kRansLow) {
-      if (rpos_ + 2 <= rans_.size()) {
-        x_ = (x_ << 8) | rans_[rpos_++];
-        if (x_ < kRansLow) x_ = (x_ << 8) | rans_[rpos_++];
-      } else {
-        while (x_ < kRansLow) {
-          if (rpos_ >= rans_.size()) {
-            ok_ = false;
-            x_ = kRansLow;
-            break;
-          }
-          x_ = (x_ << 8) | rans_[rpos_++];
-        }
-      }
+    // x ≥ 2^11 here (x ≥ 2^23 before, freq ≥ 1), so at most two bytes come
+    // in; branch-free, reading from a copy with two zero bytes of padding.
+    for (int k = 0; k < 2; ++k) {
+      const bool in = x_ < kRansLow;
+      const uint32_t shifted = (x_ << 8) | rans_[rpos_];
+      x_ = in ? shifted : x_;
+      rpos_ += in;
+    }
+    if (rpos_ > rans_end_) {  // read into the padding: the stream was too short
+      ok_ = false;
+      rpos_ = rans_end_;
     }
     return s;
   }
@@ -444,7 +447,7 @@ class TokenReader {
   // and no bytes are left over.
   Status Finish() const {
     if (!ok_) return DataLoss(field_ + ": coded data is truncated or corrupt");
-    if (x_ != kRansLow || rpos_ != rans_.size()) return DataLoss(field_ + ": rANS data does not end cleanly");
+    if (x_ != kRansLow || rpos_ != rans_end_) return DataLoss(field_ + ": rANS data does not end cleanly");
     if (bits_.size() - bpos_ > 0) return DataLoss(field_ + ": raw bits left over");
     return OkStatus();
   }
@@ -458,7 +461,9 @@ class TokenReader {
   };
   std::string field_;
   std::vector<Table> tables_;
-  std::span<const uint8_t> rans_, bits_;
+  std::vector<uint8_t> rans_;  // the rANS bytes and two zero bytes
+  size_t rans_end_ = 0;        // the number of real rANS bytes
+  std::span<const uint8_t> bits_;
   size_t rpos_ = 0, bpos_ = 0;
   uint32_t x_ = 0;
   uint64_t acc_ = 0;
@@ -521,8 +526,8 @@ class Border {
     return false;
   }
 
-  // Adds triangle (b, a, c) across gate g = a→b.
-  void Attach(uint32_t g, uint32_t c) {
+  // Adds triangle (b, a, c) across gate g = a→b; `new_vertex`: c has just been created.
+  void Attach(uint32_t g, uint32_t c, bool new_vertex) {
     const Node gn = nodes_[g];
     const uint32_t e1 = New(gn.origin, c, gn.target), e2 = New(c, gn.target, gn.origin);
     if (gn.next == g) {
@@ -534,8 +539,12 @@ class Border {
       Link(e2, gn.next);
     }
     Kill(g);
-    Zip(e1);
-    Zip(e2);
+    // A vertex seen for the first time has no border edges but e1 and e2, so
+    // neither can have a twin unless a = b: skip the searches (same result).
+    if (!new_vertex || gn.origin == gn.target) {
+      Zip(e1);
+      Zip(e2);
+    }
     Push(e1);
     Push(e2);
   }
@@ -652,10 +661,10 @@ inline void SeedPreds(uint32_t num_before, const uint32_t* corner_ids, int new_i
 void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter* tw, std::vector<uint32_t>* order,
                         std::vector<uint32_t>* tris, std::vector<VertexPred>* preds) {
   const size_t nt = idx.size() / 3;
-  // Outgoing edges by origin vertex: (target, third vertex, triangle), so the
+  // Outgoing edges by origin vertex: (target, triangle), so the
   // search for the triangle across a gate reads one contiguous run.
   struct Out {
-    uint32_t target, third, tri;
+    uint32_t target, tri;
   };
   std::vector<uint32_t> off(nu + 1, 0);
   std::vector<Out> outs(idx.size());
@@ -665,9 +674,10 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     std::vector<uint32_t> fill(off.begin(), off.end() - 1);
     for (size_t t = 0; t < nt; ++t) {
       const uint32_t* tri = &idx[t * 3];
-      outs[fill[tri[0]]++] = {tri[1], tri[2], static_cast<uint32_t>(t)};
-      outs[fill[tri[1]]++] = {tri[2], tri[0], static_cast<uint32_t>(t)};
-      outs[fill[tri[2]]++] = {tri[0], tri[1], static_cast<uint32_t>(t)};
+      const auto tt = static_cast<uint32_t>(t);
+      outs[fill[tri[0]]++] = {tri[1], tt};
+      outs[fill[tri[1]]++] = {tri[2], tt};
+      outs[fill[tri[2]]++] = {tri[0], tt};
     }
   }
   std::vector<uint8_t> coded(nt, 0);
@@ -718,7 +728,9 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       const Out& e = outs[k];
       if (e.target != oa || coded[e.tri]) continue;
       found = e.tri;
-      oc = e.third;
+      // The third corner: the sum of the triangle's ids minus the two known
+      // (exact modulo 2^32, also when ids repeat).
+      oc = idx[size_t{found} * 3] + idx[size_t{found} * 3 + 1] + idx[size_t{found} * 3 + 2] - ob - oa;
       break;
     }
     if (found == kNil) {
@@ -752,7 +764,7 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     tris->push_back(b);
     tris->push_back(a);
     tris->push_back(c);
-    border.Attach(g, c);
+    border.Attach(g, c, sym == kNew);
   }
 }
 
@@ -817,7 +829,7 @@ Status DecodeConnectivity(TokenReader& tr, uint32_t nv, uint32_t nt, std::vector
     tris->push_back(gn.target);
     tris->push_back(gn.origin);
     tris->push_back(c);
-    border.Attach(g, c);
+    border.Attach(g, c, sym == kNew);
     ++done;
   }
   HOLO_RETURN_IF_ERROR(tr.Finish());
@@ -853,14 +865,22 @@ inline std::array<int32_t, C> PredictValue(const std::vector<std::array<T, C>>& 
   return r;
 }
 
-// YCoCg-R: a lossless integer transform (Malvar & Sullivan); Co, Cg in [-255, 255] stored + 255.
-inline std::array<uint16_t, 3> ToYCoCg(const std::array<uint8_t, 3>& rgb) {
+// YCoCg-R (Malvar & Sullivan's lossless lifting), with Co and Cg optionally
+// quantized to multiples of 2^shift. Stored as Y, (Co + 255) >> shift,
+// (Cg + 255) >> shift (rounded). The lifting is redone with the quantized Co
+// and Cg so that B stays exact and R, G are off by at most 2^(shift−1).
+inline std::array<uint16_t, 3> ToYCoCg(const std::array<uint8_t, 3>& rgb, int shift) {
   const int r = rgb[0], g = rgb[1], b = rgb[2];
-  const int co = r - b, t = b + (co >> 1), cg = g - t, y = t + (cg >> 1);
-  return {static_cast<uint16_t>(y), static_cast<uint16_t>(co + 255), static_cast<uint16_t>(cg + 255)};
+  const int half = shift ? 1 << (shift - 1) : 0;
+  auto quant = [&](int v) { return (std::clamp(v, -255, 255) + 255 + half) >> shift; };
+  const int co_s = quant(r - b), co = (co_s << shift) - 255;
+  const int t = b + (co >> 1);
+  const int cg_s = quant(g - t), cg = (cg_s << shift) - 255;
+  const int y = std::clamp(t + (cg >> 1), 0, 255);
+  return {static_cast<uint16_t>(y), static_cast<uint16_t>(co_s), static_cast<uint16_t>(cg_s)};
 }
-inline std::array<uint8_t, 3> FromYCoCg(const std::array<uint16_t, 3>& v) {
-  const int y = v[0], co = int{v[1]} - 255, cg = int{v[2]} - 255;
+inline std::array<uint8_t, 3> FromYCoCg(const std::array<uint16_t, 3>& v, int shift) {
+  const int y = v[0], co = (int{v[1]} << shift) - 255, cg = (int{v[2]} << shift) - 255;
   const int t = y - (cg >> 1), g = cg + t, b = t - (co >> 1), r = b + co;
   auto u8 = [](int x) { return static_cast<uint8_t>(std::clamp(x, 0, 255)); };
   return {u8(r), u8(g), u8(b)};
@@ -979,6 +999,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   WritePrefix(w, GeometryCodec::kG1, flags, nv, nt);
   for (int c = 0; c < 3; ++c) w.F32(lo[c]);
   w.F32(step);
+  w.U8(static_cast<uint8_t>(colors ? o.chroma_shift : 0));
 
   std::vector<uint8_t> buf;
   conn.Finish(&buf);
@@ -996,7 +1017,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
       // (p − lo) ≥ 0: adding ½ and truncating rounds to the nearest grid point.
       q[v][c] = static_cast<uint16_t>(std::min(65535.0f, (p[c] - lo[c]) * inv_step + 0.5f));
     }
-    if (colors) ycc[v] = ToYCoCg(mesh.colors[src]);
+    if (colors) ycc[v] = ToYCoCg(mesh.colors[src], o.chroma_shift);
     if (send_normals) {
       float a, b;
       OctEncode(mesh.normals[src], &a, &b);
@@ -1053,6 +1074,9 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   float origin[3], step = 0;
   for (float& f : origin) HOLO_RETURN_IF_ERROR(r.F32("g1.origin", &f));
   HOLO_RETURN_IF_ERROR(r.F32("g1.step", &step));
+  uint8_t chroma_shift = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("g1.chroma_shift", &chroma_shift));
+  if (chroma_shift > 3 || (chroma_shift && !colors)) return DataLoss("g1.chroma_shift: must be 0..3, and 0 without colours");
   if (!(step >= 1e-5f && step <= 0.1f)) return DataLoss("g1.step: must be in [1e-5, 0.1] m");
   for (float f : origin)
     if (!std::isfinite(f) || std::abs(f) > 1e6f) return DataLoss("g1.origin: not a finite coordinate");
@@ -1102,7 +1126,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
     std::vector<std::array<uint16_t, 3>> ycc;
     HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 512, !(flags & kColorsByMean), &ycc));
     mesh->colors.resize(nv);
-    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v]);
+    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v], chroma_shift);
   }
   mesh->triangles.resize(nt);
   if (nt > 0) std::memcpy(mesh->triangles.data(), tris.data(), tris.size() * 4);
@@ -1114,6 +1138,9 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
 
 Status GeometryEncodeOptions::Check() const {
   if (codec != GeometryCodec::kG0 && codec != GeometryCodec::kG1) return InvalidArgument("codec must be G0 or G1");
+  if (chroma_shift < 0 || chroma_shift > 3) {
+    return InvalidArgument("chroma_shift must be in [0, 3], got " + std::to_string(chroma_shift));
+  }
   if (!(position_step_m >= 1e-5f && position_step_m <= 0.1f)) {
     return InvalidArgument("position_step_m must be in [1e-5, 0.1], got " + std::to_string(position_step_m));
   }

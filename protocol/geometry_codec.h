@@ -38,6 +38,10 @@ struct GeometryEncodeOptions {
   NormalMode normals = NormalMode::kRecompute;
   // Send colours when the mesh has them.
   bool colors = true;
+  // G1: colour chroma (YCoCg's Co and Cg) quantized to multiples of
+  // 2^chroma_shift, 0..3; 0 is lossless. R and G are then off by at most
+  // 2^(chroma_shift−1) levels, B is exact.
+  int chroma_shift = 1;
   Status Check() const;
 };
 
