@@ -274,8 +274,11 @@ class TokenWriter {
       if (freq[i]) recip[i] = ((uint64_t{1} << 44) + freq[i] - 1) / freq[i];
     std::vector<uint8_t> rans(syms_.size() * 4 + 16);
     uint8_t* p = rans.data() + rans.size();
-    uint32_t x = kRansLow;
+    // Two interleaved states (symbol i uses state i mod 2) so that the
+    // decoder's two dependency chains overlap.
+    uint32_t xs[2] = {kRansLow, kRansLow};
     for (size_t i = syms_.size(); i-- > 0;) {
+      uint32_t& x = xs[i & 1];
       const uint16_t s = syms_[i];
       const uint32_t fr = freq[s];
       const uint32_t x_max = ((kRansLow >> kProbBits) << 8) * fr;
@@ -290,8 +293,10 @@ class TokenWriter {
       const auto q = static_cast<uint32_t>((static_cast<U128>(x) * recip[s]) >> 44);
       x = (q << kProbBits) + (x - q * fr) + start[s];
     }
-    p -= 4;
-    for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(x >> (8 * i));
+    for (int j = 1; j >= 0; --j) {
+      p -= 4;
+      for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(xs[j] >> (8 * i));
+    }
     const auto n = static_cast<uint32_t>(rans.data() + rans.size() - p);
     for (int i = 0; i < 4; ++i) out->push_back(static_cast<uint8_t>(n >> (8 * i)));
     out->insert(out->end(), p, p + n);
@@ -384,16 +389,20 @@ class TokenReader {
     uint32_t n = 0;
     for (int i = 0; i < 4; ++i) n |= uint32_t{data[pos + i]} << (8 * i);
     pos += 4;
-    if (n < 4 || n > data.size() - pos) return DataLoss(field + ": rANS length out of range");
+    if (n > data.size() - pos) return DataLoss(field + ": rANS length out of range");
     rans_.assign(data.begin() + static_cast<std::ptrdiff_t>(pos), data.begin() + static_cast<std::ptrdiff_t>(pos + n));
     rans_end_ = n;
     rans_.push_back(0);
     rans_.push_back(0);
     bits_ = data.subspan(pos + n);
-    x_ = 0;
-    for (int i = 0; i < 4; ++i) x_ |= uint32_t{rans_[i]} << (8 * i);
-    rpos_ = 4;
-    if (x_ < kRansLow) return DataLoss(field + ": bad rANS state");
+    if (n < 8) return DataLoss(field + ": rANS length out of range");
+    for (int j = 0; j < 2; ++j) {
+      x_[j] = 0;
+      for (int i = 0; i < 4; ++i) x_[j] |= uint32_t{rans_[4 * j + i]} << (8 * i);
+      if (x_[j] < kRansLow) return DataLoss(field + ": bad rANS state");
+    }
+    rpos_ = 8;
+    sel_ = 0;
     return OkStatus();
   }
   // Symbols the rANS bytes can hold at most (each costs ≥ 0.0227 bits).
@@ -405,15 +414,17 @@ class TokenReader {
       ok_ = false;
       return 0;
     }
-    const uint32_t slot = x_ & (kProbScale - 1);
+    uint32_t& x = x_[sel_];
+    sel_ ^= 1;
+    const uint32_t slot = x & (kProbScale - 1);
     const uint32_t s = tb.sym[slot];
-    x_ = tb.freq[s] * (x_ >> kProbBits) + slot - tb.start[s];
+    x = tb.freq[s] * (x >> kProbBits) + slot - tb.start[s];
     // x ≥ 2^11 here (x ≥ 2^23 before, freq ≥ 1), so at most two bytes come
     // in; branch-free, reading from a copy with two zero bytes of padding.
     for (int k = 0; k < 2; ++k) {
-      const bool in = x_ < kRansLow;
-      const uint32_t shifted = (x_ << 8) | rans_[rpos_];
-      x_ = in ? shifted : x_;
+      const bool in = x < kRansLow;
+      const uint32_t shifted = (x << 8) | rans_[rpos_];
+      x = in ? shifted : x;
       rpos_ += in;
     }
     if (rpos_ > rans_end_) {  // read into the padding: the stream was too short
@@ -447,7 +458,9 @@ class TokenReader {
   // and no bytes are left over.
   Status Finish() const {
     if (!ok_) return DataLoss(field_ + ": coded data is truncated or corrupt");
-    if (x_ != kRansLow || rpos_ != rans_end_) return DataLoss(field_ + ": rANS data does not end cleanly");
+    if (x_[0] != kRansLow || x_[1] != kRansLow || rpos_ != rans_end_) {
+      return DataLoss(field_ + ": rANS data does not end cleanly");
+    }
     if (bits_.size() - bpos_ > 0) return DataLoss(field_ + ": raw bits left over");
     return OkStatus();
   }
@@ -465,7 +478,8 @@ class TokenReader {
   size_t rans_end_ = 0;        // the number of real rANS bytes
   std::span<const uint8_t> bits_;
   size_t rpos_ = 0, bpos_ = 0;
-  uint32_t x_ = 0;
+  uint32_t x_[2] = {0, 0};
+  uint32_t sel_ = 0;  // the state of the next symbol
   uint64_t acc_ = 0;
   uint32_t nacc_ = 0;
   bool ok_ = true;
