@@ -117,7 +117,8 @@ TEST(GeometryCodec, G1IsMuchSmallerThanG0) {
   ASSERT_TRUE(EncodeGeometry(in, o, &g0).ok());
   o.codec = GeometryCodec::kG1;
   ASSERT_TRUE(EncodeGeometry(in, o, &g1).ok());
-  EXPECT_LT(g1.size() * 4, g0.size()) << "G0 " << g0.size() << " G1 " << g1.size();
+  // The target is 1/8 of G0's bytes; a smooth sphere does far better.
+  EXPECT_LT(g1.size() * 8, g0.size()) << "G0 " << g0.size() << " G1 " << g1.size();
 }
 
 TEST(GeometryCodec, WithoutNormalsOrColorsAndOptions) {
