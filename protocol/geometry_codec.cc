@@ -675,10 +675,10 @@ inline void SeedPreds(uint32_t num_before, const uint32_t* corner_ids, int new_i
 void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter* tw, std::vector<uint32_t>* order,
                         std::vector<uint32_t>* tris, std::vector<VertexPred>* preds) {
   const size_t nt = idx.size() / 3;
-  // Outgoing edges by origin vertex: (target, triangle), so the
+  // Outgoing edges by origin vertex: (target, third vertex, triangle), so the
   // search for the triangle across a gate reads one contiguous run.
   struct Out {
-    uint32_t target, tri;
+    uint32_t target, third, tri;
   };
   std::vector<uint32_t> off(nu + 1, 0);
   std::vector<Out> outs(idx.size());
@@ -689,9 +689,9 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     for (size_t t = 0; t < nt; ++t) {
       const uint32_t* tri = &idx[t * 3];
       const auto tt = static_cast<uint32_t>(t);
-      outs[fill[tri[0]]++] = {tri[1], tt};
-      outs[fill[tri[1]]++] = {tri[2], tt};
-      outs[fill[tri[2]]++] = {tri[0], tt};
+      outs[fill[tri[0]]++] = {tri[1], tri[2], tt};
+      outs[fill[tri[1]]++] = {tri[2], tri[0], tt};
+      outs[fill[tri[2]]++] = {tri[0], tri[1], tt};
     }
   }
   std::vector<uint8_t> coded(nt, 0);
@@ -742,9 +742,7 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       const Out& e = outs[k];
       if (e.target != oa || coded[e.tri]) continue;
       found = e.tri;
-      // The third corner: the sum of the triangle's ids minus the two known
-      // (exact modulo 2^32, also when ids repeat).
-      oc = idx[size_t{found} * 3] + idx[size_t{found} * 3 + 1] + idx[size_t{found} * 3 + 2] - ob - oa;
+      oc = e.third;
       break;
     }
     if (found == kNil) {
@@ -754,6 +752,9 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     }
     coded[found] = 1;
     ++done;
+    // The gate a→c will scan c's outgoing edges a few steps from now: start
+    // that (likely cache-missing) load early.
+    __builtin_prefetch(&outs[off[oc]]);
     uint32_t c = newid[oc], sym;
     if (c == kNil) {
       sym = kNew;
@@ -762,9 +763,6 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       order->push_back(oc);
       preds->push_back({a, b, gn.opp});
       border.GrowVertices(order->size());
-      // The gate a→c will scan c's outgoing edges a few steps from now: start
-      // that (likely cache-missing) load early.
-      __builtin_prefetch(&outs[off[oc]]);
     } else if (c == border.node(gn.prev).origin) {
       sym = kLeft;
     } else if (c == border.node(gn.next).target) {
