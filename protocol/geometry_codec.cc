@@ -396,13 +396,13 @@ class TokenReader {
     rans_.push_back(0);
     bits_ = data.subspan(pos + n);
     if (n < 8) return DataLoss(field + ": rANS length out of range");
-    for (int j = 0; j < 2; ++j) {
-      x_[j] = 0;
-      for (int i = 0; i < 4; ++i) x_[j] |= uint32_t{rans_[4 * j + i]} << (8 * i);
-      if (x_[j] < kRansLow) return DataLoss(field + ": bad rANS state");
+    x0_ = x1_ = 0;
+    for (int i = 0; i < 4; ++i) {
+      x0_ |= uint32_t{rans_[i]} << (8 * i);
+      x1_ |= uint32_t{rans_[4 + i]} << (8 * i);
     }
+    if (x0_ < kRansLow || x1_ < kRansLow) return DataLoss(field + ": bad rANS state");
     rpos_ = 8;
-    sel_ = 0;
     return OkStatus();
   }
   // Symbols the rANS bytes can hold at most (each costs ≥ 0.0227 bits).
@@ -414,8 +414,9 @@ class TokenReader {
       ok_ = false;
       return 0;
     }
-    uint32_t& x = x_[sel_];
-    sel_ ^= 1;
+    // x0_ is the state of this symbol, x1_ that of the next: swap after use
+    // (two named members rather than an indexed pair, so they stay in registers).
+    uint32_t x = x0_;
     const uint32_t slot = x & (kProbScale - 1);
     const uint32_t s = tb.sym[slot];
     x = tb.freq[s] * (x >> kProbBits) + slot - tb.start[s];
@@ -427,6 +428,8 @@ class TokenReader {
       x = in ? shifted : x;
       rpos_ += in;
     }
+    x0_ = x1_;
+    x1_ = x;
     if (rpos_ > rans_end_) {  // read into the padding: the stream was too short
       ok_ = false;
       rpos_ = rans_end_;
@@ -458,7 +461,7 @@ class TokenReader {
   // and no bytes are left over.
   Status Finish() const {
     if (!ok_) return DataLoss(field_ + ": coded data is truncated or corrupt");
-    if (x_[0] != kRansLow || x_[1] != kRansLow || rpos_ != rans_end_) {
+    if (x0_ != kRansLow || x1_ != kRansLow || rpos_ != rans_end_) {
       return DataLoss(field_ + ": rANS data does not end cleanly");
     }
     if (bits_.size() - bpos_ > 0) return DataLoss(field_ + ": raw bits left over");
@@ -478,8 +481,7 @@ class TokenReader {
   size_t rans_end_ = 0;        // the number of real rANS bytes
   std::span<const uint8_t> bits_;
   size_t rpos_ = 0, bpos_ = 0;
-  uint32_t x_[2] = {0, 0};
-  uint32_t sel_ = 0;  // the state of the next symbol
+  uint32_t x0_ = 0, x1_ = 0;  // the states of the next two symbols
   uint64_t acc_ = 0;
   uint32_t nacc_ = 0;
   bool ok_ = true;
