@@ -1,4 +1,12 @@
 // holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
+//                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444] [--chroma-shift=S]
+//
+// Times are medians over frames × repeats, wall (`encode_ms`) and thread CPU
+// (`encode_cpu_ms`, robust to other load on a shared machine). G1 runs as
+// "G1" (defaults: normals recomputed by the decoder, chroma quantized),
+// "G1-normals" (normals sent) and "G1-lossless-color"; normal errors are
+// angles to the input's normals, and "area-weighted-unquantized" shows how
+// much of that is the method rather than the quantization.
 //
 // Geometry codecs G0 (Holoportation's fp16 + LZ4 baseline) and G1 (ours),
 // Draco side by side in the same process on the same meshes at comparable

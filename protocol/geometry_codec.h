@@ -5,9 +5,10 @@
 //        per triangle: new vertex / left / right / explicit / boundary);
 //        positions quantized on a grid in the frame's bounding box (default
 //        step 1 mm), parallelogram-predicted along the traversal; colours in
-//        YCoCg-R, predicted the same way; normals recomputed by the decoder
-//        (default) or sent octahedral 8-bit; every stream through a static
-//        rANS coder with small contexts.
+//        YCoCg-R with chroma on a 2-level grid by default (R, G ±1, B exact),
+//        predicted the same way or by the mean; normals recomputed by the
+//        decoder (default) or sent octahedral 8-bit; every stream through a
+//        static rANS coder, one context per component.
 // Each blob is self-describing (codec id, counts, flags) and decodes without
 // any other state (every frame is a key frame).
 #pragma once
