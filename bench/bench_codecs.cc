@@ -1,4 +1,12 @@
 // holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
+//                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444] [--chroma-shift=S]
+//
+// Times are medians over frames × repeats, wall (`encode_ms`) and thread CPU
+// (`encode_cpu_ms`, robust to other load on a shared machine). G1 runs as
+// "G1" (defaults: normals recomputed by the decoder, chroma quantized),
+// "G1-normals" (normals sent) and "G1-lossless-color"; normal errors are
+// angles to the input's normals, and "area-weighted-unquantized" shows how
+// much of that is the method rather than the quantization.
 //
 // Geometry codecs G0 (Holoportation's fp16 + LZ4 baseline) and G1 (ours),
 // Draco side by side in the same process on the same meshes at comparable
@@ -16,6 +24,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <unordered_map>
@@ -46,6 +56,25 @@ using protocol::GeometryCodec;
 
 double NowMs() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+// CPU time of the calling thread: robust to other load on a shared machine
+// (wall time still counts the cache and frequency effects of that load).
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+bool HasFlag(const BenchArgs& args, const std::string& flag) {
+  return std::find(args.extra.begin(), args.extra.end(), flag) != args.extra.end();
+}
+
+// The value of "--name=value" among the extra arguments, or `fallback`.
+int IntFlag(const BenchArgs& args, const std::string& name, int fallback) {
+  for (const std::string& e : args.extra)
+    if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
+  return fallback;
 }
 
 struct PodImageInput {
@@ -209,19 +238,50 @@ PodImageInput SyntheticPodImage(int w, int h, int pod, int frame) {
 
 struct GeomError {
   double rms_mm = 0, max_mm = 0;
+  // Angle between input and decoded normals (-1 when either has none).
+  double normal_mean_deg = -1, normal_p99_deg = -1, normal_max_deg = -1;
+  double color_psnr_db = -1;  // vertex colours (RGB), capped at 99 dB; -1 without colours
 };
 
 GeomError ErrorByMap(const Mesh& in, const Mesh& out, const std::vector<uint32_t>& map) {
   double sum = 0, mx = 0;
   size_t n = 0;
+  std::vector<double> angles;
+  const bool normals = !in.normals.empty() && !out.normals.empty();
   for (size_t i = 0; i < in.num_vertices(); ++i) {
     if (map[i] == UINT32_MAX) continue;
     const double d = (in.positions[i] - out.positions[map[i]]).norm() * 1000.0;
     sum += d * d;
     mx = std::max(mx, d);
     ++n;
+    if (normals) {
+      const float c = std::clamp(in.normals[i].normalized().dot(out.normals[map[i]].normalized()), -1.0f, 1.0f);
+      angles.push_back(std::acos(c) * 180.0 / M_PI);
+    }
   }
-  return {n ? std::sqrt(sum / n) : 0, mx};
+  GeomError e{n ? std::sqrt(sum / n) : 0, mx};
+  if (!in.colors.empty() && !out.colors.empty()) {
+    double se = 0;
+    size_t k = 0;
+    for (size_t i = 0; i < in.num_vertices(); ++i) {
+      if (map[i] == UINT32_MAX) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = static_cast<double>(in.colors[i][c]) - out.colors[map[i]][c];
+        se += d * d;
+      }
+      k += 3;
+    }
+    e.color_psnr_db = se == 0 || k == 0 ? 99.0 : std::min(99.0, 10 * std::log10(255.0 * 255.0 / (se / k)));
+  }
+  if (!angles.empty()) {
+    double s = 0;
+    for (double a : angles) s += a;
+    e.normal_mean_deg = s / angles.size();
+    std::sort(angles.begin(), angles.end());
+    e.normal_p99_deg = angles[angles.size() * 99 / 100];
+    e.normal_max_deg = angles.back();
+  }
+  return e;
 }
 
 // Error to the nearest decoded vertex (for Draco, which renumbers vertices).
@@ -272,12 +332,13 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
 }
 
 struct Figures {
-  std::vector<double> bytes, enc, dec, a, b;  // a, b: rms/max mm or psnr
+  std::vector<double> bytes, enc, dec, enc_cpu, dec_cpu, a, b;  // a, b: rms/max mm or psnr
+  std::vector<double> n_mean, n_p99, n_max;                      // normal angle errors, degrees
+  std::vector<double> vcol_psnr;                                 // vertex colour PSNR
 };
 
 int RunCodecs(const BenchArgs& args) {
-  const bool synthetic = !HOLO_BENCH_HAVE_STUDIO ||
-                         std::find(args.extra.begin(), args.extra.end(), "--synthetic") != args.extra.end();
+  const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || HasFlag(args, "--synthetic");
   const int frames = args.frames > 0 ? args.frames : 4;
   std::string workload = args.workload;
   std::map<std::string, std::string> q0;
@@ -348,10 +409,23 @@ int RunCodecs(const BenchArgs& args) {
   std::vector<GeomRun> runs;
   runs.push_back({"G0", false, {}, {}});
   runs.back().g.codec = GeometryCodec::kG0;
+  const int chroma_shift = IntFlag(args, "--chroma-shift", protocol::GeometryEncodeOptions{}.chroma_shift);
   runs.push_back({"G1", false, {}, {}});
+  runs.back().g.chroma_shift = chroma_shift;
+  runs.push_back({"G1-normals", false, {}, {}});  // normals sent instead of recomputed
+  runs.back().g.normals = protocol::NormalMode::kTransmit;
+  runs.back().g.chroma_shift = chroma_shift;
+  runs.push_back({"G1-lossless-color", false, {}, {}});  // chroma not quantized
+  runs.back().g.chroma_shift = 0;
   runs.push_back({"draco", true, {}, {}});
   runs.push_back({"draco-fast", true, {}, {}});
   runs.back().d.speed = 10;
+  // --only=G1,C1 restricts the run to those codecs (for profiling).
+  std::string only;
+  for (const std::string& e : args.extra)
+    if (e.rfind("--only=", 0) == 0) only = "," + e.substr(7) + ",";
+  auto wanted = [&](const std::string& name) { return only.empty() || only.find("," + name + ",") != std::string::npos; };
+  std::erase_if(runs, [&](const GeomRun& r) { return !wanted(r.name); });
   for (const GeomRun& run : runs) {
     Figures fig;
     for (int rep = 0; rep < args.repeats; ++rep) {
@@ -368,12 +442,15 @@ int RunCodecs(const BenchArgs& args) {
           }
           dopt.position_bits = protocol::DracoBitsForStep((hi - lo).maxCoeff(), 0.001f);
         }
+        const double c0 = ThreadCpuMs();
         const double t0 = NowMs();
         const Status es = run.draco ? protocol::EncodeDraco(in.mesh, dopt, &blob)
                                     : protocol::EncodeGeometry(in.mesh, run.g, &blob, &map);
         const double t1 = NowMs();
+        const double c1 = ThreadCpuMs();
         const Status ds = run.draco ? protocol::DecodeDraco(blob, &out) : protocol::DecodeGeometry(blob, &out);
         const double t2 = NowMs();
+        const double c2 = ThreadCpuMs();
         if (!es.ok() || !ds.ok()) {
           std::fprintf(stderr, "codecs: %s failed: %s %s\n", run.name.c_str(), es.ToString().c_str(),
                        ds.ToString().c_str());
@@ -382,10 +459,18 @@ int RunCodecs(const BenchArgs& args) {
         fig.bytes.push_back(static_cast<double>(blob.size()));
         fig.enc.push_back(t1 - t0);
         fig.dec.push_back(t2 - t1);
+        fig.enc_cpu.push_back(c1 - c0);
+        fig.dec_cpu.push_back(c2 - c1);
         if (rep == 0) {
           const GeomError e = run.draco ? ErrorByNearest(in.mesh, out) : ErrorByMap(in.mesh, out, map);
           fig.a.push_back(e.rms_mm);
           fig.b.push_back(e.max_mm);
+          if (e.color_psnr_db >= 0) fig.vcol_psnr.push_back(e.color_psnr_db);
+          if (e.normal_mean_deg >= 0) {
+            fig.n_mean.push_back(e.normal_mean_deg);
+            fig.n_p99.push_back(e.normal_p99_deg);
+            fig.n_max.push_back(e.normal_max_deg);
+          }
         }
       }
     }
@@ -401,31 +486,62 @@ int RunCodecs(const BenchArgs& args) {
     emit(run.name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
     emit(run.name, "encode_ms", Median(fig.enc), "ms", extra);
     emit(run.name, "decode_ms", Median(fig.dec), "ms", extra);
+    emit(run.name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit(run.name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
-  }
-  {
-    // Where G1's bytes go: its four u32-length streams after the 28-byte prefix.
-    std::vector<uint8_t> blob;
-    if (protocol::EncodeGeometry(inputs[0].mesh, {}, &blob).ok()) {
-      size_t off = 28;
-      for (const char* stream : {"indices", "positions", "normals", "colors"}) {
-        if (off + 4 > blob.size()) break;
-        uint32_t n = 0;
-        std::memcpy(&n, blob.data() + off, 4);
-        emit("G1", "stream_bytes", n, "B", {{"stream", stream}});
-        off += 4 + n;
-      }
+    if (!fig.vcol_psnr.empty()) emit(run.name, "vertex_color_psnr_db", Median(fig.vcol_psnr), "dB", extra);
+    if (!fig.n_mean.empty()) {  // vs the input's normals; G1 recomputes them from the decoded triangles
+      emit(run.name, "normal_mean_deg", Median(fig.n_mean), "deg", extra);
+      emit(run.name, "normal_p99_deg", Median(fig.n_p99), "deg", extra);
+      emit(run.name, "normal_max_deg", *std::max_element(fig.n_max.begin(), fig.n_max.end()), "deg", extra);
     }
   }
-  emit("G1", "bytes_ratio_vs_G0", bytes_of["G1"] / bytes_of["G0"], "1");
-  emit("draco", "bytes_ratio_vs_G1", bytes_of["draco"] / bytes_of["G1"], "1", {{"peer", "draco"}});
+  for (const GeomRun& run : runs) {
+    // Where G1's bytes go: its u32-length streams after the 29 bytes of prefix and G1 header
+    // (flags: bit 0 normals sent, bit 1 colours).
+    if (run.draco || run.g.codec != GeometryCodec::kG1) continue;
+    std::vector<uint8_t> blob;
+    if (!protocol::EncodeGeometry(inputs[0].mesh, run.g, &blob).ok() || blob.size() < 29) continue;
+    std::vector<const char*> streams{"connectivity", "positions"};
+    if (blob[1] & 1) streams.push_back("normals");
+    if (blob[1] & 2) streams.push_back("colors");
+    size_t off = 29;
+    for (const char* stream : streams) {
+      if (off + 4 > blob.size()) break;
+      uint32_t n = 0;
+      std::memcpy(&n, blob.data() + off, 4);
+      emit(run.name, "stream_bytes", n, "B", {{"stream", stream}});
+      if (std::string(stream) == "connectivity") {
+        emit(run.name, "connectivity_bits_per_triangle", n * 8.0 / std::max<size_t>(1, inputs[0].mesh.num_triangles()),
+             "bit");
+      }
+      off += 4 + n;
+    }
+  }
+  if (!inputs[0].mesh.normals.empty()) {
+    // The share of G1's normal error that is the method rather than the
+    // quantization: area-weighted normals of the unquantized input vs its own normals.
+    Mesh m = inputs[0].mesh;
+    protocol::RecomputeNormals(&m);
+    std::vector<uint32_t> identity(m.num_vertices());
+    for (size_t i = 0; i < identity.size(); ++i) identity[i] = static_cast<uint32_t>(i);
+    const GeomError e = ErrorByMap(inputs[0].mesh, m, identity);
+    emit("area-weighted-unquantized", "normal_mean_deg", e.normal_mean_deg, "deg");
+    emit("area-weighted-unquantized", "normal_p99_deg", e.normal_p99_deg, "deg");
+    emit("area-weighted-unquantized", "normal_max_deg", e.normal_max_deg, "deg");
+  }
+  if (bytes_of.count("G0")) emit("G1", "bytes_ratio_vs_G0", bytes_of["G1"] / bytes_of["G0"], "1");
+  if (bytes_of.count("draco")) emit("draco", "bytes_ratio_vs_G1", bytes_of["draco"] / bytes_of["G1"], "1", {{"peer", "draco"}});
 
   // ---- colour
   for (ColorCodec codec : {ColorCodec::kC0, ColorCodec::kC1}) {
     const std::string name = codec == ColorCodec::kC0 ? "C0" : "C1";
+    if (!wanted(name)) continue;
     protocol::ColorEncodeOptions o;
     o.codec = codec;
+    o.jpeg_quality = IntFlag(args, "--jpeg-quality", o.jpeg_quality);
+    if (HasFlag(args, "--chroma444")) o.chroma_420 = false;
     Figures fig;
     for (int rep = 0; rep < args.repeats; ++rep) {
       for (const FrameInput& in : inputs) {
@@ -458,7 +574,10 @@ int RunCodecs(const BenchArgs& args) {
     const double bytes = Median(fig.bytes);
     bytes_of[name] = bytes;
     std::map<std::string, std::string> extra{{"pods", std::to_string(inputs[0].pods.size())}};
-    if (codec == ColorCodec::kC1) extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
+    if (codec == ColorCodec::kC1) {
+      extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
+      extra["chroma"] = o.chroma_420 ? "420" : "444";
+    }
     emit(name, "bytes_per_frame", bytes, "B", extra);
     emit(name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
     emit(name, "encode_ms", Median(fig.enc), "ms", extra);

@@ -1,11 +1,14 @@
 // Geometry codecs for MeshFrame payloads (PROTOCOL.md §7):
 //   G0 — the Holoportation baseline: deduplicated vertices, fp16 positions and
 //        normals, raw RGB8 colours, LZ4 on 32-bit indices.
-//   G1 — our default: positions quantized on a grid in the frame's bounding
-//        box (default step 1 mm), parallelogram-predicted along the triangle
-//        order; octahedral 8-bit normals and RGB8 colours predicted from
-//        neighbours; triangles through meshoptimizer's index codec; the index and
-//        residual streams through zstd.
+//   G1 — our default: connectivity by a region-growing traversal (one symbol
+//        per triangle: new vertex / left / right / explicit / boundary);
+//        positions quantized on a grid in the frame's bounding box (default
+//        step 1 mm), parallelogram-predicted along the traversal; colours in
+//        YCoCg-R with chroma on a 2-level grid by default (R, G ±1, B exact),
+//        predicted the same way or by the mean; normals recomputed by the
+//        decoder (default) or sent octahedral 8-bit; every stream through a
+//        static rANS coder, one context per component.
 // Each blob is self-describing (codec id, counts, flags) and decodes without
 // any other state (every frame is a key frame).
 #pragma once
@@ -20,20 +23,26 @@
 
 namespace holo::protocol {
 
+enum class NormalMode : uint8_t {
+  kNone,       // the decoded mesh has no normals
+  kTransmit,   // sent (G0: fp16; G1: octahedral 8+8 bits, predicted)
+  kRecompute,  // G1: not sent; the decoder computes area-weighted normals from
+               // the decoded triangles (G0 treats this as kTransmit)
+};
+
 struct GeometryEncodeOptions {
   GeometryCodec codec = GeometryCodec::kG1;
   // G1: position quantization step, metres. The maximum position error is
   // step/2 per axis (≤ step·√3/2 in 3D). Must be in [1e-5, 0.1].
   float position_step_m = 0.001f;
-  // G1: zstd level for the index and residual streams (1 = fastest).
-  int zstd_level = 1;
-  // G1: reorder triangles first (meshoptimizer's FIFO vertex cache
-  // optimizer). Off keeps the extraction order, which is already spatially
-  // coherent for marching-cubes output; on costs encode time.
-  bool optimize_order = false;
-  // Send normals and colours when the mesh has them.
-  bool normals = true;
+  // Normals, when the mesh has them.
+  NormalMode normals = NormalMode::kRecompute;
+  // Send colours when the mesh has them.
   bool colors = true;
+  // G1: colour chroma (YCoCg's Co and Cg) quantized to multiples of
+  // 2^chroma_shift, 0..3; 0 is lossless. R and G are then off by at most
+  // 2^(chroma_shift−1) levels, B is exact.
+  int chroma_shift = 1;
   Status Check() const;
 };
 
@@ -60,6 +69,12 @@ StatusOr<GeometryCodec> PeekGeometryCodec(std::span<const uint8_t> blob);
 Status CheckMesh(const Mesh& mesh);
 // Empties all of `mesh`'s arrays.
 void ClearMesh(Mesh* mesh);
+
+// Replaces `mesh`'s normals by normals computed from its triangles, as the G1
+// decoder does when normals are flagged as recomputed (PROTOCOL.md §7): the
+// area-weighted sum of face normals at each vertex, smoothed once over the
+// one-ring, normalized (+Z for a vertex without a non-degenerate triangle).
+void RecomputeNormals(Mesh* mesh);
 
 // Octahedral mapping of a unit vector to [-1, 1]² and back.
 void OctEncode(const Eigen::Vector3f& n, float* u, float* v);

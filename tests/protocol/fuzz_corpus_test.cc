@@ -42,6 +42,13 @@ std::vector<std::pair<std::string, std::vector<uint8_t>>> Seeds() {
     seeds.emplace_back(c == GeometryCodec::kG0 ? "seed-geometry-g0" : "seed-geometry-g1",
                        FuzzInput(FuzzTarget::kGeometry, b));
   }
+  {
+    GeometryEncodeOptions o;
+    o.normals = NormalMode::kTransmit;
+    std::vector<uint8_t> b;
+    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
+    seeds.emplace_back("seed-geometry-g1-normals", FuzzInput(FuzzTarget::kGeometry, b));
+  }
   ImageRgb8 im;
   ImageGray8 mask;
   test::MaskedImage(24, 18, &im, &mask);

@@ -40,6 +40,13 @@ std::vector<std::vector<uint8_t>> SampleBlobs() {
     EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
     out.push_back(FuzzInput(FuzzTarget::kGeometry, b));
   }
+  {  // G1 with normals sent rather than recomputed
+    GeometryEncodeOptions o;
+    o.normals = NormalMode::kTransmit;
+    std::vector<uint8_t> b;
+    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
+    out.push_back(FuzzInput(FuzzTarget::kGeometry, b));
+  }
   ImageRgb8 im;
   ImageGray8 mask;
   test::MaskedImage(20, 14, &im, &mask);
