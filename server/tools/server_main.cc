@@ -9,10 +9,14 @@
 #include <CLI/CLI.hpp>
 
 #include "common/file_util.h"
+#include "common/image_io.h"
+#include "common/visualize.h"
 #include "server/capture/dataset.h"
 #include "server/pipeline/capture_site.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
+#include "server/texture/mesh_renderer.h"
+#include "server/texture/novel_view.h"
 
 namespace {
 
@@ -35,7 +39,7 @@ int main(int argc, char** argv) {
       "running concurrently; every frame's textured mesh can be exported as PLY. Stage timings and\n"
       "progress go to stderr, per-frame stats as JSON lines to --stats (or stdout)."};
   std::string source_spec = "synthetic", workload_name = "S8-QVGA", rig_path, background_spec, export_dir, stats_path;
-  std::string masks_name = "segment";
+  std::string masks_name = "segment", snapshot_path;
   int64_t frames = 60;
   double voxel_mm = 0, trunc_voxels = 4, pace = 0;
   size_t decimate = 0, min_component = 200;
@@ -57,6 +61,9 @@ int main(int argc, char** argv) {
   app.add_option("--queue", queue, "frames in flight per pipeline hop")->capture_default_str();
   app.add_option("--pace", pace, "pace acquisition like a live camera at this fps (0: as fast as possible)");
   app.add_option("--export", export_dir, "write every frame's textured mesh to DIR/mesh_NNNNNN.ply");
+  app.add_option("--snapshot", snapshot_path,
+                 "write a PNG of the last frame's textured mesh from a viewpoint no pod has "
+                 "(synthetic source: ground truth on the left, ours on the right)");
   app.add_option("--stats", stats_path, "write per-frame stats as JSON lines to this file (default stdout)");
   app.add_flag("--serial", serial, "run the stages one after another on one thread");
   app.add_flag("--no-texture", no_texture, "skip texturing (voxel colours stay)");
@@ -152,7 +159,13 @@ int main(int argc, char** argv) {
   if (!site.ok()) return Fail(site.status());
 
   int64_t done = 0;
+  holo::Mesh last_mesh;
+  int64_t last_frame = -1;
   auto sink = [&](const holo::FrameWork& w) -> holo::Status {
+    if (!snapshot_path.empty()) {
+      last_mesh = w.mesh;
+      last_frame = w.frames.frame_index;
+    }
     const auto& t = w.timings;
     std::fprintf(stats_out,
                  "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"acquire_ms\":%.3f,\"segment_ms\":%.3f,"
@@ -175,13 +188,31 @@ int main(int argc, char** argv) {
   auto stats = (*site)->Run(sink);
   if (stats_out != stdout) std::fclose(stats_out);
   if (!stats.ok()) return Fail(stats.status());
+  if (!snapshot_path.empty() && last_frame >= 0) {
+    holo::NovelViewOptions nv;
+    nv.intrinsics = holo::Intrinsics::FromFov(480, 480, 60.0);
+    const holo::NovelView view = holo::MakeNovelViews(nv)[0];
+    holo::ImageRgb8 ours, truth;
+    holo::Status s = holo::RenderMesh(last_mesh, view.camera, &ours, nullptr, nullptr);
+    if (!s.ok()) return Fail(s);
+    std::vector<const holo::ImageRgb8*> tiles;
+    if (studio) {
+      studio->RenderView(last_frame, view.camera, &truth, nullptr, nullptr);
+      tiles.push_back(&truth);
+    }
+    tiles.push_back(&ours);
+    s = holo::WriteImageRgb8(snapshot_path, holo::TileImages(tiles, 2));
+    if (!s.ok()) return Fail(s);
+    if (!quiet) std::fprintf(stderr, "holoport-server: snapshot of frame %lld in %s\n", static_cast<long long>(last_frame), snapshot_path.c_str());
+  }
   const holo::StageTimings m = holo::MedianTimings(*stats);
   if (!quiet)
     std::fprintf(stderr,
                  "holoport-server: %lld frames in %.2f s = %.1f fps; median ms: acquire %.1f, segment %.1f, fuse %.1f, "
-                 "mesh %.1f, texture %.1f; median latency %.1f ms%s%s\n",
+                 "mesh %.1f, texture %.1f; median latency %.1f ms (%s)%s%s\n",
                  static_cast<long long>(stats->frames), stats->wall_seconds, stats->fps, m.acquire_ms, m.segment_ms,
                  m.fuse_ms, m.mesh_ms, m.texture_ms, holo::MedianLatencyMs(*stats),
+                 pace > 0 ? "paced" : "unpaced: includes waiting in queues; use --pace for live latency",
                  export_dir.empty() ? "" : "; meshes in ", export_dir.c_str());
   return 0;
 }
