@@ -23,3 +23,6 @@ pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
 pkg_check_modules(TURBOJPEG REQUIRED IMPORTED_TARGET libturbojpeg)
 find_package(meshoptimizer REQUIRED)
 find_package(draco REQUIRED)
+# Spatial voice (audio/): Opus and OpenAL Soft.
+pkg_check_modules(OPUS REQUIRED IMPORTED_TARGET opus)
+find_package(OpenAL REQUIRED)

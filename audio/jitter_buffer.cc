@@ -1,0 +1,194 @@
+#include "audio/jitter_buffer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace holo::audio {
+namespace {
+// Frames held at most (10 s): a flood of future sequence numbers cannot grow memory.
+constexpr size_t kMaxPackets = 500;
+// Underflows in a row after which the buffer stops and buffers again (200 ms).
+constexpr int kMaxUnderflows = 10;
+}  // namespace
+
+Status JitterBufferOptions::Check() const {
+  if (!(min_target_ms >= 0 && min_target_ms <= max_target_ms)) {
+    return InvalidArgument("need 0 <= min_target_ms <= max_target_ms, got " + std::to_string(min_target_ms) + ", " +
+                           std::to_string(max_target_ms));
+  }
+  if (!(initial_target_ms >= 0)) return InvalidArgument("initial_target_ms must be >= 0");
+  if (window_packets < 10) return InvalidArgument("window_packets must be >= 10, got " + std::to_string(window_packets));
+  if (!(max_stretch >= 0 && max_stretch <= 0.1)) return InvalidArgument("max_stretch must be in 0..0.1");
+  if (!(stretch_per_ms >= 0)) return InvalidArgument("stretch_per_ms must be >= 0");
+  if (!(drop_above_ms > 0)) return InvalidArgument("drop_above_ms must be > 0");
+  return OkStatus();
+}
+
+StatusOr<std::unique_ptr<JitterBuffer>> JitterBuffer::Create(AudioCodec codec, Clock& clock,
+                                                             const JitterBufferOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  std::unique_ptr<JitterBuffer> jb(new JitterBuffer(clock, options));
+  HOLO_ASSIGN_OR_RETURN(jb->decoder_, VoiceDecoder::Create(codec));
+  jb->stats_.target_delay_ms = options.initial_target_ms;
+  return jb;
+}
+
+Status JitterBuffer::Insert(AudioPose frame) {
+  HOLO_RETURN_IF_ERROR(ValidateVoiceFrame(frame));
+  if (frame.codec != decoder_->codec()) return DataLoss("voice frame codec differs from the stream's");
+  const int64_t now = clock_.NowUs();
+  int64_t seq = 0;
+  if (!started_) {
+    seq = frame.sequence;
+    next_seq_ = seq;
+    last_seq32_ = seq;
+    started_ = true;
+  } else {
+    seq = last_seq32_ + static_cast<int32_t>(frame.sequence - static_cast<uint32_t>(last_seq32_));
+  }
+  if (seq > next_seq_ + static_cast<int64_t>(kMaxPackets)) {
+    // The sender restarted or jumped far ahead: start over from this frame.
+    packets_.clear();
+    fifo_.clear();
+    frac_ = 0;
+    transit_us_.clear();
+    rel_delay_ms_.clear();
+    next_seq_ = seq;
+    max_seq_ = seq - 1;
+    playing_ = false;
+  }
+  if (packets_.count(seq) != 0) {
+    ++stats_.duplicates;
+    return OkStatus();
+  }
+  last_seq32_ = std::max(last_seq32_, seq);
+  if (seq >= max_seq_) {
+    anchor_seq_ = seq;
+    anchor_capture_us_ = frame.capture_time_us;
+  }
+  max_seq_ = std::max(max_seq_, seq);
+  // Arrival delay relative to the sender's timeline, anchored on this frame.
+  transit_us_.push_back(now - (anchor_capture_us_ + (seq - anchor_seq_) * kFrameUs));
+  if (static_cast<int>(transit_us_.size()) > options_.window_packets) transit_us_.pop_front();
+  const int64_t min_transit = *std::min_element(transit_us_.begin(), transit_us_.end());
+  rel_delay_ms_.push_back(static_cast<double>(transit_us_.back() - min_transit) / 1000.0);
+  if (static_cast<int>(rel_delay_ms_.size()) > options_.window_packets) rel_delay_ms_.pop_front();
+  UpdateTarget();
+  if (seq < next_seq_) {  // its turn has passed (it was concealed, or it is a duplicate of a played frame)
+    ++stats_.late;
+    return OkStatus();
+  }
+  packets_.emplace(seq, std::move(frame));
+  while (packets_.size() > kMaxPackets) packets_.erase(packets_.begin());
+  ++stats_.inserted;
+  return OkStatus();
+}
+
+void JitterBuffer::UpdateTarget() {
+  // Too few packets for a percentile: keep the initial target as a floor.
+  std::vector<double> v(rel_delay_ms_.begin(), rel_delay_ms_.end());
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(0.97 * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  double target = v[k] + options_.margin_ms;
+  if (v.size() < 50) target = std::max(target, options_.initial_target_ms);
+  stats_.target_delay_ms = std::clamp(target, options_.min_target_ms, options_.max_target_ms);
+}
+
+double JitterBuffer::DelayMs(int64_t now_us) const {
+  if (transit_us_.empty()) return 0.0;
+  const int64_t min_transit = *std::min_element(transit_us_.begin(), transit_us_.end());
+  const double play_seq =
+      static_cast<double>(next_seq_) - (static_cast<double>(fifo_.size()) - frac_) / kFrameSamples;
+  const double capture_us =
+      static_cast<double>(anchor_capture_us_) + (play_seq - static_cast<double>(anchor_seq_)) * kFrameUs;
+  return (static_cast<double>(now_us) - capture_us - static_cast<double>(min_transit)) / 1000.0;
+}
+
+void JitterBuffer::DecodeNext() {
+  std::vector<float> pcm;
+  auto it = packets_.find(next_seq_);
+  bool ok = false;
+  if (it != packets_.end()) {
+    auto decoded = decoder_->Decode(it->second.audio);
+    if (decoded.ok()) {
+      pcm = std::move(decoded).value();
+      pose_ = it->second.pose;
+      ++stats_.played;
+      ok = true;
+    }
+    packets_.erase(it);
+  }
+  if (!ok) {
+    auto next = packets_.find(next_seq_ + 1);
+    bool used_fec = false;
+    pcm = decoder_->Conceal(next != packets_.end() ? std::span<const uint8_t>(next->second.audio)
+                                                   : std::span<const uint8_t>(),
+                            &used_fec);
+    ++stats_.concealed;
+    if (used_fec) ++stats_.fec_recovered;
+  }
+  fifo_.insert(fifo_.end(), pcm.begin(), pcm.end());
+  ++next_seq_;
+}
+
+std::vector<float> JitterBuffer::Pull() {
+  std::vector<float> out(kFrameSamples, 0.0f);
+  const int64_t now = clock_.NowUs();
+  if (!started_) return out;
+  if (!playing_) {
+    if (packets_.empty()) return out;
+    next_seq_ = std::max(next_seq_, packets_.begin()->first);
+    fifo_.clear();
+    frac_ = 0;
+    if (DelayMs(now) < stats_.target_delay_ms) return out;
+    playing_ = true;
+    consecutive_underflows_ = 0;
+  }
+  double delay = DelayMs(now);
+  // Far too much delay (a burst after a stall): drop whole frames.
+  while (delay > stats_.target_delay_ms + options_.drop_above_ms && max_seq_ > next_seq_) {
+    packets_.erase(next_seq_);
+    ++next_seq_;
+    ++stats_.dropped_frames;
+    delay = DelayMs(now);
+  }
+  const double ratio =
+      1.0 + std::clamp(options_.stretch_per_ms * (delay - stats_.target_delay_ms), -options_.max_stretch,
+                       options_.max_stretch);
+  const size_t need = static_cast<size_t>(frac_ + kFrameSamples * ratio) + 2;
+  while (fifo_.size() < need) {
+    if (packets_.count(next_seq_) != 0 || max_seq_ > next_seq_) {
+      DecodeNext();
+      consecutive_underflows_ = 0;
+      continue;
+    }
+    // Nothing to play: stretch with concealment without consuming a frame.
+    ++stats_.underflows;
+    if (++consecutive_underflows_ > kMaxUnderflows) {
+      playing_ = false;
+      fifo_.clear();
+      frac_ = 0;
+      stats_.current_delay_ms = 0;
+      return out;
+    }
+    bool used_fec = false;
+    const std::vector<float> pcm = decoder_->Conceal({}, &used_fec);
+    fifo_.insert(fifo_.end(), pcm.begin(), pcm.end());
+  }
+  double pos = frac_;
+  for (int i = 0; i < kFrameSamples; ++i) {
+    const auto k = static_cast<size_t>(pos);
+    const float t = static_cast<float>(pos - static_cast<double>(k));
+    out[i] = fifo_[k] * (1.0f - t) + fifo_[k + 1] * t;
+    pos += ratio;
+  }
+  const auto consumed = static_cast<size_t>(pos);
+  fifo_.erase(fifo_.begin(), fifo_.begin() + static_cast<std::ptrdiff_t>(consumed));
+  frac_ = pos - static_cast<double>(consumed);
+  stats_.stretch = ratio;
+  stats_.current_delay_ms = DelayMs(now);
+  return out;
+}
+
+}  // namespace holo::audio
