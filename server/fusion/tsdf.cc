@@ -259,21 +259,27 @@ const uint8_t* NonRegisteredColor(const TsdfVolume::PodView& v, const Eigen::Vec
   return v.color + 3 * (static_cast<size_t>(iw) * v.cwidth + iu);
 }
 
+// A cube of voxels of a block: local voxel coordinates [i0, i0 + side) ×
+// [j0, j0 + side) × [k0, k0 + side); side is 4 or 8 (a multiple of 4).
+struct SubBox {
+  int i0 = 0, j0 = 0, k0 = 0, side = kBlockSide;
+};
+
 // Projects the voxels of one block (first voxel centre at `origin`, world)
 // into one view and accumulates their truncated signed distances. General
 // path: any camera, optional edge filter.
 template <bool kDistorted, bool kRegistered>
 void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                   BlockAccumulator* acc) {
+                   const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const float inv_trunc = 1.0f / trunc;
   const float wf = static_cast<float>(v.width), hf = static_cast<float>(v.height);
-  for (int k = 0; k < kBlockSide; ++k) {
-    for (int j = 0; j < kBlockSide; ++j) {
-      Eigen::Vector3f p = p0 + dy * static_cast<float>(j) + dz * static_cast<float>(k);
+  for (int k = box.k0; k < box.k0 + box.side; ++k) {
+    for (int j = box.j0; j < box.j0 + box.side; ++j) {
+      Eigen::Vector3f p = p0 + dx * static_cast<float>(box.i0) + dy * static_cast<float>(j) + dz * static_cast<float>(k);
       const int row = kBlockSide * j + kBlockSide * kBlockSide * k;
-      for (int i = 0; i < kBlockSide; ++i, p += dx) {
+      for (int i = box.i0; i < box.i0 + box.side; ++i, p += dx) {
         if (p.z() <= kMinProjectZ) continue;
         float u, w;
         if constexpr (kDistorted) {
@@ -308,7 +314,7 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
 // time with SSE2 (part of every x86-64 CPU). Same arithmetic as the general
 // path up to float rounding order.
 void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                       BlockAccumulator* acc) {
+                       const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const __m128 lane = _mm_setr_ps(0, 1, 2, 3);
@@ -321,11 +327,11 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
   const __m128 inv_trunc = _mm_set1_ps(1.0f / trunc);
   alignas(16) int32_t pix[4];
   alignas(16) float depth[4];
-  for (int k = 0; k < kBlockSide; ++k) {
-    for (int j = 0; j < kBlockSide; ++j) {
+  for (int k = box.k0; k < box.k0 + box.side; ++k) {
+    for (int j = box.j0; j < box.j0 + box.side; ++j) {
       const Eigen::Vector3f pr = p0 + dy * static_cast<float>(j) + dz * static_cast<float>(k);
       const int row = kBlockSide * j + kBlockSide * kBlockSide * k;
-      for (int half = 0; half < kBlockSide; half += 4) {
+      for (int half = box.i0; half < box.i0 + box.side; half += 4) {
         const __m128 li = _mm_add_ps(lane, _mm_set1_ps(static_cast<float>(half)));
         const __m128 px = _mm_add_ps(_mm_set1_ps(pr.x()), _mm_mul_ps(li, dxx));
         const __m128 py = _mm_add_ps(_mm_set1_ps(pr.y()), _mm_mul_ps(li, dxy));
@@ -367,32 +373,35 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
 
 enum class BlockView { kSkip, kFreeSpace, kProject };
 
-// How view `v` sees the block whose voxel centres span [lo, hi] (world):
-// kSkip if no voxel can receive an update (outside the image, over pixels
-// without usable depth, or entirely more than `trunc` behind the observed
-// surface); kFreeSpace if every voxel projects onto a usable pixel more than
-// `trunc` behind it (each voxel gets tsdf +1, weight 1, no colour: exactly
-// what projecting them would give); kProject otherwise.
-BlockView ClassifyBlockView(const TsdfVolume::PodView& v, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi,
-                            float trunc) {
-  if (v.distorted) return BlockView::kProject;  // projected corners do not bound a distorted image region
+// Image footprint of a box of voxel centres in one (undistorted) view: the
+// range of its projected corners and of their camera depths. `behind` = a
+// corner is at or behind the camera plane (the footprint is then unbounded).
+struct Footprint {
   float umin = INFINITY, umax = -INFINITY, vmin = INFINITY, vmax = -INFINITY, zmin = INFINITY, zmax = -INFINITY;
-  for (int c = 0; c < 8; ++c) {
-    const Eigen::Vector3f pw((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
-    const Eigen::Vector3f p = v.R * pw + v.t;
-    if (p.z() <= kMinProjectZ) return BlockView::kProject;  // straddles the camera plane
-    const float u = v.fx * p.x() / p.z() + v.cx, w = v.fy * p.y() / p.z() + v.cy;
+  bool behind = false;
+  void Add(float u, float w, float z, bool b) {
     umin = std::min(umin, u);
     umax = std::max(umax, u);
     vmin = std::min(vmin, w);
     vmax = std::max(vmax, w);
-    zmin = std::min(zmin, p.z());
-    zmax = std::max(zmax, p.z());
+    zmin = std::min(zmin, z);
+    zmax = std::max(zmax, z);
+    behind |= b;
   }
+};
+
+// How view `v` sees a box of voxel centres with footprint `f`: kSkip if no
+// voxel can receive an update (outside the image, over pixels without usable
+// depth, or entirely more than `trunc` behind the observed surface);
+// kFreeSpace if every voxel projects onto a usable pixel more than `trunc`
+// behind it (each voxel gets tsdf +1, weight 1, no colour: exactly what
+// projecting them would give); kProject otherwise.
+BlockView ClassifyFootprint(const TsdfVolume::PodView& v, const Footprint& f, float trunc) {
+  if (f.behind) return BlockView::kProject;  // straddles the camera plane
   // Pixels a voxel can round to: [floor(u + ½)] over the projected range
   // (the projection of the box is convex and holds every voxel's projection).
-  const int ux0 = static_cast<int>(std::floor(umin + 0.5f)), ux1 = static_cast<int>(std::floor(umax + 0.5f));
-  const int uy0 = static_cast<int>(std::floor(vmin + 0.5f)), uy1 = static_cast<int>(std::floor(vmax + 0.5f));
+  const int ux0 = static_cast<int>(std::floor(f.umin + 0.5f)), ux1 = static_cast<int>(std::floor(f.umax + 0.5f));
+  const int uy0 = static_cast<int>(std::floor(f.vmin + 0.5f)), uy1 = static_cast<int>(std::floor(f.vmax + 0.5f));
   const int x0 = std::max(0, ux0), x1 = std::min(v.width - 1, ux1);
   const int y0 = std::max(0, uy0), y1 = std::min(v.height - 1, uy1);
   if (x0 > x1 || y0 > y1) return BlockView::kSkip;
@@ -403,13 +412,51 @@ BlockView ClassifyBlockView(const TsdfVolume::PodView& v, const Eigen::Vector3f&
       dmin = std::min(dmin, v.tile_min[ty * v.tiles_x + tx]);
     }
   if (dmax == 0) return BlockView::kSkip;
-  if (zmin - trunc > static_cast<float>(dmax) * 0.001f) return BlockView::kSkip;
+  if (f.zmin - trunc > static_cast<float>(dmax) * 0.001f) return BlockView::kSkip;
   const bool inside = ux0 >= 0 && ux1 < v.width && uy0 >= 0 && uy1 < v.height;
   // A small margin keeps float rounding in the per-voxel path from making a
   // voxel's distance fall just short of the truncation.
-  if (inside && dmin > 0 && static_cast<float>(dmin) * 0.001f - zmax > trunc * 1.001f + 1e-4f) return BlockView::kFreeSpace;
+  if (inside && dmin > 0 && static_cast<float>(dmin) * 0.001f - f.zmax > trunc * 1.001f + 1e-4f)
+    return BlockView::kFreeSpace;
   return BlockView::kProject;
 }
+
+// A block's voxel centres projected on a 3×3×3 lattice (local voxel
+// coordinates 0, 3.5 and 7 on each axis): the corners of the whole block and
+// of its eight 4³ sub-blocks (each sub-block's box [0, 3.5] or [3.5, 7] holds
+// its voxel centres).
+struct BlockLattice {
+  float u[27], w[27], z[27];
+  bool behind[27];
+  static int Index(int a, int b, int c) { return a + 3 * b + 9 * c; }
+  void Project(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel) {
+    const Eigen::Vector3f p0 = v.R * origin + v.t;
+    const float h = 0.5f * (kBlockSide - 1) * voxel;
+    const Eigen::Vector3f dx = v.R.col(0) * h, dy = v.R.col(1) * h, dz = v.R.col(2) * h;
+    for (int c = 0; c < 3; ++c)
+      for (int b = 0; b < 3; ++b)
+        for (int a = 0; a < 3; ++a) {
+          const Eigen::Vector3f p = p0 + dx * static_cast<float>(a) + dy * static_cast<float>(b) + dz * static_cast<float>(c);
+          const int i = Index(a, b, c);
+          behind[i] = p.z() <= kMinProjectZ;
+          const float inv_z = 1.0f / p.z();
+          u[i] = v.fx * p.x() * inv_z + v.cx;
+          w[i] = v.fy * p.y() * inv_z + v.cy;
+          z[i] = p.z();
+        }
+  }
+  // Footprint of the box with lattice corners (a0..a0+n, b0..b0+n, c0..c0+n).
+  Footprint Box(int a0, int b0, int c0, int n) const {
+    Footprint f;
+    for (int c = c0; c <= c0 + n; c += n)
+      for (int b = b0; b <= b0 + n; b += n)
+        for (int a = a0; a <= a0 + n; a += n) {
+          const int i = Index(a, b, c);
+          f.Add(u[i], w[i], z[i], behind[i]);
+        }
+    return f;
+  }
+};
 
 }  // namespace
 
@@ -537,45 +584,77 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   s.thread_block_views.assign(static_cast<size_t>(threads), 0);
   s.thread_skipped.assign(static_cast<size_t>(threads), 0);
   s.thread_free.assign(static_cast<size_t>(threads), 0);
+  s.thread_subs.assign(static_cast<size_t>(threads), 0);
   const size_t num_tasks = (s.active.size() + kBlocksPerTask - 1) / kBlocksPerTask;
   s.pool.Run(num_tasks, [&](size_t task, int thread) {
     BlockAccumulator acc;
+    BlockLattice lattice;
     const size_t end = std::min(s.active.size(), (task + 1) * kBlocksPerTask);
     for (size_t a = task * kBlocksPerTask; a < end; ++a) {
       const int32_t b = s.active[a];
       const BlockCoord& bc = blocks_.coord(b);
       const Eigen::Vector3f lo = Eigen::Vector3f(static_cast<float>(bc.x), static_cast<float>(bc.y),
                                                  static_cast<float>(bc.z)) * (voxel * kBlockSide);
-      const Eigen::Vector3f hi = lo + Eigen::Vector3f::Constant(voxel * (kBlockSide - 1));
       acc.Clear();
       for (const PodView& v : s.views) {
-        const BlockView kind = ClassifyBlockView(v, lo, hi, trunc);
+        auto project = [&](const SubBox& box) {
+#if defined(__SSE2__)
+          if (!v.distorted && v.registered && !v.edge) {
+            IntegrateViewSse2(v, lo, voxel, trunc, box, &acc);
+            return;
+          }
+#endif
+          if (v.distorted) {
+            if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, box, &acc);
+            else IntegrateView<true, false>(v, lo, voxel, trunc, box, &acc);
+          } else {
+            if (v.registered) IntegrateView<false, true>(v, lo, voxel, trunc, box, &acc);
+            else IntegrateView<false, false>(v, lo, voxel, trunc, box, &acc);
+          }
+        };
+        auto free_space = [&](const SubBox& box) {
+          for (int k = box.k0; k < box.k0 + box.side; ++k)
+            for (int j = box.j0; j < box.j0 + box.side; ++j) {
+              const int row = box.i0 + kBlockSide * j + kBlockSide * kBlockSide * k;
+              for (int i = 0; i < box.side; ++i) {
+                acc.tsdf[row + i] += 1.0f;
+                acc.weight[row + i] += 1.0f;
+              }
+            }
+        };
+        if (v.distorted) {  // projected corners do not bound a distorted image region
+          ++s.thread_block_views[static_cast<size_t>(thread)];
+          project(SubBox{});
+          continue;
+        }
+        lattice.Project(v, lo, voxel);
+        const BlockView kind = ClassifyFootprint(v, lattice.Box(0, 0, 0, 2), trunc);
         if (kind == BlockView::kSkip) {
           ++s.thread_skipped[static_cast<size_t>(thread)];
           continue;
         }
         if (kind == BlockView::kFreeSpace) {
           ++s.thread_free[static_cast<size_t>(thread)];
-          for (int i = 0; i < kBlockVoxels; ++i) {
-            acc.tsdf[i] += 1.0f;
-            acc.weight[i] += 1.0f;
-          }
+          free_space(SubBox{});
           continue;
         }
         ++s.thread_block_views[static_cast<size_t>(thread)];
-#if defined(__SSE2__)
-        if (!v.distorted && v.registered && !v.edge) {
-          IntegrateViewSse2(v, lo, voxel, trunc, &acc);
-          continue;
-        }
-#endif
-        if (v.distorted) {
-          if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, &acc);
-          else IntegrateView<true, false>(v, lo, voxel, trunc, &acc);
-        } else {
-          if (v.registered) IntegrateView<false, true>(v, lo, voxel, trunc, &acc);
-          else IntegrateView<false, false>(v, lo, voxel, trunc, &acc);
-        }
+        // Partly in the band: the same test on each 4³ sub-block, so only
+        // sub-blocks near the observed surface are projected voxel by voxel.
+        constexpr int kSub = kBlockSide / 2;
+        for (int c = 0; c < 2; ++c)
+          for (int bb = 0; bb < 2; ++bb)
+            for (int a2 = 0; a2 < 2; ++a2) {
+              const SubBox box{kSub * a2, kSub * bb, kSub * c, kSub};
+              const BlockView sub = ClassifyFootprint(v, lattice.Box(a2, bb, c, 1), trunc);
+              if (sub == BlockView::kSkip) continue;
+              if (sub == BlockView::kFreeSpace) {
+                free_space(box);
+              } else {
+                ++s.thread_subs[static_cast<size_t>(thread)];
+                project(box);
+              }
+            }
       }
       VoxelBlock& vb = blocks_.block(b);
       uint8_t flags = 0;
@@ -596,7 +675,11 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
             vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i] * s) * inv + 0.5f);
           }
         }
-        if (vb.weight[i] > 0) flags |= vb.tsdf[i] < 0 ? kBlockHasNegative : kBlockHasPositive;
+        if (vb.weight[i] > 0) {
+          if (vb.tsdf[i] < 0) flags |= kBlockHasNegative;
+          else if (vb.tsdf[i] < kTsdfBandLimit) flags |= kBlockHasPositive | kBlockHasPositiveInBand;
+          else flags |= kBlockHasPositive;
+        }
       }
       blocks_.set_flags(b, flags);
     }
@@ -609,6 +692,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
     stats_.block_views += s.thread_block_views[static_cast<size_t>(t)];
     stats_.block_views_skipped += s.thread_skipped[static_cast<size_t>(t)];
     stats_.block_views_free += s.thread_free[static_cast<size_t>(t)];
+    stats_.sub_blocks_projected += s.thread_subs[static_cast<size_t>(t)];
   }
   return OkStatus();
 }

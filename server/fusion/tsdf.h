@@ -63,6 +63,7 @@ struct TsdfStats {
   size_t block_views = 0;          // (block, pod) pairs integrated
   size_t block_views_skipped = 0;  // pairs skipped: outside the image, no valid depth, or occluded
   size_t block_views_free = 0;     // of the integrated pairs, those wholly in free space (no projection needed)
+  size_t sub_blocks_projected = 0; // 4³ sub-blocks projected voxel by voxel (the rest culled or free space)
   size_t mesh_blocks = 0;          // blocks that could hold a surface during meshing
   // Wall time of Integrate's phases, ms: depth preparation and block
   // collection (parallel over pods), block allocation (serial), voxel

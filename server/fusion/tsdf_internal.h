@@ -45,7 +45,11 @@ struct TsdfVolume::PodView {
   int tiles_x = 0, tiles_y = 0;
 };
 
-inline constexpr int kTileSide = 8;
+// Side of the pixel tiles whose depth range culls blocks and sub-blocks.
+inline constexpr int kTileSide = 4;
+// Tsdf at or above this is free space beyond the truncation band in every
+// view (skip_truncated_cubes).
+inline constexpr float kTsdfBandLimit = 0.999f;
 inline constexpr int kEdgesPerBlock = 3 * kBlockVoxels;
 
 struct TsdfVolume::Scratch {
@@ -63,7 +67,7 @@ struct TsdfVolume::Scratch {
   uint32_t stamp = 0;
   std::vector<int32_t> active;                      // blocks touched this frame
   std::vector<std::pair<uint64_t, int32_t>> order;  // (Morton code, block) for sorting
-  std::vector<size_t> thread_block_views, thread_skipped, thread_free;
+  std::vector<size_t> thread_block_views, thread_skipped, thread_free, thread_subs;
 
   // Meshing.
   struct MeshVertex {

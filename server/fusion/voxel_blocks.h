@@ -55,6 +55,7 @@ struct alignas(64) VoxelBlock {
 enum BlockFlags : uint8_t {
   kBlockHasNegative = 1,  // some observed voxel has tsdf < 0
   kBlockHasPositive = 2,  // some observed voxel has tsdf ≥ 0
+  kBlockHasPositiveInBand = 4,  // some observed voxel has 0 ≤ tsdf < 0.999 (not beyond the band in every view)
 };
 
 class VoxelBlockMap {
