@@ -68,6 +68,8 @@ Status TsdfOptions::Check() const {
     return InvalidArgument("min_depth_m must be in [0, max_depth_m), got " + Num(min_depth_m));
   if (!(min_weight > 0) || !std::isfinite(min_weight))
     return InvalidArgument("min_weight must be > 0, got " + Num(min_weight));
+  if (allocation_min_support < 0 || allocation_min_support > 4)
+    return InvalidArgument("allocation_min_support must be in [0, 4], got " + std::to_string(allocation_min_support));
   if (threads < 0) return InvalidArgument("threads must be >= 0, got " + std::to_string(threads));
   return OkStatus();
 }
@@ -170,12 +172,22 @@ void CollectBlocks(const TsdfVolume::PodView& v, const TsdfOptions& o, std::vect
   const float trunc = o.truncation_voxels * o.voxel_size;
   const float inv_block = 1.0f / (o.voxel_size * kBlockSide);
   const float half = 0.5f / kBlockSide;  // voxel centres sit on the lattice: block b covers [8b − ½, 8b + 7½) voxels
+  const int min_support = o.allocation_min_support;
+  const int trunc_mm = static_cast<int>(trunc * 1000.0f);
   const Eigen::Matrix3f Rt = v.R.transpose();
   const Eigen::Vector3f c = v.center * inv_block + Eigen::Vector3f::Constant(half);
   for (int py = 0; py < v.height; ++py) {
     const uint16_t* row = v.depth + static_cast<size_t>(py) * v.width;
     for (int px = 0; px < v.width; ++px) {
       if (row[px] == 0) continue;
+      if (min_support > 0) {
+        // Support: 4-neighbours with depth within the truncation distance.
+        const int d0 = row[px];
+        auto near = [&](int n) { return n != 0 && std::abs(n - d0) <= trunc_mm; };
+        const int support = (px > 0 && near(row[px - 1])) + (px + 1 < v.width && near(row[px + 1])) +
+                            (py > 0 && near(row[px - v.width])) + (py + 1 < v.height && near(row[px + v.width]));
+        if (support < min_support) continue;
+      }
       const float d = row[px] * 0.001f;
       Eigen::Vector2d n((px - v.cx) / v.fx, (py - v.cy) / v.fy);
       if (v.distorted) n = Undistort(v.distortion, n);
