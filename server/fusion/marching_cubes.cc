@@ -261,17 +261,17 @@ void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOption
 
 // TSDF gradient at cache voxel (x, y, z) ∈ [0, 8]³: central differences,
 // one-sided next to unobserved voxels.
-Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
+inline Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
   const int i = CacheIndex(x, y, z);
   static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
+  const float t0 = c.tsdf[i];
   Eigen::Vector3f g;
   for (int a = 0; a < 3; ++a) {
     const int ip = i + kStride[a], im = i - kStride[a];
     const bool p = c.weight[ip] > 0, m = c.weight[im] > 0;
-    if (p && m) g[a] = 0.5f * (c.tsdf[ip] - c.tsdf[im]);
-    else if (p) g[a] = c.tsdf[ip] - c.tsdf[i];
-    else if (m) g[a] = c.tsdf[i] - c.tsdf[im];
-    else g[a] = 0;
+    // Branch-free form of: both → ½(t+ − t−), one side → one-sided, none → 0.
+    const float d = (p ? c.tsdf[ip] : t0) - (m ? c.tsdf[im] : t0);
+    g[a] = p && m ? 0.5f * d : d;
   }
   return g;
 }
@@ -293,6 +293,14 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   if (nb == 0) return;
   HOLO_CHECK_MSG(nb < (size_t{1} << (32 - kEdgeBits)), "too many voxel blocks for marching cubes");
   const McTable& table = Table();
+  const EdgeInfo& edges = Edges();
+  // Per cube edge: its (voxel·3 + axis) offset from the cube origin's, for
+  // cubes whose edges all lie in the same block.
+  int edge_offset[12];
+  for (int e = 0; e < 12; ++e) {
+    const int c = edges.low[e];
+    edge_offset[e] = 3 * ((c & 1) + kBlockSide * (((c >> 1) & 1) + kBlockSide * ((c >> 2) & 1))) + edges.axis[e];
+  }
   const int threads = s.pool.num_threads();
   s.thread_vertices.resize(static_cast<size_t>(threads));
   s.thread_tris.resize(static_cast<size_t>(threads));
@@ -420,11 +428,21 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
                              (cache.tsdf[ci + sz + 1] < 0) << 5 | (cache.tsdf[ci + sz + sy] < 0) << 6 |
                              (cache.tsdf[ci + sz + sy + 1] < 0) << 7;
             const McCase& mc = table.cases[code];
+            const int v0 = x + kBlockSide * (y + kBlockSide * z);
+            if (x < kBlockSide - 1 && y < kBlockSide - 1 && z < kBlockSide - 1) {
+              // Interior cube: every edge belongs to this block.
+              for (int t = 0; t < mc.num_triangles; ++t) {
+                const uint8_t* te = mc.edges + 3 * t;
+                tris.push_back({PackEdgeRef(b, 3 * v0 + edge_offset[te[0]]), PackEdgeRef(b, 3 * v0 + edge_offset[te[1]]),
+                                PackEdgeRef(b, 3 * v0 + edge_offset[te[2]])});
+              }
+              continue;
+            }
             for (int t = 0; t < mc.num_triangles; ++t) {
               std::array<uint32_t, 3> ref;
               for (int k = 0; k < 3; ++k) {
                 const int e = mc.edges[3 * t + k];
-                const int c = Edges().low[e];
+                const int c = edges.low[e];
                 int p[3] = {x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)};
                 int d[3];
                 for (int q = 0; q < 3; ++q) {
@@ -433,7 +451,7 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
                 }
                 const int32_t owner = nbr[NeighbourIndex(d[0], d[1], d[2])];
                 HOLO_CHECK(owner >= 0);
-                ref[k] = PackEdgeRef(owner, 3 * (p[0] + kBlockSide * (p[1] + kBlockSide * p[2])) + Edges().axis[e]);
+                ref[k] = PackEdgeRef(owner, 3 * (p[0] + kBlockSide * (p[1] + kBlockSide * p[2])) + edges.axis[e]);
               }
               tris.push_back(ref);
             }
