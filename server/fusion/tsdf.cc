@@ -412,7 +412,6 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
   const __m256 inv_trunc = _mm256_set1_ps(1.0f / trunc);
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
   const int* depth_words = reinterpret_cast<const int*>(v.depth);  // v.depth is padded by one pixel
-  alignas(32) int32_t pix[8];
   const int row_step = full ? 1 : 2;
   for (int k = box.k0; k < box.k0 + box.side; ++k) {
     for (int j = box.j0; j < box.j0 + box.side; j += row_step) {
@@ -436,27 +435,26 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
       const __m256 d = _mm256_and_ps(ok, _mm256_cvtepi32_ps(raw));
       const __m256 sdf = _mm256_sub_ps(_mm256_mul_ps(d, mm), pz);
       const __m256 upd = _mm256_and_ps(_mm256_cmp_ps(d, zero, _CMP_GT_OQ), _mm256_cmp_ps(sdf, neg_trunc, _CMP_GE_OQ));
-      const int upd_bits = _mm256_movemask_ps(upd);
-      if (upd_bits == 0) continue;
       const __m256 t = _mm256_and_ps(upd, _mm256_min_ps(one, _mm256_mul_ps(sdf, inv_trunc)));
       const __m256 wt = _mm256_and_ps(upd, one);
       const int row0 = kBlockSide * j + kBlockSide * kBlockSide * k + box.i0;
       const int row1 = full ? row0 + 4 : row0 + kBlockSide;  // accumulator index of lane 4
-      float* at0 = acc->tsdf + row0;
-      float* at1 = acc->tsdf + row1;
-      float* aw0 = acc->weight + row0;
-      float* aw1 = acc->weight + row1;
-      _mm_storeu_ps(at0, _mm_add_ps(_mm_loadu_ps(at0), _mm256_castps256_ps128(t)));
-      _mm_storeu_ps(at1, _mm_add_ps(_mm_loadu_ps(at1), _mm256_extractf128_ps(t, 1)));
-      _mm_storeu_ps(aw0, _mm_add_ps(_mm_loadu_ps(aw0), _mm256_castps256_ps128(wt)));
-      _mm_storeu_ps(aw1, _mm_add_ps(_mm_loadu_ps(aw1), _mm256_extractf128_ps(wt, 1)));
-      const int near_bits = upd_bits & _mm256_movemask_ps(_mm256_cmp_ps(sdf, pos_trunc, _CMP_LT_OQ));
-      if (near_bits == 0) continue;
-      _mm256_store_si256(reinterpret_cast<__m256i*>(pix), idx);
-      for (int bits = near_bits; bits != 0; bits &= bits - 1) {
-        const int l = std::countr_zero(static_cast<unsigned>(bits));
-        AddColor(acc, (l < 4 ? row0 + l : row1 + l - 4), v.color + 3 * static_cast<size_t>(pix[l]));
-      }
+      // Adds the lanes of `x` to acc array `base` (lanes 0–3 at row0, 4–7 at row1).
+      auto add = [row0, row1](float* base, __m256 x) __attribute__((target("avx2"))) {
+        _mm_storeu_ps(base + row0, _mm_add_ps(_mm_loadu_ps(base + row0), _mm256_castps256_ps128(x)));
+        _mm_storeu_ps(base + row1, _mm_add_ps(_mm_loadu_ps(base + row1), _mm256_extractf128_ps(x, 1)));
+      };
+      add(acc->tsdf, t);
+      add(acc->weight, wt);
+      const __m256 near = _mm256_and_ps(upd, _mm256_cmp_ps(sdf, pos_trunc, _CMP_LT_OQ));
+      if (_mm256_movemask_ps(near) == 0) continue;
+      const __m256i rgb = _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), reinterpret_cast<const int*>(v.color_words),
+                                                      idx, _mm256_castps_si256(near), 4);
+      const __m256i byte = _mm256_set1_epi32(0xFF);
+      add(acc->r, _mm256_cvtepi32_ps(_mm256_and_si256(rgb, byte)));
+      add(acc->g, _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(rgb, 8), byte)));
+      add(acc->b, _mm256_cvtepi32_ps(_mm256_srli_epi32(rgb, 16)));
+      add(acc->color_weight, _mm256_and_ps(near, one));
     }
   }
 }
@@ -590,6 +588,10 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   s.tile_min.resize(num_pods);
   s.edge.resize(num_pods);
   s.pod_blocks.resize(num_pods);
+  s.color_words.resize(num_pods);
+#if defined(HOLO_FUSION_AVX2)
+  const bool use_avx2 = CpuHasAvx2() && !std::getenv("HOLO_FUSION_NO_AVX2");
+#endif
   for (size_t k = 0; k < num_pods; ++k) {
     const PodCalibration& pod = rig.pods[k];
     PodView& v = s.views[k];
@@ -627,6 +629,18 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
     PrepareDepth(frames.frames[k], min_mm, max_mm, &s.masked_depth[k], &s.tile_max[k], &s.tile_min[k], s.views[k].tiles_x,
                  s.views[k].tiles_y);
     s.views[k].depth = s.masked_depth[k].data();
+    s.views[k].color_words = nullptr;
+#if defined(HOLO_FUSION_AVX2)
+    if (use_avx2 && s.views[k].registered && !s.views[k].distorted) {
+      const size_t n = static_cast<size_t>(s.views[k].width) * s.views[k].height;
+      std::vector<uint32_t>& words = s.color_words[k];
+      words.resize(n);
+      const uint8_t* c = s.views[k].color;
+      for (size_t i = 0; i < n; ++i)
+        words[i] = uint32_t{c[3 * i]} | uint32_t{c[3 * i + 1]} << 8 | uint32_t{c[3 * i + 2]} << 16;
+      s.views[k].color_words = words.data();
+    }
+#endif
     s.views[k].tile_max = s.tile_max[k].data();
     s.views[k].tile_min = s.tile_min[k].data();
     if (options_.ignore_behind_depth_edges) {
@@ -682,9 +696,6 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   s.thread_free.assign(static_cast<size_t>(threads), 0);
   s.thread_subs.assign(static_cast<size_t>(threads), 0);
   const size_t num_tasks = (s.active.size() + kBlocksPerTask - 1) / kBlocksPerTask;
-#if defined(HOLO_FUSION_AVX2)
-  const bool use_avx2 = CpuHasAvx2() && !std::getenv("HOLO_FUSION_NO_AVX2");
-#endif
   s.pool.Run(num_tasks, [&](size_t task, int thread) {
     BlockAccumulator acc;
     BlockLattice lattice;
@@ -698,7 +709,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
       for (const PodView& v : s.views) {
         auto project = [&](const SubBox& box) {
 #if defined(HOLO_FUSION_AVX2)
-          if (!v.distorted && v.registered && !v.edge && use_avx2) {
+          if (v.color_words && !v.edge) {
             IntegrateViewAvx2(v, lo, voxel, trunc, box, &acc);
             return;
           }

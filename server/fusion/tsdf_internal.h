@@ -36,6 +36,9 @@ struct TsdfVolume::PodView {
   bool color_distorted = false;
   std::array<double, 5> color_distortion{};
   const uint8_t* color = nullptr;  // RGB8, cwidth × cheight
+  // The colour as one 32-bit word per pixel (R | G << 8 | B << 16), for the
+  // AVX2 gather; only for registered pods on that path (else null).
+  const uint32_t* color_words = nullptr;
   // Masked depth (mm, 0 = unused) and the maximum of each 8×8 pixel tile.
   const uint16_t* depth = nullptr;
   const uint16_t* tile_max = nullptr;
@@ -62,6 +65,7 @@ struct TsdfVolume::Scratch {
   std::vector<std::vector<uint16_t>> tile_max;
   std::vector<std::vector<uint16_t>> tile_min;
   std::vector<std::vector<uint8_t>> edge;
+  std::vector<std::vector<uint32_t>> color_words;
   std::vector<std::vector<BlockCoord>> pod_blocks;  // candidate blocks per pod, locally de-duplicated
   std::vector<uint32_t> touched_stamp;              // per block: frame stamp of the last touch
   uint32_t stamp = 0;
