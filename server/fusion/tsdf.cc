@@ -666,8 +666,12 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   for (size_t k = 0; k < num_pods; ++k) {
     for (const BlockCoord& c : s.pod_blocks[k]) {
       bool created = false;
-      const int32_t b = blocks_.FindOrAllocate(c, &created);
+      // New blocks are not cleared here: the merge below writes every voxel
+      // of every active block (serial memory traffic saved).
+      const int32_t b = blocks_.FindOrAllocate(c, &created, /*clear=*/false);
       if (static_cast<size_t>(b) >= s.touched_stamp.size()) s.touched_stamp.resize(static_cast<size_t>(b) + 1, 0u);
+      if (static_cast<size_t>(b) >= s.fresh.size()) s.fresh.resize(static_cast<size_t>(b) + 1, 0);
+      if (created) s.fresh[static_cast<size_t>(b)] = 1;
       if (s.touched_stamp[static_cast<size_t>(b)] != s.stamp) {
         s.touched_stamp[static_cast<size_t>(b)] = s.stamp;
         s.active.push_back(b);
@@ -775,6 +779,15 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
       // Merge into the stored running averages: branch-free so the compiler
       // vectorises it; colour only where this frame saw the voxel in the band.
       VoxelBlock& vb = blocks_.block(b);
+      // A block allocated this frame holds stale memory: old weight, tsdf
+      // and colour are taken as 0 (what Clear() would have written).
+      const bool fresh = s.fresh[static_cast<size_t>(b)] != 0;
+      s.fresh[static_cast<size_t>(b)] = 0;
+      if (fresh) {
+        std::memset(vb.r, 0, sizeof(vb.r));
+        std::memset(vb.g, 0, sizeof(vb.g));
+        std::memset(vb.b, 0, sizeof(vb.b));
+      }
       int has_neg = 0, has_pos = 0, has_band = 0;
 #if defined(__SSE2__)
       {
@@ -782,8 +795,8 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         __m128 neg = zero, pos = zero, in_band = zero;
         for (int i = 0; i < kBlockVoxels; i += 4) {
           const __m128 w_new = _mm_load_ps(acc.weight + i);
-          const __m128 w_old = _mm_load_ps(vb.weight + i);
-          const __m128 t_old = _mm_load_ps(vb.tsdf + i);
+          const __m128 w_old = fresh ? zero : _mm_load_ps(vb.weight + i);
+          const __m128 t_old = fresh ? zero : _mm_load_ps(vb.tsdf + i);
           const __m128 w = _mm_add_ps(w_old, w_new);
           const __m128 seen = _mm_cmpgt_ps(w_new, zero);
           const __m128 denom = _mm_or_ps(_mm_and_ps(seen, w), _mm_andnot_ps(seen, one));
@@ -804,10 +817,11 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
 #else
       for (int i = 0; i < kBlockVoxels; ++i) {
         const float w_new = acc.weight[i];
-        const float w_old = vb.weight[i];
+        const float w_old = fresh ? 0.0f : vb.weight[i];
+        const float t_old = fresh ? 0.0f : vb.tsdf[i];
         const float w = w_old + w_new;
-        const float merged = (vb.tsdf[i] * w_old + acc.tsdf[i]) * (1.0f / (w_new > 0 ? w : 1.0f));
-        const float t = w_new > 0 ? merged : vb.tsdf[i];
+        const float merged = (t_old * w_old + acc.tsdf[i]) * (1.0f / (w_new > 0 ? w : 1.0f));
+        const float t = w_new > 0 ? merged : t_old;
         vb.tsdf[i] = t;
         vb.weight[i] = w;
         const int observed = w > 0;

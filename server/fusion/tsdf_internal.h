@@ -70,6 +70,7 @@ struct TsdfVolume::Scratch {
   std::vector<uint32_t> touched_stamp;              // per block: frame stamp of the last touch
   uint32_t stamp = 0;
   std::vector<int32_t> active;                      // blocks touched this frame
+  std::vector<uint8_t> fresh;                       // per block: allocated this frame, voxels not yet written
   std::vector<std::pair<uint64_t, int32_t>> order;  // (Morton code, block) for sorting
   std::vector<size_t> thread_block_views, thread_skipped, thread_free, thread_subs;
 

@@ -76,8 +76,10 @@ class VoxelBlockMap {
 
   // Index of the block at `c`, allocating it with cleared voxels (weight 0)
   // if absent; `*created` (if not null) says which. `c` must be in range
-  // (BlockCoordInRange; checked).
-  int32_t FindOrAllocate(const BlockCoord& c, bool* created = nullptr);
+  // (BlockCoordInRange; checked). With `clear` false a new block's voxels are
+  // left as they are (stale memory): the caller must write every voxel
+  // before anyone reads the block.
+  int32_t FindOrAllocate(const BlockCoord& c, bool* created = nullptr, bool clear = true);
 
   // Number of blocks in use.
   size_t size() const { return num_blocks_; }
