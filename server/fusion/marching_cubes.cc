@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -176,14 +177,17 @@ constexpr int kCacheVoxels = kCacheSide * kCacheSide * kCacheSide;
 inline int CacheIndex(int x, int y, int z) { return (x + 1) + kCacheSide * ((y + 1) + kCacheSide * (z + 1)); }
 inline int NeighbourIndex(int dx, int dy, int dz) { return (dx + 1) + 3 * (dy + 1) + 9 * (dz + 1); }
 
+// Per cache row (y, z ∈ −1..9), bit x + 1 for x ∈ −1..9.
+constexpr int kCacheRows = kCacheSide * kCacheSide;
+inline int RowIndex(int y, int z) { return (y + 1) + kCacheSide * (z + 1); }
+
 struct BlockCache {
   float tsdf[kCacheVoxels];
   float weight[kCacheVoxels];
-  uint8_t ok[kCacheVoxels];     // usable as a cube corner
-  uint8_t cube_ok[9 * 9 * 9];   // cube with origin (−1..7)³ has all corners usable
+  uint16_t ok[kCacheRows];    // voxel usable as a cube corner
+  uint16_t neg[kCacheRows];   // tsdf < 0
+  uint16_t cube[kCacheRows];  // cube with origin (x, y, z) has all eight corners usable (y, z ∈ −1..7, x ∈ −1..7)
 };
-
-inline int CubeIndex(int x, int y, int z) { return (x + 1) + 9 * ((y + 1) + 9 * (z + 1)); }
 
 // Packs a reference to edge `edge` (voxel·3 + axis) of block `block`.
 constexpr int kEdgeBits = 11;
@@ -231,35 +235,43 @@ void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOption
     }
   }
   // Tsdf 1 = free space beyond the truncation band in every view.
-  const float max_tsdf = o.skip_truncated_cubes ? 0.999f : 2.0f;
-  for (int i = 0; i < kCacheVoxels; ++i) c->ok[i] = c->weight[i] >= o.min_weight && c->tsdf[i] < max_tsdf;
-  // All eight corners usable, separably: pairs along x, then y, then z.
-  constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
-  uint8_t okx[kCacheVoxels], okxy[kCacheVoxels];
-  for (int i = 0; i + 1 < kCacheVoxels; ++i) okx[i] = c->ok[i] & c->ok[i + 1];
-  for (int i = 0; i + sy < kCacheVoxels - 1; ++i) okxy[i] = okx[i] & okx[i + sy];
+  const float max_tsdf = o.skip_truncated_cubes ? kTsdfBandLimit : 2.0f;
+  for (int r = 0; r < kCacheRows; ++r) {
+    const float* t = c->tsdf + kCacheSide * r;
+    const float* w = c->weight + kCacheSide * r;
+    unsigned ok = 0, neg = 0;
+    for (int x = 0; x < kCacheSide; ++x) {
+      ok |= static_cast<unsigned>(w[x] >= o.min_weight && t[x] < max_tsdf) << x;
+      neg |= static_cast<unsigned>(t[x] < 0.0f) << x;
+    }
+    c->ok[r] = static_cast<uint16_t>(ok);
+    c->neg[r] = static_cast<uint16_t>(neg);
+  }
+  // All eight corners usable, separably: pairs along x, then y and z.
+  constexpr unsigned kCubeBits = (1u << (kBlockSide + 1)) - 1;  // origins x = −1..7
   for (int z = -1; z < kBlockSide; ++z)
     for (int y = -1; y < kBlockSide; ++y) {
-      const int i = CacheIndex(-1, y, z);
-      uint8_t* out = c->cube_ok + CubeIndex(-1, y, z);
-      for (int x = 0; x <= kBlockSide; ++x) out[x] = okxy[i + x] & okxy[i + x + sz];
+      const unsigned a0 = c->ok[RowIndex(y, z)], a1 = c->ok[RowIndex(y + 1, z)];
+      const unsigned a2 = c->ok[RowIndex(y, z + 1)], a3 = c->ok[RowIndex(y + 1, z + 1)];
+      const unsigned all = a0 & a1 & a2 & a3;
+      c->cube[RowIndex(y, z)] = static_cast<uint16_t>(all & (all >> 1) & kCubeBits);
     }
 }
 
 
 // TSDF gradient at cache voxel (x, y, z) ∈ [0, 8]³: central differences,
 // one-sided next to unobserved voxels.
-Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
+inline Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
   const int i = CacheIndex(x, y, z);
   static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
+  const float t0 = c.tsdf[i];
   Eigen::Vector3f g;
   for (int a = 0; a < 3; ++a) {
     const int ip = i + kStride[a], im = i - kStride[a];
     const bool p = c.weight[ip] > 0, m = c.weight[im] > 0;
-    if (p && m) g[a] = 0.5f * (c.tsdf[ip] - c.tsdf[im]);
-    else if (p) g[a] = c.tsdf[ip] - c.tsdf[i];
-    else if (m) g[a] = c.tsdf[i] - c.tsdf[im];
-    else g[a] = 0;
+    // Branch-free form of: both → ½(t+ − t−), one side → one-sided, none → 0.
+    const float d = (p ? c.tsdf[ip] : t0) - (m ? c.tsdf[im] : t0);
+    g[a] = p && m ? 0.5f * d : d;
   }
   return g;
 }
@@ -281,6 +293,14 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   if (nb == 0) return;
   HOLO_CHECK_MSG(nb < (size_t{1} << (32 - kEdgeBits)), "too many voxel blocks for marching cubes");
   const McTable& table = Table();
+  const EdgeInfo& edges = Edges();
+  // Per cube edge: its (voxel·3 + axis) offset from the cube origin's, for
+  // cubes whose edges all lie in the same block.
+  int edge_offset[12];
+  for (int e = 0; e < 12; ++e) {
+    const int c = edges.low[e];
+    edge_offset[e] = 3 * ((c & 1) + kBlockSide * (((c >> 1) & 1) + kBlockSide * ((c >> 2) & 1))) + edges.axis[e];
+  }
   const int threads = s.pool.num_threads();
   s.thread_vertices.resize(static_cast<size_t>(threads));
   s.thread_tris.resize(static_cast<size_t>(threads));
@@ -289,7 +309,10 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   s.block_output.assign(nb, {});
   if (s.edge_vertex.size() < nb * kEdgesPerBlock) s.edge_vertex.resize(nb * kEdgesPerBlock);
   const float voxel = options_.voxel_size;
-  const uint8_t both = kBlockHasNegative | kBlockHasPositive;
+  // A usable cube needs a negative corner and a nonnegative one; with
+  // skip_truncated_cubes the latter must lie inside the band (< 0.999).
+  const uint8_t positive = options_.skip_truncated_cubes ? kBlockHasPositiveInBand : kBlockHasPositive;
+  const uint8_t both = kBlockHasNegative | positive;
   std::vector<size_t> thread_mesh_blocks(static_cast<size_t>(threads), 0);
 
   // Pass 1 (per block, in parallel): vertices on the block's own edges
@@ -332,28 +355,30 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
       uint32_t local = 0;
       const Eigen::Vector3f block_origin = Eigen::Vector3f(static_cast<float>(bc.x), static_cast<float>(bc.y),
                                                            static_cast<float>(bc.z)) * static_cast<float>(kBlockSide);
+      // Crossed edges that one of the four cubes around them needs, as bit
+      // masks per row (bit x + 1 = voxel x), so only those are visited.
+      constexpr unsigned kOwnBits = ((1u << kBlockSide) - 1) << 1;  // x = 0..7
       for (int z = 0; z < kBlockSide; ++z)
-        for (int y = 0; y < kBlockSide; ++y)
-          for (int x = 0; x < kBlockSide; ++x) {
+        for (int y = 0; y < kBlockSide; ++y) {
+          const int r = RowIndex(y, z);
+          const unsigned n0 = cache.neg[r];
+          const unsigned cx = cache.cube[r] | cache.cube[RowIndex(y - 1, z)] | cache.cube[RowIndex(y, z - 1)] |
+                              cache.cube[RowIndex(y - 1, z - 1)];
+          const unsigned cy = cache.cube[r] | cache.cube[RowIndex(y, z - 1)];
+          const unsigned cz = cache.cube[r] | cache.cube[RowIndex(y - 1, z)];
+          unsigned edge_mask[3];
+          edge_mask[0] = (n0 ^ (n0 >> 1)) & cx & kOwnBits;
+          edge_mask[1] = (n0 ^ cache.neg[RowIndex(y + 1, z)]) & (cy | (cy << 1)) & kOwnBits;
+          edge_mask[2] = (n0 ^ cache.neg[RowIndex(y, z + 1)]) & (cz | (cz << 1)) & kOwnBits;
+          for (unsigned any = edge_mask[0] | edge_mask[1] | edge_mask[2]; any != 0; any &= any - 1) {
+            const int x = std::countr_zero(any) - 1;
             const int ci = CacheIndex(x, y, z);
             const float t0 = cache.tsdf[ci];
             const int v = x + kBlockSide * (y + kBlockSide * z);
-            const int xyz[3] = {x, y, z};
             for (int a = 0; a < 3; ++a) {
+              if (!((edge_mask[a] >> (x + 1)) & 1)) continue;
               static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
               const float t1 = cache.tsdf[ci + kStride[a]];
-              if ((t0 < 0) == (t1 < 0)) continue;
-              // Needed if one of the four cubes around the edge is usable.
-              const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
-              bool needed = false;
-              for (int s2 = 0; s2 <= 1 && !needed; ++s2)
-                for (int s1 = 0; s1 <= 1 && !needed; ++s1) {
-                  int o[3] = {xyz[0], xyz[1], xyz[2]};
-                  o[b1] -= s1;
-                  o[b2] -= s2;
-                  needed = cache.cube_ok[CubeIndex(o[0], o[1], o[2])] != 0;
-                }
-              if (!needed) continue;
               const float f = std::clamp(t0 / (t0 - t1), kMinEdgeFraction, 1.0f - kMinEdgeFraction);
               Scratch::MeshVertex mv;
               Eigen::Vector3f pos(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
@@ -384,13 +409,18 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
               verts.push_back(mv);
             }
           }
+        }
       bo.num_vertices = local;
 
-      // Owned cubes.
+      // Owned cubes: usable ones with corners of both signs.
       for (int z = 0; z < kBlockSide; ++z)
-        for (int y = 0; y < kBlockSide; ++y)
-          for (int x = 0; x < kBlockSide; ++x) {
-            if (!cache.cube_ok[CubeIndex(x, y, z)]) continue;
+        for (int y = 0; y < kBlockSide; ++y) {
+          const unsigned n0 = cache.neg[RowIndex(y, z)], n1 = cache.neg[RowIndex(y + 1, z)];
+          const unsigned n2 = cache.neg[RowIndex(y, z + 1)], n3 = cache.neg[RowIndex(y + 1, z + 1)];
+          const unsigned any = n0 | n1 | n2 | n3, all = n0 & n1 & n2 & n3;
+          const unsigned mixed = (any | (any >> 1)) & ~(all & (all >> 1));
+          for (unsigned m = cache.cube[RowIndex(y, z)] & mixed & kOwnBits; m != 0; m &= m - 1) {
+            const int x = std::countr_zero(m) - 1;
             const int ci = CacheIndex(x, y, z);
             constexpr int sy = kCacheSide, sz = kCacheSide * kCacheSide;
             const int code = (cache.tsdf[ci] < 0) | (cache.tsdf[ci + 1] < 0) << 1 | (cache.tsdf[ci + sy] < 0) << 2 |
@@ -398,11 +428,21 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
                              (cache.tsdf[ci + sz + 1] < 0) << 5 | (cache.tsdf[ci + sz + sy] < 0) << 6 |
                              (cache.tsdf[ci + sz + sy + 1] < 0) << 7;
             const McCase& mc = table.cases[code];
+            const int v0 = x + kBlockSide * (y + kBlockSide * z);
+            if (x < kBlockSide - 1 && y < kBlockSide - 1 && z < kBlockSide - 1) {
+              // Interior cube: every edge belongs to this block.
+              for (int t = 0; t < mc.num_triangles; ++t) {
+                const uint8_t* te = mc.edges + 3 * t;
+                tris.push_back({PackEdgeRef(b, 3 * v0 + edge_offset[te[0]]), PackEdgeRef(b, 3 * v0 + edge_offset[te[1]]),
+                                PackEdgeRef(b, 3 * v0 + edge_offset[te[2]])});
+              }
+              continue;
+            }
             for (int t = 0; t < mc.num_triangles; ++t) {
               std::array<uint32_t, 3> ref;
               for (int k = 0; k < 3; ++k) {
                 const int e = mc.edges[3 * t + k];
-                const int c = Edges().low[e];
+                const int c = edges.low[e];
                 int p[3] = {x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1)};
                 int d[3];
                 for (int q = 0; q < 3; ++q) {
@@ -411,11 +451,12 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
                 }
                 const int32_t owner = nbr[NeighbourIndex(d[0], d[1], d[2])];
                 HOLO_CHECK(owner >= 0);
-                ref[k] = PackEdgeRef(owner, 3 * (p[0] + kBlockSide * (p[1] + kBlockSide * p[2])) + Edges().axis[e]);
+                ref[k] = PackEdgeRef(owner, 3 * (p[0] + kBlockSide * (p[1] + kBlockSide * p[2])) + edges.axis[e]);
               }
               tris.push_back(ref);
             }
           }
+        }
       bo.num_tris = static_cast<uint32_t>(tris.size()) - bo.tri_begin;
     }
   });

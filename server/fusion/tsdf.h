@@ -42,6 +42,13 @@ struct TsdfOptions {
   // With nearest-pixel lookup such pixels otherwise mark the space just
   // behind a silhouette as inside, which grows flaps at object edges.
   bool ignore_behind_depth_edges = false;
+  // Blocks are allocated only around pixels with at least this many
+  // 4-neighbours whose depth is within the truncation distance of theirs
+  // (0 = every usable pixel). Isolated flying pixels then allocate nothing:
+  // on the studio they would allocate ~60 % of the blocks, all of it junk
+  // (small blobs the clean-up removes) and time. Such pixels still update
+  // blocks that their neighbours' bands allocated.
+  int allocation_min_support = 2;
   // Marching cubes uses a cube only if every corner has at least this
   // accumulated weight (one observation = weight 1).
   float min_weight = 1.0f;
@@ -63,6 +70,7 @@ struct TsdfStats {
   size_t block_views = 0;          // (block, pod) pairs integrated
   size_t block_views_skipped = 0;  // pairs skipped: outside the image, no valid depth, or occluded
   size_t block_views_free = 0;     // of the integrated pairs, those wholly in free space (no projection needed)
+  size_t sub_blocks_projected = 0; // 4³ sub-blocks projected voxel by voxel (the rest culled or free space)
   size_t mesh_blocks = 0;          // blocks that could hold a surface during meshing
   // Wall time of Integrate's phases, ms: depth preparation and block
   // collection (parallel over pods), block allocation (serial), voxel

@@ -36,6 +36,9 @@ struct TsdfVolume::PodView {
   bool color_distorted = false;
   std::array<double, 5> color_distortion{};
   const uint8_t* color = nullptr;  // RGB8, cwidth × cheight
+  // The colour as one 32-bit word per pixel (R | G << 8 | B << 16), for the
+  // AVX2 gather; only for registered pods on that path (else null).
+  const uint32_t* color_words = nullptr;
   // Masked depth (mm, 0 = unused) and the maximum of each 8×8 pixel tile.
   const uint16_t* depth = nullptr;
   const uint16_t* tile_max = nullptr;
@@ -45,7 +48,11 @@ struct TsdfVolume::PodView {
   int tiles_x = 0, tiles_y = 0;
 };
 
-inline constexpr int kTileSide = 8;
+// Side of the pixel tiles whose depth range culls blocks and sub-blocks.
+inline constexpr int kTileSide = 4;
+// Tsdf at or above this is free space beyond the truncation band in every
+// view (skip_truncated_cubes).
+inline constexpr float kTsdfBandLimit = 0.999f;
 inline constexpr int kEdgesPerBlock = 3 * kBlockVoxels;
 
 struct TsdfVolume::Scratch {
@@ -58,12 +65,14 @@ struct TsdfVolume::Scratch {
   std::vector<std::vector<uint16_t>> tile_max;
   std::vector<std::vector<uint16_t>> tile_min;
   std::vector<std::vector<uint8_t>> edge;
+  std::vector<std::vector<uint32_t>> color_words;
   std::vector<std::vector<BlockCoord>> pod_blocks;  // candidate blocks per pod, locally de-duplicated
   std::vector<uint32_t> touched_stamp;              // per block: frame stamp of the last touch
   uint32_t stamp = 0;
   std::vector<int32_t> active;                      // blocks touched this frame
+  std::vector<uint8_t> fresh;                       // per block: allocated this frame, voxels not yet written
   std::vector<std::pair<uint64_t, int32_t>> order;  // (Morton code, block) for sorting
-  std::vector<size_t> thread_block_views, thread_skipped, thread_free;
+  std::vector<size_t> thread_block_views, thread_skipped, thread_free, thread_subs;
 
   // Meshing.
   struct MeshVertex {

@@ -33,7 +33,7 @@ void VoxelBlockMap::Rehash(size_t num_slots) {
   }
 }
 
-int32_t VoxelBlockMap::FindOrAllocate(const BlockCoord& c, bool* created) {
+int32_t VoxelBlockMap::FindOrAllocate(const BlockCoord& c, bool* created, bool clear) {
   HOLO_CHECK(BlockCoordInRange(c.x, c.y, c.z));
   const uint64_t key = Pack(c);
   size_t s = Slot(key);
@@ -51,7 +51,7 @@ int32_t VoxelBlockMap::FindOrAllocate(const BlockCoord& c, bool* created) {
     coords_.emplace_back();
     flags_.emplace_back();
   }
-  blocks_[num_blocks_].Clear();
+  if (clear) blocks_[num_blocks_].Clear();
   coords_[num_blocks_] = c;
   flags_[num_blocks_] = 0;
   ++num_blocks_;

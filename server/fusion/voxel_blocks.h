@@ -55,6 +55,7 @@ struct alignas(64) VoxelBlock {
 enum BlockFlags : uint8_t {
   kBlockHasNegative = 1,  // some observed voxel has tsdf < 0
   kBlockHasPositive = 2,  // some observed voxel has tsdf ≥ 0
+  kBlockHasPositiveInBand = 4,  // some observed voxel has 0 ≤ tsdf < 0.999 (not beyond the band in every view)
 };
 
 class VoxelBlockMap {
@@ -75,8 +76,10 @@ class VoxelBlockMap {
 
   // Index of the block at `c`, allocating it with cleared voxels (weight 0)
   // if absent; `*created` (if not null) says which. `c` must be in range
-  // (BlockCoordInRange; checked).
-  int32_t FindOrAllocate(const BlockCoord& c, bool* created = nullptr);
+  // (BlockCoordInRange; checked). With `clear` false a new block's voxels are
+  // left as they are (stale memory): the caller must write every voxel
+  // before anyone reads the block.
+  int32_t FindOrAllocate(const BlockCoord& c, bool* created = nullptr, bool clear = true);
 
   // Number of blocks in use.
   size_t size() const { return num_blocks_; }

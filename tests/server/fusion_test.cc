@@ -1,6 +1,7 @@
 #include "server/fusion/tsdf.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <functional>
 #include <optional>
@@ -288,6 +289,51 @@ TEST(TsdfFusion, ResetEmptiesAndRefusingIsDeterministic) {
   const Mesh single = Fuse(rig, set, o);
   EXPECT_EQ(single.positions, first.positions);
   EXPECT_EQ(single.triangles, first.triangles);
+}
+
+TEST(TsdfFusion, SimdPathsGiveIdenticalVolumes) {
+  // The AVX2 path (used when the CPU has it) must match the SSE2 path bit
+  // for bit; HOLO_FUSION_NO_AVX2 forces the latter.
+  const Eigen::Vector3f center(0, 0, 1);
+  const Rig rig = RingRig(4, center, 1.5f);
+  const RgbdFrameSet set = RenderAnalytic(rig, Sphere(center, 0.3f));
+  TsdfOptions o;
+  o.voxel_size = 0.01f;
+  o.threads = 2;
+  const Mesh fast = Fuse(rig, set, o);
+  setenv("HOLO_FUSION_NO_AVX2", "1", 1);
+  const Mesh baseline = Fuse(rig, set, o);
+  unsetenv("HOLO_FUSION_NO_AVX2");
+  ASSERT_GT(fast.num_triangles(), 0u);
+  EXPECT_EQ(fast.positions, baseline.positions);
+  EXPECT_EQ(fast.normals, baseline.normals);
+  EXPECT_EQ(fast.colors, baseline.colors);
+  EXPECT_EQ(fast.triangles, baseline.triangles);
+}
+
+TEST(TsdfFusion, IsolatedFlyingPixelsAllocateNoBlocks) {
+  const Eigen::Vector3f center(0, 0, 1);
+  const Rig rig = RingRig(4, center, 1.5f);
+  RgbdFrameSet set = RenderAnalytic(rig, Sphere(center, 0.3f));
+  TsdfOptions o;
+  o.voxel_size = 0.01f;
+  TsdfVolume clean(o);
+  ASSERT_TRUE(clean.Integrate(rig, set).ok());
+  // Scattered single pixels 40 cm behind the sphere's background-free
+  // image: each has no neighbour within the truncation distance.
+  for (RgbdFrame& f : set.frames)
+    for (int y = 5; y < f.depth.height(); y += 7)
+      for (int x = 5; x < f.depth.width(); x += 7)
+        if (f.depth.row(y)[x] == 0) f.depth.row(y)[x] = 2300;
+  TsdfVolume filtered(o);
+  ASSERT_TRUE(filtered.Integrate(rig, set).ok());
+  EXPECT_EQ(filtered.num_blocks(), clean.num_blocks());
+  o.allocation_min_support = 0;
+  TsdfVolume unfiltered(o);
+  ASSERT_TRUE(unfiltered.Integrate(rig, set).ok());
+  EXPECT_GT(unfiltered.num_blocks(), clean.num_blocks() + 100);
+  o.allocation_min_support = 5;
+  EXPECT_FALSE(o.Check().ok());
 }
 
 TEST(TsdfFusion, IntegratingTwiceDoublesTheWeightAndKeepsTheTsdf) {
