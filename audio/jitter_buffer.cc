@@ -21,6 +21,8 @@ Status JitterBufferOptions::Check() const {
   if (window_packets < 10) return InvalidArgument("window_packets must be >= 10, got " + std::to_string(window_packets));
   if (!(max_stretch >= 0 && max_stretch <= 0.1)) return InvalidArgument("max_stretch must be in 0..0.1");
   if (!(stretch_per_ms >= 0)) return InvalidArgument("stretch_per_ms must be >= 0");
+  if (!(stretch_integral_per_ms >= 0)) return InvalidArgument("stretch_integral_per_ms must be >= 0");
+  if (!(delay_filter > 0 && delay_filter <= 1)) return InvalidArgument("delay_filter must be in (0, 1]");
   if (!(drop_above_ms > 0)) return InvalidArgument("drop_above_ms must be > 0");
   return OkStatus();
 }
@@ -57,6 +59,8 @@ Status JitterBuffer::Insert(AudioPose frame) {
     next_seq_ = seq;
     max_seq_ = seq - 1;
     playing_ = false;
+    delay_filter_init_ = false;
+    integral_ = 0.0;
   }
   if (packets_.count(seq) != 0) {
     ++stats_.duplicates;
@@ -153,9 +157,27 @@ std::vector<float> JitterBuffer::Pull() {
     ++stats_.dropped_frames;
     delay = DelayMs(now);
   }
-  const double ratio =
-      1.0 + std::clamp(options_.stretch_per_ms * (delay - stats_.target_delay_ms), -options_.max_stretch,
-                       options_.max_stretch);
+  // Drift controller. The controlled level is the delay of the first sample
+  // the next pull will play (this pull's 20 ms already taken out), so it is
+  // the audio actually held in reserve against late packets.
+  const double level_ms = delay - static_cast<double>(kFrameUs) / 1000.0;
+  if (!delay_filter_init_) {
+    filtered_delay_ms_ = level_ms;
+    delay_filter_init_ = true;
+  } else {
+    filtered_delay_ms_ += options_.delay_filter * (level_ms - filtered_delay_ms_);
+  }
+  const double error_ms = filtered_delay_ms_ - stats_.target_delay_ms;
+  const double p = options_.stretch_per_ms * error_ms;
+  // Anti-windup: the integral alone stays within the stretch range, and does
+  // not integrate further while the output is saturated in that direction.
+  const double next_integral = std::clamp(integral_ + options_.stretch_integral_per_ms * error_ms,
+                                          -options_.max_stretch, options_.max_stretch);
+  const double unclamped = p + next_integral;
+  if (std::abs(unclamped) <= options_.max_stretch || std::abs(next_integral) < std::abs(integral_)) {
+    integral_ = next_integral;
+  }
+  const double ratio = 1.0 + std::clamp(p + integral_, -options_.max_stretch, options_.max_stretch);
   const size_t need = static_cast<size_t>(frac_ + kFrameSamples * ratio) + 2;
   while (fifo_.size() < need) {
     if (packets_.count(next_seq_) != 0 || max_seq_ > next_seq_) {
@@ -167,6 +189,7 @@ std::vector<float> JitterBuffer::Pull() {
     ++stats_.underflows;
     if (++consecutive_underflows_ > kMaxUnderflows) {
       playing_ = false;
+      delay_filter_init_ = false;  // keep the integral: the clocks did not change
       fifo_.clear();
       frac_ = 0;
       stats_.current_delay_ms = 0;
@@ -187,6 +210,7 @@ std::vector<float> JitterBuffer::Pull() {
   fifo_.erase(fifo_.begin(), fifo_.begin() + static_cast<std::ptrdiff_t>(consumed));
   frac_ = pos - static_cast<double>(consumed);
   stats_.stretch = ratio;
+  stats_.drift_estimate = integral_;
   stats_.current_delay_ms = DelayMs(now);
   return out;
 }

@@ -11,9 +11,13 @@
 // - If nothing has arrived yet (underflow) the decoder's PLC stretches the
 //   output without consuming a frame, so the delay grows.
 // - Drift and excess delay: decoded audio goes through a linear-interpolation
-//   resampler whose ratio follows (delay − target) within ±`max_stretch`
-//   (0.5% by default), so a sender clock 0.1% off is absorbed without pitch
-//   jumps; a delay more than `drop_above_ms` over target drops a whole frame.
+//   resampler whose ratio is set by a PI controller on the low-pass filtered
+//   playout delay (measured in samples, including the partly played frame, at
+//   the point where the next pull starts) against the adaptive target, within
+//   ±`max_stretch` (0.5% by default). The integral term settles on the clock
+//   ratio, so a sender clock 0.1% off is absorbed with no steady-state delay
+//   error and without pitch jumps; a delay more than `drop_above_ms` over
+//   target drops a whole frame.
 #pragma once
 
 #include <cstdint>
@@ -38,8 +42,15 @@ struct JitterBufferOptions {
   int window_packets = 250;
   // Largest resampling deviation from 1 (0.005 = ±0.5%).
   double max_stretch = 0.005;
-  // Stretch per ms of delay error (0.0005: 10 ms error → 0.5%).
+  // Proportional gain: stretch per ms of (filtered) delay error
+  // (0.0005: 10 ms error → 0.5%).
   double stretch_per_ms = 0.0005;
+  // Integral gain: stretch added per ms of delay error per pull (20 ms).
+  // With the proportional gain above the loop is about critically damped
+  // (time constants ~2 s and ~10 s).
+  double stretch_integral_per_ms = 1e-6;
+  // Low-pass on the measured delay: weight of each new pull (0..1].
+  double delay_filter = 0.05;
   // Delay over target beyond which whole frames are dropped, ms.
   double drop_above_ms = 80.0;
   Status Check() const;
@@ -57,6 +68,7 @@ struct JitterBufferStats {
   double current_delay_ms = 0; // playout delay above the fastest packet
   double target_delay_ms = 0;
   double stretch = 1.0;        // current resampling ratio (input per output sample)
+  double drift_estimate = 0.0; // integral term: estimated sender/receiver clock ratio − 1
 };
 
 // Not thread-safe. `clock` is borrowed for the buffer's lifetime.
@@ -98,6 +110,10 @@ class JitterBuffer {
   bool started_ = false;                  // a packet has arrived
   bool playing_ = false;
   int consecutive_underflows_ = 0;
+  // Drift controller state.
+  bool delay_filter_init_ = false;
+  double filtered_delay_ms_ = 0.0;
+  double integral_ = 0.0;
   // Anchor for the sender's timeline: capture time of sequence anchor_seq_.
   int64_t anchor_seq_ = 0;
   int64_t anchor_capture_us_ = 0;
