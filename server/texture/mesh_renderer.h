@@ -68,7 +68,8 @@ class MeshRasterizer {
 
  private:
   int width_ = 0, height_ = 0;
-  std::vector<float> sx_, sy_, iz_;  // projected vertices: pixel x, y and 1/z
+  std::vector<int32_t> sx_, sy_;     // projected vertices: pixel x, y in 1/256 px
+  std::vector<float> iz_;            // and 1/z
   std::vector<uint8_t> ok_;          // vertex in front of the near plane
   std::vector<float> iz_buf_, b1_, b2_;
   std::vector<int32_t> tri_;
