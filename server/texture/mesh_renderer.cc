@@ -21,6 +21,13 @@ constexpr int kSubShift = 8;
 constexpr int64_t kSub = int64_t{1} << kSubShift;  // sub-pixel steps per pixel
 constexpr float kMaxCoord = 1048576.0f;  // |screen coordinate| limit, pixels
 
+// floor for |v| < 2^31 without a libm call or SSE4.1 (truncation, then one
+// down where it rounded up); equal to std::floor here since |v| < 2^28.
+inline int32_t FloorToInt(float v) {
+  const int32_t i = static_cast<int32_t>(v);
+  return i - (static_cast<float>(i) > v);
+}
+
 inline uint8_t ToByte(float v) { return static_cast<uint8_t>(std::clamp(v + 0.5f, 0.0f, 255.0f)); }
 
 }  // namespace
@@ -43,10 +50,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
 
   // Project every vertex once.
   const size_t n = positions.size();
-  sx_.resize(n);
-  sy_.resize(n);
-  iz_.resize(n);
-  ok_.resize(n);
+  sv_.resize(n);
   const Eigen::Matrix3f cam_from_world = camera.world_from_camera.linear().transpose();
   const Vector3f center = camera.world_from_camera.translation();
   const Vector3f t = -cam_from_world * center;
@@ -55,10 +59,9 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   const float cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
   for (size_t i = 0; i < n; ++i) {
     const Vector3f p = cam_from_world * positions[i] + t;
-    if (!(p.z() >= near_m)) {
-      ok_[i] = 0;
-      continue;
-    }
+    ScreenVertex& v = sv_[i];
+    v.iz = 0.0f;
+    if (!(p.z() >= near_m)) continue;
     const float izv = 1.0f / p.z();
     max_iz_ = std::max(max_iz_, izv);
     float fxp, fyp;
@@ -72,17 +75,13 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       fyp = fy * p.y() * izv + cy;
     }
     // Vertices beyond ±2^20 px drop their triangles (int32/int64 safe).
-    if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) {
-      ok_[i] = 0;
-      continue;
-    }
-    ok_[i] = 1;
-    iz_[i] = izv;
+    if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) continue;
+    v.iz = izv;
     // Screen positions snapped to 1/256 px once per vertex: integer edge
     // functions are exact, so two triangles sharing an edge agree on every
     // pixel centre (no cracks, no double coverage).
-    sx_[i] = static_cast<int32_t>(std::floor(fxp * kSub + 0.5f));
-    sy_[i] = static_cast<int32_t>(std::floor(fyp * kSub + 0.5f));
+    v.x = FloorToInt(fxp * kSub + 0.5f);
+    v.y = FloorToInt(fyp * kSub + 0.5f);
   }
 
   // Culling in screen space: for a pinhole camera the signed screen area of
@@ -93,9 +92,11 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   const bool world_cull = cull_back_faces && distorted;
   for (size_t ti = 0; ti < triangles.size(); ++ti) {
     const auto& tr = triangles[ti];
-    if (!(ok_[tr[0]] & ok_[tr[1]] & ok_[tr[2]])) continue;
-    int64_t x[3], y[3];
-    for (int c = 0; c < 3; ++c) x[c] = sx_[tr[c]], y[c] = sy_[tr[c]];
+    const ScreenVertex& v0 = sv_[tr[0]];
+    const ScreenVertex& v1 = sv_[tr[1]];
+    const ScreenVertex& v2 = sv_[tr[2]];
+    if (!(v0.iz > 0.0f && v1.iz > 0.0f && v2.iz > 0.0f)) continue;
+    int64_t x[3] = {v0.x, v1.x, v2.x}, y[3] = {v0.y, v1.y, v2.y};
     const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
     const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
     // Pixel centres inside the box: ceil(min / kSub) .. floor(max / kSub)
@@ -115,8 +116,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       const Vector3f normal = (positions[tr[1]] - p0).cross(positions[tr[2]] - p0);
       if (normal.dot(p0 - center) >= 0.0f) continue;
     }
-    float iz[3];
-    for (int c = 0; c < 3; ++c) iz[c] = iz_[tr[c]];
+    float iz[3] = {v0.iz, v1.iz, v2.iz};
     int slot[3] = {0, 1, 2};  // original vertex of each screen vertex
     if (area < 0) {
       std::swap(x[1], x[2]);
