@@ -17,8 +17,16 @@ inline bool OwnsTies(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
   return dy > 0 || (dy == 0 && bx - ax < 0);
 }
 
-constexpr int64_t kSub = 256;            // sub-pixel steps per pixel
+constexpr int kSubShift = 8;
+constexpr int64_t kSub = int64_t{1} << kSubShift;  // sub-pixel steps per pixel
 constexpr float kMaxCoord = 1048576.0f;  // |screen coordinate| limit, pixels
+
+// floor for |v| < 2^31 without a libm call or SSE4.1 (truncation, then one
+// down where it rounded up); equal to std::floor here since |v| < 2^28.
+inline int32_t FloorToInt(float v) {
+  const int32_t i = static_cast<int32_t>(v);
+  return i - (static_cast<float>(i) > v);
+}
 
 inline uint8_t ToByte(float v) { return static_cast<uint8_t>(std::clamp(v + 0.5f, 0.0f, 255.0f)); }
 
@@ -42,10 +50,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
 
   // Project every vertex once.
   const size_t n = positions.size();
-  sx_.resize(n);
-  sy_.resize(n);
-  iz_.resize(n);
-  ok_.resize(n);
+  sv_.resize(n);
   const Eigen::Matrix3f cam_from_world = camera.world_from_camera.linear().transpose();
   const Vector3f center = camera.world_from_camera.translation();
   const Vector3f t = -cam_from_world * center;
@@ -54,49 +59,65 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   const float cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
   for (size_t i = 0; i < n; ++i) {
     const Vector3f p = cam_from_world * positions[i] + t;
-    if (!(p.z() >= near_m)) {
-      ok_[i] = 0;
-      continue;
-    }
-    ok_[i] = 1;
-    iz_[i] = 1.0f / p.z();
-    max_iz_ = std::max(max_iz_, iz_[i]);
+    ScreenVertex& v = sv_[i];
+    v.iz = 0.0f;
+    if (!(p.z() >= near_m)) continue;
+    const float izv = 1.0f / p.z();
+    max_iz_ = std::max(max_iz_, izv);
+    float fxp, fyp;
     if (distorted) {
       Eigen::Vector2f px;
       camera.ProjectCamera(p, &px);
-      sx_[i] = px.x();
-      sy_[i] = px.y();
+      fxp = px.x();
+      fyp = px.y();
     } else {
-      sx_[i] = fx * p.x() * iz_[i] + cx;
-      sy_[i] = fy * p.y() * iz_[i] + cy;
+      fxp = fx * p.x() * izv + cx;
+      fyp = fy * p.y() * izv + cy;
     }
+    // Vertices beyond ±2^20 px drop their triangles (int32/int64 safe).
+    if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) continue;
+    v.iz = izv;
+    // Screen positions snapped to 1/256 px once per vertex: integer edge
+    // functions are exact, so two triangles sharing an edge agree on every
+    // pixel centre (no cracks, no double coverage).
+    v.x = FloorToInt(fxp * kSub + 0.5f);
+    v.y = FloorToInt(fyp * kSub + 0.5f);
   }
 
+  // Culling in screen space: for a pinhole camera the signed screen area of
+  // a triangle is n·(p0 − centre)·fx·fy / (z0·z1·z2), so front faces (n
+  // towards the camera) are exactly those with area < 0. Distorted cameras
+  // keep the 3D test.
+  const bool screen_cull = cull_back_faces && !distorted;
+  const bool world_cull = cull_back_faces && distorted;
   for (size_t ti = 0; ti < triangles.size(); ++ti) {
     const auto& tr = triangles[ti];
-    if (!ok_[tr[0]] || !ok_[tr[1]] || !ok_[tr[2]]) continue;
-    if (cull_back_faces) {
+    const ScreenVertex& v0 = sv_[tr[0]];
+    const ScreenVertex& v1 = sv_[tr[1]];
+    const ScreenVertex& v2 = sv_[tr[2]];
+    if (!(v0.iz > 0.0f && v1.iz > 0.0f && v2.iz > 0.0f)) continue;
+    int64_t x[3] = {v0.x, v1.x, v2.x}, y[3] = {v0.y, v1.y, v2.y};
+    const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
+    const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
+    // Pixel centres inside the box: ceil(min / kSub) .. floor(max / kSub)
+    // (arithmetic shifts round toward −∞). Most triangles of a fine mesh
+    // cover no pixel centre at all and stop here.
+    const int xa = static_cast<int>(std::max<int64_t>(0, (minx + kSub - 1) >> kSubShift));
+    const int xb = static_cast<int>(std::min<int64_t>(width_ - 1, maxx >> kSubShift));
+    if (xa > xb) continue;
+    const int ya = static_cast<int>(std::max<int64_t>(0, (miny + kSub - 1) >> kSubShift));
+    const int yb = static_cast<int>(std::min<int64_t>(height_ - 1, maxy >> kSubShift));
+    if (ya > yb) continue;
+    int64_t area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+    if (area == 0) continue;
+    if (screen_cull && area > 0) continue;
+    if (world_cull) {
       const Vector3f& p0 = positions[tr[0]];
       const Vector3f normal = (positions[tr[1]] - p0).cross(positions[tr[2]] - p0);
       if (normal.dot(p0 - center) >= 0.0f) continue;
     }
-    // Screen positions snapped to 1/256 px: integer edge functions are exact,
-    // so two triangles sharing an edge agree on every pixel centre (no cracks,
-    // no double coverage). Vertices beyond ±2^20 px are rejected (int64 safe).
-    int64_t x[3], y[3];
-    float iz[3];
+    float iz[3] = {v0.iz, v1.iz, v2.iz};
     int slot[3] = {0, 1, 2};  // original vertex of each screen vertex
-    bool far_out = false;
-    for (int c = 0; c < 3; ++c) {
-      const float fxp = sx_[tr[c]], fyp = sy_[tr[c]];
-      if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) far_out = true;
-      x[c] = static_cast<int64_t>(std::floor(fxp * kSub + 0.5f));
-      y[c] = static_cast<int64_t>(std::floor(fyp * kSub + 0.5f));
-      iz[c] = iz_[tr[c]];
-    }
-    if (far_out) continue;
-    int64_t area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
-    if (area == 0) continue;
     if (area < 0) {
       std::swap(x[1], x[2]);
       std::swap(y[1], y[2]);
@@ -104,16 +125,6 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       std::swap(slot[1], slot[2]);
       area = -area;
     }
-    const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
-    const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
-    // Pixel centres inside the box: ceil(min / kSub) .. floor(max / kSub).
-    auto ceil_div = [](int64_t v) { return v >= 0 ? (v + kSub - 1) / kSub : -((-v) / kSub); };
-    auto floor_div = [](int64_t v) { return v >= 0 ? v / kSub : -((-v + kSub - 1) / kSub); };
-    const int xa = static_cast<int>(std::max<int64_t>(0, ceil_div(minx)));
-    const int xb = static_cast<int>(std::min<int64_t>(width_ - 1, floor_div(maxx)));
-    const int ya = static_cast<int>(std::max<int64_t>(0, ceil_div(miny)));
-    const int yb = static_cast<int>(std::min<int64_t>(height_ - 1, floor_div(maxy)));
-    if (xa > xb || ya > yb) continue;
     box_[0] = std::min(box_[0], xa), box_[1] = std::min(box_[1], ya);
     box_[2] = std::max(box_[2], xb), box_[3] = std::max(box_[3], yb);
     const float inv_area = 1.0f / static_cast<float>(area);

@@ -68,8 +68,15 @@ class MeshRasterizer {
 
  private:
   int width_ = 0, height_ = 0;
-  std::vector<float> sx_, sy_, iz_;  // projected vertices: pixel x, y and 1/z
-  std::vector<uint8_t> ok_;          // vertex in front of the near plane
+  // Projected vertex: pixel x, y in 1/256 px and 1/z; iz = 0 when behind the
+  // near plane or too far off screen (its triangles are dropped). One
+  // 16-byte record, so a triangle costs three cache-friendly gathers.
+  struct ScreenVertex {
+    int32_t x, y;
+    float iz;
+    int32_t pad;
+  };
+  std::vector<ScreenVertex> sv_;
   std::vector<float> iz_buf_, b1_, b2_;
   std::vector<int32_t> tri_;
   int box_[4] = {0, 0, -1, -1};

@@ -250,6 +250,11 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
     samples.clear();
     for (size_t pi = 0; pi < num_pods; ++pi) {
       const PodState& s = *pods_[pi];
+      // Facing test first: it rejects about half the views for the cost of a
+      // dot product (the sign of n·v needs no normalization).
+      const Vector3f to_pod = s.center - p;
+      const float ndv_raw = n.dot(to_pod);
+      if (o.normal_weighting && !(ndv_raw > 0.0f)) continue;
       const Vector3f pc = s.rot * p + s.trans;
       if (!(pc.z() > kNear)) continue;
       const Intrinsics& k = s.color_camera.intrinsics;
@@ -266,8 +271,7 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
       const int iy = std::min(static_cast<int>(uv.y() + 0.5f), k.height - 1);
       float weight = 1.0f;
       if (o.normal_weighting) {
-        const float ndv = n.dot((s.center - p).normalized());
-        if (!(ndv > 0.0f)) continue;
+        const float ndv = ndv_raw / to_pod.norm();
         weight = PowWeight(ndv, o.alpha, int_alpha);
         if (!(weight > 0.0f)) continue;
       }

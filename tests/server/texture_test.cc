@@ -153,6 +153,37 @@ TEST(MeshRendererTest, TiltedPlaneDepthIsPerspectiveCorrect) {
   }
 }
 
+TEST(MeshRendererTest, BackFaceCullingKeepsTheVisibleSurfaceOfAClosedMesh) {
+  // Culling works on the sign of the screen area (pinhole cameras): on a
+  // closed mesh it must drop exactly the faces that never win the z-test.
+  const Mesh sphere = metrics::MakeSphereMesh({0.05f, -0.02f, 2.0f}, 0.4f, 4);
+  MeshRenderOptions o;
+  ImageDepth16 all, front;
+  ImageGray8 mask_all, mask_front;
+  ASSERT_TRUE(RenderMesh(sphere, FrontCamera(), nullptr, &all, &mask_all, o).ok());
+  o.cull_back_faces = true;
+  ASSERT_TRUE(RenderMesh(sphere, FrontCamera(), nullptr, &front, &mask_front, o).ok());
+  int covered = 0;
+  for (int y = 0; y < all.height(); ++y)
+    for (int x = 0; x < all.width(); ++x) {
+      covered += mask_all.at(x, y) != 0;
+      EXPECT_EQ(mask_front.at(x, y), mask_all.at(x, y)) << x << "," << y;
+      EXPECT_EQ(front.at(x, y), all.at(x, y)) << x << "," << y;
+    }
+  EXPECT_GT(covered, 200);
+  // Inside out: only the far hemisphere faces the camera, so it is drawn.
+  Mesh inverted = sphere;
+  for (auto& t : inverted.triangles) std::swap(t[1], t[2]);
+  ASSERT_TRUE(RenderMesh(inverted, FrontCamera(), nullptr, &front, &mask_front, o).ok());
+  for (int y = 0; y < front.height(); ++y)
+    for (int x = 0; x < front.width(); ++x) {
+      EXPECT_EQ(mask_front.at(x, y), mask_all.at(x, y)) << x << "," << y;
+      if (mask_all.at(x, y) != 0) {
+        EXPECT_GT(front.at(x, y), all.at(x, y)) << x << "," << y;
+      }
+    }
+}
+
 TEST(MeshRendererTest, BadInputsGiveErrors) {
   Mesh m = Rectangle(-0.2f, 0.2f, -0.1f, 0.1f, 2.0f, {1, 1, 1}, {1, 1, 1});
   CameraModel cam = FrontCamera();
