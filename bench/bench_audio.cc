@@ -4,6 +4,7 @@
 #include <numbers>
 #include <random>
 
+#include "audio/ear_measure.h"
 #include "audio/spatializer.h"
 #include "audio/voice_codec.h"
 #include "bench.h"
@@ -36,19 +37,10 @@ Ears Measure(float azimuth_deg, float facing_offset_deg) {
   for (float& v : x) v = noise(rng);
   if (!(*sp)->Push(*id, x).ok()) return e;
   const auto y = (*sp)->Render(24000);
-  const size_t n0 = 2400, n1 = 21600;
-  double el = 0, er = 0;
-  for (size_t i = n0; i < n1; ++i) el += y[2 * i] * y[2 * i], er += y[2 * i + 1] * y[2 * i + 1];
-  e.ild_db = 10 * std::log10(er / el);
-  e.level_db = 10 * std::log10((el + er) / static_cast<double>(n1 - n0));
-  int best = 0;
-  double bestc = -1e30;
-  for (int lag = -72; lag <= 72; ++lag) {
-    double c = 0;
-    for (size_t i = n0; i < n1; ++i) c += y[2 * i + 1] * y[2 * (i + lag)];
-    if (c > bestc) bestc = c, best = lag;
-  }
-  e.itd_ms = best * 1000.0 / kSampleRate;
+  const EarMeasurement m = MeasureEars(y, 2400, 21600, kSampleRate, 72);
+  e.ild_db = m.ild_db;
+  e.itd_ms = m.itd_ms;
+  e.level_db = m.level_db;
   return e;
 }
 

@@ -1,3 +1,4 @@
+#include "audio/ear_measure.h"
 #include "audio/spatializer.h"
 
 #include <gtest/gtest.h>
@@ -41,22 +42,12 @@ Ears Measure(float azimuth_deg, float facing_yaw_offset_deg = 180.0f, float dist
   for (float& v : x) v = noise(rng);
   EXPECT_TRUE((*sp)->Push(*id, x).ok());
   const std::vector<float> y = (*sp)->Render(kSampleRate / 2);
-  // Skip the onset (HRTF filters fade in).
-  const size_t n0 = 2400, n1 = x.size() - 2400;
-  double el = 0, er = 0;
-  for (size_t i = n0; i < n1; ++i) el += y[2 * i] * y[2 * i], er += y[2 * i + 1] * y[2 * i + 1];
+  // Skip the onset (HRTF filters fade in); lag search within ±1.5 ms.
+  const EarMeasurement m = MeasureEars(y, 2400, x.size() - 2400, kSampleRate, 72);
   Ears e;
-  e.ild_db = 10 * std::log10(er / el);
-  e.level_db = 10 * std::log10((el + er) / static_cast<double>(n1 - n0));
-  // Cross-correlation of the ears, lag in ±1.5 ms.
-  int best = 0;
-  double bestc = -1e30;
-  for (int lag = -72; lag <= 72; ++lag) {
-    double c = 0;
-    for (size_t i = n0; i < n1; ++i) c += y[2 * i + 1] * y[2 * (i + lag)];
-    if (c > bestc) bestc = c, best = lag;
-  }
-  e.itd_ms = best * 1000.0 / kSampleRate;
+  e.ild_db = m.ild_db;
+  e.itd_ms = m.itd_ms;
+  e.level_db = m.level_db;
   return e;
 }
 
