@@ -33,6 +33,11 @@ void EmitFigure(const std::string& bench, const std::string& workload, const std
                 const std::string& unit, const std::map<std::string, std::string>& qualifiers = {});
 
 double Median(std::vector<double> values);
+// CPU time of the whole process so far (all threads), ms: steadier than wall
+// time on a shared machine.
+double ProcessCpuMs();
+// Arithmetic mean; 0 for an empty list.
+double Mean(const std::vector<double>& values);
 
 }  // namespace holo::bench
 

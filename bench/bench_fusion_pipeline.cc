@@ -150,18 +150,13 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
       }
     }
   }
-  auto mean = [](const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += x;
-    return v.empty() ? 0.0 : s / static_cast<double>(v.size());
-  };
   const std::map<std::string, std::string> pq = {{"mode", "pipeline"}, {"frames_scored", std::to_string(kept.size())}};
-  EmitFigure("fusion", wl, "mask_iou", mean(iou), "fraction", pq);
-  EmitFigure("fusion", wl, "chamfer_mm", mean(chamfer), "mm", pq);
-  EmitFigure("fusion", wl, "completeness", mean(completeness), "fraction", pq);
+  EmitFigure("fusion", wl, "mask_iou", Mean(iou), "fraction", pq);
+  EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm", pq);
+  EmitFigure("fusion", wl, "completeness", Mean(completeness), "fraction", pq);
   if (options.novel_views) {
-    EmitFigure("fusion", wl, "novel_view_psnr_db", mean(psnr), "dB", {{"mode", "pipeline"}, {"views", "4"}});
-    EmitFigure("fusion", wl, "novel_view_ssim", mean(ssim), "fraction", {{"mode", "pipeline"}, {"views", "4"}});
+    EmitFigure("fusion", wl, "novel_view_psnr_db", Mean(psnr), "dB", {{"mode", "pipeline"}, {"views", "4"}});
+    EmitFigure("fusion", wl, "novel_view_ssim", Mean(ssim), "fraction", {{"mode", "pipeline"}, {"views", "4"}});
   }
   return 0;
 }

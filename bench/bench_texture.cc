@@ -24,11 +24,8 @@
 
 namespace {
 
-double ProcessCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
-}
+using holo::bench::Mean;
+using holo::bench::ProcessCpuMs;
 
 struct Mode {
   std::string name;
@@ -171,11 +168,6 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
     }
   }
 
-  auto mean = [](const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += x;
-    return v.empty() ? 0.0 : s / static_cast<double>(v.size());
-  };
   for (const Mode& mode : modes) {
     std::map<std::string, std::string> q = {{"stage", "texture"},
                                             {"mode", mode.name},
@@ -189,8 +181,8 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
     holo::bench::EmitFigure("texture", workload->name, "cpu_ms", holo::bench::Median(cpu_ms[mode.name]), "ms", q);
     q.erase("stage");
     q["views"] = std::to_string(views.size());
-    holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", mean(psnr[mode.name]), "dB", q);
-    holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", mean(ssim[mode.name]), "1", q);
+    holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", Mean(psnr[mode.name]), "dB", q);
+    holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", Mean(ssim[mode.name]), "1", q);
     q.erase("views");
     for (size_t v = 0; v < views.size(); ++v) {
       auto qv = q;
@@ -198,13 +190,13 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
       std::snprintf(az, sizeof az, "%.1f", views[v].azimuth_deg);
       qv["azimuth_deg"] = az;
       holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db",
-                              mean(psnr_view[mode.name][static_cast<int>(v)]), "dB", qv);
+                              Mean(psnr_view[mode.name][static_cast<int>(v)]), "dB", qv);
     }
   }
   const std::map<std::string, std::string> qa = {{"mode", "gt_albedo"}, {"views", std::to_string(views.size())},
                                                  {"frames", std::to_string(frame_ids.size())}};
-  holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", mean(albedo_psnr), "dB", qa);
-  holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", mean(albedo_ssim), "1", qa);
+  holo::bench::EmitFigure("texture", workload->name, "novel_view_psnr_db", Mean(albedo_psnr), "dB", qa);
+  holo::bench::EmitFigure("texture", workload->name, "novel_view_ssim", Mean(albedo_ssim), "1", qa);
   return 0;
 }
 
