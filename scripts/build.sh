@@ -6,8 +6,11 @@ cd "$(dirname "$0")/.."
 BUILD_DIR=${HOLO_BUILD_DIR:-build}
 GENERATOR=()
 if command -v ninja > /dev/null; then GENERATOR=(-G Ninja); fi
+# ccache, when installed, makes rebuilds across worktrees cheap; optional.
+LAUNCHER=()
+if command -v ccache > /dev/null; then LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 if [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]]; then
-  cmake -S . -B "$BUILD_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release "$@"
+  cmake -S . -B "$BUILD_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release "${LAUNCHER[@]}" "$@"
 elif (($#)); then
   cmake -S . -B "$BUILD_DIR" "$@"
 fi
