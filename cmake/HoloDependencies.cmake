@@ -26,3 +26,19 @@ find_package(draco REQUIRED)
 # Spatial voice (audio/): Opus and OpenAL Soft.
 pkg_check_modules(OPUS REQUIRED IMPORTED_TARGET opus)
 find_package(OpenAL REQUIRED)
+
+# Ceres (non-rigid tracking solver).
+find_package(Ceres REQUIRED)
+
+# Asio is header-only and standalone in Debian (no CMake config).
+find_path(ASIO_INCLUDE_DIR asio.hpp REQUIRED)
+add_library(holo_asio INTERFACE)
+target_include_directories(holo_asio SYSTEM INTERFACE ${ASIO_INCLUDE_DIR})
+target_compile_definitions(holo_asio INTERFACE ASIO_STANDALONE ASIO_NO_DEPRECATED)
+target_link_libraries(holo_asio INTERFACE Threads::Threads)
+find_package(OpenSSL REQUIRED)
+
+# Rendering: GLFW window or EGL surfaceless context; GL functions via libepoxy.
+find_package(glfw3 3.3 REQUIRED)
+find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
+pkg_check_modules(EPOXY REQUIRED IMPORTED_TARGET epoxy)
