@@ -61,6 +61,7 @@ StatusOr<ChainStats> RunVoiceChain(VoiceCapture& capture, SimulatedClock& clock,
   const auto tail_us = static_cast<int64_t>(options.tail_ms * 1000.0);
   int64_t order = 0;
   protocol::HeadPose queued_pose;  // pose of the block queued in OpenAL (rendered next tick)
+  std::vector<float> queued_mono(kFrameSamples, 0.0f);
   bool queued_playing = false;
 
   while (true) {
@@ -118,12 +119,14 @@ StatusOr<ChainStats> RunVoiceChain(VoiceCapture& capture, SimulatedClock& clock,
       HOLO_RETURN_IF_ERROR(sp->SetSpeaker(speaker, t.placement));
       const std::vector<float> stereo = sp->Render(kFrameSamples);
       t.stereo = stereo;
+      t.source = queued_mono;
       t.azimuth_deg = AzimuthDeg(options.listener, t.placement.position);
       t.distance_m = (t.placement.position - Eigen::Vector3f(options.listener.x, options.listener.y, options.listener.z)).norm();
       t.gain = sp->SpeakerGain(speaker);
       queued_pose = pose;
       queued_playing = playing;
       on_tick(t);
+      queued_mono = mono;
       next_pull_us += kFrameUs;
     }
   }

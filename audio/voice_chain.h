@@ -46,6 +46,7 @@ struct VoiceChainOptions {
 struct ChainTick {
   int64_t time_us = 0;                // when the block's first sample reaches the ears
   std::span<const float> stereo;      // kFrameSamples frames, interleaved L, R
+  std::span<const float> source;      // the mono block (jitter buffer output) rendered into `stereo`
   bool playing = false;               // the jitter buffer is playing (not buffering)
   protocol::HeadPose remote_head;     // speaker's head of the audio in this block (their room)
   SpeakerPlacement placement;         // ... transformed into the local room

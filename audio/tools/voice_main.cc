@@ -132,6 +132,8 @@ struct Truth {
   double t_s;
   float azimuth_deg, distance_m, gain;
   bool playing;
+  double source_energy;  // sum of squares of the mono block rendered (before spatialisation)
+  double source_diff_energy;  // ... of its first difference (a brightness proxy)
 };
 
 // Reads the written WAV back and prints per-window ear measurements against
@@ -149,36 +151,50 @@ int Analyse(const std::string& path, const std::vector<Truth>& truth, double win
   struct Row {
     double t0, az, dist, gain_db;
     EarMeasurement m;
+    double rel_db;     // ear level re the source block level: what the spatialiser did
+    double bright_db;  // ear brightness re the source's (first-difference energy / energy)
   };
   std::vector<Row> rows;
   double max_level = -1e9;
   for (size_t b = static_cast<size_t>(max_lag); b + win + static_cast<size_t>(max_lag) <= frames; b += win) {
     const double t0 = static_cast<double>(b) / w->sample_rate, t1 = t0 + window_s;
-    double az_s = 0, az_c = 0, dist = 0, gain = 0;
+    double az_s = 0, az_c = 0, dist = 0, gain = 0, src = 0, src_d = 0;
     int n = 0;
     for (const Truth& t : truth) {
       if (t.t_s >= t0 && t.t_s < t1 && t.playing) {
         az_s += std::sin(t.azimuth_deg * kDeg), az_c += std::cos(t.azimuth_deg * kDeg);
-        dist += t.distance_m, gain += t.gain;
+        dist += t.distance_m, gain += t.gain, src += t.source_energy, src_d += t.source_diff_energy;
         ++n;
       }
     }
     if (n == 0) continue;
     Row r{t0, std::atan2(az_s, az_c) / kDeg, dist / n, 20 * std::log10(std::max(gain / n, 1e-6)),
-          MeasureEars(w->samples, b, b + win, w->sample_rate, max_lag)};
-    if (!std::isfinite(r.m.level_db)) continue;
+          MeasureEars(w->samples, b, b + win, w->sample_rate, max_lag), 0.0, 0.0};
+    if (!std::isfinite(r.m.level_db) || src <= 0) continue;
+    r.rel_db = r.m.level_db - 10 * std::log10(src / static_cast<double>(n * kFrameSamples));
+    double ee = 0, ed = 0;
+    for (size_t i = b; i < b + win; ++i) {
+      for (int c = 0; c < 2; ++c) {
+        const double x = w->samples[2 * i + c], dx = x - w->samples[2 * (i - 1) + c];
+        ee += x * x, ed += dx * dx;
+      }
+    }
+    r.bright_db = (ee > 0 && src_d > 0) ? 10 * std::log10(ed / ee) - 10 * std::log10(src_d / src) : 0.0;
     max_level = std::max(max_level, r.m.level_db);
     rows.push_back(r);
   }
   std::printf("# analysis of %s, %.2f s windows (quiet windows, > 30 dB under the loudest, marked '-')\n",
               path.c_str(), window_s);
-  std::printf("#  t_s   true_az_deg  dist_m  gain_db |  ILD_dB  ITD_ms  level_dB\n");
+  std::printf("# rel_dB: ear level (L and R power summed) re the level of the source blocks rendered in the window\n");
+  std::printf("# bright_dB: (first-difference energy / energy) of the ears re that of the source: < 0 = duller\n");
+  std::printf("#  t_s   true_az_deg  dist_m  gain_db |  ILD_dB  ITD_ms  level_dB  rel_dB  bright_dB\n");
   int agree = 0, counted = 0;
   double sxy = 0, sxx = 0, syy = 0;
+  double gx = 0, gy = 0, gxx = 0, gyy = 0, gxy = 0, gn = 0, rel_min = 1e9, rel_max = -1e9;
   for (const Row& r : rows) {
     const bool quiet = r.m.level_db < max_level - 30;
-    std::printf("%6.2f  %+8.1f  %7.2f  %7.1f | %+7.1f  %+6.3f  %7.1f%s\n", r.t0, r.az, r.dist, r.gain_db, r.m.ild_db,
-                r.m.itd_ms, r.m.level_db, quiet ? "  -" : "");
+    std::printf("%6.2f  %+8.1f  %7.2f  %7.1f | %+7.1f  %+6.3f  %7.1f  %6.1f  %+8.1f%s\n", r.t0, r.az, r.dist,
+                r.gain_db, r.m.ild_db, r.m.itd_ms, r.m.level_db, r.rel_db, r.bright_db, quiet ? "  -" : "");
     if (quiet) continue;
     const double s = std::sin(r.az * kDeg);
     if (std::abs(s) > 0.26) {  // more than 15° off the median plane
@@ -186,7 +202,13 @@ int Analyse(const std::string& path, const std::vector<Truth>& truth, double win
       agree += (s > 0) == (r.m.ild_db > 0) && (s > 0) == (r.m.itd_ms > 0);
     }
     sxy += s * r.m.ild_db, sxx += s * s, syy += r.m.ild_db * r.m.ild_db;
+    gx += r.gain_db, gy += r.rel_db, gxx += r.gain_db * r.gain_db, gyy += r.rel_db * r.rel_db,
+        gxy += r.gain_db * r.rel_db, ++gn;
+    rel_min = std::min(rel_min, r.rel_db), rel_max = std::max(rel_max, r.rel_db);
   }
+  const double cov = gxy / gn - gx / gn * gy / gn, vx = gxx / gn - gx / gn * gx / gn, vy = gyy / gn - gy / gn * gy / gn;
+  std::printf("# level: rel_dB spans %.1f dB (%.1f .. %.1f); corr(gain_dB, rel_dB) = %.2f\n", rel_max - rel_min,
+              rel_min, rel_max, gn > 1 && vx > 1e-9 && vy > 1e-9 ? cov / std::sqrt(vx * vy) : 0.0);
   std::printf("# side right: ILD and ITD sign agree with the true side in %d of %d windows >15 deg off centre; "
               "corr(sin(azimuth), ILD) = %.2f\n",
               agree, counted, sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0);
@@ -344,7 +366,12 @@ int main(int argc, char** argv) {
   auto on_tick = [&](const ChainTick& t) {
     stereo.insert(stereo.end(), t.stereo.begin(), t.stereo.end());
     const double ts = static_cast<double>(t.time_us) * 1e-6;
-    truth.push_back({ts, t.azimuth_deg, t.distance_m, t.gain, t.playing});
+    double e = 0, de = 0;
+    for (size_t i = 0; i < t.source.size(); ++i) {
+      e += static_cast<double>(t.source[i]) * t.source[i];
+      if (i > 0) de += std::pow(static_cast<double>(t.source[i]) - t.source[i - 1], 2);
+    }
+    truth.push_back({ts, t.azimuth_deg, t.distance_m, t.gain, t.playing, e, de});
     if (trace) {
       trace << ts << ',' << t.playing << ',' << t.azimuth_deg << ',' << t.distance_m << ',' << t.gain << ','
             << t.remote_head.x << ',' << t.remote_head.y << ',' << t.remote_head.yaw / kDeg << ','
