@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +16,13 @@
 #include <numbers>
 #include <string>
 #include <vector>
+
+#include <AL/al.h>
+#include <AL/alc.h>
+#include <AL/alext.h>
+
+#include <chrono>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 
@@ -128,6 +136,45 @@ StatusOr<std::vector<float>> RecordMicrophone(const std::string& device, double 
   return out;
 }
 
+// Plays the already spatialised stereo on the default output device (HRTF off
+// there and direct channels on, so the binaural signal is not processed again).
+Status PlayOnDefaultDevice(const std::vector<float>& stereo) {
+  ALCdevice* dev = alcOpenDevice(nullptr);
+  if (dev == nullptr) {
+    return Unavailable("no sound output: OpenAL could not open the default playback device (no sound card?)");
+  }
+  const ALCint attrs[] = {ALC_HRTF_SOFT, ALC_FALSE, ALC_FREQUENCY, kSampleRate, 0};
+  ALCcontext* ctx = alcCreateContext(dev, attrs);
+  if (ctx == nullptr) {
+    alcCloseDevice(dev);
+    return Unavailable("cannot create an OpenAL context on the default playback device");
+  }
+  alcMakeContextCurrent(ctx);
+  std::vector<int16_t> pcm(stereo.size());
+  for (size_t i = 0; i < stereo.size(); ++i) {
+    pcm[i] = static_cast<int16_t>(std::lrint(std::clamp(stereo[i], -1.0f, 1.0f) * 32767.0f));
+  }
+  ALuint buf = 0, src = 0;
+  alGenBuffers(1, &buf);
+  alBufferData(buf, AL_FORMAT_STEREO16, pcm.data(), static_cast<ALsizei>(pcm.size() * sizeof(int16_t)), kSampleRate);
+  alGenSources(1, &src);
+  alSourcei(src, AL_DIRECT_CHANNELS_SOFT, AL_TRUE);
+  alSourcei(src, AL_BUFFER, static_cast<ALint>(buf));
+  alSourcePlay(src);
+  Status result = alGetError() == AL_NO_ERROR ? OkStatus() : Internal("OpenAL error while starting playback");
+  ALint state = AL_PLAYING;
+  while (result.ok() && state == AL_PLAYING) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    alGetSourcei(src, AL_SOURCE_STATE, &state);
+  }
+  alDeleteSources(1, &src);
+  alDeleteBuffers(1, &buf);
+  alcMakeContextCurrent(nullptr);
+  alcDestroyContext(ctx);
+  alcCloseDevice(dev);
+  return result;
+}
+
 struct Truth {
   double t_s;
   float azimuth_deg, distance_m, gain;
@@ -224,7 +271,7 @@ int main(int argc, char** argv) {
       "-> room transform -> OpenAL Soft HRTF on the loopback device); writes the listener's stereo WAV.\n"
       "Input: a microphone (--mic, if one exists), a WAV (--audio-in) or espeak-ng speech (--say)."};
   std::string audio_in, say, voice = "en-us", out, trace_path, link_name = "face-to-face", codec = "opus", mic_device;
-  bool mic = false, no_fec = false, no_hrtf = false, quiet = false, analyse = false;
+  bool mic = false, no_fec = false, no_hrtf = false, quiet = false, analyse = false, play = false;
   double duration_s = 0, mic_seconds = 5, jitter_ms = 20, loss = 0, delay_ms = 20, gap_m = 0.5, window_s = 0.25,
          listener_yaw_deg = 0, gap_between_loops_s = 0.3;
   int bitrate = 24000;
@@ -268,6 +315,7 @@ int main(int argc, char** argv) {
   app.add_option("--trace", trace_path, "write per-20 ms truth (time, azimuth, distance, gain, jitter buffer) as CSV");
   app.add_flag("--analyse,--analyze", analyse, "read the output WAV back and print ILD/ITD/level per window vs the true azimuth");
   app.add_option("--window", window_s, "analysis window, s")->capture_default_str()->check(CLI::Range(0.05, 10.0));
+  app.add_flag("--play", play, "also play the result on the default output device (if there is one)");
   app.add_flag("-q,--quiet", quiet, "no progress output");
   CLI11_PARSE(app, argc, argv);
 
@@ -403,5 +451,11 @@ int main(int argc, char** argv) {
                  static_cast<long long>(jb.underflows), jb.target_delay_ms, jb.current_delay_ms);
   }
   if (stats->refused > 0) return fail(std::to_string(stats->refused) + " messages were refused by the receiver");
-  return analyse ? Analyse(out, truth, window_s) : 0;
+  const int rc = analyse ? Analyse(out, truth, window_s) : 0;
+  if (play) {
+    if (!quiet) std::fprintf(stderr, "holoport-voice: playing %s on the default output device\n", out.c_str());
+    const Status ps = PlayOnDefaultDevice(stereo);
+    if (!ps.ok()) return fail(ps.message() + "; the WAV " + out + " is written");
+  }
+  return rc;
 }
