@@ -75,6 +75,7 @@ StatusOr<ChainStats> RunVoiceChain(VoiceCapture& capture, SimulatedClock& clock,
         if (frame.status().code() != StatusCode::kOutOfRange) return frame.status();
         capture_done = true;
         end_us = clock.NowUs() + tail_us;
+        stats.jitter_buffer_speech_end = jb->stats();
         continue;
       }
       ++stats.frames_captured;

@@ -61,7 +61,9 @@ struct ChainStats {
   int64_t bytes_sent = 0;             // protocol header + AudioPose payload
   int64_t lost_in_network = 0;
   int64_t refused = 0;                // messages the receiver refused (never expected here)
-  JitterBufferStats jitter_buffer;
+  JitterBufferStats jitter_buffer;            // at the end of the run
+  JitterBufferStats jitter_buffer_speech_end; // when the capture ended (before draining: the
+                                              // underflows after it are the stream running out)
   std::string hrtf_status;
 };
 

@@ -441,14 +441,16 @@ int main(int argc, char** argv) {
   if (!quiet) {
     std::fprintf(stderr,
                  "holoport-voice: wrote %s (%.1f s stereo, HRTF %s). sent %lld messages, %.1f kbit/s incl. headers; "
-                 "lost %lld; jitter buffer: concealed %lld (FEC %lld), late %lld, underflows %lld, target %.0f ms, "
-                 "delay %.0f ms\n",
+                 "lost %lld; jitter buffer: concealed %lld (FEC %lld), late %lld, underflows %lld while the speech "
+                 "ran (+%lld draining at the end), target %.0f ms, delay %.0f ms when the speech ended\n",
                  out.c_str(), static_cast<double>(stereo.size()) / 2 / kSampleRate, stats->hrtf_status.c_str(),
                  static_cast<long long>(stats->messages_sent),
                  seconds > 0 ? static_cast<double>(stats->bytes_sent) * 8 / 1000 / seconds : 0.0,
                  static_cast<long long>(stats->lost_in_network), static_cast<long long>(jb.concealed),
                  static_cast<long long>(jb.fec_recovered), static_cast<long long>(jb.late),
-                 static_cast<long long>(jb.underflows), jb.target_delay_ms, jb.current_delay_ms);
+                 static_cast<long long>(stats->jitter_buffer_speech_end.underflows),
+                 static_cast<long long>(jb.underflows - stats->jitter_buffer_speech_end.underflows),
+                 stats->jitter_buffer_speech_end.target_delay_ms, stats->jitter_buffer_speech_end.current_delay_ms);
   }
   if (stats->refused > 0) return fail(std::to_string(stats->refused) + " messages were refused by the receiver");
   const int rc = analyse ? Analyse(out, truth, window_s) : 0;
