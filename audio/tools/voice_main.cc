@@ -106,16 +106,29 @@ HeadPose ToRemote(const LocalPose& p, const RoomLink& link) {
   return HeadPose{pos.x(), pos.y(), pos.z(), std::atan2(fac.y(), fac.x()), 0.0f, 0.0f};
 }
 
-// Runs espeak-ng (no shell) to make `wav` from `text`.
+// Runs espeak-ng (no shell; the text goes through a file, so text starting
+// with '-' is not taken for an option) to make `wav` from `text`.
 Status Speak(const std::string& text, const std::string& voice, const std::string& wav) {
+  const std::string txt = wav + ".txt";
+  {
+    std::ofstream f(txt);
+    f << text << '\n';
+    if (!f) return Unavailable("cannot write " + txt);
+  }
   const pid_t pid = fork();
-  if (pid < 0) return Internal("fork failed");
+  if (pid < 0) {
+    std::remove(txt.c_str());
+    return Internal("fork failed");
+  }
   if (pid == 0) {
-    execlp("espeak-ng", "espeak-ng", "-v", voice.c_str(), "-w", wav.c_str(), text.c_str(), static_cast<char*>(nullptr));
+    execlp("espeak-ng", "espeak-ng", "-v", voice.c_str(), "-w", wav.c_str(), "-f", txt.c_str(),
+           static_cast<char*>(nullptr));
     _exit(127);
   }
   int status = 0;
-  if (waitpid(pid, &status, 0) < 0) return Internal("waitpid failed");
+  const pid_t waited = waitpid(pid, &status, 0);
+  std::remove(txt.c_str());
+  if (waited < 0) return Internal("waitpid failed");
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     return Unavailable(WIFEXITED(status) && WEXITSTATUS(status) == 127
                            ? std::string("espeak-ng not found (Debian package espeak-ng)")
@@ -302,7 +315,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"face-to-face", "identity"}));
   app.add_option("--gap", gap_m, "face-to-face: distance between the two displays' rooms, m")->capture_default_str()->check(CLI::Range(0.0, 100.0));
   app.add_option("--duration", duration_s, "seconds of speech to play (the input repeats); 0 = one circle / one walk / the input once")
-      ->capture_default_str()->check(CLI::Range(0.0, 3600.0));
+      ->capture_default_str()->check(CLI::Range(0.0, 600.0));
   app.add_option("--codec", codec, "opus or pcm")->capture_default_str()->check(CLI::IsMember({"opus", "pcm"}));
   app.add_option("--bitrate", bitrate, "Opus bitrate, bit/s")->capture_default_str()->check(CLI::Range(6000, 510000));
   app.add_flag("--no-fec", no_fec, "Opus without in-band FEC");
@@ -367,6 +380,7 @@ int main(int argc, char** argv) {
                  : po.path == "walk-past" ? po.length_m / po.speed_mps
                                           : static_cast<double>(speech.size()) / kSampleRate;
   }
+  if (duration_s > 600) return fail("the run would last " + std::to_string(duration_s) + " s; at most 600 s (--duration)");
   const size_t want = static_cast<size_t>(duration_s * kSampleRate);
   std::vector<float> input;
   input.reserve(want);
