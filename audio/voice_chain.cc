@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <queue>
 #include <random>
 
@@ -133,6 +134,71 @@ StatusOr<ChainStats> RunVoiceChain(VoiceCapture& capture, SimulatedClock& clock,
   }
   stats.jitter_buffer = jb->stats();
   return stats;
+}
+
+StatusOr<MouthToEar> MeasureMouthToEar(const VoiceChainOptions& options, double seconds, double warmup_s) {
+  if (!(seconds >= 2 && seconds <= 600) || !(warmup_s >= 0 && warmup_s < seconds - 1)) {
+    return InvalidArgument("mouth-to-ear: need 2..600 s and a warm-up at least 1 s shorter");
+  }
+  constexpr double kPeriod = 0.5, kBurst = 0.010, kOffset = 0.1037;
+  const size_t n = static_cast<size_t>(seconds * kSampleRate);
+  std::vector<float> in(n, 0.0f);
+  std::vector<double> in_centroid;
+  const size_t len = static_cast<size_t>(kBurst * kSampleRate);
+  for (double t0 = kOffset; t0 + kPeriod < seconds; t0 += kPeriod) {
+    const size_t a = static_cast<size_t>(t0 * kSampleRate);
+    double num = 0, den = 0;
+    for (size_t i = 0; i < len; ++i) {
+      const double w = 0.5 - 0.5 * std::cos(2 * std::numbers::pi * (static_cast<double>(i) + 0.5) / static_cast<double>(len));
+      in[a + i] = static_cast<float>(0.5 * w * std::sin(2 * std::numbers::pi * 1000.0 * static_cast<double>(i) / kSampleRate));
+      const double e = static_cast<double>(in[a + i]) * in[a + i];
+      num += static_cast<double>(a + i) / kSampleRate * e;
+      den += e;
+    }
+    in_centroid.push_back(num / den);
+  }
+  // The source 1 m ahead of the listener in the local room, facing them, as a
+  // pose in the remote room.
+  const Eigen::Isometry3f room_from_listener = HeadToRoom(options.listener);
+  const Eigen::Vector3f local = room_from_listener * Eigen::Vector3f(1, 0, 0);
+  const Eigen::Vector3f facing = -(room_from_listener.linear() * Eigen::Vector3f::UnitX());
+  const Eigen::Isometry3f remote_from_local = options.link.local_from_remote.inverse();
+  const Eigen::Vector3f rp = remote_from_local * local, rf = remote_from_local.linear() * facing;
+  const protocol::HeadPose speaker{rp.x(), rp.y(), rp.z(), std::atan2(rf.y(), rf.x()), 0.0f, 0.0f};
+  SimulatedClock clock(0);
+  auto cap = VoiceCapture::FromSamples(std::move(in), clock, [&](int64_t) { return speaker; }, "bursts");
+  std::vector<float> ear;  // (L + R) / 2 on the ear timeline, from t = 0
+  auto on_tick = [&](const ChainTick& t) {
+    const size_t at = static_cast<size_t>(t.time_us * kSampleRate / 1000000);
+    if (ear.size() < at + kFrameSamples) ear.resize(at + kFrameSamples, 0.0f);
+    for (int i = 0; i < kFrameSamples; ++i) ear[at + i] = 0.5f * (t.stereo[2 * i] + t.stereo[2 * i + 1]);
+  };
+  HOLO_ASSIGN_OR_RETURN(ChainStats st, RunVoiceChain(*cap, clock, options, on_tick));
+  std::vector<double> delays;
+  for (double c : in_centroid) {
+    if (c < warmup_s) continue;
+    // The burst's output lies in [c, c + 450 ms): later bursts come 500 ms on.
+    const size_t a = static_cast<size_t>(c * kSampleRate);
+    const size_t b = std::min(ear.size(), a + static_cast<size_t>(0.45 * kSampleRate));
+    double num = 0, den = 0;
+    for (size_t i = a; i < b; ++i) {
+      const double e = static_cast<double>(ear[i]) * ear[i];
+      num += static_cast<double>(i) / kSampleRate * e;
+      den += e;
+    }
+    if (den > 0) delays.push_back((num / den - c) * 1000.0);
+  }
+  if (delays.empty()) return Internal("mouth-to-ear: no burst reached the ears");
+  std::sort(delays.begin(), delays.end());
+  MouthToEar m;
+  m.bursts = static_cast<int>(delays.size());
+  const size_t k = delays.size();
+  m.median_ms = k % 2 == 1 ? delays[k / 2] : 0.5 * (delays[k / 2 - 1] + delays[k / 2]);
+  m.p95_ms = delays[std::min(k - 1, static_cast<size_t>(0.95 * static_cast<double>(k)))];
+  m.min_ms = delays.front();
+  m.max_ms = delays.back();
+  m.jb_target_ms = st.jitter_buffer.target_delay_ms;
+  return m;
 }
 
 }  // namespace holo::audio

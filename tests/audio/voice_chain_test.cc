@@ -99,6 +99,35 @@ TEST(VoiceChain, FacingAwayThroughTheChainIsQuieter) {
   EXPECT_GE(la - lb, 6.0);
 }
 
+// The measured mouth-to-ear delay adds up: PCM at no jitter = 20 ms framing +
+// 20 ms jitter buffer target + the 20 ms frame playing + 20 ms queued in OpenAL;
+// Opus adds its 6.5 ms look-ahead; a network base delay adds itself; jitter
+// raises the jitter buffer's target and the delay with it.
+TEST(VoiceChain, MouthToEarDelayAddsUp) {
+  auto run = [](AudioCodec codec, double base_ms, double jitter_ms) {
+    VoiceChainOptions o;
+    o.encoder.codec = codec;
+    o.network.base_delay_ms = base_ms;
+    o.network.jitter_ms = jitter_ms;
+    o.link = RoomLink{};
+    auto m = MeasureMouthToEar(o, 14.0, 6.0);
+    EXPECT_TRUE(m.ok()) << m.status().ToString();
+    return m.ok() ? *m : MouthToEar{};
+  };
+  const MouthToEar pcm = run(AudioCodec::kPcm16, 0, 0), opus = run(AudioCodec::kOpus, 0, 0);
+  const MouthToEar far = run(AudioCodec::kPcm16, 30, 0), jittery = run(AudioCodec::kPcm16, 0, 50);
+  std::printf("mouth-to-ear median: pcm %.1f ms, opus %.1f, pcm + 30 ms network %.1f, pcm jitter 50 ms %.1f "
+              "(target %.1f ms, max %.1f)\n",
+              pcm.median_ms, opus.median_ms, far.median_ms, jittery.median_ms, jittery.jb_target_ms, jittery.max_ms);
+  EXPECT_GE(pcm.bursts, 15);
+  EXPECT_NEAR(pcm.median_ms, 80.0, 4.0);
+  EXPECT_NEAR(opus.median_ms - pcm.median_ms, 6.5, 1.5);
+  EXPECT_NEAR(far.median_ms - pcm.median_ms, 30.0, 3.0);
+  EXPECT_GT(jittery.jb_target_ms, 45.0);
+  EXPECT_NEAR(jittery.median_ms - pcm.median_ms, jittery.jb_target_ms - 20.0, 6.0);
+  EXPECT_LT(jittery.max_ms, 150.0);  // bounded
+}
+
 TEST(VoiceChain, RefusesBadOptions) {
   SimulatedClock clock;
   auto cap = VoiceCapture::FromSamples(Noise(0.1), clock, [](int64_t) { return HeadPose{}; });
