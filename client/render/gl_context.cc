@@ -166,6 +166,8 @@ bool AnyContextCurrent() {
 }
 }  // namespace
 
+void FinishGl() { glFinish(); }
+
 std::string CurrentGlRenderer() {
   if (!AnyContextCurrent()) return "";
   const GLubyte* s = glGetString(GL_RENDERER);

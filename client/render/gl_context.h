@@ -38,6 +38,10 @@ StatusOr<std::unique_ptr<GlContext>> CreateHeadlessContext();
 StatusOr<std::unique_ptr<GlContext>> CreateWindowContext(int width, int height, const std::string& title,
                                                          bool visible = true);
 
+// glFinish on the current context: waits until all submitted GL work is
+// done (for timing).
+void FinishGl();
+
 // GL_RENDERER and GL_VERSION of the current context, "" if none is current.
 std::string CurrentGlRenderer();
 std::string CurrentGlVersion();

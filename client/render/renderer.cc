@@ -21,47 +21,64 @@ struct GpuVertex {
 };
 static_assert(sizeof(GpuVertex) == 28);
 
+// The per-pod work that is affine in world space runs per vertex: the point
+// in each pod's camera frame (exact under perspective-correct interpolation)
+// and the pod's blending weight (Holoportation computes its weights per
+// vertex too). The fragment shader projects (with distortion), tests
+// visibility and discontinuities with one fetch and blends.
 constexpr const char* kDrawVs = R"(#version 330 core
+#define MAX_PODS 12
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec4 a_color;
 uniform mat4 u_clip_from_local;
 uniform mat4 u_local_from_remote;
-out vec3 v_remote;
-out vec3 v_normal;
+uniform int u_mode;
+uniform int u_num_pods;
+uniform mat4 u_pod_cam_from_world[MAX_PODS];
+uniform vec3 u_pod_center[MAX_PODS];  // remote world
+uniform vec3 u_eye_remote;
+uniform float u_alpha;
+uniform float u_beta;
 out vec3 v_color;
+// xyz: the point in pod i's camera frame; w: its weight (0 = pod unusable).
+out vec4 v_pod[MAX_PODS];
+invariant gl_Position;
 void main() {
-  v_remote = a_pos;
-  v_normal = a_normal;
   v_color = a_color.rgb;
   gl_Position = u_clip_from_local * (u_local_from_remote * vec4(a_pos, 1.0));
+  if (u_mode == 0) return;
+  vec3 n = normalize(a_normal);
+  vec3 to_eye = normalize(u_eye_remote - a_pos);
+  for (int i = 0; i < MAX_PODS; ++i) {
+    if (i >= u_num_pods) {
+      v_pod[i] = vec4(0.0);
+      continue;
+    }
+    vec3 to_pod = normalize(u_pod_center[i] - a_pos);
+    float ndv = dot(n, to_pod);
+    float w = ndv > 0.0 ? pow(ndv, u_alpha) * pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
+    v_pod[i] = vec4((u_pod_cam_from_world[i] * vec4(a_pos, 1.0)).xyz, w);
+  }
 }
 )";
 
 // u_mode 0: per-vertex colour; 1: projective texturing from the pods.
 constexpr const char* kDrawFs = R"(#version 330 core
-#define MAX_PODS 16
-in vec3 v_remote;
-in vec3 v_normal;
+#define MAX_PODS 12
 in vec3 v_color;
+in vec4 v_pod[MAX_PODS];
 out vec4 o_color;
 uniform int u_mode;
 uniform int u_num_pods;
-uniform mat4 u_pod_cam_from_world[MAX_PODS];
 uniform vec4 u_pod_intr[MAX_PODS];   // fx, fy, cx, cy
 uniform vec4 u_pod_dist[MAX_PODS];   // k1, k2, p1, p2
 uniform float u_pod_k3[MAX_PODS];
 uniform vec2 u_pod_size[MAX_PODS];   // width, height (pixels)
-uniform vec3 u_pod_center[MAX_PODS]; // remote world
 uniform vec2 u_array_size;
 uniform sampler2DArray u_pod_color;
 uniform sampler2DArray u_pod_depth;
-uniform vec3 u_eye_remote;
-uniform float u_alpha;
-uniform float u_beta;
 uniform float u_vis_tol;
-uniform float u_jump;
-uniform float u_disc_radius;
 
 vec2 Distort(vec2 x, vec4 d, float k3) {
   float r2 = dot(x, x);
@@ -75,36 +92,24 @@ void main() {
     o_color = vec4(v_color, 1.0);
     return;
   }
-  vec3 n = normalize(v_normal);
-  vec3 to_eye = normalize(u_eye_remote - v_remote);
   vec3 clean = vec3(0.0), edge = vec3(0.0);
   float clean_w = 0.0, edge_w = 0.0;
-  const ivec2 kOffsets[8] = ivec2[8](ivec2(-1, 0), ivec2(1, 0), ivec2(0, -1), ivec2(0, 1),
-                                     ivec2(-1, -1), ivec2(1, 1), ivec2(-1, 1), ivec2(1, -1));
   for (int i = 0; i < u_num_pods; ++i) {
-    vec4 pc = u_pod_cam_from_world[i] * vec4(v_remote, 1.0);
-    if (pc.z < 0.05) continue;
-    vec2 xn = Distort(pc.xy / pc.z, u_pod_dist[i], u_pod_k3[i]);
+    vec4 pod = v_pod[i];
+    float w = pod.w;
+    if (w <= 1e-6 || pod.z < 0.05) continue;
+    vec2 xn = Distort(pod.xy / pod.z, u_pod_dist[i], u_pod_k3[i]);
     vec4 intr = u_pod_intr[i];
     vec2 px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);
     vec2 size = u_pod_size[i];
     if (px.x < -0.5 || px.y < -0.5 || px.x >= size.x - 0.5 || px.y >= size.y - 0.5) continue;
-    vec3 to_pod = normalize(u_pod_center[i] - v_remote);
-    float ndv = dot(n, to_pod);
-    if (ndv <= 0.0) continue;
-    ivec2 ip = ivec2(floor(px + 0.5));
-    float zmap = texelFetch(u_pod_depth, ivec3(ip, i), 0).r;
-    if (zmap <= 0.0 || pc.z > zmap + u_vis_tol) continue;
-    int r = clamp(int(ceil(u_disc_radius * intr.x / pc.z)), 1, 8);
-    ivec2 maxp = ivec2(size) - 1;
-    bool near_edge = false;
-    for (int k = 0; k < 8; ++k) {
-      float zq = texelFetch(u_pod_depth, ivec3(clamp(ip + kOffsets[k] * r, ivec2(0), maxp), i), 0).r;
-      if (zq <= 0.0 || abs(zq - zmap) > u_jump) near_edge = true;
-    }
-    float w = pow(ndv, u_alpha) * pow(0.5 * (1.0 + dot(to_pod, to_eye)), u_beta);
+    // Flagged depth: camera z of the nearest surface, negative when that
+    // texel is near a depth discontinuity (see kEdgeFs), 0 = nothing.
+    float zf = texelFetch(u_pod_depth, ivec3(ivec2(floor(px + 0.5)), i), 0).r;
+    float zmap = abs(zf);
+    if (zmap <= 0.0 || pod.z > zmap + u_vis_tol) continue;
     vec3 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(i))).rgb;
-    if (near_edge) {
+    if (zf < 0.0) {
       edge += w * c;
       edge_w += w;
     } else {
@@ -158,6 +163,46 @@ constexpr const char* kDepthFs = R"(#version 330 core
 in float v_z;
 out float o_z;
 void main() { o_z = v_z; }
+)";
+
+// Discontinuity flags, one full-screen pass per pod layer: reads the pod's
+// depth map and writes it back negated where a neighbour at the radius
+// (discontinuity_radius_m at the texel's depth, 1..8 pixels) is empty or
+// differs by more than the jump. Done once per mesh, so the per-fragment
+// test is a single fetch.
+constexpr const char* kEdgeVs = R"(#version 330 core
+void main() {
+  // A triangle covering the viewport.
+  vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+  gl_Position = vec4(p, 0.0, 1.0);
+}
+)";
+constexpr const char* kEdgeFs = R"(#version 330 core
+uniform sampler2DArray u_depth;
+uniform int u_layer;
+uniform vec2 u_size;
+uniform float u_fx;
+uniform float u_jump;
+uniform float u_radius;
+out float o_z;
+void main() {
+  ivec2 ip = ivec2(gl_FragCoord.xy);
+  float z = texelFetch(u_depth, ivec3(ip, u_layer), 0).r;
+  if (z <= 0.0) {
+    o_z = 0.0;
+    return;
+  }
+  const ivec2 kOffsets[8] = ivec2[8](ivec2(-1, 0), ivec2(1, 0), ivec2(0, -1), ivec2(0, 1),
+                                     ivec2(-1, -1), ivec2(1, 1), ivec2(-1, 1), ivec2(1, -1));
+  int r = clamp(int(ceil(u_radius * u_fx / z)), 1, 8);
+  ivec2 maxp = ivec2(u_size) - 1;
+  bool near_edge = false;
+  for (int k = 0; k < 8; ++k) {
+    float zq = texelFetch(u_depth, ivec3(clamp(ip + kOffsets[k] * r, ivec2(0), maxp), u_layer), 0).r;
+    if (zq <= 0.0 || abs(zq - z) > u_jump) near_edge = true;
+  }
+  o_z = near_edge ? -z : z;
+}
 )";
 
 GLint Loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
@@ -250,6 +295,9 @@ Renderer::~Renderer() {
   if (depth_program_) glDeleteProgram(depth_program_);
   if (pod_color_tex_) glDeleteTextures(1, &pod_color_tex_);
   if (pod_depth_tex_) glDeleteTextures(1, &pod_depth_tex_);
+  if (pod_raw_tex_) glDeleteTextures(1, &pod_raw_tex_);
+  if (edge_program_) glDeleteProgram(edge_program_);
+  if (empty_vao_) glDeleteVertexArrays(1, &empty_vao_);
   if (pod_depth_rb_) glDeleteRenderbuffers(1, &pod_depth_rb_);
   if (pod_fbo_) glDeleteFramebuffers(1, &pod_fbo_);
 }
@@ -270,6 +318,8 @@ Status Renderer::Init() {
   }
   HOLO_ASSIGN_OR_RETURN(draw_program_, BuildProgram("mesh", kDrawVs, kDrawFs));
   HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", kDepthVs, kDepthFs));
+  HOLO_ASSIGN_OR_RETURN(edge_program_, BuildProgram("pod discontinuities", kEdgeVs, kEdgeFs));
+  glGenVertexArrays(1, &empty_vao_);
   glUseProgram(draw_program_);
   glUniform1i(Loc(draw_program_, "u_pod_color"), 0);
   glUniform1i(Loc(draw_program_, "u_pod_depth"), 1);
@@ -352,6 +402,12 @@ void Renderer::Draw(const GpuMesh& gpu) const {
 
 Status Renderer::SetRemoteMesh(const Mesh& mesh) {
   HOLO_RETURN_IF_ERROR(Upload(mesh, &remote_));
+  remote_min_ = Eigen::Vector3f::Constant(1e30f);
+  remote_max_ = Eigen::Vector3f::Constant(-1e30f);
+  for (const auto& p : mesh.positions) {
+    remote_min_ = remote_min_.cwiseMin(p);
+    remote_max_ = remote_max_.cwiseMax(p);
+  }
   visibility_dirty_ = true;
   return OkStatus();
 }
@@ -387,6 +443,7 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
   if (!pod_color_tex_) {
     glGenTextures(1, &pod_color_tex_);
     glGenTextures(1, &pod_depth_tex_);
+    glGenTextures(1, &pod_raw_tex_);
     glGenRenderbuffers(1, &pod_depth_rb_);
     glGenFramebuffers(1, &pod_fbo_);
   }
@@ -397,10 +454,12 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
-    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_R32F, w, h, n, 0, GL_RED, GL_FLOAT, nullptr);
-    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    for (GLuint tex : {pod_depth_tex_, pod_raw_tex_}) {
+      glBindTexture(GL_TEXTURE_2D_ARRAY, tex);
+      glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_R32F, w, h, n, 0, GL_RED, GL_FLOAT, nullptr);
+      glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    }
     glBindRenderbuffer(GL_RENDERBUFFER, pod_depth_rb_);
     glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, w, h);
     num_pods_ = n;
@@ -434,7 +493,8 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
   return CheckGlError("SetPodImages");
 }
 
-Status Renderer::UpdateVisibility() {
+Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
   if (num_pods_ == 0) return InvalidArgument("no pod images: call SetPodImages before projective texturing");
   constexpr float kNear = 0.05f, kFar = 100.0f;
   GLint old_fbo = 0;
@@ -445,13 +505,21 @@ Status Renderer::UpdateVisibility() {
   glUniform1f(Loc(depth_program_, "u_near"), kNear);
   glUniform1f(Loc(depth_program_, "u_far"), kFar);
   glDisable(GL_SCISSOR_TEST);
-  glDisable(GL_CULL_FACE);
+  if (options.cull_back_faces) {
+    // The pod pass does not flip y (texel row v = image row v), so the
+    // outside of a counter-clockwise triangle appears clockwise.
+    glFrontFace(GL_CW);
+    glCullFace(GL_BACK);
+    glEnable(GL_CULL_FACE);
+  } else {
+    glDisable(GL_CULL_FACE);
+  }
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDepthMask(GL_TRUE);
   glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
   for (int i = 0; i < num_pods_; ++i) {
-    glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+    glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_raw_tex_, 0, i);
     if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
       glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
       return Internal("pod depth framebuffer is incomplete");
@@ -473,10 +541,74 @@ Status Renderer::UpdateVisibility() {
     glUniform2f(Loc(depth_program_, "u_size"), static_cast<float>(in.width), static_cast<float>(in.height));
     Draw(remote_);
   }
+  glDisable(GL_CULL_FACE);
+  glFrontFace(GL_CCW);
+  // Discontinuity flags into pod_depth_tex_.
+  glDisable(GL_DEPTH_TEST);
+  glUseProgram(edge_program_);
+  glUniform1i(Loc(edge_program_, "u_depth"), 0);
+  glUniform1f(Loc(edge_program_, "u_jump"), options.discontinuity_jump_m);
+  glUniform1f(Loc(edge_program_, "u_radius"), options.discontinuity_radius_m);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
+  glBindVertexArray(empty_vao_);
+  for (int i = 0; i < num_pods_; ++i) {
+    glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    glViewport(0, 0, array_width_, array_height_);
+    glClearColor(0, 0, 0, 0);
+    glClear(GL_COLOR_BUFFER_BIT);
+    glViewport(0, 0, in.width, in.height);
+    // Only the pixels the mesh can cover (its bounding box projected, plus
+    // the largest radius): most of a pod's image is empty.
+    int box[4] = {0, 0, in.width, in.height};
+    PodBox(pod_cameras_[i], box);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(box[0], box[1], box[2], box[3]);
+    glUniform1i(Loc(edge_program_, "u_layer"), i);
+    glUniform2f(Loc(edge_program_, "u_size"), static_cast<float>(in.width), static_cast<float>(in.height));
+    glUniform1f(Loc(edge_program_, "u_fx"), static_cast<float>(in.fx));
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDisable(GL_SCISSOR_TEST);
+  }
+  glBindVertexArray(0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  glEnable(GL_DEPTH_TEST);
   glUseProgram(0);
   glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+  edge_jump_m_ = options.discontinuity_jump_m;
+  edge_radius_m_ = options.discontinuity_radius_m;
   visibility_dirty_ = false;
   return CheckGlError("pod visibility pass");
+}
+
+void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
+  const Intrinsics& in = cam.intrinsics;
+  if (in.HasDistortion() || !(remote_min_.array() <= remote_max_.array()).all()) return;  // keep the whole image
+  const Pose cam_from_world = cam.world_from_camera.inverse();
+  float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3f corner((c & 1) ? remote_max_.x() : remote_min_.x(), (c & 2) ? remote_max_.y() : remote_min_.y(),
+                                 (c & 4) ? remote_max_.z() : remote_min_.z());
+    const Eigen::Vector3f p = cam_from_world * corner;
+    if (p.z() < 0.05f) return;  // the box reaches behind the camera: whole image
+    const float u = static_cast<float>(in.fx) * p.x() / p.z() + static_cast<float>(in.cx);
+    const float v = static_cast<float>(in.fy) * p.y() / p.z() + static_cast<float>(in.cy);
+    x0 = std::min(x0, u);
+    x1 = std::max(x1, u);
+    y0 = std::min(y0, v);
+    y1 = std::max(y1, v);
+  }
+  constexpr float kMargin = 10.0f;  // > the largest discontinuity radius (8 px)
+  const int bx0 = std::clamp(static_cast<int>(std::floor(x0 - kMargin)), 0, in.width);
+  const int by0 = std::clamp(static_cast<int>(std::floor(y0 - kMargin)), 0, in.height);
+  const int bx1 = std::clamp(static_cast<int>(std::ceil(x1 + kMargin)), 0, in.width);
+  const int by1 = std::clamp(static_cast<int>(std::ceil(y1 + kMargin)), 0, in.height);
+  // Texel row v is image row v: no flip between image and window rows here.
+  box[0] = bx0;
+  box[1] = by0;
+  box[2] = std::max(0, bx1 - bx0);
+  box[3] = std::max(0, by1 - by0);
 }
 
 Status Renderer::ReadPodDepth(int i, ImageFloat* out) {
@@ -485,7 +617,7 @@ Status Renderer::ReadPodDepth(int i, ImageFloat* out) {
   GLint old_fbo = 0;
   glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
   glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
-  glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+  glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_raw_tex_, 0, i);
   const Intrinsics& in = pod_cameras_[i].intrinsics;
   out->Resize(in.width, in.height);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
@@ -505,7 +637,10 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   if (projective) {
     HOLO_RETURN_IF_ERROR(settings.projective.Check());
     if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
-    if (visibility_dirty_) HOLO_RETURN_IF_ERROR(UpdateVisibility());
+    if (visibility_dirty_ || settings.projective.discontinuity_jump_m != edge_jump_m_ ||
+        settings.projective.discontinuity_radius_m != edge_radius_m_) {
+      HOLO_RETURN_IF_ERROR(UpdateVisibility(settings.projective));
+    }
   }
   const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
   if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
@@ -540,6 +675,24 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   }
 
   SetMat4(draw_program_, "u_local_from_remote", local_from_remote);
+  if (settings.cull_back_faces) {
+    // Counter-clockwise seen from outside stays counter-clockwise in window
+    // coordinates (the y flip of the projection undoes the camera's y-down).
+    glFrontFace(GL_CCW);
+    glCullFace(GL_BACK);
+    glEnable(GL_CULL_FACE);
+  }
+  if (projective && settings.depth_prepass) {
+    // Depth first with the cheap colour mode, then the projective shader
+    // only on the visible surface (GL_LEQUAL on identical positions:
+    // gl_Position is invariant): each pixel is textured once.
+    glUniform1i(Loc(draw_program_, "u_mode"), 0);
+    glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    Draw(remote_);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    glDepthFunc(GL_LEQUAL);
+    glDepthMask(GL_FALSE);
+  }
   glUniform1i(Loc(draw_program_, "u_mode"), projective ? 1 : 0);
   if (projective) {
     const int n = num_pods_;
@@ -560,7 +713,7 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
       const Eigen::Vector3f ctr = c.Center();
       for (int k = 0; k < 3; ++k) center[3 * i + k] = ctr[k];
     }
-    glUniform1i(Loc(draw_program_, "u_num_pods"), n);
+    glUniform1i(Loc(draw_program_, "u_num_pods"), n);  // also read by the vertex shader
     glUniformMatrix4fv(Loc(draw_program_, "u_pod_cam_from_world"), n, GL_FALSE, cam_from_world.data());
     glUniform4fv(Loc(draw_program_, "u_pod_intr"), n, intr.data());
     glUniform4fv(Loc(draw_program_, "u_pod_dist"), n, dist.data());
@@ -577,14 +730,15 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     glUniform1f(Loc(draw_program_, "u_alpha"), po.alpha);
     glUniform1f(Loc(draw_program_, "u_beta"), po.beta);
     glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
-    glUniform1f(Loc(draw_program_, "u_jump"), po.discontinuity_jump_m);
-    glUniform1f(Loc(draw_program_, "u_disc_radius"), po.discontinuity_radius_m);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
     glActiveTexture(GL_TEXTURE1);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
   }
   Draw(remote_);
+  glDisable(GL_CULL_FACE);
+  glDepthMask(GL_TRUE);
+  glDepthFunc(GL_LESS);
   glActiveTexture(GL_TEXTURE1);
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   glActiveTexture(GL_TEXTURE0);

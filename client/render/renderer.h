@@ -6,11 +6,12 @@
 //       w_i = V_i · max(0, n·d_i)^α · ((1 + d_i·d_eye) / 2)^β
 //     where n is the surface normal, d_i the unit direction from the surface
 //     point to pod i, d_eye the direction to the viewer (the view-dependent
-//     term), and V_i the visibility from pod i's depth map, rendered from the
-//     mesh in a pre-pass (one layer of a texture array per pod). Samples
-//     near a depth discontinuity of that map (within `discontinuity_radius_m`
-//     at the point's depth) are used only when no clean sample exists. With
-//     no sample at all the vertex colour is used.
+//     term; weights are computed per vertex and interpolated), and V_i the
+//     visibility per fragment from pod i's depth map, rendered from the mesh
+//     in a pre-pass (one layer of a texture array per pod). Samples near a
+//     depth discontinuity of that map (within `discontinuity_radius_m` at
+//     the texel's depth) are used only when no clean sample exists. With no
+//     sample at all the vertex colour is used.
 // The remote mesh can be placed in the local room by a similarity transform
 // (the miniature mode), and composited against the local site's mesh: that
 // mesh is drawn first (in colour, or depth only for see-through AR) so it
@@ -47,6 +48,8 @@ struct ProjectiveOptions {
   // neighbour at the radius (or an empty neighbour), metres.
   float discontinuity_jump_m = 0.05f;
   float discontinuity_radius_m = 0.01f;
+  // Skip back faces when rendering the pods' depth maps (closed meshes).
+  bool cull_back_faces = true;
   Status Check() const;
 };
 
@@ -60,6 +63,14 @@ struct RenderSettings {
   bool composite_local = false;
   bool show_local = true;
   ProjectiveOptions projective;
+  // Skip the remote mesh's back faces (counter-clockwise = front, as
+  // holo::Mesh promises). Right for closed meshes (marching cubes, the
+  // studio); turn off for open ones whose inside may show.
+  bool cull_back_faces = true;
+  // Projective mode: lay down depth first so each pixel is textured once.
+  // Pays off only with much overdraw and no culling (measured in
+  // docs/viewer.md).
+  bool depth_prepass = false;
   float near_m = 0.02f;
   float far_m = 100.0f;
 };
@@ -91,7 +102,9 @@ Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out);
 
 class Renderer {
  public:
-  static constexpr int kMaxPods = 16;
+  // Per-pod varyings (4 floats each) must fit GL 3.3's 64 vertex output
+  // components.
+  static constexpr int kMaxPods = 12;
   ~Renderer();
   // Compiles the shaders; a 3.3 core context must be current.
   static StatusOr<std::unique_ptr<Renderer>> Create();
@@ -107,9 +120,10 @@ class Renderer {
   // mesh clears it.
   Status SetLocalMesh(const Mesh& mesh);
 
-  // Renders the pods' visibility depth maps now (otherwise the first
-  // projective Render after a new mesh or rig does it).
-  Status UpdateVisibility();
+  // Renders the pods' visibility depth maps and their discontinuity flags
+  // now (otherwise the first projective Render after a new mesh or rig, or
+  // with other discontinuity options, does it).
+  Status UpdateVisibility(const ProjectiveOptions& options = {});
 
   // Draws into `vp` of the bound draw framebuffer as seen by `camera` (local
   // world coordinates; its intrinsics should match vp's size).
@@ -134,11 +148,18 @@ class Renderer {
   Status Upload(const Mesh& mesh, GpuMesh* gpu);
   void Draw(const GpuMesh& gpu) const;
   void FreeMesh(GpuMesh* gpu);
+  // Scissor box {x, y, w, h} of pod image pixels the remote mesh can cover;
+  // left unchanged (whole image) when it cannot be bounded.
+  void PodBox(const CameraModel& cam, int box[4]) const;
 
-  unsigned draw_program_ = 0, depth_program_ = 0;
+  unsigned draw_program_ = 0, depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
   GpuMesh remote_, local_;
+  Eigen::Vector3f remote_min_ = Eigen::Vector3f::Constant(1e30f), remote_max_ = Eigen::Vector3f::Constant(-1e30f);
   // Pods: colour and depth texture arrays (one layer per pod, max size).
-  unsigned pod_color_tex_ = 0, pod_depth_tex_ = 0, pod_depth_rb_ = 0, pod_fbo_ = 0;
+  // pod_raw_tex_: camera z per texel; pod_depth_tex_: the same, negated
+  // near discontinuities.
+  unsigned pod_color_tex_ = 0, pod_depth_tex_ = 0, pod_raw_tex_ = 0, pod_depth_rb_ = 0, pod_fbo_ = 0;
+  float edge_jump_m_ = -1, edge_radius_m_ = -1;
   int num_pods_ = 0, array_width_ = 0, array_height_ = 0;
   std::vector<CameraModel> pod_cameras_;
   bool visibility_dirty_ = true;
