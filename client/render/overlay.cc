@@ -11,6 +11,7 @@ namespace holo::render {
 namespace {
 
 constexpr int kCellW = 6, kCellH = 8;  // 5×7 glyph plus one column and row of spacing
+constexpr int kLineH = 10;             // line pitch
 constexpr int kAtlasGlyphs = 128;
 
 constexpr const char* kVs = R"(#version 330 core
@@ -48,7 +49,7 @@ void DrawTextCpu(const std::string& text, int x, int y, int scale, const std::ar
   for (char c : text) {
     if (c == '\n') {
       cx = x;
-      cy += kCellH * scale;
+      cy += kLineH * scale;
       continue;
     }
     const auto& g = Glyph5x7(c);
@@ -131,13 +132,14 @@ Status Overlay::Draw(const std::string& text, int x, int y, int scale, int fb_wi
     }
   }
   const float pad = 2.0f * scale;
-  add_quad(x - pad, y - pad, x + cols * kCellW * scale + pad, y + lines * kCellH * scale + pad, 0, 0, 0, 0);
+  add_quad(x - pad, y - pad, x + cols * kCellW * scale + pad, y + (lines - 1) * kLineH * scale + 7 * scale + pad, 0, 0, 0,
+           0);
   const float aw = static_cast<float>(kAtlasGlyphs * kCellW);
   int cx = x, cy = y;
   for (char c : text) {
     if (c == '\n') {
       cx = x;
-      cy += kCellH * scale;
+      cy += kLineH * scale;
       continue;
     }
     // Atlas cell g holds Glyph5x7(g): lowercase cells already hold the

@@ -144,8 +144,8 @@ class Viewer {
     if (o_.miniature_scale != 0.0f) {
       const float s = mini_.scale;
       orbit_target_ = mini_.position + Eigen::Vector3f(0, 0, 0.9f * s);
-      orbit_radius_ = 2.4f * s + 0.5f;
-      orbit_height_ = mini_.position.z() + 1.2f * s + 0.25f;
+      orbit_radius_ = 3.5f * s + 0.8f;
+      orbit_height_ = mini_.position.z() + 0.6f;
     }
     controller_.SetOrbit(orbit_target_, std::hypot(orbit_radius_, orbit_height_ - orbit_target_.z()), 20.0f,
                          std::atan2(orbit_height_ - orbit_target_.z(), orbit_radius_) * 180.0f / static_cast<float>(M_PI));
@@ -217,7 +217,7 @@ class Viewer {
       HOLO_RETURN_IF_ERROR(renderer_->Render(cams[i], settings, vp));
     }
     if (overlay_ && show_overlay_) {
-      const int scale = fb_height >= 600 ? 2 : 1;
+      const int scale = fb_height >= 600 && o_.views == 1 ? 2 : 1;
       HOLO_RETURN_IF_ERROR(overlay_->Draw(OverlayText(), 10 * scale, 10 * scale, scale, fb_width, fb_height,
                                           {255, 240, 120}));
     }
