@@ -21,13 +21,14 @@ struct GpuVertex {
 };
 static_assert(sizeof(GpuVertex) == 28);
 
-// The per-pod work that is affine in world space runs per vertex: the point
-// in each pod's camera frame (exact under perspective-correct interpolation)
-// and the pod's blending weight (Holoportation computes its weights per
-// vertex too). The fragment shader projects (with distortion), tests
-// visibility and discontinuities with one fetch and blends.
+// The pods' blending weights are computed per vertex (as Holoportation
+// does) and interpolated. The fragment shader transforms the surface point
+// into each pod's camera, projects it (with distortion), tests visibility and
+// discontinuities with one fetch of the flagged depth map and blends.
+// (Interpolating the per-pod camera-frame points as varyings instead was no
+// faster on llvmpipe and needs 4 varying components per pod.)
 constexpr const char* kDrawVs = R"(#version 330 core
-#define MAX_PODS 12
+#define MAX_PODS 16
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec4 a_color;
@@ -41,35 +42,44 @@ uniform vec3 u_eye_remote;
 uniform float u_alpha;
 uniform float u_beta;
 out vec3 v_color;
-// xyz: the point in pod i's camera frame; w: its weight (0 = pod unusable).
-out vec4 v_pod[MAX_PODS];
+out vec3 v_remote;
+// Pod i's blending weight (0 = pod unusable) in component i % 4 of v_w[i / 4].
+out vec4 v_w[MAX_PODS / 4];
 invariant gl_Position;
+// pow() is costly on CPU renderers; the usual exponents are small integers.
+float Pow(float x, float e) {
+  if (e == 2.0) return x * x;
+  if (e == 1.0) return x;
+  if (e == 0.0) return 1.0;
+  if (e == 4.0) return (x * x) * (x * x);
+  return pow(x, e);
+}
 void main() {
   v_color = a_color.rgb;
+  v_remote = a_pos;
   gl_Position = u_clip_from_local * (u_local_from_remote * vec4(a_pos, 1.0));
+  for (int k = 0; k < MAX_PODS / 4; ++k) v_w[k] = vec4(0.0);
   if (u_mode == 0) return;
   vec3 n = normalize(a_normal);
   vec3 to_eye = normalize(u_eye_remote - a_pos);
-  for (int i = 0; i < MAX_PODS; ++i) {
-    if (i >= u_num_pods) {
-      v_pod[i] = vec4(0.0);
-      continue;
-    }
+  for (int i = 0; i < u_num_pods; ++i) {
     vec3 to_pod = normalize(u_pod_center[i] - a_pos);
     float ndv = dot(n, to_pod);
-    float w = ndv > 0.0 ? pow(ndv, u_alpha) * pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
-    v_pod[i] = vec4((u_pod_cam_from_world[i] * vec4(a_pos, 1.0)).xyz, w);
+    float w = ndv > 0.0 ? Pow(ndv, u_alpha) * Pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
+    v_w[i / 4][i % 4] = w;
   }
 }
 )";
 
 // u_mode 0: per-vertex colour; 1: projective texturing from the pods.
 constexpr const char* kDrawFs = R"(#version 330 core
-#define MAX_PODS 12
+#define MAX_PODS 16
 in vec3 v_color;
-in vec4 v_pod[MAX_PODS];
+in vec3 v_remote;
+in vec4 v_w[MAX_PODS / 4];
 out vec4 o_color;
 uniform int u_mode;
+uniform mat4 u_pod_cam_from_world[MAX_PODS];
 uniform int u_num_pods;
 uniform vec4 u_pod_intr[MAX_PODS];   // fx, fy, cx, cy
 uniform vec4 u_pod_dist[MAX_PODS];   // k1, k2, p1, p2
@@ -95,9 +105,10 @@ void main() {
   vec3 clean = vec3(0.0), edge = vec3(0.0);
   float clean_w = 0.0, edge_w = 0.0;
   for (int i = 0; i < u_num_pods; ++i) {
-    vec4 pod = v_pod[i];
-    float w = pod.w;
-    if (w <= 1e-6 || pod.z < 0.05) continue;
+    float w = v_w[i / 4][i % 4];
+    if (w <= 1e-6) continue;
+    vec3 pod = (u_pod_cam_from_world[i] * vec4(v_remote, 1.0)).xyz;
+    if (pod.z < 0.05) continue;
     vec2 xn = Distort(pod.xy / pod.z, u_pod_dist[i], u_pod_k3[i]);
     vec4 intr = u_pod_intr[i];
     vec2 px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);

@@ -102,9 +102,8 @@ Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out);
 
 class Renderer {
  public:
-  // Per-pod varyings (4 floats each) must fit GL 3.3's 64 vertex output
-  // components.
-  static constexpr int kMaxPods = 12;
+  // A multiple of 4 (weights travel as vec4 varyings).
+  static constexpr int kMaxPods = 16;
   ~Renderer();
   // Compiles the shaders; a 3.3 core context must be current.
   static StatusOr<std::unique_ptr<Renderer>> Create();
