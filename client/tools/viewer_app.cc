@@ -225,12 +225,16 @@ class Viewer {
   }
 
   std::string OverlayText() const {
+    // Figures of the previous displayed frame ("-" before the first).
+    char fps[32] = "-", rms[32] = "-", lat[32] = "-";
+    if (!stats_.render_ms.empty()) {
+      std::snprintf(fps, sizeof fps, "%.1f", recent_fps_);
+      std::snprintf(rms, sizeof rms, "%.1f", stats_.render_ms.back());
+      std::snprintf(lat, sizeof lat, "%.0f", stats_.latency_ms.back());
+    }
     char buf[512];
-    const double fps = recent_fps_;
-    const double lat = stats_.latency_ms.empty() ? 0 : stats_.latency_ms.back();
-    const double rms = stats_.render_ms.empty() ? 0 : stats_.render_ms.back();
     std::snprintf(buf, sizeof buf,
-                  "HOLOPORT VIEWER  %s\nFPS %.1f  RENDER %.1f MS\nLATENCY %.0f MS CAPTURE->DISPLAY\n"
+                  "HOLOPORT VIEWER  %s\nFPS %s  RENDER %s MS\nLATENCY %s MS CAPTURE->DISPLAY\n"
                   "BITRATE N/A (LOCAL SOURCE)  DROPS %lld\n%zu TRIS  %s  %d VIEW%s%s",
                   o_.source.c_str(), fps, rms, lat, static_cast<long long>(stats_.drops),
                   renderer_->remote_triangles(), mode_ == ColorMode::kProjective ? "PROJECTIVE" : "VERTEX COLOUR",
