@@ -439,6 +439,53 @@ TEST_F(RenderTest, BadInputsAreErrors) {
   EXPECT_FALSE(OffscreenTarget::Create(0, 10).ok());
 }
 
+// Pure math, no GL: the projection puts pixel (u, v) at window pixel centre
+// (u + 0.5, height - v - 0.5); the orbit/fly controller keeps its target in view.
+TEST(RenderViewMathTest, ProjectionMapsPixelCentres) {
+  Intrinsics in = Intrinsics::FromFov(640, 480, 60.0);
+  in.cx = 300.0;
+  in.cy = 250.0;
+  const Eigen::Matrix4f p = ProjectionFromIntrinsics(in, 0.1f, 10.0f);
+  for (const Eigen::Vector3f& pc : {Eigen::Vector3f(0.3f, -0.2f, 2.0f), Eigen::Vector3f(-1.0f, 0.5f, 4.0f)}) {
+    const Eigen::Vector4f clip = p * pc.homogeneous();
+    const float u = static_cast<float>(in.fx) * pc.x() / pc.z() + static_cast<float>(in.cx);
+    const float v = static_cast<float>(in.fy) * pc.y() / pc.z() + static_cast<float>(in.cy);
+    const float wx = (clip.x() / clip.w() + 1.0f) * 0.5f * 640.0f;
+    const float wy = (clip.y() / clip.w() + 1.0f) * 0.5f * 480.0f;
+    EXPECT_NEAR(wx, u + 0.5f, 1e-3f);
+    EXPECT_NEAR(wy, 480.0f - v - 0.5f, 1e-3f);
+    EXPECT_GT(clip.z() / clip.w(), -1.0f);
+    EXPECT_LT(clip.z() / clip.w(), 1.0f);
+  }
+}
+
+TEST(RenderViewMathTest, CameraControllerOrbitsAndFlies) {
+  CameraController c;
+  const Eigen::Vector3f target(0.5f, -0.5f, 1.0f);
+  c.SetOrbit(target, 3.0f, 30.0f, 20.0f);
+  EXPECT_NEAR((c.Eye() - target).norm(), 3.0f, 1e-4f);
+  auto looks_at = [](const Pose& pose, const Eigen::Vector3f& p) {
+    const Eigen::Vector3f d = (pose.inverse() * p).normalized();
+    return d.z() > 0.9999f;  // on the optical axis
+  };
+  EXPECT_TRUE(looks_at(c.WorldFromCamera(), target));
+  c.Rotate(100.0f, -40.0f);
+  EXPECT_NEAR((c.Eye() - target).norm(), 3.0f, 1e-4f);
+  EXPECT_TRUE(looks_at(c.WorldFromCamera(), target));
+  c.Zoom(2.0f);
+  EXPECT_NEAR((c.Eye() - target).norm(), 3.0f * 0.81f, 1e-3f);
+  // Fly: the eye stays where it was; moving forward approaches the target.
+  const Eigen::Vector3f eye = c.Eye();
+  c.SetMode(CameraController::Mode::kFly);
+  EXPECT_NEAR((c.Eye() - eye).norm(), 0.0f, 1e-5f);
+  const float before = (c.Eye() - target).norm();
+  c.Move(0.5f, 0.0f, 0.0f);
+  EXPECT_NEAR((c.Eye() - target).norm(), before - 0.5f, 1e-3f);
+  // Back to orbit: around the point ahead, at the same distance.
+  c.SetMode(CameraController::Mode::kOrbit);
+  EXPECT_TRUE(looks_at(c.WorldFromCamera(), c.Target()));
+}
+
 // Without a display a window cannot open: a clear error, not a crash.
 TEST(RenderNoDisplayTest, WindowWithoutDisplayIsAClearError) {
   const char* old = std::getenv("DISPLAY");
