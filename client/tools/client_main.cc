@@ -74,7 +74,12 @@ int main(int argc, char** argv) {
   app.add_option("--miniature-at", mini_at, "where the remote floor centre goes: X,Y,Z[,YAW_DEG] (default 0,0,0.75)");
   app.add_option("--local", o.local,
                  "local-site geometry for AR compositing (it occludes the remote people): 'table' (a table, the "
-                 "default with --miniature) or a PLY mesh in local-room coordinates");
+                 "default with --miniature), a PLY mesh in local-room coordinates, or synthetic:WORKLOAD (the local "
+                 "site's people, live from a second synthetic studio)");
+  std::string remote_at;
+  app.add_option("--remote-at", remote_at,
+                 "place the remote room in the local one: X,Y,Z[,YAW_DEG] (e.g. 1.6,0,0,180 puts the remote people "
+                 "1.6 m away, facing the local ones)");
   app.add_flag("--see-through", o.see_through,
                "AR see-through: local geometry occludes but is not drawn (the real room shows through)");
   app.add_option("--pose-trace", o.pose_trace,
@@ -100,6 +105,21 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "holoport-client: --miniature-at needs --miniature SCALE\n");
       return 2;
     }
+  }
+  if (!remote_at.empty()) {
+    std::vector<float> v;
+    if (!ParseFloats(remote_at, &v) || (v.size() != 3 && v.size() != 4)) {
+      std::fprintf(stderr, "holoport-client: --remote-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n",
+                   remote_at.c_str());
+      return 2;
+    }
+    if (o.miniature_scale != 0.0f) {
+      std::fprintf(stderr, "holoport-client: --remote-at and --miniature exclude each other (use --miniature-at)\n");
+      return 2;
+    }
+    o.remote_placed = true;
+    o.remote_at = Eigen::Vector3f(v[0], v[1], v[2]);
+    if (v.size() == 4) o.remote_yaw_deg = v[3];
   }
   if (o.miniature_scale != 0.0f && o.local.empty()) o.local = "table";
   return holo::client::RunViewer(o);

@@ -93,6 +93,11 @@ class Viewer {
       mini_.position = o_.miniature_at;
       mini_.yaw_deg = o_.miniature_yaw_deg;
       HOLO_RETURN_IF_ERROR(mini_.Check().WithContext("--miniature"));
+    } else if (o_.remote_placed) {
+      mini_.scale = 1.0f;
+      mini_.position = o_.remote_at;
+      mini_.yaw_deg = o_.remote_yaw_deg;
+      HOLO_RETURN_IF_ERROR(mini_.Check().WithContext("--remote-at"));
     }
     if (!o_.pose_trace.empty()) {
 #if HOLO_CLIENT_HAVE_TRACE
@@ -134,13 +139,23 @@ class Viewer {
     if (o_.local == "table") {
       HOLO_RETURN_IF_ERROR(renderer_->SetLocalMesh(MakeTable(mini_.position)));
       have_local_ = true;
+    } else if (o_.local.rfind("synthetic", 0) == 0) {
+      // The local site live: a second studio (its own seed and people), its
+      // mesh replaced every frame.
+      HOLO_ASSIGN_OR_RETURN(local_source_, SyntheticSource::Create(o_.local, o_.threads));
+      have_local_ = true;
     } else if (!o_.local.empty() && o_.local != "none") {
       auto mesh = ReadPly(o_.local);
       if (!mesh.ok()) return mesh.status().WithContext("--local");
       HOLO_RETURN_IF_ERROR(renderer_->SetLocalMesh(*mesh).WithContext("--local " + o_.local));
       have_local_ = true;
     }
-    // Orbit defaults: around the people, or around the table top.
+    // Orbit defaults: around the people, between the two sites' people, or
+    // around the table top.
+    if (o_.remote_placed && o_.miniature_scale == 0.0f) {
+      orbit_target_ = 0.5f * o_.remote_at + Eigen::Vector3f(0, 0, 1.0f);
+      orbit_radius_ = 3.0f + 0.5f * o_.remote_at.head<2>().norm();
+    }
     if (o_.miniature_scale != 0.0f) {
       const float s = mini_.scale;
       orbit_target_ = mini_.position + Eigen::Vector3f(0, 0, 0.9f * s);
@@ -172,6 +187,11 @@ class Viewer {
   }
 
   Status Upload(const StreamFrame& frame) {
+    if (local_source_) {
+      // The local site's frame of the same instant (its own capture, not timed as the stream's).
+      HOLO_RETURN_IF_ERROR(local_source_->Produce(frame.index, &local_frame_).WithContext("--local"));
+      HOLO_RETURN_IF_ERROR(renderer_->SetLocalMesh(local_frame_.mesh));
+    }
     Stopwatch sw;
     HOLO_RETURN_IF_ERROR(renderer_->SetRemoteMesh(frame.mesh));
     std::vector<const ImageRgb8*> images;
@@ -187,7 +207,8 @@ class Viewer {
   Status Draw(double t, int fb_width, int fb_height) {
     render::RenderSettings settings;
     settings.mode = mode_;
-    settings.local_from_remote = o_.miniature_scale != 0.0f ? mini_.LocalFromRemote() : Eigen::Matrix4f::Identity();
+    settings.local_from_remote =
+        o_.miniature_scale != 0.0f || o_.remote_placed ? mini_.LocalFromRemote() : Eigen::Matrix4f::Identity();
     settings.composite_local = have_local_;
     settings.show_local = !o_.see_through;
     auto layout = render::MakeMosaicLayout(o_.views, fb_width, fb_height);
@@ -416,6 +437,8 @@ class Viewer {
   std::vector<int> trace_;
 #endif
   std::unique_ptr<SyntheticSource> source_;
+  std::unique_ptr<SyntheticSource> local_source_;
+  StreamFrame local_frame_;
   std::unique_ptr<render::GlContext> context_;
   std::unique_ptr<render::Renderer> renderer_;
   std::unique_ptr<render::Overlay> overlay_;

@@ -23,7 +23,14 @@ struct ViewerOptions {
   float miniature_yaw_deg = 0.0f;
   std::string pose_trace;  // CSV (time, x, y, z, yaw, pitch, roll); empty = orbit
   std::string color = "projective";  // or "vertex"
-  std::string local;                 // "", "table", or a PLY of the local site
+  // "", "table", a PLY of the local site, or synthetic:WORKLOAD (the local
+  // site's people, live from a second studio)
+  std::string local;
+  // Where the remote room goes in the local room (scale 1), e.g. facing the
+  // local people in a two-site call: X, Y, Z, yaw; unset = identity.
+  bool remote_placed = false;
+  Eigen::Vector3f remote_at = Eigen::Vector3f::Zero();
+  float remote_yaw_deg = 0.0f;
   bool see_through = false;          // local geometry occludes but is not drawn
   bool overlay = true;
   bool write_png = true;

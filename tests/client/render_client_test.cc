@@ -100,6 +100,12 @@ TEST(RenderClientTest, BadOptionsAreRefused) {
   r = RunClient("--headless --frames 1 --miniature-at 1,2 --out /tmp");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.output.find("--miniature-at"), std::string::npos) << r.output;
+  r = RunClient("--headless --frames 1 --remote-at 1,x,0 --out /tmp");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--remote-at"), std::string::npos) << r.output;
+  r = RunClient("--headless --frames 1 --local /nonexistent/local.ply --out /tmp");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--local"), std::string::npos) << r.output;
   r = RunClient("--help");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_NE(r.output.find("--miniature"), std::string::npos);
