@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -82,6 +83,22 @@ TEST(RenderClientTest, WindowWithoutDisplayIsAClearError) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("no display"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("--headless"), std::string::npos) << r.output;
+}
+
+// The window path (GLFW, OpenGL 3.3 core) on a virtual X display the test
+// starts itself with xvfb-run.
+TEST(RenderClientTest, WindowUnderXvfb) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) GTEST_SKIP() << "xvfb-run is not installed";
+  const std::string dir = test::MakeTempDir("render_client_xvfb");
+  const RunResult r = RunClient("--frames 3 --width 320 --height 240 --out " + dir,
+                                "xvfb-run -a -s '-screen 0 640x480x24'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("GLFW window"), std::string::npos) << r.output;
+  std::ifstream f(dir + "/stats.json");
+  ASSERT_TRUE(f.good());
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j["frames"], 3);
+  EXPECT_EQ(j["camera"], "interactive");
 }
 
 TEST(RenderClientTest, BadOptionsAreRefused) {
