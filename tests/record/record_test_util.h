@@ -2,6 +2,7 @@
 #pragma once
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <cstdint>
 #include <fstream>
@@ -79,7 +80,10 @@ inline std::vector<uint8_t> ReadBytes(const std::string& path) {
   return std::vector<uint8_t>(std::istreambuf_iterator<char>(f), {});
 }
 
+// Writes a fresh file (unlinked first: rewriting a truncated file makes ext4
+// flush it on close, which is slow on a busy disk).
 inline void WriteBytes(const std::string& path, const std::vector<uint8_t>& b, size_t n) {
+  ::unlink(path.c_str());
   std::ofstream f(path, std::ios::binary | std::ios::trunc);
   f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(n));
 }
