@@ -47,8 +47,12 @@ StatusOr<std::unique_ptr<ReplaySource>> ReplaySource::Create(std::shared_ptr<con
   if (options.start_us > reader->summary().duration_us)
     return OutOfRange("replay start " + FormatSeconds(options.start_us) + " is past the end (" +
                       FormatSeconds(reader->summary().duration_us) + ")");
+  // Media time starts at the first message (a segment starts late).
+  HOLO_ASSIGN_OR_RETURN(RecordedMessage first, reader->ReadAt(reader->summary().data_begin));
   std::unique_ptr<ReplaySource> r(new ReplaySource(std::move(reader), clock, options));
-  if (options.start_us > 0) {
+  r->first_time_us_ = first.time_us;
+  r->anchor_media_us_ = first.time_us;
+  if (options.start_us > first.time_us) {
     std::lock_guard<std::mutex> lock(r->mu_);
     HOLO_RETURN_IF_ERROR(r->SeekLocked(options.start_us, clock->NowUs()));
     r->counters_.generation = 0;
@@ -111,7 +115,7 @@ StatusOr<size_t> ReplaySource::Pump(const ReplayCallback& sink, size_t max_messa
         counters_.generation += 1;
         error = LoadPendingLocked();
         if (!error.ok()) break;
-        anchor_media_us_ = pending_ ? pending_->time_us : 0;
+        anchor_media_us_ = pending_ ? pending_->time_us : first_time_us_;
         continue;
       }
       if (pending_->time_us > MediaNowLocked(now)) break;
@@ -192,6 +196,7 @@ Status ReplaySource::SeekLocked(int64_t time_us, int64_t now) {
   if (time_us < 0 || time_us > sum.duration_us)
     return OutOfRange("seek to " + FormatSeconds(time_us) + " is outside the recording [0, " +
                       FormatSeconds(sum.duration_us) + "]");
+  time_us = std::max(time_us, first_time_us_);
   const IndexEntry* key = reader_->KeyFrameAtOrBefore(time_us);
   pending_.reset();
   pending_rig_.reset();

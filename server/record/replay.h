@@ -116,7 +116,8 @@ class ReplaySource {
   std::optional<uint64_t> pending_rig_;      // Rig to emit before it (after a seek)
   int64_t fast_forward_until_us_ = -1;       // skip audio/stats before this media time
   int64_t last_time_us_ = 0;                 // time of the last message read (must not go back)
-  int64_t loop_gap_us_ = 33333;              // media time between the end and the restart
+  int64_t loop_gap_us_ = 33333;
+  int64_t first_time_us_ = 0;                // media time of the first message              // media time between the end and the restart
   ReplayState counters_;
   Status failed_;
 };
