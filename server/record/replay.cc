@@ -108,7 +108,10 @@ StatusOr<size_t> ReplaySource::Pump(const ReplayCallback& sink, size_t max_messa
         }
         const int64_t restart_media = sum.duration_us + loop_gap_us_;
         if (MediaNowLocked(now) < restart_media) break;
-        anchor_clock_us_ = DueClockLocked(restart_media);
+        // Seamless laps; after a long stall (the caller did not pump for more
+        // than a second) restart now instead of replaying the missed laps.
+        const int64_t wrap_clock = DueClockLocked(restart_media);
+        anchor_clock_us_ = now - wrap_clock > 1000000 ? now : wrap_clock;
         cursor_ = sum.data_begin;
         last_time_us_ = 0;
         fast_forward_until_us_ = -1;

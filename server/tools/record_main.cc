@@ -66,7 +66,8 @@ int Record(const std::string& out, const std::string& source_spec, double durati
   const int64_t limit_us = duration_s > 0 ? static_cast<int64_t>(duration_s * 1e6) : INT64_MAX;
   if (!quiet)
     std::fprintf(stderr, "holoport-record: %s → %s (%s%s, %s)%s\n", wo.source.c_str(), out.c_str(), codec.c_str(),
-                 audio ? " + PCM audio" : "", duration_s > 0 ? (std::to_string(duration_s) + " s").c_str() : "until stopped",
+                 audio ? " + PCM audio" : "",
+                 duration_s > 0 ? holo::record::FormatSeconds(limit_us).c_str() : "until stopped",
                  max_bytes ? (", limit " + std::to_string(max_bytes) + " bytes").c_str() : "");
   holo::RealClock& clock = holo::RealClock::Instance();
   const int64_t start = clock.NowUs();

@@ -11,6 +11,7 @@
 #include "server/record/inspect.h"
 #include "server/record/recording_reader.h"
 #include "server/record/replay.h"
+#include "server/record/replay_command.h"
 #include "server/record/segments.h"
 #include "server/record/synthetic_stream.h"
 #include "test_util.h"
@@ -130,6 +131,29 @@ TEST(RecordSyntheticStream, IsAValidTimeOrderedProtocolStream) {
   EXPECT_GT(audio, 14);
   o.workload = "nope";
   EXPECT_FALSE(SyntheticStream::Create(o).ok());
+}
+
+TEST(RecordReplayCommand, ReplaysAFileAndExportsEveryMeshFrame) {
+  const std::string dir = test::MakeTempDir("record_cmd");
+  test::WriteTestRecording(dir + "/r.hrec", test::MakeTestStream(12));
+  ReplayCommandOptions o;
+  o.path = dir + "/r.hrec";
+  o.speed = 4;
+  o.export_dir = dir + "/out";
+  o.stats_path = dir + "/stats.jsonl";
+  o.quiet = true;
+  ASSERT_EQ(RunReplayCommand(o), 0);
+  size_t plys = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir + "/out")) plys += e.path().extension() == ".ply";
+  EXPECT_EQ(plys, 12u);
+  auto stats = ReadFileToString(dir + "/stats.jsonl");
+  ASSERT_TRUE(stats.ok());
+  EXPECT_EQ(std::count(stats->begin(), stats->end(), '\n'), static_cast<long>(test::MakeTestStream(12).size()));
+  o.speed = 5;
+  EXPECT_EQ(RunReplayCommand(o), 1);
+  o.speed = 1;
+  o.path = dir + "/missing.hrec";
+  EXPECT_EQ(RunReplayCommand(o), 1);
 }
 
 }  // namespace
