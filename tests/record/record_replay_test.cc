@@ -310,6 +310,41 @@ TEST_F(ReplayTest, ControlsFromAnotherThreadWhileRunning) {
   EXPECT_GT(n.load(), 0u);  // controls are noticed within one 20 ms sleep slice
 }
 
+TEST_F(ReplayTest, SeekEmitsTheRigInEffect) {
+  // Calibration changes half-way: a second Rig (another name) in the stream.
+  dir_ = test::MakeTempDir("record_rig2");
+  msgs_ = test::MakeTestStream(60);
+  Rig rig2 = test::SampleRig();
+  rig2.name = "recalibrated";
+  protocol::Header h;
+  h.sequence = 1;
+  h.capture_time_us = 1000000;
+  size_t at = 0;
+  while (msgs_[at].time_us < 1000000) ++at;
+  msgs_.insert(msgs_.begin() + static_cast<std::ptrdiff_t>(at),
+               {1000000, protocol::EncodeMessage(h, protocol::RigMessage{rig2}), MessageType::kRig});
+  test::WriteTestRecording(dir_ + "/r.hrec", msgs_);
+  auto r = RecordingReader::Open(dir_ + "/r.hrec");
+  ASSERT_TRUE(r.ok());
+  reader_ = std::shared_ptr<const RecordingReader>(std::move(*r));
+  EXPECT_EQ(reader_->rig().name, "test-rig");
+  auto src = Source();
+  auto rig_name = [&](const Emitted& e) {
+    auto m = protocol::DecodeMessage(*e.bytes);
+    HOLO_CHECK(m.ok());
+    return std::get<protocol::RigMessage>(m->payload).rig.name;
+  };
+  ASSERT_TRUE(src->Seek(1500000).ok());
+  Pump(*src);
+  ASSERT_FALSE(out_.empty());
+  EXPECT_EQ(rig_name(out_[0]), "recalibrated");
+  out_.clear();
+  ASSERT_TRUE(src->Seek(500000).ok());
+  Pump(*src);
+  ASSERT_FALSE(out_.empty());
+  EXPECT_EQ(rig_name(out_[0]), "test-rig");
+}
+
 TEST_F(ReplayTest, DamageFoundWhileReplayingEndsItWithAnError) {
   Make(30);
   // Flip a byte inside a late message of the (clean, index-opened) file.
