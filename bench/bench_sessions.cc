@@ -35,6 +35,7 @@
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "server/net/session_server.h"
+#include "server/pipeline/capture_site.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
 
@@ -154,12 +155,58 @@ class RawViewer {
   std::atomic<int64_t> meshes_{0};
 };
 
+// The capture site's own output: fused, meshed and textured frames (exact
+// masks, to keep the preparation short), encoded like holoport-server does.
+StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
+  Content c;
+  HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(wl.rig, wl.studio));
+  CaptureSiteOptions o;
+  o.masks = MaskSource::kTruth;
+  o.color_calibration = false;
+  o.tsdf.voxel_size = wl.voxel_size_m;
+  o.pipeline.max_frames = frames;
+  HOLO_ASSIGN_OR_RETURN(auto site, CaptureSite::Create(studio.get(), nullptr, studio.get(), o));
+  double bytes = 0;
+  auto sink = [&](const FrameWork& w) -> Status {
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(w.mesh, {}, &blob));
+    protocol::ColorFrame cf;
+    cf.codec = protocol::ColorCodec::kC1;
+    for (const auto& f : w.frames.frames) {
+      if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) continue;
+      protocol::PodImage pi;
+      pi.pod_id = static_cast<uint16_t>(f.pod_id);
+      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(f.color, f.mask, {}, &pi.data));
+      bytes += static_cast<double>(pi.data.size());
+      cf.images.push_back(std::move(pi));
+    }
+    bytes += static_cast<double>(blob.size());
+    c.vertices = w.mesh.num_vertices();
+    c.geometry.push_back(std::move(blob));
+    c.color.push_back(std::move(cf));
+    std::fprintf(stderr, "  fused frame %zu/%d: %zu vertices\n", c.geometry.size(), frames, w.mesh.num_vertices());
+    return OkStatus();
+  };
+  HOLO_ASSIGN_OR_RETURN(auto stats, site->Run(sink));
+  (void)stats;
+  if (c.geometry.empty()) return Internal("the capture site produced no frames");
+  c.bytes_per_frame = bytes / static_cast<double>(c.geometry.size());
+  return c;
+}
+
 int RunSessions(const BenchArgs& args) {
   const int num_viewers = std::max(1, Flag(args, "--viewers", 100));
   const int seconds = std::max(4, Flag(args, "--seconds", 20));
   const int server_threads = std::max(1, Flag(args, "--server-threads", 2));
   const int client_threads = std::max(1, Flag(args, "--client-threads", 1));
-  const int content_frames = args.frames > 0 ? args.frames : 30;
+  std::string content_kind = "truth";
+  for (const std::string& e : args.extra)
+    if (e.rfind("--content=", 0) == 0) content_kind = e.substr(10);
+  if (content_kind != "truth" && content_kind != "fused") {
+    std::fprintf(stderr, "sessions: --content must be truth or fused\n");
+    return 2;
+  }
+  const int content_frames = args.frames > 0 ? args.frames : (content_kind == "truth" ? 30 : 8);
   const double fps = 30.0;
   auto wl = GetWorkload(args.workload);
   if (!wl.ok()) {
@@ -167,9 +214,9 @@ int RunSessions(const BenchArgs& args) {
     return 2;
   }
   std::fprintf(stderr, "sessions: load average before: %s\n", LoadAverage().c_str());
-  std::fprintf(stderr, "sessions: pre-encoding %d %s frames (ground-truth mesh G1 + 8 pods C1)...\n", content_frames,
-               args.workload.c_str());
-  auto content = PrepareContent(*wl, content_frames);
+  std::fprintf(stderr, "sessions: pre-encoding %d %s frames (%s mesh G1 + 8 pods C1)...\n", content_frames,
+               args.workload.c_str(), content_kind == "truth" ? "ground-truth" : "fused");
+  auto content = content_kind == "truth" ? PrepareContent(*wl, content_frames) : PrepareFusedContent(*wl, content_frames);
   if (!content.ok()) {
     std::fprintf(stderr, "sessions: %s\n", content.status().ToString().c_str());
     return 1;
@@ -264,7 +311,7 @@ int RunSessions(const BenchArgs& args) {
     const auto start = Clock::now();
     const int64_t total = static_cast<int64_t>(seconds * fps);
     for (int64_t i = 0; i < total; ++i) {
-      const size_t k = static_cast<size_t>(i % content_frames);
+      const size_t k = static_cast<size_t>(i % static_cast<int64_t>(content->geometry.size()));
       (*server)->PublishVideo(net::MakeVideoFrame(i, net::WallUs(), protocol::GeometryCodec::kG1,
                                                   content->geometry[k], &content->color[k], cfg.fragment_bytes));
       ++published;
@@ -337,7 +384,7 @@ int RunSessions(const BenchArgs& args) {
   const std::string w = args.workload;
   const std::map<std::string, std::string> q{{"viewers", std::to_string(num_viewers)},
                                              {"fps", "30"},
-                                             {"content", "studio-ground-truth-G1+C1-looped"},
+                                             {"content", content_kind == "truth" ? "studio-ground-truth-G1+C1-looped" : "fused-G1+C1-looped"},
                                              {"server_threads", std::to_string(server_threads)}};
   auto with = [&](std::map<std::string, std::string> extra) {
     extra.insert(q.begin(), q.end());

@@ -131,13 +131,14 @@ class RawViewer {
 
 TEST(NetFanout, SlowAndStalledViewersDoNotAffectNormalViewers) {
   ServerConfig cfg = LoopbackConfig();
-  cfg.queue_video_frames = 8;
+  // 24 frames (0.8 s) of slack: normal viewers survive scheduling hiccups
+  // of a loaded machine; the stalled one still loses most of 90 frames.
+  cfg.queue_video_frames = 24;
   cfg.socket_send_buffer = 64 << 10;
   auto server = Server::Start(cfg);
   ASSERT_TRUE(server.ok());
   const test::EncodedContent content = test::MakeContent(120, 160);  // ~50 KB per frame
   const size_t frame_bytes = content.geometry.size();
-  std::printf("frame: %zu bytes\n", frame_bytes);
   std::vector<std::unique_ptr<SiteClient>> normal;
   for (int i = 0; i < 4; ++i) {
     ClientOptions o = ViewerOptions((*server)->port(), "normal" + std::to_string(i));
@@ -153,7 +154,7 @@ TEST(NetFanout, SlowAndStalledViewersDoNotAffectNormalViewers) {
   RawViewer stalled((*server)->port(), 0, "stalled");
   ASSERT_TRUE(Eventually([&] { return (*server)->num_subscribed(kContentGeometry) == 6; }));
 
-  const int kFrames = 60;
+  const int kFrames = 90;
   const auto start = std::chrono::steady_clock::now();
   for (int i = 0; i < kFrames; ++i) {
     (*server)->PublishVideo(
