@@ -242,6 +242,7 @@ TEST(NetFanout, AudioPoseFromPublisherReachesEveryAudioSubscriber) {
 TEST(NetFanout, AudioJumpsAheadOfQueuedVideo) {
   ServerConfig cfg = LoopbackConfig();
   cfg.queue_video_frames = 16;
+  cfg.socket_send_buffer = 4096;
   auto server = Server::Start(cfg);
   ASSERT_TRUE(server.ok());
   // A raw viewer that does not read yet: video piles up in its queue.
@@ -260,19 +261,26 @@ TEST(NetFanout, AudioJumpsAheadOfQueuedVideo) {
     (*server)->PublishVideo(
         MakeVideoFrame(i, WallUs(), protocol::GeometryCodec::kG1, content.geometry, nullptr, 4096));
   ASSERT_TRUE(Eventually([&] { return (*server)->Sessions()[0].queue_video >= 5; }));
+  // Frames already written to the kernel cannot be overtaken; the ones still
+  // in the server's queue must be.
+  const SessionStats before = (*server)->Sessions()[0];
   protocol::AudioPose a;
   a.codec = protocol::AudioCodec::kOpus;
   a.audio = {1, 2, 3};
   (*server)->PublishAudio(a, kFirstParticipantStreamId);
-  // The audio arrives before the video that was queued ahead of it.
-  int meshes_before_audio = 0;
-  for (;;) {
+  int meshes_before_audio = 0, meshes_after_audio = 0;
+  bool audio_seen = false;
+  while (meshes_before_audio + meshes_after_audio < 10) {
     auto m = (*p)->ReadMessage(5);
     ASSERT_TRUE(m.ok()) << m.status().ToString();
-    if (m->header.type == protocol::MessageType::kAudioPose) break;
-    if (m->header.type == protocol::MessageType::kMeshFrame) ++meshes_before_audio;
+    if (m->header.type == protocol::MessageType::kAudioPose) audio_seen = true;
+    if (m->header.type == protocol::MessageType::kMeshFrame) ++(audio_seen ? meshes_after_audio : meshes_before_audio);
   }
-  EXPECT_LE(meshes_before_audio, 1) << "audio waited behind queued video frames";
+  ASSERT_TRUE(audio_seen);
+  // At most the frames already written plus the one in flight came first.
+  EXPECT_LE(meshes_before_audio, static_cast<int>(before.video_frames_sent) + 1)
+      << "audio waited behind queued video frames";
+  EXPECT_GE(meshes_after_audio, static_cast<int>(before.queue_video) - 1);
 }
 
 TEST(NetFanout, ClientReconnectsAfterServerRestart) {
