@@ -244,19 +244,24 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         }));
   }
 
-  void StartTls(uint64_t my) {
+  // Once, at start: the CA file and the verification mode.
+  Status SetUpTls() {
+    if (!ssl) return OkStatus();
+    std::error_code ec;
     if (opt.tls.verify) {
-      ssl->set_verify_mode(asio::ssl::verify_peer);
-      std::error_code ec;
-      if (!opt.tls.ca_file.empty()) ssl->load_verify_file(opt.tls.ca_file, ec);
-      if (ec) {
-        Fatal(InvalidArgument("tls: cannot load CA file '" + opt.tls.ca_file + "': " + ec.message()));
-        return;
-      }
-      ssl->set_verify_callback(asio::ssl::host_name_verification(opt.host));
+      ssl->set_verify_mode(asio::ssl::verify_peer, ec);
+      if (!ec && !opt.tls.ca_file.empty()) ssl->load_verify_file(opt.tls.ca_file, ec);
+      if (!ec && opt.tls.ca_file.empty()) ssl->set_default_verify_paths(ec);
+      if (ec) return InvalidArgument("tls: cannot load CA file '" + opt.tls.ca_file + "': " + ec.message());
+      ssl->set_verify_callback(asio::ssl::host_name_verification(opt.host), ec);
     } else {
-      ssl->set_verify_mode(asio::ssl::verify_none);
+      ssl->set_verify_mode(asio::ssl::verify_none, ec);
     }
+    if (ec) return Internal("tls: " + ec.message());
+    return OkStatus();
+  }
+
+  void StartTls(uint64_t my) {
     tls = std::make_unique<asio::ssl::stream<tcp::socket>>(std::move(*sock), *ssl);
     sock.reset();
     SSL_set_tlsext_host_name(tls->native_handle(), opt.host.c_str());
@@ -313,14 +318,6 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   void CountFailure() {
     std::lock_guard<std::mutex> l(mu);
     ++stats.connect_failures;
-  }
-
-  void Fatal(const Status& why) {
-    ++attempt_id;
-    CloseSocket();
-    timer.cancel();
-    ping_timer.cancel();
-    SetState(ClientState::kStopped, why);
   }
 
   void SetState(ClientState s, const Status& why) {
@@ -719,12 +716,8 @@ SiteClient::~SiteClient() { Stop(); }
 StatusOr<std::unique_ptr<SiteClient>> SiteClient::Start(ClientOptions options, ClientCallbacks callbacks,
                                                         NetContext* context) {
   HOLO_RETURN_IF_ERROR(options.Check());
-  if (options.tls.enabled && options.tls.verify && !options.tls.ca_file.empty()) {
-    FILE* f = std::fopen(options.tls.ca_file.c_str(), "rb");
-    if (f == nullptr) return NotFound("tls: CA file '" + options.tls.ca_file + "' cannot be opened");
-    std::fclose(f);
-  }
   auto impl = std::make_shared<Impl>(std::move(options), std::move(callbacks), context);
+  HOLO_RETURN_IF_ERROR(impl->SetUpTls());
   impl->subscription = impl->opt.subscribe;
   Impl* raw = impl.get();
   asio::post(impl->strand, [raw, keep = impl] { raw->Connect(); });

@@ -734,6 +734,7 @@ void Server::Impl::Accept() {
     std::shared_ptr<Session> s;
     {
       std::lock_guard<std::mutex> l(mu);
+      if (stopped) return;  // Stop() set it under `mu`: no session is added after its snapshot
       if (pending >= static_cast<size_t>(cfg.max_pending)) {
         n.rejected_pending++;
       } else {
@@ -946,7 +947,10 @@ double Server::IoCpuMs() const {
 }
 
 void Server::Stop() {
-  if (impl_->stopped.exchange(true)) return;
+  {
+    std::lock_guard<std::mutex> l(impl_->mu);
+    if (impl_->stopped.exchange(true)) return;
+  }
   asio::post(impl_->io, [this] {
     std::error_code ignore;
     impl_->acceptor.close(ignore);

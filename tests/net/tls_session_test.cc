@@ -76,6 +76,13 @@ TEST(NetTls, SelfSignedSessionCarriesFramesAndRejectsOthers) {
   EXPECT_TRUE(Eventually([&] { return log.Contains("TLS handshake failed"); }));
   EXPECT_EQ((*server)->num_viewers(), 1u);
 
+  // A missing CA file is an error at Start.
+  ClientOptions no_ca = o;
+  no_ca.tls.ca_file = dir + "/missing.pem";
+  auto nc = SiteClient::Start(no_ca);
+  ASSERT_FALSE(nc.ok());
+  EXPECT_NE(nc.status().message().find("missing.pem"), std::string::npos) << nc.status().ToString();
+
   // A missing certificate is a clear start-up error.
   ServerConfig missing = cfg;
   missing.tls.cert_file = dir + "/nope.pem";
