@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <mutex>
 #include <thread>
 
 #include "client/net/raw_peer.h"
@@ -128,6 +129,51 @@ class RawViewer {
   std::atomic<bool> stop_{false};
   std::atomic<int> meshes_{0};
 };
+
+TEST(NetFanout, RecorderGetsRawMessagesByteIdentical) {
+  ServerConfig cfg = LoopbackConfig();
+  cfg.queue_video_frames = 64;
+  cfg.fragment_bytes = 8192;  // several fragments per message: reassembly is exercised
+  auto server = Server::Start(cfg);
+  ASSERT_TRUE(server.ok());
+  const test::EncodedContent content = test::MakeContent(60, 80);
+  std::mutex mu;
+  std::vector<RawMessage> raws;
+  ClientOptions o = ViewerOptions((*server)->port(), "recorder");
+  o.role = protocol::Role::kRecorder;
+  o.decode = false;
+  ClientCallbacks cb;
+  cb.on_raw = [&](const RawMessage& m) {
+    if (m.header.type != protocol::MessageType::kMeshFrame && m.header.type != protocol::MessageType::kColorFrame)
+      return;
+    std::lock_guard<std::mutex> l(mu);
+    raws.push_back(m);
+  };
+  auto rec = SiteClient::Start(o, cb);
+  ASSERT_TRUE(rec.ok());
+  ASSERT_TRUE((*rec)->WaitConnected(5.0));
+  ASSERT_TRUE(Eventually([&] { return (*server)->num_subscribed(kContentGeometry) == 1; }));
+  for (int i = 0; i < 5; ++i)
+    (*server)->PublishVideo(MakeVideoFrame(i, 1000 + i, protocol::GeometryCodec::kG1, content.geometry,
+                                           &content.color, cfg.fragment_bytes));
+  ASSERT_TRUE(Eventually([&] {
+    std::lock_guard<std::mutex> l(mu);
+    return raws.size() == 10;
+  }));
+  for (int i = 0; i < 5; ++i) {
+    const RawMessage& mesh = raws[2 * i];
+    const RawMessage& color = raws[2 * i + 1];
+    ASSERT_EQ(mesh.header.type, protocol::MessageType::kMeshFrame);
+    EXPECT_EQ(mesh.header.capture_time_us, 1000 + i);
+    EXPECT_EQ(mesh.header.flags & protocol::kFlagMoreFragments, 0);
+    EXPECT_EQ(mesh.header.payload_length, mesh.payload.size());
+    EXPECT_EQ(mesh.payload, protocol::EncodePayload(protocol::MeshFrame{i, protocol::GeometryCodec::kG1,
+                                                                        content.geometry}));
+    protocol::ColorFrame c = content.color;
+    c.frame_index = i;
+    EXPECT_EQ(color.payload, protocol::EncodePayload(c));
+  }
+}
 
 TEST(NetFanout, SlowAndStalledViewersDoNotAffectNormalViewers) {
   ServerConfig cfg = LoopbackConfig();
