@@ -1,17 +1,29 @@
 // holoport-server: the capture site. Reads frames from the synthetic studio or
 // a dataset, segments, fuses, meshes and textures every frame on the
-// concurrent pipeline; exports PLY meshes and per-frame stats. (Streaming to
-// viewers comes with the sessions issue.)
+// concurrent pipeline; exports PLY meshes and per-frame stats. With --listen
+// (or --net-config) it is also a session server: every frame is encoded once
+// (G1 mesh + C1 pod images) and fanned out to viewers, render hosts and
+// recorders; participants' audio+pose is relayed (docs/sessions.md).
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 
 #include "common/file_util.h"
 #include "common/image_io.h"
 #include "common/visualize.h"
+#include "common/clock.h"
 #include "server/capture/dataset.h"
+#include "server/net/server_config.h"
+#include "server/net/session_server.h"
+#include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
 #include "server/record/replay_command.h"
 #include "server/studio/studio.h"
@@ -29,6 +41,30 @@ int Fail(const holo::Status& s) {
 char FrameFileName(char* buf, size_t n, const std::string& dir, int64_t index) {
   std::snprintf(buf, n, "%s/mesh_%06lld.ply", dir.c_str(), static_cast<long long>(index));
   return 0;
+}
+
+std::atomic<bool> g_stop{false};
+void OnSignal(int) { g_stop = true; }
+
+// Per-viewer counters summed for the stats lines and stderr.
+struct NetSummary {
+  size_t viewers = 0;
+  uint64_t sent = 0, dropped = 0, bytes = 0;
+  size_t max_queue = 0;
+  double rtt_ms_max = -1;
+};
+NetSummary Summarize(const holo::net::Server& server) {
+  NetSummary n;
+  for (const auto& s : server.Sessions()) {
+    if (s.role == holo::protocol::Role::kPublisher) continue;
+    ++n.viewers;
+    n.sent += s.video_frames_sent;
+    n.dropped += s.video_frames_dropped;
+    n.bytes += s.bytes_sent;
+    n.max_queue = std::max(n.max_queue, s.queue_video);
+    n.rtt_ms_max = std::max(n.rtt_ms_max, s.rtt_ms);
+  }
+  return n;
 }
 
 }  // namespace
@@ -77,6 +113,26 @@ int main(int argc, char** argv) {
   app.add_flag("--loop", replay.loop, "--replay: start again at the end");
   app.add_option("--start", replay.start_s, "--replay: start at this media time, seconds");
   app.add_option("--replay-seconds", replay.max_wall_s, "--replay: stop after this many seconds (0: at the end)");
+  std::string listen_spec, net_config_path, publisher_token, viewer_token;
+  bool truth_mesh = false, no_color_stream = false;
+  int truth_loop = 0;
+  app.add_option("--listen", listen_spec,
+                 "stream to viewers: listen on HOST:PORT (default: off, no networking; overrides the "
+                 "config's listen)");
+  app.add_option("--net-config", net_config_path,
+                 "session server config, YAML: tokens, limits, timeouts, TLS (docs/sessions.md)");
+  app.add_option("--publisher-token", publisher_token,
+                 "token participants need to publish audio+pose (default: env HOLO_PUBLISHER_TOKEN or the config)");
+  app.add_option("--viewer-token", viewer_token,
+                 "token viewers, render hosts and recorders need (default: env HOLO_VIEWER_TOKEN or the config)");
+  app.add_flag("--truth-mesh", truth_mesh,
+               "synthetic source: stream the studio's ground-truth meshes and exact-mask pod images instead of "
+               "running the capture pipeline (a valid 30 fps stream; paced at --pace, default 30)");
+  app.add_option("--truth-loop", truth_loop,
+                 "with --truth-mesh: render this many frames up front and loop them (frame indices keep "
+                 "counting), so that the studio's rendering does not limit the rate (0: render live)")
+      ->check(CLI::Range(0, 3000));
+  app.add_flag("--no-color-stream", no_color_stream, "stream meshes only (no C1 pod images)");
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -84,6 +140,45 @@ int main(int argc, char** argv) {
     replay.quiet = quiet;
     return holo::record::RunReplayCommand(replay);
   }
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+
+  // Session server (optional).
+  std::unique_ptr<holo::net::Server> server;
+  if (!listen_spec.empty() || !net_config_path.empty()) {
+    holo::net::ServerConfig net;
+    if (!net_config_path.empty()) {
+      auto c = holo::net::LoadServerConfig(net_config_path);
+      if (!c.ok()) return Fail(c.status());
+      net = *c;
+    } else {
+      net.host = "0.0.0.0";
+    }
+    if (!listen_spec.empty()) {
+      holo::Status st = holo::net::ParseHostPort(listen_spec, &net.host, &net.port);
+      if (!st.ok()) return Fail(st.WithContext("--listen"));
+    }
+    if (publisher_token.empty() && std::getenv("HOLO_PUBLISHER_TOKEN")) publisher_token = std::getenv("HOLO_PUBLISHER_TOKEN");
+    if (viewer_token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) viewer_token = std::getenv("HOLO_VIEWER_TOKEN");
+    if (!publisher_token.empty()) net.publisher_token = publisher_token;
+    if (!viewer_token.empty()) net.viewer_token = viewer_token;
+    if (net.publisher_token.empty() || net.viewer_token.empty())
+      return Fail(holo::InvalidArgument(
+          "streaming needs a publisher and a viewer token: --publisher-token/--viewer-token, the env "
+          "variables HOLO_PUBLISHER_TOKEN/HOLO_VIEWER_TOKEN, or publisher_token/viewer_token in --net-config"));
+    holo::net::ServerHooks hooks;
+    if (quiet) hooks.log = [](const std::string&) {};
+    auto srv = holo::net::Server::Start(net, hooks);
+    if (!srv.ok()) return Fail(srv.status());
+    server = std::move(*srv);
+    if (!quiet)
+      std::fprintf(stderr, "holoport-server: session server '%s' on %s:%u%s, max %d viewers\n", net.name.c_str(),
+                   net.host.c_str(), server->port(), net.tls.enabled ? " (TLS)" : "", net.max_viewers);
+  }
+  holo::net::SitePublisherOptions publish_options;
+  publish_options.color = !no_color_stream;
+  std::unique_ptr<holo::net::SitePublisher> publisher;
+  if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
   auto masks = holo::ParseMaskSource(masks_name);
   if (!masks.ok()) return Fail(masks.status());
@@ -165,6 +260,134 @@ int main(int argc, char** argv) {
     if (stats_out == nullptr) return Fail(holo::Unavailable(stats_path + ": cannot open for writing"));
   }
 
+  if (server) server->SetRig(source->rig());
+
+  // Network stats line every 30 frames and a summary at the end.
+  auto net_line = [&](int64_t frame) {
+    if (!server) return;
+    const NetSummary n = Summarize(*server);
+    const holo::net::ServerCounters c = server->counters();
+    std::fprintf(stats_out,
+                 "{\"net\":true,\"frame\":%lld,\"viewers\":%zu,\"frames_sent\":%llu,\"frames_dropped\":%llu,"
+                 "\"bytes_sent\":%llu,\"max_queue\":%zu,\"rtt_ms_max\":%.3f,\"refused\":%llu,\"violations\":%llu,"
+                 "\"audio_relayed\":%llu,\"io_cpu_ms\":%.1f}\n",
+                 static_cast<long long>(frame), n.viewers, static_cast<unsigned long long>(n.sent),
+                 static_cast<unsigned long long>(n.dropped), static_cast<unsigned long long>(n.bytes), n.max_queue,
+                 n.rtt_ms_max, static_cast<unsigned long long>(c.refused), static_cast<unsigned long long>(c.violations),
+                 static_cast<unsigned long long>(c.audio_relayed), server->IoCpuMs());
+    std::fflush(stats_out);
+  };
+
+  if (truth_mesh) {
+    // Fast path: the studio's exact meshes and masks, no reconstruction.
+    if (!studio) return Fail(holo::InvalidArgument("--truth-mesh needs --source synthetic"));
+    const double fps = pace > 0 ? pace : 30.0;
+    if (!quiet)
+      std::fprintf(stderr, "holoport-server: streaming the studio's ground truth (%s) at %.0f fps%s\n",
+                   source_name.c_str(), fps, frames < 0 ? " until interrupted" : "");
+    holo::RgbdFrameSet fs;
+    holo::StudioGroundTruth gt;
+    // Pre-rendered loop: meshes, colour images and exact masks.
+    struct Prerendered {
+      holo::Mesh mesh;
+      std::vector<holo::ImageRgb8> color;
+      std::vector<holo::ImageGray8> mask;
+    };
+    std::vector<Prerendered> loop(static_cast<size_t>(truth_loop));
+    for (int k = 0; k < truth_loop && !g_stop; ++k) {
+      if (no_color_stream) {
+        loop[k].mesh = studio->ForegroundMesh(k);
+        continue;
+      }
+      studio->RenderFrame(k, &fs, &gt);
+      loop[k].mesh = std::move(gt.foreground_mesh);
+      for (size_t p = 0; p < fs.frames.size() && p < gt.mask.size(); ++p) {
+        loop[k].color.push_back(fs.frames[p].color);
+        loop[k].mask.push_back(gt.mask[p]);
+      }
+      if (!quiet && (k + 1) % 10 == 0) std::fprintf(stderr, "  pre-rendered %d/%d frames\n", k + 1, truth_loop);
+    }
+    const auto start = std::chrono::steady_clock::now();
+    int64_t late = 0;
+    std::vector<double> render_ms, geom_ms, color_ms, pub_ms;
+    int64_t i = 0;
+    for (; (frames < 0 || i < frames) && !g_stop; ++i) {
+      const auto due = start + std::chrono::microseconds(static_cast<int64_t>(i * 1e6 / fps));
+      if (std::chrono::steady_clock::now() > due + std::chrono::milliseconds(5)) ++late;
+      std::this_thread::sleep_until(due);
+      const int64_t capture_us = holo::net::WallUs();
+      holo::Stopwatch sw;
+      std::vector<holo::net::PodColor> pods;
+      holo::Mesh mesh;
+      if (truth_loop > 0) {
+        const Prerendered& pr = loop[static_cast<size_t>(i % truth_loop)];
+        mesh = pr.mesh;
+        for (size_t p = 0; p < pr.color.size(); ++p) pods.push_back({static_cast<uint16_t>(p), &pr.color[p], &pr.mask[p]});
+      } else if (no_color_stream) {
+        mesh = studio->ForegroundMesh(i);
+      } else {
+        studio->RenderFrame(i, &fs, &gt);
+        mesh = std::move(gt.foreground_mesh);
+        for (size_t p = 0; p < fs.frames.size() && p < gt.mask.size(); ++p)
+          pods.push_back({static_cast<uint16_t>(p), &fs.frames[p].color, &gt.mask[p]});
+      }
+      const double r_ms = sw.ElapsedMs();
+      holo::net::PublishTimings pt;
+      if (publisher) {
+        holo::Status st = publisher->Publish(i, capture_us, mesh, pods, &pt);
+        if (!st.ok()) return Fail(st);
+      } else {
+        // No server: encode anyway so the timings mean the same.
+        holo::net::SitePublisherOptions o = publish_options;
+        std::vector<uint8_t> blob;
+        holo::Stopwatch g;
+        holo::Status st = holo::protocol::EncodeGeometry(mesh, o.geometry, &blob);
+        if (!st.ok()) return Fail(st);
+        pt.geometry_ms = g.ElapsedMs();
+        pt.geometry_bytes = blob.size();
+      }
+      render_ms.push_back(r_ms);
+      geom_ms.push_back(pt.geometry_ms);
+      color_ms.push_back(pt.color_ms);
+      pub_ms.push_back(pt.publish_ms);
+      std::fprintf(stats_out,
+                   "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"truth_render_ms\":%.3f,"
+                   "\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
+                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
+                   static_cast<long long>(i), mesh.num_vertices(), mesh.num_triangles(), r_ms, pt.geometry_ms,
+                   pt.color_ms, pt.publish_ms, pt.geometry_bytes, pt.color_bytes, pt.viewers);
+      if ((i + 1) % 30 == 0) {
+        net_line(i);
+        if (!quiet)
+          std::fprintf(stderr, "  frame %lld: %zu vertices, %.1f KB; render %.1f ms, encode G1 %.1f, C1 %.1f, publish %.2f; %zu viewers\n",
+                       static_cast<long long>(i + 1), mesh.num_vertices(), (pt.geometry_bytes + pt.color_bytes) / 1024.0,
+                       r_ms, pt.geometry_ms, pt.color_ms, pt.publish_ms, pt.viewers);
+      }
+    }
+    net_line(i);
+    if (stats_out != stdout) std::fclose(stats_out);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    auto med = [](std::vector<double> v) {
+      if (v.empty()) return 0.0;
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      return v[v.size() / 2];
+    };
+    if (!quiet) {
+      std::fprintf(stderr,
+                   "holoport-server: %lld frames in %.2f s = %.1f fps (%lld late); median ms: truth render %.1f, "
+                   "encode G1 %.1f, C1 %.1f, publish %.2f\n",
+                   static_cast<long long>(i), wall, i / std::max(wall, 1e-9), static_cast<long long>(late),
+                   med(render_ms), med(geom_ms), med(color_ms), med(pub_ms));
+      if (server) {
+        const NetSummary n = Summarize(*server);
+        std::fprintf(stderr, "holoport-server: %zu viewers at the end; %llu frames sent, %llu dropped; io CPU %.0f ms\n",
+                     n.viewers, static_cast<unsigned long long>(n.sent), static_cast<unsigned long long>(n.dropped),
+                     server->IoCpuMs());
+      }
+    }
+    return 0;
+  }
+
   if (!quiet)
     std::fprintf(stderr, "holoport-server: %s, %zu pods, masks=%s, voxel %.1f mm, %s pipeline; learning background...\n",
                  source_name.c_str(), source->rig().pods.size(), holo::MaskSourceName(options.masks),
@@ -181,17 +404,36 @@ int main(int argc, char** argv) {
       last_frame = w.frames.frame_index;
     }
     const auto& t = w.timings;
+    holo::net::PublishTimings pt;
+    if (publisher) {
+      // Capture time on the wall clock: now minus the time since acquisition.
+      const int64_t capture_us = holo::net::WallUs() - (holo::RealClock::Instance().NowUs() - t.acquired_us);
+      std::vector<holo::net::PodColor> pods;
+      for (const auto& f : w.frames.frames)
+        pods.push_back({static_cast<uint16_t>(f.pod_id), &f.color, &f.mask});
+      HOLO_RETURN_IF_ERROR(publisher->Publish(w.frames.frame_index, capture_us, w.mesh, pods, &pt));
+    }
     std::fprintf(stats_out,
                  "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"acquire_ms\":%.3f,\"segment_ms\":%.3f,"
-                 "\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"texture_ms\":%.3f,\"latency_ms\":%.3f}\n",
+                 "\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"texture_ms\":%.3f,\"latency_ms\":%.3f%s",
                  static_cast<long long>(w.frames.frame_index), w.mesh.num_vertices(), w.mesh.num_triangles(),
-                 t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.texture_ms, t.latency_ms());
+                 t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.texture_ms, t.latency_ms(), publisher ? "" : "}\n");
+    if (publisher)
+      std::fprintf(stats_out,
+                   ",\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
+                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
+                   pt.geometry_ms, pt.color_ms, pt.publish_ms, pt.geometry_bytes, pt.color_bytes, pt.viewers);
     if (!export_dir.empty()) {
       char path[4096];
       FrameFileName(path, sizeof(path), export_dir, w.frames.frame_index);
       HOLO_RETURN_IF_ERROR(holo::WritePly(path, w.mesh));
     }
     ++done;
+    if (done % 30 == 0) net_line(w.frames.frame_index);
+    if (!quiet && publisher && (done % 30 == 0))
+      std::fprintf(stderr, "  frame %lld: encode G1 %.1f ms (%zu B), C1 %.1f ms (%zu B), publish %.2f ms, %zu viewers\n",
+                   static_cast<long long>(done), pt.geometry_ms, pt.geometry_bytes, pt.color_ms, pt.color_bytes,
+                   pt.publish_ms, pt.viewers);
     if (!quiet && (done % 30 == 0))
       std::fprintf(stderr,
                    "  frame %lld: %zu triangles; segment %.1f ms, fuse %.1f, mesh %.1f, texture %.1f; latency %.1f ms\n",
@@ -199,7 +441,17 @@ int main(int argc, char** argv) {
                    t.texture_ms, t.latency_ms());
     return holo::OkStatus();
   };
+  // Ctrl-C / SIGTERM: stop the pipeline (from a watcher thread; signal
+  // handlers may only set a flag).
+  std::atomic<bool> run_done{false};
+  std::thread watcher([&] {
+    while (!run_done && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (g_stop) (*site)->Stop();
+  });
   auto stats = (*site)->Run(sink);
+  run_done = true;
+  watcher.join();
+  if (server) net_line(-1);
   if (stats_out != stdout) std::fclose(stats_out);
   if (!stats.ok()) return Fail(stats.status());
   if (!snapshot_path.empty() && last_frame >= 0) {

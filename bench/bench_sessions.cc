@@ -1,0 +1,430 @@
+// holoport-bench sessions --workload S8-QVGA [--json] [--frames N] [--viewers=N] [--seconds=S]
+//                         [--server-threads=N] [--client-threads=N]
+//
+// One-to-many broadcast on loopback: an in-process session server (its own
+// io threads) fans a 30 fps stream out to N normal viewers (SiteClient, no
+// decoding, on a shared client io thread), one slow viewer (reads at 1/10 of
+// the stream's byte rate) and one stalled viewer (never reads).
+//
+// Content: N frames (default 30) of the workload pre-encoded once, then looped:
+// the studio's ground-truth foreground mesh per frame (G1, colours) and the 8
+// pods' colour images with the exact masks (C1), i.e. S8-QVGA-sized frames
+// without the capture pipeline's cost (which holoport-server measures).
+//
+// Figures: viewers_held (normal viewers at >= 29 fps over the measured window),
+// delivered_fraction per class (normal, slow, stalled), latency_p50_ms and
+// latency_p99_ms (publish time stamped as capture time → message reassembled
+// at the viewer), cpu_per_viewer_pct (server io + publisher threads' CPU per
+// wall second, per viewer), plus the machine load and the clients' CPU.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <time.h>
+
+#include "bench.h"
+#include "client/net/raw_peer.h"
+#include "client/net/site_client.h"
+#include "protocol/color_codec.h"
+#include "protocol/geometry_codec.h"
+#include "server/net/session_server.h"
+#include "server/pipeline/capture_site.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+
+namespace holo::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int Flag(const BenchArgs& args, const std::string& name, int fallback) {
+  for (const std::string& e : args.extra)
+    if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
+  return fallback;
+}
+
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+std::string LoadAverage() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
+  return v[i];
+}
+
+struct Content {
+  std::vector<std::vector<uint8_t>> geometry;
+  std::vector<protocol::ColorFrame> color;
+  size_t vertices = 0;
+  double bytes_per_frame = 0;
+};
+
+StatusOr<Content> PrepareContent(const Workload& wl, int frames) {
+  Content c;
+  SyntheticStudio studio(wl.rig, wl.studio);
+  RgbdFrameSet fs;
+  StudioGroundTruth gt;
+  double bytes = 0;
+  for (int f = 0; f < frames; ++f) {
+    studio.RenderFrame(f, &fs, &gt);
+    protocol::GeometryEncodeOptions g;
+    g.colors = !gt.foreground_mesh.colors.empty();
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(gt.foreground_mesh, g, &blob));
+    c.vertices = gt.foreground_mesh.num_vertices();
+    protocol::ColorFrame cf;
+    cf.codec = protocol::ColorCodec::kC1;
+    for (size_t p = 0; p < fs.frames.size(); ++p) {
+      protocol::PodImage pi;
+      pi.pod_id = static_cast<uint16_t>(p);
+      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(fs.frames[p].color, gt.mask[p], {}, &pi.data));
+      bytes += static_cast<double>(pi.data.size());
+      cf.images.push_back(std::move(pi));
+    }
+    bytes += static_cast<double>(blob.size());
+    c.geometry.push_back(std::move(blob));
+    c.color.push_back(std::move(cf));
+  }
+  c.bytes_per_frame = bytes / frames;
+  return c;
+}
+
+// A viewer on a raw socket reading `bytes_per_10ms` every 10 ms (0: never).
+class RawViewer {
+ public:
+  RawViewer(uint16_t port, size_t bytes_per_10ms, const std::string& name, Status* status) : budget_(bytes_per_10ms) {
+    auto p = net::RawPeer::Connect("127.0.0.1", port);
+    if (!p.ok()) {
+      *status = p.status();
+      return;
+    }
+    peer_ = std::move(*p);
+    peer_->SetReceiveBuffer(64 << 10);
+    *status = peer_->SendHello(protocol::Role::kViewer, "bench-view", name);
+    if (!status->ok()) return;
+    auto w = peer_->ReadMessage(10.0);
+    if (!w.ok() || w->header.type != protocol::MessageType::kWelcome) {
+      *status = Unavailable(name + ": no Welcome");
+      return;
+    }
+    protocol::Control c;
+    c.command = protocol::ControlCommand::kSubscribe;
+    c.value = net::kContentGeometry | net::kContentColor;
+    *status = peer_->SendMessage(c);
+    if (budget_ > 0) thread_ = std::thread([this] { Run(); });
+  }
+  ~RawViewer() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  int64_t meshes() const { return meshes_; }
+
+ private:
+  void Run() {
+    while (!stop_) {
+      std::vector<protocol::Frame> frames;
+      if (!peer_->ReadFrames(budget_, 0.01, &frames).ok()) return;
+      for (const auto& f : frames)
+        if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments))
+          ++meshes_;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  size_t budget_;
+  std::unique_ptr<net::RawPeer> peer_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int64_t> meshes_{0};
+};
+
+// The capture site's own output: fused, meshed and textured frames (exact
+// masks, to keep the preparation short), encoded like holoport-server does.
+StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
+  Content c;
+  HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(wl.rig, wl.studio));
+  CaptureSiteOptions o;
+  o.masks = MaskSource::kTruth;
+  o.color_calibration = false;
+  o.tsdf.voxel_size = wl.voxel_size_m;
+  o.pipeline.max_frames = frames;
+  HOLO_ASSIGN_OR_RETURN(auto site, CaptureSite::Create(studio.get(), nullptr, studio.get(), o));
+  double bytes = 0;
+  auto sink = [&](const FrameWork& w) -> Status {
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(w.mesh, {}, &blob));
+    protocol::ColorFrame cf;
+    cf.codec = protocol::ColorCodec::kC1;
+    for (const auto& f : w.frames.frames) {
+      if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) continue;
+      protocol::PodImage pi;
+      pi.pod_id = static_cast<uint16_t>(f.pod_id);
+      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(f.color, f.mask, {}, &pi.data));
+      bytes += static_cast<double>(pi.data.size());
+      cf.images.push_back(std::move(pi));
+    }
+    bytes += static_cast<double>(blob.size());
+    c.vertices = w.mesh.num_vertices();
+    c.geometry.push_back(std::move(blob));
+    c.color.push_back(std::move(cf));
+    std::fprintf(stderr, "  fused frame %zu/%d: %zu vertices\n", c.geometry.size(), frames, w.mesh.num_vertices());
+    return OkStatus();
+  };
+  HOLO_ASSIGN_OR_RETURN(auto stats, site->Run(sink));
+  (void)stats;
+  if (c.geometry.empty()) return Internal("the capture site produced no frames");
+  c.bytes_per_frame = bytes / static_cast<double>(c.geometry.size());
+  return c;
+}
+
+int RunSessions(const BenchArgs& args) {
+  const int num_viewers = std::max(1, Flag(args, "--viewers", 100));
+  const int seconds = std::max(4, Flag(args, "--seconds", 20));
+  const int server_threads = std::max(1, Flag(args, "--server-threads", 2));
+  const int client_threads = std::max(1, Flag(args, "--client-threads", 1));
+  std::string content_kind = "truth";
+  for (const std::string& e : args.extra)
+    if (e.rfind("--content=", 0) == 0) content_kind = e.substr(10);
+  if (content_kind != "truth" && content_kind != "fused") {
+    std::fprintf(stderr, "sessions: --content must be truth or fused\n");
+    return 2;
+  }
+  const int content_frames = args.frames > 0 ? args.frames : (content_kind == "truth" ? 30 : 8);
+  const double fps = 30.0;
+  auto wl = GetWorkload(args.workload);
+  if (!wl.ok()) {
+    std::fprintf(stderr, "sessions: %s\n", wl.status().ToString().c_str());
+    return 2;
+  }
+  std::fprintf(stderr, "sessions: load average before: %s\n", LoadAverage().c_str());
+  std::fprintf(stderr, "sessions: pre-encoding %d %s frames (%s mesh G1 + 8 pods C1)...\n", content_frames,
+               args.workload.c_str(), content_kind == "truth" ? "ground-truth" : "fused");
+  auto content = content_kind == "truth" ? PrepareContent(*wl, content_frames) : PrepareFusedContent(*wl, content_frames);
+  if (!content.ok()) {
+    std::fprintf(stderr, "sessions: %s\n", content.status().ToString().c_str());
+    return 1;
+  }
+  std::fprintf(stderr, "sessions: %zu vertices, %.1f KB per frame (%.1f Mbit/s per viewer)\n", content->vertices,
+               content->bytes_per_frame / 1024, content->bytes_per_frame * 8 * fps / 1e6);
+
+  net::ServerConfig cfg;
+  cfg.name = "bench-site";
+  cfg.publisher_token = "bench-pub";
+  cfg.viewer_token = "bench-view";
+  cfg.max_viewers = num_viewers + 8;
+  cfg.max_pending = num_viewers + 8;
+  cfg.threads = server_threads;
+  cfg.idle_timeout_s = 3600;
+  std::atomic<int> log_lines{0};
+  net::ServerHooks hooks;
+  hooks.log = [&log_lines](const std::string&) { ++log_lines; };  // 100 welcomes: not interesting here
+  auto server = net::Server::Start(cfg, hooks);
+  if (!server.ok()) {
+    std::fprintf(stderr, "sessions: %s\n", server.status().ToString().c_str());
+    return 1;
+  }
+  const uint16_t port = (*server)->port();
+
+  // Normal viewers.
+  struct ViewerCount {
+    std::atomic<int64_t> frames{0};
+    std::atomic<int64_t> last_index{-1};
+    std::atomic<int64_t> out_of_order{0};
+  };
+  std::vector<ViewerCount> counts(num_viewers);
+  std::mutex lat_mu;
+  std::vector<double> latencies;
+  std::atomic<bool> measuring{false};
+  net::NetContext ctx(client_threads);
+  std::vector<std::unique_ptr<net::SiteClient>> viewers;
+  for (int i = 0; i < num_viewers; ++i) {
+    net::ClientOptions o;
+    o.port = port;
+    o.token = "bench-view";
+    o.name = "normal" + std::to_string(i);
+    o.decode = false;
+    o.subscribe = net::kSubscribeGeometry | net::kSubscribeColor;
+    o.connect_timeout_s = 30;
+    net::ClientCallbacks cb;
+    ViewerCount* vc = &counts[i];
+    cb.on_frame = [vc, &lat_mu, &latencies, &measuring](const net::ReceivedFrame& f) {
+      ++vc->frames;
+      if (f.frame_index <= vc->last_index) ++vc->out_of_order;
+      vc->last_index = f.frame_index;
+      if (measuring) {
+        std::lock_guard<std::mutex> l(lat_mu);
+        latencies.push_back(f.latency_ms);
+      }
+    };
+    auto c = net::SiteClient::Start(o, cb, &ctx);
+    if (!c.ok()) {
+      std::fprintf(stderr, "sessions: %s\n", c.status().ToString().c_str());
+      return 1;
+    }
+    viewers.push_back(std::move(*c));
+  }
+  for (auto& v : viewers)
+    if (!v->WaitConnected(30)) {
+      std::fprintf(stderr, "sessions: a viewer did not connect: %s\n", v->status().ToString().c_str());
+      return 1;
+    }
+  // 1/10 of the stream's byte rate, per 10 ms slice.
+  const size_t slow_budget = static_cast<size_t>(content->bytes_per_frame * fps / 10 / 100);
+  Status slow_status, stalled_status;
+  RawViewer slow(port, std::max<size_t>(512, slow_budget), "slow", &slow_status);
+  RawViewer stalled(port, 0, "stalled", &stalled_status);
+  if (!slow_status.ok() || !stalled_status.ok()) {
+    std::fprintf(stderr, "sessions: slow/stalled viewer: %s %s\n", slow_status.ToString().c_str(),
+                 stalled_status.ToString().c_str());
+    return 1;
+  }
+  while ((*server)->num_subscribed(net::kContentGeometry) < static_cast<size_t>(num_viewers + 2))
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  std::fprintf(stderr, "sessions: %d normal + 1 slow + 1 stalled viewers connected; streaming %d s at %.0f fps\n",
+               num_viewers, seconds, fps);
+
+  // Publisher: one encode per frame (MakeVideoFrame copies the pre-encoded
+  // blobs into the wire buffer once), shared by every viewer.
+  const double warmup_s = 2.0;
+  std::atomic<int64_t> published{0};
+  std::atomic<int64_t> published_at_window_start{0};
+  double publisher_cpu_ms = 0;
+  std::thread publisher([&] {
+    const double cpu0 = ThreadCpuMs();
+    const auto start = Clock::now();
+    const int64_t total = static_cast<int64_t>(seconds * fps);
+    for (int64_t i = 0; i < total; ++i) {
+      const size_t k = static_cast<size_t>(i % static_cast<int64_t>(content->geometry.size()));
+      (*server)->PublishVideo(net::MakeVideoFrame(i, net::WallUs(), protocol::GeometryCodec::kG1,
+                                                  content->geometry[k], &content->color[k], cfg.fragment_bytes));
+      ++published;
+      std::this_thread::sleep_until(start + std::chrono::microseconds(static_cast<int64_t>((i + 1) * 1e6 / fps)));
+    }
+    publisher_cpu_ms = ThreadCpuMs() - cpu0;
+  });
+
+  // Window: after the warm-up until the end of publishing.
+  std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(warmup_s * 1000)));
+  std::vector<int64_t> frames0(num_viewers);
+  for (int i = 0; i < num_viewers; ++i) frames0[i] = counts[i].frames;
+  const int64_t slow0 = slow.meshes();
+  const int64_t stalled0 = stalled.meshes();
+  published_at_window_start = published.load();
+  const double server_cpu0 = (*server)->IoCpuMs();
+  const double client_cpu0 = ctx.CpuMs();
+  const double proc_cpu0 = ProcessCpuMs();
+  const auto t0 = Clock::now();
+  measuring = true;
+  for (int s = 0; s < seconds - static_cast<int>(warmup_s); s += 5) {
+    std::this_thread::sleep_for(std::chrono::seconds(std::min(5, seconds - static_cast<int>(warmup_s) - s)));
+    int64_t sum = 0;
+    for (int i = 0; i < num_viewers; ++i) sum += counts[i].frames - frames0[i];
+    const double el = std::chrono::duration<double>(Clock::now() - t0).count();
+    std::fprintf(stderr, "  %.0f s: published %lld, mean %.1f fps per normal viewer, server io CPU %.0f%%, load %s\n",
+                 el + warmup_s, static_cast<long long>(published.load()), sum / el / num_viewers,
+                 ((*server)->IoCpuMs() - server_cpu0) / (el * 10), LoadAverage().c_str());
+  }
+  publisher.join();
+  const double window_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  const double server_cpu_ms = (*server)->IoCpuMs() - server_cpu0;
+  const double client_cpu_ms = ctx.CpuMs() - client_cpu0;
+  const double proc_cpu_ms = ProcessCpuMs() - proc_cpu0;
+  // Let in-flight frames arrive (the window's frames were published before now).
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  measuring = false;
+  const int64_t window_published = published.load() - published_at_window_start.load();
+
+  int held = 0;
+  std::vector<double> fractions, fps_list;
+  int64_t out_of_order = 0;
+  for (int i = 0; i < num_viewers; ++i) {
+    const int64_t got = counts[i].frames - frames0[i];
+    const double f = static_cast<double>(got) / window_s;
+    fps_list.push_back(f);
+    // The window's start and end fall between frames: ±1 frame of slack.
+    if (got + 1 >= static_cast<int64_t>(29.0 * window_s)) ++held;
+    fractions.push_back(std::min(1.0, static_cast<double>(got) / static_cast<double>(window_published)));
+    out_of_order += counts[i].out_of_order;
+  }
+  const double slow_fraction = static_cast<double>(slow.meshes() - slow0) / static_cast<double>(window_published);
+  const double stalled_fraction =
+      static_cast<double>(stalled.meshes() - stalled0) / static_cast<double>(window_published);
+  uint64_t dropped_normal = 0, dropped_slow = 0, dropped_stalled = 0, bytes_sent = 0;
+  for (const auto& s : (*server)->Sessions()) {
+    bytes_sent += s.bytes_sent;
+    if (s.client_name == "slow") dropped_slow = s.video_frames_dropped;
+    else if (s.client_name == "stalled") dropped_stalled = s.video_frames_dropped;
+    else dropped_normal += s.video_frames_dropped;
+  }
+  std::vector<double> lat;
+  {
+    std::lock_guard<std::mutex> l(lat_mu);
+    lat = latencies;
+  }
+  const double server_total_cpu_ms = server_cpu_ms + publisher_cpu_ms * (window_s / seconds);
+  const double cpu_pct_per_viewer = server_total_cpu_ms / (window_s * 1e3) * 100.0 / (num_viewers + 2);
+
+  const std::string w = args.workload;
+  const std::map<std::string, std::string> q{{"viewers", std::to_string(num_viewers)},
+                                             {"fps", "30"},
+                                             {"content", content_kind == "truth" ? "studio-ground-truth-G1+C1-looped" : "fused-G1+C1-looped"},
+                                             {"server_threads", std::to_string(server_threads)}};
+  auto with = [&](std::map<std::string, std::string> extra) {
+    extra.insert(q.begin(), q.end());
+    return extra;
+  };
+  EmitFigure("sessions", w, "viewers_held", held, "viewers", with({{"of", std::to_string(num_viewers)}}));
+  EmitFigure("sessions", w, "delivered_fraction", Mean(fractions), "1", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "delivered_fraction", *std::min_element(fractions.begin(), fractions.end()), "1",
+             with({{"class", "normal"}, {"stat", "min"}}));
+  EmitFigure("sessions", w, "delivered_fraction", slow_fraction, "1", with({{"class", "slow"}}));
+  EmitFigure("sessions", w, "delivered_fraction", stalled_fraction, "1", with({{"class", "stalled"}}));
+  EmitFigure("sessions", w, "frames_dropped", static_cast<double>(dropped_normal), "frames",
+             with({{"class", "normal"}, {"stat", "sum"}}));
+  EmitFigure("sessions", w, "frames_dropped", static_cast<double>(dropped_slow), "frames", with({{"class", "slow"}}));
+  EmitFigure("sessions", w, "frames_dropped", static_cast<double>(dropped_stalled), "frames",
+             with({{"class", "stalled"}}));
+  EmitFigure("sessions", w, "fps_per_viewer", Median(fps_list), "1/s", with({{"class", "normal"}, {"stat", "median"}}));
+  EmitFigure("sessions", w, "fps_per_viewer", *std::min_element(fps_list.begin(), fps_list.end()), "1/s",
+             with({{"class", "normal"}, {"stat", "min"}}));
+  EmitFigure("sessions", w, "latency_p50_ms", Percentile(lat, 0.5), "ms", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "latency_p99_ms", Percentile(lat, 0.99), "ms", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "cpu_per_viewer_pct", cpu_pct_per_viewer, "%",
+             with({{"stage", "server"}, {"note", "io threads + publisher, per wall second"}}));
+  EmitFigure("sessions", w, "cpu_pct", server_total_cpu_ms / (window_s * 10), "%", with({{"stage", "server"}}));
+  EmitFigure("sessions", w, "cpu_pct", client_cpu_ms / (window_s * 10), "%", with({{"stage", "viewers"}}));
+  EmitFigure("sessions", w, "cpu_pct", proc_cpu_ms / (window_s * 10), "%", with({{"stage", "process"}}));
+  EmitFigure("sessions", w, "frame_bytes", content->bytes_per_frame, "B", with({{"vertices", std::to_string(content->vertices)}}));
+  EmitFigure("sessions", w, "out_of_order_frames", static_cast<double>(out_of_order), "frames", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "server_send_rate", static_cast<double>(bytes_sent) * 8 / 1e6 / (seconds + 2.0), "Mbit/s",
+             with({{"note", "all viewers, whole run incl. warm-up"}}));
+  EmitFigure("sessions", w, "window_s", window_s, "s", with({}));
+  std::fprintf(stderr, "sessions: load average after: %s (2 cores shared)\n", LoadAverage().c_str());
+
+  return 0;
+}
+
+HOLO_REGISTER_BENCH("sessions",
+                    "broadcast fan-out on loopback: N viewers + slow + stalled at 30 fps (viewers_held, "
+                    "delivered_fraction, latency, cpu_per_viewer_pct)",
+                    RunSessions);
+
+}  // namespace
+}  // namespace holo::bench
