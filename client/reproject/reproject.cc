@@ -251,27 +251,61 @@ Status Reproject(const ImageRgb8& source, const ImageDepth16* source_depth, cons
         }
       }
     }
+    // Per target row: splatted pixels take their source coordinate; the
+    // others keep the rotation-homography sample if it shows background
+    // (source pixel without depth); if it lands on a surface the pixel is a
+    // disocclusion hole: it takes the farther of its nearest splatted (or
+    // background) neighbours on the row, extrapolated — the background
+    // stretched into the gap, as a depth-image warper does.
+    enum : uint8_t { kSplat, kBackground, kHole, kBorder };
+    std::vector<uint8_t> kind(static_cast<size_t>(tw));
+    const float k_default = fxs / fxt;
     for (int y = 0; y < th; ++y) {
       uint8_t* orow = out->row(y);
       uint8_t* vrow = ok.row(y);
+      const size_t row0 = static_cast<size_t>(y) * tw;
       for (int x = 0; x < tw; ++x) {
-        const size_t i = static_cast<size_t>(y) * tw + x;
+        const size_t i = row0 + x;
         if (std::isfinite(zbuf[i])) {
-          if (!vrow[x]) --border;  // a splat reached past the rotation border
-          SampleWith(options.filter, source, src_x[i], src_y[i], orow + 3 * x);
-          vrow[x] = 255;
-        } else if (vrow[x]) {
-          // Background by the rotation homography, unless that lands on a
-          // source pixel with a surface: then it is a disocclusion.
+          kind[x] = kSplat;
+        } else if (!vrow[x]) {
+          kind[x] = kBorder;
+        } else {
           const Eigen::Vector3f d = rel.r * Eigen::Vector3f(static_cast<float>((x - kt.cx) / kt.fx),
                                                             static_cast<float>((y - kt.cy) / kt.fy), 1.0f);
           const int sx = std::clamp(static_cast<int>(std::lround(fxs * d.x() / d.z() + cxs)), 0, sw - 1);
           const int sy = std::clamp(static_cast<int>(std::lround(fys * d.y() / d.z() + cys)), 0, sh - 1);
-          if (source_depth->at(sx, sy) != 0) {
+          kind[x] = source_depth->at(sx, sy) != 0 ? kHole : kBackground;
+        }
+      }
+      for (int x = 0; x < tw; ++x) {
+        const size_t i = row0 + x;
+        if (kind[x] == kSplat) {
+          if (!vrow[x]) --border;  // a splat reached past the rotation border
+          SampleWith(options.filter, source, src_x[i], src_y[i], orow + 3 * x);
+          vrow[x] = 255;
+        } else if (kind[x] == kHole) {
+          ++holes;
+          // Nearest non-hole neighbour on each side and its depth (inf = background).
+          int best = -1;
+          float best_z = -1;
+          for (int dir : {-1, 1}) {
+            int n = x + dir;
+            while (n >= 0 && n < tw && kind[n] == kHole) n += dir;
+            if (n < 0 || n >= tw || kind[n] == kBorder) continue;
+            const float z = kind[n] == kSplat ? zbuf[row0 + n] : std::numeric_limits<float>::infinity();
+            if (z > best_z) {
+              best_z = z;
+              best = n;
+            }
+          }
+          if (best >= 0 && kind[best] == kSplat) {
+            SampleWith(options.filter, source, src_x[row0 + best] + (x - best) * k_default, src_y[row0 + best],
+                       orow + 3 * x);
+          } else {
             orow[3 * x] = options.background[0];
             orow[3 * x + 1] = options.background[1];
             orow[3 * x + 2] = options.background[2];
-            ++holes;
           }
         }
       }
