@@ -8,24 +8,21 @@
 namespace holo::reproject {
 namespace {
 
-// Bilinear sample of `img` at pixel coordinates (x, y), which must lie in
-// [0, w−1] × [0, h−1] (callers clamp the half-pixel rim).
+// Bilinear sample of `img` at pixel coordinates (x, y), clamped to the
+// image (callers pass points inside the half-pixel rim).
 inline void Sample(const ImageRgb8& img, float x, float y, uint8_t* out) {
   const int w = img.width(), h = img.height();
   x = std::clamp(x, 0.0f, static_cast<float>(w - 1));
   y = std::clamp(y, 0.0f, static_cast<float>(h - 1));
-  const int x0 = std::min(static_cast<int>(x), w - 2 < 0 ? 0 : w - 2);
-  const int y0 = std::min(static_cast<int>(y), h - 2 < 0 ? 0 : h - 2);
-  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+  const int x0 = std::min(static_cast<int>(x), w - 2);
+  const int y0 = std::min(static_cast<int>(y), h - 2);
   const float ax = x - x0, ay = y - y0;
-  const uint8_t* p00 = &img.at(x0, y0);
-  const uint8_t* p01 = &img.at(x1, y0);
-  const uint8_t* p10 = &img.at(x0, y1);
-  const uint8_t* p11 = &img.at(x1, y1);
+  const uint8_t* p = img.data() + (static_cast<size_t>(y0) * w + x0) * 3;
+  const uint8_t* q = p + static_cast<size_t>(w) * 3;
   for (int c = 0; c < 3; ++c) {
-    const float top = p00[c] + ax * (p01[c] - p00[c]);
-    const float bot = p10[c] + ax * (p11[c] - p10[c]);
-    out[c] = static_cast<uint8_t>(std::lround(top + ay * (bot - top)));
+    const float top = p[c] + ax * (p[c + 3] - p[c]);
+    const float bot = q[c] + ax * (q[c + 3] - q[c]);
+    out[c] = static_cast<uint8_t>(top + ay * (bot - top) + 0.5f);  // in [0, 255]: a convex combination
   }
 }
 
@@ -62,7 +59,7 @@ inline void SampleCubic(const ImageRgb8& img, float x, float y, uint8_t* out) {
     acc[1] += wy[j] * r[1];
     acc[2] += wy[j] * r[2];
   }
-  for (int c = 0; c < 3; ++c) out[c] = static_cast<uint8_t>(std::clamp(std::lround(acc[c]), 0L, 255L));
+  for (int c = 0; c < 3; ++c) out[c] = static_cast<uint8_t>(std::clamp(acc[c] + 0.5f, 0.0f, 255.0f));
 }
 
 inline void SampleWith(ReprojectFilter f, const ImageRgb8& img, float x, float y, uint8_t* out) {
