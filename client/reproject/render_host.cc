@@ -112,4 +112,35 @@ Status DecodeRenderedFrame(const protocol::RenderedFrame& f, RenderedView* out, 
   return OkStatus();
 }
 
+protocol::ClientPose ToClientPose(const pose::PoseSample& sample, const FieldOfView& fov, int64_t predicted_display_us) {
+  protocol::ClientPose m;
+  m.time_us = sample.time_us;
+  m.predicted_display_us = predicted_display_us;
+  m.position = {static_cast<float>(sample.position.x()), static_cast<float>(sample.position.y()),
+                static_cast<float>(sample.position.z())};
+  const Eigen::Quaterniond q = sample.rotation.normalized();
+  m.rotation = {static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
+                static_cast<float>(q.z())};
+  m.fov_tan = fov.ToTan();
+  return m;
+}
+
+StatusOr<pose::PoseSample> FromClientPose(const protocol::ClientPose& m, FieldOfView* fov) {
+  for (float v : m.position) {
+    if (!std::isfinite(v) || std::abs(v) > 1e6f) return DataLoss("ClientPose: position is not finite or too large");
+  }
+  const Eigen::Quaterniond q(m.rotation[0], m.rotation[1], m.rotation[2], m.rotation[3]);
+  if (!q.coeffs().allFinite() || std::abs(q.norm() - 1.0) > 1e-3) {
+    return DataLoss("ClientPose: rotation is not a unit quaternion (norm " + std::to_string(q.norm()) + ")");
+  }
+  const FieldOfView f = FieldOfView::FromTan(m.fov_tan);
+  if (Status s = f.Check(); !s.ok()) return DataLoss("ClientPose: " + s.message());
+  if (fov) *fov = f;
+  pose::PoseSample s;
+  s.time_us = m.time_us;
+  s.position = Eigen::Vector3d(m.position[0], m.position[1], m.position[2]);
+  s.rotation = q.normalized();
+  return s;
+}
+
 }  // namespace holo::reproject

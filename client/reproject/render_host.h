@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 
+#include "client/pose/head_pose.h"
 #include "client/reproject/fov.h"
 #include "common/camera.h"
 #include "common/image.h"
@@ -60,5 +61,13 @@ StatusOr<protocol::RenderedFrame> EncodeRenderedView(const RenderedView& view, c
 // width × height, the depth blob decompressing to exactly width × height ×
 // 2 bytes. Safe on untrusted input (DataLoss / UnsupportedVersion naming the field).
 Status DecodeRenderedFrame(const protocol::RenderedFrame& frame, RenderedView* out, const protocol::Limits& limits = {});
+
+// The thin client's pose message (protocol ClientPose) from a head-pose
+// sample, the display FOV and the expected display time (0 = unknown).
+protocol::ClientPose ToClientPose(const pose::PoseSample& sample, const FieldOfView& fov, int64_t predicted_display_us);
+// Back to a sample (and its FOV if `fov` is not null), validated: finite
+// position, unit quaternion (±1e-3), FOV tangents in (0, 100]. Safe on
+// untrusted input (DataLoss naming the field).
+StatusOr<pose::PoseSample> FromClientPose(const protocol::ClientPose& message, FieldOfView* fov = nullptr);
 
 }  // namespace holo::reproject

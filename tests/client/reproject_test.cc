@@ -1,10 +1,12 @@
 // Reprojection, fields of view and the RenderedFrame wire form. No timing.
 #include <cmath>
+#include <limits>
 #include <random>
 #include <variant>
 
 #include <gtest/gtest.h>
 
+#include "client/pose/head_pose.h"
 #include "client/reproject/fov.h"
 #include "client/reproject/render_host.h"
 #include "client/reproject/reproject.h"
@@ -242,6 +244,33 @@ TEST_F(ReprojectTest, RenderedFrameValidation) {
     const std::vector<uint8_t> prefix(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n));
     EXPECT_FALSE(protocol::DecodePayload(protocol::MessageType::kRenderedFrame, prefix).ok()) << n;
   }
+}
+
+TEST(ClientPoseMessage, RoundTripAndValidation) {
+  pose::PoseSample s;
+  s.time_us = 987654;
+  s.position = Eigen::Vector3d(-2.5, 0.25, 1.7);
+  s.rotation = pose::RotationFromYawPitchRoll(0.3, -0.1, 0.05);
+  const FieldOfView fov = FieldOfView::FromHorizontalDeg(90, 16.0 / 9);
+  const protocol::ClientPose m = ToClientPose(s, fov, 1030000);
+  auto payload = protocol::DecodePayload(protocol::MessageType::kClientPose, protocol::EncodePayload(m));
+  ASSERT_TRUE(payload.ok());
+  FieldOfView back_fov;
+  auto back = FromClientPose(std::get<protocol::ClientPose>(*payload), &back_fov);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->time_us, s.time_us);
+  EXPECT_LT((back->position - s.position).norm(), 1e-6);
+  EXPECT_LT(pose::AngleBetween(back->rotation, s.rotation), 1e-6);
+  EXPECT_EQ(back_fov.ToTan(), fov.ToTan());
+  protocol::ClientPose bad = m;
+  bad.rotation = {0, 0, 0, 0};
+  EXPECT_FALSE(FromClientPose(bad).ok());
+  bad = m;
+  bad.fov_tan[0] = 0;
+  EXPECT_FALSE(FromClientPose(bad).ok());
+  bad = m;
+  bad.position[2] = std::numeric_limits<float>::infinity();
+  EXPECT_FALSE(FromClientPose(bad).ok());
 }
 
 }  // namespace
