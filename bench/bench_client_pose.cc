@@ -102,7 +102,9 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
   o.encode.jpeg_quality = 90;
   double view_distance_m = 2.6;
   std::string scenes = "both", method_name = "plane";
-  int frames = args.frames > 0 ? args.frames : 60;
+  // Display frames per scene (the room renders 3× slower than the person).
+  const int fg_frames = args.frames > 0 ? args.frames : 120;
+  const int studio_frames = args.frames > 0 ? args.frames : 60;
   for (size_t i = 0; i < extra.size(); ++i) {
     const bool has_value = i + 1 < extra.size();
     if (extra[i] == "--size" && has_value) {
@@ -144,7 +146,6 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
       return 2;
     }
   }
-  o.display_frames = frames;
   if (scenes != "foreground" && scenes != "studio" && scenes != "both") {
     std::fprintf(stderr, "client-pose: --scene must be foreground, studio or both, got %s\n", scenes.c_str());
     return 2;
@@ -186,6 +187,7 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
   if (scenes != "studio") scene_list.push_back("foreground");
   if (scenes != "foreground") scene_list.push_back("studio");
   for (const std::string& scene : scene_list) {
+    o.display_frames = scene == "studio" ? studio_frames : fg_frames;
     holo::Mesh mesh;
     int64_t mesh_frame = -1;
     SceneAtFrame scene_at = [&](int64_t frame) -> SceneRenderFn {
@@ -238,9 +240,45 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
                      r.black_border_fraction, r.wire_bytes / 1024.0, r.reproject_cpu_ms);
       }
     }
+    // Paired per-frame gains (same display frames): mean ± standard error.
+    auto gain = [&](int latency, OffloadMode from, OffloadMode to) {
+      const OffloadResult *a = nullptr, *b = nullptr;
+      for (const OffloadResult& r : *results) {
+        if (r.latency_ms == latency && r.mode == from) a = &r;
+        if (r.latency_ms == latency && r.mode == to) b = &r;
+      }
+      if (!a || !b || a->frame_psnr_db.size() != b->frame_psnr_db.size() || a->frame_psnr_db.size() < 2) return;
+      const size_t n = a->frame_psnr_db.size();
+      double sum = 0, sum2 = 0;
+      int better = 0;
+      for (size_t i = 0; i < n; ++i) {
+        const double d = b->frame_psnr_db[i] - a->frame_psnr_db[i];
+        sum += d;
+        sum2 += d * d;
+        better += d > 0;
+      }
+      const double mean = sum / n;
+      const double se = std::sqrt(std::max(0.0, sum2 / n - mean * mean) / (n - 1));
+      std::map<std::string, std::string> q = {{"from", OffloadModeName(from)}, {"to", OffloadModeName(to)},
+                                              {"latency_ms", std::to_string(latency)}, {"scene", scene},
+                                              {"method", ReprojectMethodName(o.method)}};
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_db", mean, "dB", q);
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_se_db", se, "dB", q);
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_frames_better", static_cast<double>(better) / n,
+                              "1", q);
+      if (!args.json) {
+        std::fprintf(stderr, "%-10s L=%3d ms %s → %s: %+.2f ± %.2f dB (better in %d of %zu frames)\n", scene.c_str(),
+                     latency, OffloadModeName(from), OffloadModeName(to), mean, se, better, n);
+      }
+    };
+    for (int latency : o.latencies_ms) {
+      gain(latency, OffloadMode::kStale, OffloadMode::kReprojected);
+      gain(latency, OffloadMode::kReprojected, OffloadMode::kPredicted);
+      gain(latency, OffloadMode::kPredicted, OffloadMode::kEnlarged);
+    }
     if (!args.json) {
       std::fprintf(stderr, "client-pose: %s: %.1f s CPU for %d display frames\n", scene.c_str(),
-                   (holo::bench::ProcessCpuMs() - cpu0) * 1e-3, frames);
+                   (holo::bench::ProcessCpuMs() - cpu0) * 1e-3, o.display_frames);
     }
   }
   return 0;

@@ -181,6 +181,7 @@ StatusOr<std::vector<OffloadResult>> SimulateOffload(const std::vector<pose::Pos
       r.hole_fraction = MeanOf(a.holes);
       r.wire_bytes = MeanOf(a.bytes);
       r.reproject_cpu_ms = MedianOf(a.cpu_ms);
+      r.frame_psnr_db = a.psnr;
       results.push_back(r);
     }
   }

@@ -66,6 +66,7 @@ struct OffloadResult {
   double hole_fraction = 0;
   double wire_bytes = 0;       // RenderedFrame payload
   double reproject_cpu_ms = 0; // median thread CPU time of Reproject
+  std::vector<double> frame_psnr_db;  // per display frame (for paired comparisons)
 };
 
 // The scene to render for content frame `frame`.
