@@ -5,11 +5,17 @@
 // synthetic generator (looking around and walking, 60 s each at 90 Hz) and
 // on the recorded trace tests/data/head/lookaround_72hz.csv:
 //   {"metric":"pred_err_deg","model":"cv","horizon_ms":"50","trace":"synthetic",...}
-// Reprojection: see RunReprojection below.
+// Reprojection: see RunReprojectionBench below:
+//   {"metric":"reproj_psnr_db","mode":"predicted","latency_ms":"50","region":"frame",...}
+//   {"metric":"black_border_fraction",...}, reproj_gain_db, rendered_frame_kb, reproj_cpu_ms
 //
 // Extra options: --part pred|reproj|all (default all); --trace FILE (recorded
 // trace, default the sample); tuning of the Kalman model: --jerk_pos X
-// --jerk_ang X --accel_tau X --vel_tau X --cv_window X.
+// --jerk_ang X --accel_tau X --vel_tau X --cv_window X. Reprojection:
+// --scene foreground|studio|both, --method none|rotation|plane|depth,
+// --filter bilinear|bicubic, --latencies 30,50,80, --margin 0.25,
+// --size 640x360, --hfov 90, --quality 90, --distance 2.6, --png DIR;
+// --frames N sets the display frames of both scenes (default 120 / 60).
 #include <array>
 #include <cmath>
 #include <cstdio>
