@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "audio/room.h"
+#include "audio/wav.h"  // WAV helpers used with the spatializer
 #include "common/status.h"
 
 namespace holo::audio {
@@ -71,11 +72,5 @@ class Spatializer {
   std::unique_ptr<Impl> impl_;
   std::string hrtf_status_;
 };
-
-// Writes interleaved stereo float samples as a 16-bit PCM WAV.
-Status WriteStereoWav(const std::string& path, std::span<const float> interleaved, int sample_rate);
-// Reads a 16-bit PCM or 32-bit float WAV, mixes to mono, resamples (linear
-// interpolation) to `target_rate`. Safe on untrusted files.
-StatusOr<std::vector<float>> ReadMonoWav(const std::string& path, int target_rate);
 
 }  // namespace holo::audio

@@ -42,3 +42,5 @@ find_package(OpenSSL REQUIRED)
 find_package(glfw3 3.3 REQUIRED)
 find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
 pkg_check_modules(EPOXY REQUIRED IMPORTED_TARGET epoxy)
+# Resampling of voice input to 48 kHz (audio/).
+pkg_check_modules(SOXR REQUIRED IMPORTED_TARGET soxr)

@@ -13,6 +13,7 @@
 #include "common/visualize.h"
 #include "server/capture/dataset.h"
 #include "server/pipeline/capture_site.h"
+#include "server/record/replay_command.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
 #include "server/texture/mesh_renderer.h"
@@ -69,7 +70,20 @@ int main(int argc, char** argv) {
   app.add_flag("--no-texture", no_texture, "skip texturing (voxel colours stay)");
   app.add_flag("--no-color-calibration", no_color_calibration, "do not estimate and apply per-pod colour maps");
   app.add_flag("-q,--quiet", quiet, "no progress output");
+  // Replay of a recording (docs/recording.md): serves the recorded stream instead of the capture pipeline.
+  holo::record::ReplayCommandOptions replay;
+  app.add_option("--replay", replay.path, "replay this recording instead of capturing (with --export / --stats)");
+  app.add_option("--speed", replay.speed, "--replay: playback speed, 0.25..4")->capture_default_str();
+  app.add_flag("--loop", replay.loop, "--replay: start again at the end");
+  app.add_option("--start", replay.start_s, "--replay: start at this media time, seconds");
+  app.add_option("--replay-seconds", replay.max_wall_s, "--replay: stop after this many seconds (0: at the end)");
   CLI11_PARSE(app, argc, argv);
+  if (!replay.path.empty()) {
+    replay.export_dir = export_dir;
+    replay.stats_path = stats_path;
+    replay.quiet = quiet;
+    return holo::record::RunReplayCommand(replay);
+  }
 
   auto masks = holo::ParseMaskSource(masks_name);
   if (!masks.ok()) return Fail(masks.status());

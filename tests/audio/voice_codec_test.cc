@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
-#include "audio/spatializer.h"
+#include "audio/speech_quality.h"
+#include "audio/wav.h"
 #include "test_util.h"
 
 namespace holo::audio {
@@ -39,32 +41,6 @@ std::vector<float> RoundTrip(const std::vector<float>& in, const VoiceEncoderOpt
   return out;
 }
 
-// Segmental SNR (dB) over 20 ms segments with speech energy, after aligning
-// by the best lag in 0..`max_lag` (Opus has a 6.5 ms algorithmic delay).
-double SegmentalSnr(const std::vector<float>& ref, const std::vector<float>& out, int max_lag) {
-  int best_lag = 0;
-  double best = -1e30;
-  for (int lag = 0; lag <= max_lag; ++lag) {
-    double c = 0;
-    for (size_t i = 0; i + lag < out.size() && i < ref.size(); ++i) c += ref[i] * out[i + lag];
-    if (c > best) best = c, best_lag = lag;
-  }
-  double sum = 0;
-  int n = 0;
-  for (size_t s = 0; s + kFrameSamples + best_lag <= out.size(); s += kFrameSamples) {
-    double e = 0, d = 0;
-    for (size_t i = s; i < s + kFrameSamples; ++i) {
-      e += ref[i] * ref[i];
-      const double diff = ref[i] - out[i + best_lag];
-      d += diff * diff;
-    }
-    if (e < 1e-4) continue;  // silence
-    sum += std::clamp(10 * std::log10(e / std::max(d, 1e-12)), -10.0, 35.0);
-    ++n;
-  }
-  return n ? sum / n : 0;
-}
-
 TEST(VoiceCodec, OpusRoundTripKeepsSpeech) {
   const std::vector<float> speech = Speech();
   ASSERT_GT(speech.size(), 48000u);
@@ -76,8 +52,8 @@ TEST(VoiceCodec, OpusRoundTripKeepsSpeech) {
   const double frames = static_cast<double>(speech.size() / kFrameSamples);
   const double opus_kbps = opus_bytes * 8 / (frames * 20.0);
   const double pcm_kbps = pcm_bytes * 8 / (frames * 20.0);
-  const double snr_opus = SegmentalSnr(speech, opus, 960);
-  const double snr_pcm = SegmentalSnr(speech, pcm, 0);
+  const double snr_opus = SegmentalSnrDb(speech, opus, BestLag(speech, opus, 960));
+  const double snr_pcm = SegmentalSnrDb(speech, pcm, BestLag(speech, pcm, 960));
   std::printf("opus 24k: %.1f kbit/s payload, segSNR %.1f dB; pcm: %.1f kbit/s, segSNR %.1f dB\n", opus_kbps,
               snr_opus, pcm_kbps, snr_pcm);
   EXPECT_LT(opus_kbps, 50.0);  // 24 kbit/s audio + 18.4 kbit/s of 46-byte pose/sequence fields
@@ -85,6 +61,49 @@ TEST(VoiceCodec, OpusRoundTripKeepsSpeech) {
   EXPECT_GT(snr_pcm, 30.0);
   // Opus is a perceptual codec: waveform SNR is modest yet speech stays clear.
   EXPECT_GT(snr_opus, 1.0);
+}
+
+// Intelligibility of Opus against the PCM path on synthetic speech (espeak-ng,
+// tests/data/audio/SOURCE.txt), measured with the frequency-weighted segmental
+// SNR (fwSNRseg, Hu & Loizou 2008: 25 Bark bands, clipped to [-10, 35] dB),
+// which follows intelligibility; the waveform segmental SNR is printed too.
+TEST(VoiceCodec, OpusKeepsEspeakSpeechIntelligible) {
+  auto speech = ReadMonoWav(test::TestDataPath("audio/espeak_speech_22k.wav"), kSampleRate);
+  ASSERT_TRUE(speech.ok()) << speech.status().ToString();
+  size_t bytes = 0;
+  VoiceEncoderOptions pcm_o;
+  pcm_o.codec = AudioCodec::kPcm16;
+  const auto pcm = RoundTrip(*speech, pcm_o, &bytes);
+  const int pcm_lag = BestLag(*speech, pcm, 960);
+  EXPECT_EQ(pcm_lag, 0);
+  const double fw_pcm = FwSegSnrDb(*speech, pcm, pcm_lag, kSampleRate);
+  for (int bitrate : {12000, 24000, 32000}) {
+    VoiceEncoderOptions o;
+    o.bitrate_bps = bitrate;
+    const auto opus = RoundTrip(*speech, o, &bytes);
+    const int lag = BestLag(*speech, opus, 960);
+    const double fw = FwSegSnrDb(*speech, opus, lag, kSampleRate);
+    const double seg = SegmentalSnrDb(*speech, opus, lag);
+    std::printf("espeak-ng speech: opus %d kbit/s: lag %d samples, fwSNRseg %.1f dB, segSNR %.1f dB; pcm fwSNRseg %.1f dB\n",
+                bitrate / 1000, lag, fw, seg, fw_pcm);
+    EXPECT_NEAR(lag, 312, 8);  // Opus look-ahead: 6.5 ms at 48 kHz
+    EXPECT_GT(fw, 12.0) << bitrate;
+    EXPECT_LT(fw, fw_pcm);
+  }
+  EXPECT_GT(fw_pcm, 30.0);
+  // Wrong signals score low, so the bound can fail: the speech 150 ms out of
+  // step with itself (other phonemes), and white noise.
+  std::vector<float> shifted(speech->size(), 0.0f);
+  std::copy(speech->begin(), speech->end() - 7200, shifted.begin() + 7200);
+  const double fw_shifted = FwSegSnrDb(*speech, shifted, 0, kSampleRate);
+  std::mt19937 rng(3);
+  std::normal_distribution<float> g(0.0f, 0.1f);
+  std::vector<float> noise(speech->size());
+  for (float& v : noise) v = g(rng);
+  const double fw_noise = FwSegSnrDb(*speech, noise, 0, kSampleRate);
+  std::printf("fwSNRseg of speech 150 ms out of step: %.1f dB; of white noise: %.1f dB\n", fw_shifted, fw_noise);
+  EXPECT_LT(fw_shifted, 8.0);
+  EXPECT_LT(fw_noise, 8.0);
 }
 
 TEST(VoiceCodec, RefusesMalformedPayloads) {

@@ -1,0 +1,762 @@
+#include "client/render/renderer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include <epoxy/gl.h>
+
+#include "client/render/gl_util.h"
+#include "client/render/view.h"
+
+namespace holo::render {
+namespace {
+
+// One vertex on the GPU: position, normal (floats) and RGBA8 colour.
+struct GpuVertex {
+  float p[3];
+  float n[3];
+  uint8_t c[4];
+};
+static_assert(sizeof(GpuVertex) == 28);
+
+// The pods' blending weights are computed per vertex (as Holoportation
+// does) and interpolated. The fragment shader transforms the surface point
+// into each pod's camera, projects it (with distortion), tests visibility and
+// discontinuities with one fetch of the flagged depth map and blends.
+// (Interpolating the per-pod camera-frame points as varyings instead was no
+// faster on llvmpipe and needs 4 varying components per pod.)
+constexpr const char* kDrawVs = R"(#version 330 core
+#define MAX_PODS 16
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in vec4 a_color;
+uniform mat4 u_clip_from_local;
+uniform mat4 u_local_from_remote;
+uniform int u_mode;
+uniform int u_num_pods;
+uniform mat4 u_pod_cam_from_world[MAX_PODS];
+uniform vec3 u_pod_center[MAX_PODS];  // remote world
+uniform vec3 u_eye_remote;
+uniform float u_alpha;
+uniform float u_beta;
+out vec3 v_color;
+out vec3 v_remote;
+// Pod i's blending weight (0 = pod unusable) in component i % 4 of v_w[i / 4].
+out vec4 v_w[MAX_PODS / 4];
+invariant gl_Position;
+// pow() is costly on CPU renderers; the usual exponents are small integers.
+float Pow(float x, float e) {
+  if (e == 2.0) return x * x;
+  if (e == 1.0) return x;
+  if (e == 0.0) return 1.0;
+  if (e == 4.0) return (x * x) * (x * x);
+  return pow(x, e);
+}
+void main() {
+  v_color = a_color.rgb;
+  v_remote = a_pos;
+  gl_Position = u_clip_from_local * (u_local_from_remote * vec4(a_pos, 1.0));
+  for (int k = 0; k < MAX_PODS / 4; ++k) v_w[k] = vec4(0.0);
+  if (u_mode == 0) return;
+  vec3 n = normalize(a_normal);
+  vec3 to_eye = normalize(u_eye_remote - a_pos);
+  for (int i = 0; i < u_num_pods; ++i) {
+    vec3 to_pod = normalize(u_pod_center[i] - a_pos);
+    float ndv = dot(n, to_pod);
+    float w = ndv > 0.0 ? Pow(ndv, u_alpha) * Pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
+    v_w[i / 4][i % 4] = w;
+  }
+}
+)";
+
+// u_mode 0: per-vertex colour; 1: projective texturing from the pods.
+constexpr const char* kDrawFs = R"(#version 330 core
+#define MAX_PODS 16
+in vec3 v_color;
+in vec3 v_remote;
+in vec4 v_w[MAX_PODS / 4];
+out vec4 o_color;
+uniform int u_mode;
+uniform mat4 u_pod_cam_from_world[MAX_PODS];
+uniform int u_num_pods;
+uniform vec4 u_pod_intr[MAX_PODS];   // fx, fy, cx, cy
+uniform vec4 u_pod_dist[MAX_PODS];   // k1, k2, p1, p2
+uniform float u_pod_k3[MAX_PODS];
+uniform vec2 u_pod_size[MAX_PODS];   // width, height (pixels)
+uniform vec2 u_array_size;
+uniform sampler2DArray u_pod_color;
+uniform sampler2DArray u_pod_depth;
+uniform float u_vis_tol;
+
+vec2 Distort(vec2 x, vec4 d, float k3) {
+  float r2 = dot(x, x);
+  float radial = 1.0 + r2 * (d.x + r2 * (d.y + r2 * k3));
+  return vec2(x.x * radial + 2.0 * d.z * x.x * x.y + d.w * (r2 + 2.0 * x.x * x.x),
+              x.y * radial + d.z * (r2 + 2.0 * x.y * x.y) + 2.0 * d.w * x.x * x.y);
+}
+
+void main() {
+  if (u_mode == 0 || u_num_pods == 0) {
+    o_color = vec4(v_color, 1.0);
+    return;
+  }
+  vec3 clean = vec3(0.0), edge = vec3(0.0);
+  float clean_w = 0.0, edge_w = 0.0;
+  for (int i = 0; i < u_num_pods; ++i) {
+    float w = v_w[i / 4][i % 4];
+    if (w <= 1e-6) continue;
+    vec3 pod = (u_pod_cam_from_world[i] * vec4(v_remote, 1.0)).xyz;
+    if (pod.z < 0.05) continue;
+    vec2 xn = Distort(pod.xy / pod.z, u_pod_dist[i], u_pod_k3[i]);
+    vec4 intr = u_pod_intr[i];
+    vec2 px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);
+    vec2 size = u_pod_size[i];
+    if (px.x < -0.5 || px.y < -0.5 || px.x >= size.x - 0.5 || px.y >= size.y - 0.5) continue;
+    // Flagged depth: camera z of the nearest surface, negative when that
+    // texel is near a depth discontinuity (see kEdgeFs), 0 = nothing.
+    float zf = texelFetch(u_pod_depth, ivec3(ivec2(floor(px + 0.5)), i), 0).r;
+    float zmap = abs(zf);
+    if (zmap <= 0.0 || pod.z > zmap + u_vis_tol) continue;
+    vec3 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(i))).rgb;
+    if (zf < 0.0) {
+      edge += w * c;
+      edge_w += w;
+    } else {
+      clean += w * c;
+      clean_w += w;
+    }
+  }
+  if (clean_w > 0.0) {
+    o_color = vec4(clean / clean_w, 1.0);
+  } else if (edge_w > 0.0) {
+    o_color = vec4(edge / edge_w, 1.0);
+  } else {
+    o_color = vec4(v_color, 1.0);
+  }
+}
+)";
+
+// Visibility pre-pass: camera z of the nearest surface per pod pixel, with
+// the pod's distortion applied to the vertices (straight edges between them,
+// as the CPU rasterizer does).
+constexpr const char* kDepthVs = R"(#version 330 core
+layout(location = 0) in vec3 a_pos;
+uniform mat4 u_cam_from_world;
+uniform vec4 u_intr;
+uniform vec4 u_dist;
+uniform float u_k3;
+uniform vec2 u_size;
+uniform float u_near;
+uniform float u_far;
+out float v_z;
+vec2 Distort(vec2 x, vec4 d, float k3) {
+  float r2 = dot(x, x);
+  float radial = 1.0 + r2 * (d.x + r2 * (d.y + r2 * k3));
+  return vec2(x.x * radial + 2.0 * d.z * x.x * x.y + d.w * (r2 + 2.0 * x.x * x.x),
+              x.y * radial + d.z * (r2 + 2.0 * x.y * x.y) + 2.0 * d.w * x.x * x.y);
+}
+void main() {
+  vec4 pc = u_cam_from_world * vec4(a_pos, 1.0);
+  float z = pc.z;
+  v_z = z;
+  vec2 xn = Distort(pc.xy / max(z, 1e-6), u_dist, u_k3);
+  vec2 px = vec2(u_intr.x * xn.x + u_intr.z, u_intr.y * xn.y + u_intr.w);
+  // Texel (u, v) of the map holds pixel (u, v): no vertical flip here.
+  vec2 ndc = 2.0 * (px + 0.5) / u_size - 1.0;
+  float zc = (u_far + u_near) / (u_far - u_near) * z - 2.0 * u_far * u_near / (u_far - u_near);
+  // Points behind the camera are pushed outside the clip volume.
+  gl_Position = z > u_near ? vec4(ndc * z, zc, z) : vec4(0.0, 0.0, -2.0, 1.0);
+}
+)";
+constexpr const char* kDepthFs = R"(#version 330 core
+in float v_z;
+out float o_z;
+void main() { o_z = v_z; }
+)";
+
+// Discontinuity flags, one full-screen pass per pod layer: reads the pod's
+// depth map and writes it back negated where a neighbour at the radius
+// (discontinuity_radius_m at the texel's depth, 1..8 pixels) is empty or
+// differs by more than the jump. Done once per mesh, so the per-fragment
+// test is a single fetch.
+constexpr const char* kEdgeVs = R"(#version 330 core
+void main() {
+  // A triangle covering the viewport.
+  vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+  gl_Position = vec4(p, 0.0, 1.0);
+}
+)";
+constexpr const char* kEdgeFs = R"(#version 330 core
+uniform sampler2DArray u_depth;
+uniform int u_layer;
+uniform vec2 u_size;
+uniform float u_fx;
+uniform float u_jump;
+uniform float u_radius;
+out float o_z;
+void main() {
+  ivec2 ip = ivec2(gl_FragCoord.xy);
+  float z = texelFetch(u_depth, ivec3(ip, u_layer), 0).r;
+  if (z <= 0.0) {
+    o_z = 0.0;
+    return;
+  }
+  const ivec2 kOffsets[8] = ivec2[8](ivec2(-1, 0), ivec2(1, 0), ivec2(0, -1), ivec2(0, 1),
+                                     ivec2(-1, -1), ivec2(1, 1), ivec2(-1, 1), ivec2(1, -1));
+  int r = clamp(int(ceil(u_radius * u_fx / z)), 1, 8);
+  ivec2 maxp = ivec2(u_size) - 1;
+  bool near_edge = false;
+  for (int k = 0; k < 8; ++k) {
+    float zq = texelFetch(u_depth, ivec3(clamp(ip + kOffsets[k] * r, ivec2(0), maxp), u_layer), 0).r;
+    if (zq <= 0.0 || abs(zq - z) > u_jump) near_edge = true;
+  }
+  o_z = near_edge ? -z : z;
+}
+)";
+
+GLint Loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
+
+void SetMat4(GLuint program, const char* name, const Eigen::Matrix4f& m) {
+  glUniformMatrix4fv(Loc(program, name), 1, GL_FALSE, m.data());  // Eigen is column-major like GL
+}
+
+}  // namespace
+
+const char* ColorModeName(ColorMode m) { return m == ColorMode::kVertexColor ? "vertex_color" : "projective"; }
+
+Status ProjectiveOptions::Check() const {
+  if (!(alpha >= 0 && alpha <= 64)) return InvalidArgument("projective alpha must be in [0, 64]");
+  if (!(beta >= 0 && beta <= 64)) return InvalidArgument("projective beta must be in [0, 64]");
+  if (!(visibility_tolerance_m > 0 && visibility_tolerance_m < 1)) {
+    return InvalidArgument("visibility_tolerance_m must be in (0, 1)");
+  }
+  if (!(discontinuity_jump_m > 0)) return InvalidArgument("discontinuity_jump_m must be > 0");
+  if (!(discontinuity_radius_m >= 0 && discontinuity_radius_m < 1)) {
+    return InvalidArgument("discontinuity_radius_m must be in [0, 1)");
+  }
+  return OkStatus();
+}
+
+// ---------------------------------------------------------------- OffscreenTarget
+
+OffscreenTarget::~OffscreenTarget() {
+  if (fbo_) glDeleteFramebuffers(1, &fbo_);
+  if (color_) glDeleteRenderbuffers(1, &color_);
+  if (depth_) glDeleteRenderbuffers(1, &depth_);
+}
+
+StatusOr<std::unique_ptr<OffscreenTarget>> OffscreenTarget::Create(int width, int height) {
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &max_size);
+  if (width <= 0 || height <= 0 || width > max_size || height > max_size) {
+    return InvalidArgument("render target " + std::to_string(width) + "x" + std::to_string(height) +
+                           " outside 1.." + std::to_string(max_size));
+  }
+  std::unique_ptr<OffscreenTarget> t(new OffscreenTarget);
+  t->width_ = width;
+  t->height_ = height;
+  glGenFramebuffers(1, &t->fbo_);
+  glGenRenderbuffers(1, &t->color_);
+  glGenRenderbuffers(1, &t->depth_);
+  glBindRenderbuffer(GL_RENDERBUFFER, t->color_);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+  glBindRenderbuffer(GL_RENDERBUFFER, t->depth_);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
+  glBindFramebuffer(GL_FRAMEBUFFER, t->fbo_);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t->color_);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->depth_);
+  if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+    return Internal("offscreen framebuffer is incomplete");
+  }
+  HOLO_RETURN_IF_ERROR(CheckGlError("OffscreenTarget::Create"));
+  return t;
+}
+
+void OffscreenTarget::Bind() const {
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  glViewport(0, 0, width_, height_);
+}
+
+Status OffscreenTarget::ReadRgb(ImageRgb8* out) const {
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  return ReadViewportRgb({0, 0, width_, height_}, out);
+}
+
+Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out) {
+  if (vp.width <= 0 || vp.height <= 0) return InvalidArgument("empty viewport");
+  out->Resize(vp.width, vp.height);
+  std::vector<uint8_t> rows(static_cast<size_t>(vp.width) * vp.height * 3);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(vp.x, vp.y, vp.width, vp.height, GL_RGB, GL_UNSIGNED_BYTE, rows.data());
+  const size_t stride = static_cast<size_t>(vp.width) * 3;
+  for (int y = 0; y < vp.height; ++y) {
+    std::memcpy(out->row(y), rows.data() + (vp.height - 1 - y) * stride, stride);
+  }
+  return CheckGlError("glReadPixels");
+}
+
+// ---------------------------------------------------------------- Renderer
+
+Renderer::~Renderer() {
+  FreeMesh(&remote_);
+  FreeMesh(&local_);
+  if (draw_program_) glDeleteProgram(draw_program_);
+  if (depth_program_) glDeleteProgram(depth_program_);
+  if (pod_color_tex_) glDeleteTextures(1, &pod_color_tex_);
+  if (pod_depth_tex_) glDeleteTextures(1, &pod_depth_tex_);
+  if (pod_raw_tex_) glDeleteTextures(1, &pod_raw_tex_);
+  if (edge_program_) glDeleteProgram(edge_program_);
+  if (empty_vao_) glDeleteVertexArrays(1, &empty_vao_);
+  if (pod_depth_rb_) glDeleteRenderbuffers(1, &pod_depth_rb_);
+  if (pod_fbo_) glDeleteFramebuffers(1, &pod_fbo_);
+}
+
+StatusOr<std::unique_ptr<Renderer>> Renderer::Create() {
+  std::unique_ptr<Renderer> r(new Renderer);
+  HOLO_RETURN_IF_ERROR(r->Init());
+  return r;
+}
+
+Status Renderer::Init() {
+  GLint major = 0, minor = 0;
+  glGetIntegerv(GL_MAJOR_VERSION, &major);
+  glGetIntegerv(GL_MINOR_VERSION, &minor);
+  if (major * 10 + minor < 33) {
+    return Unavailable("the renderer needs OpenGL 3.3, the context has " + std::to_string(major) + "." +
+                       std::to_string(minor));
+  }
+  HOLO_ASSIGN_OR_RETURN(draw_program_, BuildProgram("mesh", kDrawVs, kDrawFs));
+  HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", kDepthVs, kDepthFs));
+  HOLO_ASSIGN_OR_RETURN(edge_program_, BuildProgram("pod discontinuities", kEdgeVs, kEdgeFs));
+  glGenVertexArrays(1, &empty_vao_);
+  glUseProgram(draw_program_);
+  glUniform1i(Loc(draw_program_, "u_pod_color"), 0);
+  glUniform1i(Loc(draw_program_, "u_pod_depth"), 1);
+  glUseProgram(0);
+  return CheckGlError("Renderer::Init");
+}
+
+void Renderer::FreeMesh(GpuMesh* gpu) {
+  if (gpu->vao) glDeleteVertexArrays(1, &gpu->vao);
+  if (gpu->vbo) glDeleteBuffers(1, &gpu->vbo);
+  if (gpu->ibo) glDeleteBuffers(1, &gpu->ibo);
+  *gpu = GpuMesh{};
+}
+
+Status Renderer::Upload(const Mesh& mesh, GpuMesh* gpu) {
+  HOLO_RETURN_IF_ERROR(mesh.Validate());
+  if (mesh.num_vertices() > (1u << 30) || mesh.num_triangles() > (1u << 30)) {
+    return InvalidArgument("mesh too large to draw: " + std::to_string(mesh.num_vertices()) + " vertices");
+  }
+  const Mesh* m = &mesh;
+  Mesh with_normals;
+  if (mesh.normals.size() != mesh.positions.size()) {
+    with_normals = mesh;
+    with_normals.ComputeNormals();
+    m = &with_normals;
+  }
+  std::vector<GpuVertex> verts(m->num_vertices());
+  const bool has_color = m->colors.size() == m->positions.size();
+  for (size_t i = 0; i < verts.size(); ++i) {
+    GpuVertex& v = verts[i];
+    for (int k = 0; k < 3; ++k) {
+      v.p[k] = m->positions[i][k];
+      v.n[k] = m->normals[i][k];
+      v.c[k] = has_color ? m->colors[i][k] : 180;
+    }
+    v.c[3] = 255;
+  }
+  if (!gpu->vao) {
+    glGenVertexArrays(1, &gpu->vao);
+    glGenBuffers(1, &gpu->vbo);
+    glGenBuffers(1, &gpu->ibo);
+    glBindVertexArray(gpu->vao);
+    glBindBuffer(GL_ARRAY_BUFFER, gpu->vbo);
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, gpu->ibo);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(GpuVertex), reinterpret_cast<void*>(offsetof(GpuVertex, p)));
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, sizeof(GpuVertex), reinterpret_cast<void*>(offsetof(GpuVertex, n)));
+    glEnableVertexAttribArray(2);
+    glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, sizeof(GpuVertex),
+                          reinterpret_cast<void*>(offsetof(GpuVertex, c)));
+  }
+  glBindVertexArray(gpu->vao);
+  glBindBuffer(GL_ARRAY_BUFFER, gpu->vbo);
+  const size_t vbytes = verts.size() * sizeof(GpuVertex);
+  const size_t ibytes = m->triangles.size() * sizeof(m->triangles[0]);
+  if (vbytes > gpu->vbo_bytes) {
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vbytes), verts.data(), GL_DYNAMIC_DRAW);
+    gpu->vbo_bytes = vbytes;
+  } else if (vbytes > 0) {
+    glBufferSubData(GL_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(vbytes), verts.data());
+  }
+  if (ibytes > gpu->ibo_bytes) {
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(ibytes), m->triangles.data(), GL_DYNAMIC_DRAW);
+    gpu->ibo_bytes = ibytes;
+  } else if (ibytes > 0) {
+    glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(ibytes), m->triangles.data());
+  }
+  gpu->index_count = m->triangles.size() * 3;
+  glBindVertexArray(0);
+  return CheckGlError("mesh upload");
+}
+
+void Renderer::Draw(const GpuMesh& gpu) const {
+  if (gpu.index_count == 0) return;
+  glBindVertexArray(gpu.vao);
+  glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(gpu.index_count), GL_UNSIGNED_INT, nullptr);
+  glBindVertexArray(0);
+}
+
+Status Renderer::SetRemoteMesh(const Mesh& mesh) {
+  HOLO_RETURN_IF_ERROR(Upload(mesh, &remote_));
+  remote_min_ = Eigen::Vector3f::Constant(1e30f);
+  remote_max_ = Eigen::Vector3f::Constant(-1e30f);
+  for (const auto& p : mesh.positions) {
+    remote_min_ = remote_min_.cwiseMin(p);
+    remote_max_ = remote_max_.cwiseMax(p);
+  }
+  visibility_dirty_ = true;
+  return OkStatus();
+}
+
+Status Renderer::SetLocalMesh(const Mesh& mesh) { return Upload(mesh, &local_); }
+
+Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images) {
+  const int n = static_cast<int>(rig.pods.size());
+  if (n == 0 || n > kMaxPods) {
+    return InvalidArgument("projective texturing supports 1.." + std::to_string(kMaxPods) + " pods, rig has " +
+                           std::to_string(n));
+  }
+  if (images.size() != rig.pods.size()) {
+    return InvalidArgument("got " + std::to_string(images.size()) + " pod images for a rig of " + std::to_string(n) +
+                           " pods");
+  }
+  int w = 0, h = 0;
+  for (int i = 0; i < n; ++i) {
+    const Intrinsics& c = rig.pods[i].color;
+    HOLO_RETURN_IF_ERROR(c.Check().WithContext("pod " + std::to_string(i) + " colour camera"));
+    if (images[i] == nullptr || images[i]->width() != c.width || images[i]->height() != c.height) {
+      return InvalidArgument("pod " + std::to_string(i) + " image is " +
+                             (images[i] ? std::to_string(images[i]->width()) + "x" + std::to_string(images[i]->height())
+                                        : std::string("missing")) +
+                             ", its colour camera is " + std::to_string(c.width) + "x" + std::to_string(c.height));
+    }
+    w = std::max(w, c.width);
+    h = std::max(h, c.height);
+  }
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  if (w > max_size || h > max_size) return InvalidArgument("pod images larger than GL_MAX_TEXTURE_SIZE");
+  if (!pod_color_tex_) {
+    glGenTextures(1, &pod_color_tex_);
+    glGenTextures(1, &pod_depth_tex_);
+    glGenTextures(1, &pod_raw_tex_);
+    glGenRenderbuffers(1, &pod_depth_rb_);
+    glGenFramebuffers(1, &pod_fbo_);
+  }
+  if (n != num_pods_ || w != array_width_ || h != array_height_) {
+    glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
+    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGB8, w, h, n, 0, GL_RGB, GL_UNSIGNED_BYTE, nullptr);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    for (GLuint tex : {pod_depth_tex_, pod_raw_tex_}) {
+      glBindTexture(GL_TEXTURE_2D_ARRAY, tex);
+      glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_R32F, w, h, n, 0, GL_RED, GL_FLOAT, nullptr);
+      glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    }
+    glBindRenderbuffer(GL_RENDERBUFFER, pod_depth_rb_);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, w, h);
+    num_pods_ = n;
+    array_width_ = w;
+    array_height_ = h;
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  for (int i = 0; i < n; ++i) {
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, images[i]->width(), images[i]->height(), 1, GL_RGB,
+                    GL_UNSIGNED_BYTE, images[i]->data());
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  std::vector<CameraModel> cams;
+  for (const auto& pod : rig.pods) cams.push_back(pod.ColorCamera());
+  bool same_cams = cams.size() == pod_cameras_.size();
+  for (size_t i = 0; same_cams && i < cams.size(); ++i) {
+    same_cams = cams[i].world_from_camera.matrix() == pod_cameras_[i].world_from_camera.matrix() &&
+                cams[i].intrinsics.fx == pod_cameras_[i].intrinsics.fx &&
+                cams[i].intrinsics.cx == pod_cameras_[i].intrinsics.cx &&
+                cams[i].intrinsics.cy == pod_cameras_[i].intrinsics.cy &&
+                cams[i].intrinsics.fy == pod_cameras_[i].intrinsics.fy &&
+                cams[i].intrinsics.distortion == pod_cameras_[i].intrinsics.distortion &&
+                cams[i].intrinsics.width == pod_cameras_[i].intrinsics.width &&
+                cams[i].intrinsics.height == pod_cameras_[i].intrinsics.height;
+  }
+  if (!same_cams) {
+    pod_cameras_ = std::move(cams);
+    visibility_dirty_ = true;
+  }
+  return CheckGlError("SetPodImages");
+}
+
+Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  if (num_pods_ == 0) return InvalidArgument("no pod images: call SetPodImages before projective texturing");
+  constexpr float kNear = 0.05f, kFar = 100.0f;
+  GLint old_fbo = 0;
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &old_fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, pod_fbo_);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, pod_depth_rb_);
+  glUseProgram(depth_program_);
+  glUniform1f(Loc(depth_program_, "u_near"), kNear);
+  glUniform1f(Loc(depth_program_, "u_far"), kFar);
+  glDisable(GL_SCISSOR_TEST);
+  if (options.cull_back_faces) {
+    // The pod pass does not flip y (texel row v = image row v), so the
+    // outside of a counter-clockwise triangle appears clockwise.
+    glFrontFace(GL_CW);
+    glCullFace(GL_BACK);
+    glEnable(GL_CULL_FACE);
+  } else {
+    glDisable(GL_CULL_FACE);
+  }
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  for (int i = 0; i < num_pods_; ++i) {
+    glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_raw_tex_, 0, i);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+      return Internal("pod depth framebuffer is incomplete");
+    }
+    glViewport(0, 0, array_width_, array_height_);
+    glClearColor(0, 0, 0, 0);
+    glClearDepth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    const CameraModel& cam = pod_cameras_[i];
+    const Intrinsics& in = cam.intrinsics;
+    glViewport(0, 0, in.width, in.height);
+    SetMat4(depth_program_, "u_cam_from_world", cam.world_from_camera.inverse().matrix());
+    glUniform4f(Loc(depth_program_, "u_intr"), static_cast<float>(in.fx), static_cast<float>(in.fy),
+                static_cast<float>(in.cx), static_cast<float>(in.cy));
+    glUniform4f(Loc(depth_program_, "u_dist"), static_cast<float>(in.distortion[0]),
+                static_cast<float>(in.distortion[1]), static_cast<float>(in.distortion[2]),
+                static_cast<float>(in.distortion[3]));
+    glUniform1f(Loc(depth_program_, "u_k3"), static_cast<float>(in.distortion[4]));
+    glUniform2f(Loc(depth_program_, "u_size"), static_cast<float>(in.width), static_cast<float>(in.height));
+    Draw(remote_);
+  }
+  glDisable(GL_CULL_FACE);
+  glFrontFace(GL_CCW);
+  // Discontinuity flags into pod_depth_tex_.
+  glDisable(GL_DEPTH_TEST);
+  glUseProgram(edge_program_);
+  glUniform1i(Loc(edge_program_, "u_depth"), 0);
+  glUniform1f(Loc(edge_program_, "u_jump"), options.discontinuity_jump_m);
+  glUniform1f(Loc(edge_program_, "u_radius"), options.discontinuity_radius_m);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
+  glBindVertexArray(empty_vao_);
+  for (int i = 0; i < num_pods_; ++i) {
+    glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    glViewport(0, 0, array_width_, array_height_);
+    glClearColor(0, 0, 0, 0);
+    glClear(GL_COLOR_BUFFER_BIT);
+    glViewport(0, 0, in.width, in.height);
+    // Only the pixels the mesh can cover (its bounding box projected, plus
+    // the largest radius): most of a pod's image is empty.
+    int box[4] = {0, 0, in.width, in.height};
+    PodBox(pod_cameras_[i], box);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(box[0], box[1], box[2], box[3]);
+    glUniform1i(Loc(edge_program_, "u_layer"), i);
+    glUniform2f(Loc(edge_program_, "u_size"), static_cast<float>(in.width), static_cast<float>(in.height));
+    glUniform1f(Loc(edge_program_, "u_fx"), static_cast<float>(in.fx));
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDisable(GL_SCISSOR_TEST);
+  }
+  glBindVertexArray(0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  glEnable(GL_DEPTH_TEST);
+  glUseProgram(0);
+  glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+  edge_jump_m_ = options.discontinuity_jump_m;
+  edge_radius_m_ = options.discontinuity_radius_m;
+  visibility_dirty_ = false;
+  return CheckGlError("pod visibility pass");
+}
+
+void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
+  const Intrinsics& in = cam.intrinsics;
+  if (in.HasDistortion() || !(remote_min_.array() <= remote_max_.array()).all()) return;  // keep the whole image
+  const Pose cam_from_world = cam.world_from_camera.inverse();
+  float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3f corner((c & 1) ? remote_max_.x() : remote_min_.x(), (c & 2) ? remote_max_.y() : remote_min_.y(),
+                                 (c & 4) ? remote_max_.z() : remote_min_.z());
+    const Eigen::Vector3f p = cam_from_world * corner;
+    if (p.z() < 0.05f) return;  // the box reaches behind the camera: whole image
+    const float u = static_cast<float>(in.fx) * p.x() / p.z() + static_cast<float>(in.cx);
+    const float v = static_cast<float>(in.fy) * p.y() / p.z() + static_cast<float>(in.cy);
+    x0 = std::min(x0, u);
+    x1 = std::max(x1, u);
+    y0 = std::min(y0, v);
+    y1 = std::max(y1, v);
+  }
+  constexpr float kMargin = 10.0f;  // > the largest discontinuity radius (8 px)
+  const int bx0 = std::clamp(static_cast<int>(std::floor(x0 - kMargin)), 0, in.width);
+  const int by0 = std::clamp(static_cast<int>(std::floor(y0 - kMargin)), 0, in.height);
+  const int bx1 = std::clamp(static_cast<int>(std::ceil(x1 + kMargin)), 0, in.width);
+  const int by1 = std::clamp(static_cast<int>(std::ceil(y1 + kMargin)), 0, in.height);
+  // Texel row v is image row v: no flip between image and window rows here.
+  box[0] = bx0;
+  box[1] = by0;
+  box[2] = std::max(0, bx1 - bx0);
+  box[3] = std::max(0, by1 - by0);
+}
+
+Status Renderer::ReadPodDepth(int i, ImageFloat* out) {
+  if (i < 0 || i >= num_pods_) return InvalidArgument("no pod " + std::to_string(i));
+  if (visibility_dirty_) HOLO_RETURN_IF_ERROR(UpdateVisibility());
+  GLint old_fbo = 0;
+  glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
+  glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_raw_tex_, 0, i);
+  const Intrinsics& in = pod_cameras_[i].intrinsics;
+  out->Resize(in.width, in.height);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  // Texel row v is image row v (the pass does not flip).
+  glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, out->data());
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+  return CheckGlError("ReadPodDepth");
+}
+
+Status Renderer::Render(const CameraModel& camera, const RenderSettings& settings, const Viewport& vp) {
+  if (vp.width <= 0 || vp.height <= 0) return InvalidArgument("empty viewport");
+  HOLO_RETURN_IF_ERROR(camera.intrinsics.Check().WithContext("view camera"));
+  if (!(settings.near_m > 0 && settings.far_m > settings.near_m)) {
+    return InvalidArgument("need 0 < near_m < far_m");
+  }
+  const bool projective = settings.mode == ColorMode::kProjective;
+  if (projective) {
+    HOLO_RETURN_IF_ERROR(settings.projective.Check());
+    if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
+    if (visibility_dirty_ || settings.projective.discontinuity_jump_m != edge_jump_m_ ||
+        settings.projective.discontinuity_radius_m != edge_radius_m_) {
+      HOLO_RETURN_IF_ERROR(UpdateVisibility(settings.projective));
+    }
+  }
+  const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
+  if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
+    return InvalidArgument("local_from_remote must be a finite, invertible transform");
+  }
+  glViewport(vp.x, vp.y, vp.width, vp.height);
+  glEnable(GL_SCISSOR_TEST);
+  glScissor(vp.x, vp.y, vp.width, vp.height);
+  glClearColor(settings.background[0] / 255.0f, settings.background[1] / 255.0f, settings.background[2] / 255.0f,
+               1.0f);
+  glClearDepth(1.0);
+  glDepthMask(GL_TRUE);
+  glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+
+  const Eigen::Matrix4f clip_from_local = ViewProjection(camera, settings.near_m, settings.far_m);
+  glUseProgram(draw_program_);
+  SetMat4(draw_program_, "u_clip_from_local", clip_from_local);
+
+  // Local geometry first: it fills the depth buffer, so remote fragments
+  // behind it are discarded by the depth test.
+  if (settings.composite_local && local_.index_count > 0) {
+    SetMat4(draw_program_, "u_local_from_remote", Eigen::Matrix4f::Identity());
+    glUniform1i(Loc(draw_program_, "u_mode"), 0);
+    if (!settings.show_local) glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    Draw(local_);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  }
+
+  SetMat4(draw_program_, "u_local_from_remote", local_from_remote);
+  if (settings.cull_back_faces) {
+    // Counter-clockwise seen from outside stays counter-clockwise in window
+    // coordinates (the y flip of the projection undoes the camera's y-down).
+    glFrontFace(GL_CCW);
+    glCullFace(GL_BACK);
+    glEnable(GL_CULL_FACE);
+  }
+  if (projective && settings.depth_prepass) {
+    // Depth first with the cheap colour mode, then the projective shader
+    // only on the visible surface (GL_LEQUAL on identical positions:
+    // gl_Position is invariant): each pixel is textured once.
+    glUniform1i(Loc(draw_program_, "u_mode"), 0);
+    glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    Draw(remote_);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    glDepthFunc(GL_LEQUAL);
+    glDepthMask(GL_FALSE);
+  }
+  glUniform1i(Loc(draw_program_, "u_mode"), projective ? 1 : 0);
+  if (projective) {
+    const int n = num_pods_;
+    std::vector<float> cam_from_world(16 * n), intr(4 * n), dist(4 * n), k3(n), size(2 * n), center(3 * n);
+    for (int i = 0; i < n; ++i) {
+      const CameraModel& c = pod_cameras_[i];
+      const Eigen::Matrix4f m = c.world_from_camera.inverse().matrix();
+      std::copy(m.data(), m.data() + 16, cam_from_world.data() + 16 * i);
+      const Intrinsics& in = c.intrinsics;
+      intr[4 * i + 0] = static_cast<float>(in.fx);
+      intr[4 * i + 1] = static_cast<float>(in.fy);
+      intr[4 * i + 2] = static_cast<float>(in.cx);
+      intr[4 * i + 3] = static_cast<float>(in.cy);
+      for (int k = 0; k < 4; ++k) dist[4 * i + k] = static_cast<float>(in.distortion[k]);
+      k3[i] = static_cast<float>(in.distortion[4]);
+      size[2 * i + 0] = static_cast<float>(in.width);
+      size[2 * i + 1] = static_cast<float>(in.height);
+      const Eigen::Vector3f ctr = c.Center();
+      for (int k = 0; k < 3; ++k) center[3 * i + k] = ctr[k];
+    }
+    glUniform1i(Loc(draw_program_, "u_num_pods"), n);  // also read by the vertex shader
+    glUniformMatrix4fv(Loc(draw_program_, "u_pod_cam_from_world"), n, GL_FALSE, cam_from_world.data());
+    glUniform4fv(Loc(draw_program_, "u_pod_intr"), n, intr.data());
+    glUniform4fv(Loc(draw_program_, "u_pod_dist"), n, dist.data());
+    glUniform1fv(Loc(draw_program_, "u_pod_k3"), n, k3.data());
+    glUniform2fv(Loc(draw_program_, "u_pod_size"), n, size.data());
+    glUniform3fv(Loc(draw_program_, "u_pod_center"), n, center.data());
+    glUniform2f(Loc(draw_program_, "u_array_size"), static_cast<float>(array_width_),
+                static_cast<float>(array_height_));
+    const Eigen::Vector4f eye_local(camera.Center().x(), camera.Center().y(), camera.Center().z(), 1.0f);
+    const Eigen::Vector4f eye_remote = local_from_remote.inverse() * eye_local;
+    glUniform3f(Loc(draw_program_, "u_eye_remote"), eye_remote.x() / eye_remote.w(), eye_remote.y() / eye_remote.w(),
+                eye_remote.z() / eye_remote.w());
+    const ProjectiveOptions& po = settings.projective;
+    glUniform1f(Loc(draw_program_, "u_alpha"), po.alpha);
+    glUniform1f(Loc(draw_program_, "u_beta"), po.beta);
+    glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
+    glActiveTexture(GL_TEXTURE1);
+    glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
+  }
+  Draw(remote_);
+  glDisable(GL_CULL_FACE);
+  glDepthMask(GL_TRUE);
+  glDepthFunc(GL_LESS);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  glUseProgram(0);
+  glDisable(GL_SCISSOR_TEST);
+  return CheckGlError("Renderer::Render");
+}
+
+}  // namespace holo::render

@@ -1,0 +1,167 @@
+// The viewer's OpenGL 3.3 core renderer (needs a current context from
+// gl_context.h). It draws the remote site's mesh
+//   * with its per-vertex colours (Gouraud), or
+//   * with projective texturing from the pods' colour images, blended per
+//     fragment with Holoportation-style weights: for pod i,
+//       w_i = V_i · max(0, n·d_i)^α · ((1 + d_i·d_eye) / 2)^β
+//     where n is the surface normal, d_i the unit direction from the surface
+//     point to pod i, d_eye the direction to the viewer (the view-dependent
+//     term; weights are computed per vertex and interpolated), and V_i the
+//     visibility per fragment from pod i's depth map, rendered from the mesh
+//     in a pre-pass (one layer of a texture array per pod). Samples near a
+//     depth discontinuity of that map (within `discontinuity_radius_m` at
+//     the texel's depth) are used only when no clean sample exists. With no
+//     sample at all the vertex colour is used.
+// The remote mesh can be placed in the local room by a similarity transform
+// (the miniature mode), and composited against the local site's mesh: that
+// mesh is drawn first (in colour, or depth only for see-through AR) so it
+// occludes the remote people wherever it is nearer.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "common/camera.h"
+#include "common/image.h"
+#include "common/mesh.h"
+#include "common/rig.h"
+#include "common/status.h"
+
+namespace holo::render {
+
+enum class ColorMode { kVertexColor, kProjective };
+const char* ColorModeName(ColorMode m);
+
+struct ProjectiveOptions {
+  float alpha = 2.0f;  // exponent of the normal term max(0, n·d_i)
+  float beta = 2.0f;   // exponent of the view-dependent term ((1 + d_i·d_eye)/2)
+  // (β = 0: 25.1 dB on exact geometry, 19.3 dB with 16 mm geometry error;
+  // β = 2: 25.0 / 19.4; β = 8: 24.7 / 19.3 — docs/viewer.md)
+  // A point is visible from a pod when its camera z is at most this much
+  // behind the pod's depth map.
+  float visibility_tolerance_m = 0.015f;
+  // Discontinuity test in the pod depth maps: jump between the centre and a
+  // neighbour at the radius (or an empty neighbour), metres.
+  float discontinuity_jump_m = 0.05f;
+  float discontinuity_radius_m = 0.01f;
+  // Skip back faces when rendering the pods' depth maps (closed meshes).
+  bool cull_back_faces = true;
+  Status Check() const;
+};
+
+struct RenderSettings {
+  ColorMode mode = ColorMode::kProjective;
+  std::array<uint8_t, 3> background = {24, 26, 30};
+  // local_from_remote (similarity; identity = the remote room as it is).
+  Eigen::Matrix4f local_from_remote = Eigen::Matrix4f::Identity();
+  // Local-site mesh (SetLocalMesh): draw it for occlusion; in colour when
+  // `show_local`, depth only (see-through AR) otherwise.
+  bool composite_local = false;
+  bool show_local = true;
+  ProjectiveOptions projective;
+  // Skip the remote mesh's back faces (counter-clockwise = front, as
+  // holo::Mesh promises). Right for closed meshes (marching cubes, the
+  // studio); turn off for open ones whose inside may show.
+  bool cull_back_faces = true;
+  // Projective mode: lay down depth first so each pixel is textured once.
+  // Pays off only with much overdraw and no culling (measured in
+  // docs/viewer.md).
+  bool depth_prepass = false;
+  float near_m = 0.02f;
+  float far_m = 100.0f;
+};
+
+// Pixel rectangle of the bound framebuffer, origin bottom-left (GL convention).
+struct Viewport {
+  int x = 0, y = 0, width = 0, height = 0;
+};
+
+// A framebuffer object with an RGBA8 colour and a 24-bit depth renderbuffer.
+class OffscreenTarget {
+ public:
+  ~OffscreenTarget();
+  static StatusOr<std::unique_ptr<OffscreenTarget>> Create(int width, int height);
+  void Bind() const;
+  int width() const { return width_; }
+  int height() const { return height_; }
+  // Reads the whole target (rows top to bottom) into `out`.
+  Status ReadRgb(ImageRgb8* out) const;
+
+ private:
+  OffscreenTarget() = default;
+  unsigned fbo_ = 0, color_ = 0, depth_ = 0;
+  int width_ = 0, height_ = 0;
+};
+
+// Reads `vp` of the bound read framebuffer, rows top to bottom.
+Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out);
+
+class Renderer {
+ public:
+  // A multiple of 4 (weights travel as vec4 varyings).
+  static constexpr int kMaxPods = 16;
+  ~Renderer();
+  // Compiles the shaders; a 3.3 core context must be current.
+  static StatusOr<std::unique_ptr<Renderer>> Create();
+
+  // The remote mesh (remote world coordinates). Normals are computed when the
+  // mesh has none; missing colours are grey. DataLoss from Mesh::Validate.
+  Status SetRemoteMesh(const Mesh& mesh);
+  // The pods' colour images (one per pod of `rig`, in rig order, each the
+  // size of that pod's colour camera), for projective texturing. Up to
+  // kMaxPods pods.
+  Status SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images);
+  // Local-site geometry (local world coordinates) for compositing; an empty
+  // mesh clears it.
+  Status SetLocalMesh(const Mesh& mesh);
+
+  // Renders the pods' visibility depth maps and their discontinuity flags
+  // now (otherwise the first projective Render after a new mesh or rig, or
+  // with other discontinuity options, does it).
+  Status UpdateVisibility(const ProjectiveOptions& options = {});
+
+  // Draws into `vp` of the bound draw framebuffer as seen by `camera` (local
+  // world coordinates; its intrinsics should match vp's size).
+  Status Render(const CameraModel& camera, const RenderSettings& settings, const Viewport& vp);
+
+  size_t remote_triangles() const { return remote_.index_count / 3; }
+  size_t local_triangles() const { return local_.index_count / 3; }
+  bool has_pod_images() const { return num_pods_ > 0; }
+
+  // Depth map (camera z, metres; 0 = nothing) of pod `i` from the last
+  // visibility pass, for tests and debugging.
+  Status ReadPodDepth(int i, ImageFloat* out);
+
+ private:
+  struct GpuMesh {
+    unsigned vao = 0, vbo = 0, ibo = 0;
+    size_t index_count = 0;
+    size_t vbo_bytes = 0, ibo_bytes = 0;
+  };
+  Renderer() = default;
+  Status Init();
+  Status Upload(const Mesh& mesh, GpuMesh* gpu);
+  void Draw(const GpuMesh& gpu) const;
+  void FreeMesh(GpuMesh* gpu);
+  // Scissor box {x, y, w, h} of pod image pixels the remote mesh can cover;
+  // left unchanged (whole image) when it cannot be bounded.
+  void PodBox(const CameraModel& cam, int box[4]) const;
+
+  unsigned draw_program_ = 0, depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
+  GpuMesh remote_, local_;
+  Eigen::Vector3f remote_min_ = Eigen::Vector3f::Constant(1e30f), remote_max_ = Eigen::Vector3f::Constant(-1e30f);
+  // Pods: colour and depth texture arrays (one layer per pod, max size).
+  // pod_raw_tex_: camera z per texel; pod_depth_tex_: the same, negated
+  // near discontinuities.
+  unsigned pod_color_tex_ = 0, pod_depth_tex_ = 0, pod_raw_tex_ = 0, pod_depth_rb_ = 0, pod_fbo_ = 0;
+  float edge_jump_m_ = -1, edge_radius_m_ = -1;
+  int num_pods_ = 0, array_width_ = 0, array_height_ = 0;
+  std::vector<CameraModel> pod_cameras_;
+  bool visibility_dirty_ = true;
+};
+
+}  // namespace holo::render

@@ -1,0 +1,126 @@
+// holoport-client: the Holoport viewer. Renders the remote site's people
+// locally (OpenGL 3.3 core): per-vertex colour or projective texturing from
+// the pods' images, free-viewpoint camera, miniature mode, AR compositing
+// against local geometry, a K-view mosaic for light-field displays, and an
+// overlay with fps, latency, bitrate and drops. Until the network client
+// lands, the stream is the synthetic studio's ground truth (--source).
+#include <cstdio>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "client/tools/viewer_app.h"
+
+namespace {
+
+// "X,Y,Z" or "X,Y,Z,YAW" → values; false if malformed.
+bool ParseFloats(const std::string& text, std::vector<float>* out) {
+  out->clear();
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      size_t used = 0;
+      const float v = std::stof(item, &used);
+      if (used != item.size()) return false;
+      out->push_back(v);
+    } catch (...) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  holo::client::ViewerOptions o;
+  CLI::App app{
+      "holoport-client: the Holoport viewer (local OpenGL rendering of a site's stream).\n"
+      "Window controls: left-drag turns, wheel zooms, WASD/E/C move, F orbit/fly, T projective/vertex colour,\n"
+      "O overlay, Esc quits."};
+  app.add_option("--source", o.source,
+                 "stream source: synthetic[:WORKLOAD] renders the synthetic studio's ground-truth mesh and pod "
+                 "images (workloads S8-QVGA, S8-VGA, S4-QVGA)")
+      ->capture_default_str();
+  app.add_flag("--headless", o.headless,
+               "no window: render --frames frames offscreen (EGL surfaceless, no X server needed) and write PNGs "
+               "and stats.json to --out");
+  app.add_option("--frames", o.frames, "frames to render (default 30 headless; unlimited in a window)")
+      ->check(CLI::Range(0, 1000000));
+  app.add_option("--out", o.out_dir, "output folder for PNGs and stats.json")->capture_default_str();
+  app.add_option("--width", o.width, "image width")->capture_default_str()->check(CLI::Range(16, 8192));
+  app.add_option("--height", o.height, "image height")->capture_default_str()->check(CLI::Range(16, 8192));
+  app.add_option("--views", o.views,
+                 "K horizontally spaced perspectives per frame, tiled into one mosaic image (light-field display "
+                 "input)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  app.add_option("--view-spacing", o.view_spacing_m, "distance between neighbouring views, metres")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0f, 1.0f));
+  app.add_option("--hfov", o.hfov_deg, "horizontal field of view of each view, degrees")
+      ->capture_default_str()
+      ->check(CLI::Range(10.0f, 150.0f));
+  app.add_option("--color", o.color, "projective (from the pods' images) or vertex (per-vertex colour)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"projective", "vertex"}));
+  app.add_option("--miniature", o.miniature_scale,
+                 "miniature mode: scale the remote room by SCALE (e.g. 0.2) onto a table top")
+      ->check(CLI::Range(0.01f, 10.0f));
+  std::string mini_at;
+  app.add_option("--miniature-at", mini_at, "where the remote floor centre goes: X,Y,Z[,YAW_DEG] (default 0,0,0.75)");
+  app.add_option("--local", o.local,
+                 "local-site geometry for AR compositing (it occludes the remote people): 'table' (a table, the "
+                 "default with --miniature), a PLY mesh in local-room coordinates, or synthetic:WORKLOAD (the local "
+                 "site's people, live from a second synthetic studio)");
+  std::string remote_at;
+  app.add_option("--remote-at", remote_at,
+                 "place the remote room in the local one: X,Y,Z[,YAW_DEG] (e.g. 1.6,0,0,180 puts the remote people "
+                 "1.6 m away, facing the local ones)");
+  app.add_flag("--see-through", o.see_through,
+               "AR see-through: local geometry occludes but is not drawn (the real room shows through)");
+  app.add_option("--pose-trace", o.pose_trace,
+                 "drive the camera from a head trace CSV (time_s, x, y, z, yaw_deg, pitch_deg, roll_deg); default: "
+                 "an orbit around the people");
+  app.add_flag("!--no-overlay", o.overlay, "hide the fps/latency/bitrate/drops overlay");
+  app.add_flag("!--no-png", o.write_png, "headless: do not write PNGs (stats only)");
+  app.add_option("--threads", o.threads, "worker threads of the synthetic source")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  CLI11_PARSE(app, argc, argv);
+
+  if (!mini_at.empty()) {
+    std::vector<float> v;
+    if (!ParseFloats(mini_at, &v) || (v.size() != 3 && v.size() != 4)) {
+      std::fprintf(stderr, "holoport-client: --miniature-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n",
+                   mini_at.c_str());
+      return 2;
+    }
+    o.miniature_at = Eigen::Vector3f(v[0], v[1], v[2]);
+    if (v.size() == 4) o.miniature_yaw_deg = v[3];
+    if (o.miniature_scale == 0.0f) {
+      std::fprintf(stderr, "holoport-client: --miniature-at needs --miniature SCALE\n");
+      return 2;
+    }
+  }
+  if (!remote_at.empty()) {
+    std::vector<float> v;
+    if (!ParseFloats(remote_at, &v) || (v.size() != 3 && v.size() != 4)) {
+      std::fprintf(stderr, "holoport-client: --remote-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n",
+                   remote_at.c_str());
+      return 2;
+    }
+    if (o.miniature_scale != 0.0f) {
+      std::fprintf(stderr, "holoport-client: --remote-at and --miniature exclude each other (use --miniature-at)\n");
+      return 2;
+    }
+    o.remote_placed = true;
+    o.remote_at = Eigen::Vector3f(v[0], v[1], v[2]);
+    if (v.size() == 4) o.remote_yaw_deg = v[3];
+  }
+  if (o.miniature_scale != 0.0f && o.local.empty()) o.local = "table";
+  return holo::client::RunViewer(o);
+}

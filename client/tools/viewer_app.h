@@ -1,0 +1,43 @@
+// The holoport-client viewer loop: a source of stream frames, the renderer,
+// the camera (orbit, interactive or a recorded head trace), the mosaic and
+// miniature modes, the overlay, PNG and stats output.
+#pragma once
+
+#include <string>
+
+#include <Eigen/Core>
+
+namespace holo::client {
+
+struct ViewerOptions {
+  std::string source = "synthetic:S8-QVGA";
+  bool headless = false;
+  int frames = 0;  // 0: 30 headless, unlimited in a window
+  std::string out_dir = "client-output";
+  int width = 1280, height = 720;
+  int views = 1;
+  float view_spacing_m = 0.04f;
+  float hfov_deg = 60.0f;
+  float miniature_scale = 0.0f;  // 0 = off
+  Eigen::Vector3f miniature_at = Eigen::Vector3f(0.0f, 0.0f, 0.75f);
+  float miniature_yaw_deg = 0.0f;
+  std::string pose_trace;  // CSV (time, x, y, z, yaw, pitch, roll); empty = orbit
+  std::string color = "projective";  // or "vertex"
+  // "", "table", a PLY of the local site, or synthetic:WORKLOAD (the local
+  // site's people, live from a second studio)
+  std::string local;
+  // Where the remote room goes in the local room (scale 1), e.g. facing the
+  // local people in a two-site call: X, Y, Z, yaw; unset = identity.
+  bool remote_placed = false;
+  Eigen::Vector3f remote_at = Eigen::Vector3f::Zero();
+  float remote_yaw_deg = 0.0f;
+  bool see_through = false;          // local geometry occludes but is not drawn
+  bool overlay = true;
+  bool write_png = true;
+  int threads = 2;
+};
+
+// Runs the viewer; prints progress and errors; returns the process exit code.
+int RunViewer(const ViewerOptions& options);
+
+}  // namespace holo::client

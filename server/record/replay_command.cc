@@ -1,0 +1,149 @@
+#include "server/record/replay_command.h"
+
+#include <algorithm>
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <vector>
+
+#include "common/clock.h"
+#include "common/file_util.h"
+#include "common/mesh.h"
+#include "protocol/geometry_codec.h"
+#include "server/record/recording_reader.h"
+#include "server/record/replay.h"
+
+namespace holo::record {
+namespace {
+
+volatile std::sig_atomic_t g_replay_stop = 0;
+void OnReplaySignal(int) { g_replay_stop = 1; }
+
+int Fail(const Status& s) {
+  std::fprintf(stderr, "holoport-server: replay: %s\n", s.message().c_str());
+  return 1;
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
+}
+
+}  // namespace
+
+int RunReplayCommand(const ReplayCommandOptions& o) {
+  auto reader = RecordingReader::Open(o.path);
+  if (!reader.ok()) return Fail(reader.status());
+  std::shared_ptr<const RecordingReader> shared(std::move(*reader));
+  const RecordingSummary& sum = shared->summary();
+  RealClock& clock = RealClock::Instance();
+  ReplayOptions ro;
+  ro.speed = o.speed;
+  ro.loop = o.loop;
+  ro.start_us = static_cast<int64_t>(o.start_s * 1e6);
+  auto source = ReplaySource::Create(shared, &clock, ro);
+  if (!source.ok()) return Fail(source.status());
+  if (!o.export_dir.empty()) {
+    Status s = MakeDirs(o.export_dir);
+    if (!s.ok()) return Fail(s);
+  }
+  FILE* stats = nullptr;
+  if (o.stats_path == "-") {
+    stats = stdout;
+  } else if (!o.stats_path.empty()) {
+    stats = std::fopen(o.stats_path.c_str(), "w");
+    if (stats == nullptr) return Fail(Unavailable(o.stats_path + ": cannot open for writing"));
+  }
+  if (!o.quiet)
+    std::fprintf(stderr, "holoport-server: replaying %s (%s, %llu messages, %zu key frames%s) at %.2fx%s\n",
+                 o.path.c_str(), FormatSeconds(sum.duration_us).c_str(),
+                 static_cast<unsigned long long>(sum.num_messages), sum.index.size(),
+                 sum.clean ? "" : "; not closed cleanly, index rebuilt", o.speed, o.loop ? ", looping" : "");
+  std::signal(SIGINT, OnReplaySignal);
+  std::signal(SIGTERM, OnReplaySignal);
+
+  const int64_t start = clock.NowUs();
+  uint64_t messages = 0, meshes = 0, bytes = 0;
+  std::vector<double> lateness_ms;
+  int64_t due = 0;
+  Status sink_error;
+  Mesh mesh;
+  auto sink = [&](std::shared_ptr<const std::vector<uint8_t>> frame, protocol::Header h) {
+    const int64_t now = clock.NowUs();
+    const double late = static_cast<double>(now - due) * 1e-3;
+    ++messages;
+    bytes += frame->size();
+    if (h.type == protocol::MessageType::kMeshFrame) {
+      ++meshes;
+      lateness_ms.push_back(late);
+    }
+    int64_t frame_index = -1;
+    if (h.type == protocol::MessageType::kMeshFrame && (!o.export_dir.empty() || stats != nullptr)) {
+      auto payload = protocol::DecodePayload(h.type, std::span<const uint8_t>(*frame).subspan(protocol::kHeaderSize));
+      if (!payload.ok()) {
+        if (sink_error.ok()) sink_error = payload.status();
+        return;
+      }
+      const auto& mf = std::get<protocol::MeshFrame>(*payload);
+      frame_index = mf.frame_index;
+      if (!o.export_dir.empty()) {
+        Status s = protocol::DecodeGeometry(mf.data, &mesh);
+        if (s.ok()) {
+          char path[4096];
+          std::snprintf(path, sizeof(path), "%s/mesh_%06lld.ply", o.export_dir.c_str(),
+                        static_cast<long long>(mf.frame_index));
+          s = WritePly(path, mesh);
+        }
+        if (!s.ok() && sink_error.ok()) sink_error = s;
+      }
+    }
+    if (stats != nullptr)
+      std::fprintf(stats,
+                   "{\"wall_ms\":%.3f,\"type\":\"%s\",\"stream\":%u,\"sequence\":%u,\"capture_time_us\":%lld,"
+                   "\"bytes\":%zu,\"frame\":%lld,\"late_ms\":%.3f}\n",
+                   static_cast<double>(now - start) * 1e-3, protocol::MessageTypeName(h.type), h.stream_id,
+                   h.sequence, static_cast<long long>(h.capture_time_us), frame->size(),
+                   static_cast<long long>(frame_index), late);
+  };
+
+  int64_t next_progress = start + 2000000;
+  int code = 0;
+  while (!g_replay_stop && sink_error.ok()) {
+    due = (*source)->NextDueUs();
+    if (due == INT64_MAX && (*source)->state().ended) break;
+    const int64_t now = clock.NowUs();
+    if (o.max_wall_s > 0 && now - start >= static_cast<int64_t>(o.max_wall_s * 1e6)) break;
+    if (due > now) {
+      clock.SleepUntilUs(std::min(due, now + 20000));
+      continue;
+    }
+    auto n = (*source)->Pump(sink);
+    if (!n.ok()) {
+      std::fprintf(stderr, "holoport-server: replay stopped: %s\n", n.status().message().c_str());
+      code = 1;
+      break;
+    }
+    if (!o.quiet && clock.NowUs() >= next_progress) {
+      const ReplayState st = (*source)->state();
+      std::fprintf(stderr, "  at %s of %s: %llu messages, %llu mesh frames\n", FormatSeconds(st.position_us).c_str(),
+                   FormatSeconds(st.duration_us).c_str(), static_cast<unsigned long long>(messages),
+                   static_cast<unsigned long long>(meshes));
+      next_progress = clock.NowUs() + 2000000;
+    }
+  }
+  if (stats != nullptr && stats != stdout) std::fclose(stats);
+  if (!sink_error.ok()) return Fail(sink_error);
+  const double wall = static_cast<double>(clock.NowUs() - start) * 1e-6;
+  if (!o.quiet)
+    std::fprintf(stderr,
+                 "holoport-server: replayed %llu messages (%llu mesh frames, %.2f MB) in %.2f s wall; "
+                 "mesh frame pacing error p50 %.2f ms, p99 %.2f ms, max %.2f ms%s%s\n",
+                 static_cast<unsigned long long>(messages), static_cast<unsigned long long>(meshes),
+                 static_cast<double>(bytes) / 1e6, wall, Percentile(lateness_ms, 0.5), Percentile(lateness_ms, 0.99),
+                 lateness_ms.empty() ? 0.0 : *std::max_element(lateness_ms.begin(), lateness_ms.end()),
+                 o.export_dir.empty() ? "" : "; meshes in ", o.export_dir.c_str());
+  return code;
+}
+
+}  // namespace holo::record

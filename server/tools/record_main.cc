@@ -1,0 +1,203 @@
+// holoport-record: writes a recording (living memory) of a protocol stream,
+// validates and describes recordings (--info), and cuts them into segments for
+// an HTTP cache (--cut). docs/recording.md describes the format and the
+// commands.
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "common/clock.h"
+#include "server/record/inspect.h"
+#include "server/record/recording_reader.h"
+#include "server/record/recording_writer.h"
+#include "server/record/segments.h"
+#include "server/record/synthetic_stream.h"
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+void OnSignal(int) { g_stop = 1; }
+
+int Fail(const holo::Status& s) {
+  std::fprintf(stderr, "holoport-record: %s\n", s.message().c_str());
+  return 1;
+}
+
+// Exit codes: 0 done, 1 error (nothing or a damaged file), 3 size limit
+// reached and 4 disk full / write failure (the recording is valid up to there).
+int Record(const std::string& out, const std::string& source_spec, double duration_s, uint64_t max_bytes,
+           const std::string& codec, double step_mm, bool audio, bool realtime, bool overwrite, double sync_mb,
+           bool quiet) {
+  holo::record::SyntheticStreamOptions so;
+  if (source_spec == "synthetic") {
+    so.workload = "S8-QVGA";
+  } else if (source_spec.rfind("synthetic:", 0) == 0) {
+    so.workload = source_spec.substr(10);
+  } else {
+    return Fail(holo::InvalidArgument("--source must be synthetic[:WORKLOAD], got '" + source_spec +
+                                      "' (recording from a site over the network needs the client library, "
+                                      "which this build does not have yet)"));
+  }
+  if (codec == "g1") {
+    so.geometry.codec = holo::protocol::GeometryCodec::kG1;
+  } else if (codec == "g0") {
+    so.geometry.codec = holo::protocol::GeometryCodec::kG0;
+  } else {
+    return Fail(holo::InvalidArgument("--codec must be g1 or g0, got '" + codec + "'"));
+  }
+  so.geometry.position_step_m = static_cast<float>(step_mm * 1e-3);
+  so.audio = audio;
+  if (!(duration_s >= 0)) return Fail(holo::InvalidArgument("--duration must be ≥ 0"));
+  auto stream = holo::record::SyntheticStream::Create(so);
+  if (!stream.ok()) return Fail(stream.status());
+
+  holo::record::RecordingWriterOptions wo;
+  wo.max_bytes = max_bytes;
+  wo.source = "synthetic:" + so.workload;
+  wo.sync_every_bytes = static_cast<uint64_t>(sync_mb * 1e6);
+  auto writer = holo::record::RecordingWriter::Create(out, wo, overwrite);
+  if (!writer.ok()) return Fail(writer.status());
+
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  const int64_t limit_us = duration_s > 0 ? static_cast<int64_t>(duration_s * 1e6) : INT64_MAX;
+  if (!quiet)
+    std::fprintf(stderr, "holoport-record: %s → %s (%s%s, %s)%s\n", wo.source.c_str(), out.c_str(), codec.c_str(),
+                 audio ? " + PCM audio" : "",
+                 duration_s > 0 ? holo::record::FormatSeconds(limit_us).c_str() : "until stopped",
+                 max_bytes ? (", limit " + std::to_string(max_bytes) + " bytes").c_str() : "");
+  holo::RealClock& clock = holo::RealClock::Instance();
+  const int64_t start = clock.NowUs();
+  int64_t next_progress = start + 1000000;
+  holo::record::StreamMessage m;
+  holo::Status end;
+  double write_ms = 0;
+  while (!g_stop) {
+    holo::Status s = (*stream)->Next(&m);
+    if (!s.ok()) return Fail(s);
+    if (m.time_us > limit_us) break;
+    if (realtime) clock.SleepUntilUs(start + m.time_us);
+    holo::Stopwatch sw;
+    end = (*writer)->WriteMessage(m.time_us, m.frame);
+    write_ms += sw.ElapsedMs();
+    if (!end.ok()) break;
+    const int64_t now = clock.NowUs();
+    if (!quiet && now >= next_progress) {
+      const auto& st = (*writer)->stats();
+      std::fprintf(stderr, "  %s recorded, %llu messages, %.2f MB\n",
+                   holo::record::FormatSeconds(st.duration_us).c_str(), static_cast<unsigned long long>(st.messages),
+                   static_cast<double>(st.bytes) / 1e6);
+      next_progress = now + 1000000;
+    }
+  }
+  int code = 0;
+  if (end.ok()) {
+    holo::Status c = (*writer)->Close();
+    if (!c.ok()) {
+      end = c;
+      code = 4;
+    }
+  } else if (end.code() == holo::StatusCode::kOutOfRange) {
+    code = 3;
+  } else if (end.code() == holo::StatusCode::kUnavailable) {
+    code = 4;
+  } else {
+    return Fail(end);  // a message the writer refused (should not happen with our own source)
+  }
+  const auto& st = (*writer)->stats();
+  const double wall_s = static_cast<double>(clock.NowUs() - start) * 1e-6;
+  if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
+  if (g_stop && !quiet) std::fprintf(stderr, "holoport-record: stopped by signal; recording closed\n");
+  if (!quiet)
+    std::fprintf(stderr,
+                 "holoport-record: %s: %llu messages (%llu key frames), %s, %.2f MB in %.1f s wall; "
+                 "%.2f MB per minute of media; writing took %.1f ms (%.0f MB/s)\n",
+                 out.c_str(), static_cast<unsigned long long>(st.messages),
+                 static_cast<unsigned long long>(st.key_frames), holo::record::FormatSeconds(st.duration_us).c_str(),
+                 static_cast<double>(st.bytes) / 1e6, wall_s,
+                 st.duration_us > 0 ? static_cast<double>(st.bytes) * 60.0 / static_cast<double>(st.duration_us) : 0.0,
+                 write_ms, write_ms > 0 ? static_cast<double>(st.bytes) / 1e3 / write_ms : 0.0);
+  return code;
+}
+
+int Info(const std::string& path, bool deep, bool json, bool salvage) {
+  holo::record::RecordingReaderOptions o;
+  o.salvage = salvage;
+  auto reader = holo::record::RecordingReader::Open(path, o);
+  if (!reader.ok()) return Fail(reader.status());
+  auto in = holo::record::InspectRecording(**reader, deep);
+  if (!in.ok()) return Fail(in.status());
+  if (json) {
+    std::printf("%s\n", holo::record::InspectionJson(**reader, *in).c_str());
+  } else {
+    std::printf("%s", holo::record::InspectionText(**reader, *in).c_str());
+  }
+  return 0;
+}
+
+int Cut(const std::string& path, double segment_s, const std::string& dir, bool quiet) {
+  auto reader = holo::record::RecordingReader::Open(path);
+  if (!reader.ok()) return Fail(reader.status());
+  auto segs = holo::record::CutSegments(**reader, static_cast<int64_t>(segment_s * 1e6), dir);
+  if (!segs.ok()) return Fail(segs.status());
+  if (!quiet)
+    for (const auto& s : *segs)
+      std::fprintf(stderr, "  %s: %s .. %s, %llu messages, %llu bytes\n", s.file.c_str(),
+                   holo::record::FormatSeconds(s.start_us).c_str(), holo::record::FormatSeconds(s.end_us).c_str(),
+                   static_cast<unsigned long long>(s.messages), static_cast<unsigned long long>(s.bytes));
+  std::fprintf(stderr, "holoport-record: %zu segments and manifest.json in %s\n", segs->size(), dir.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "holoport-record: records a Holoport protocol stream into a crash-safe, seekable file (a \"living\n"
+      "memory\"), validates and describes recordings, and cuts them into segments for an HTTP cache.\n"
+      "Replay a recording with: holoport-server --replay FILE [--speed S] [--loop].\n"
+      "Exit codes: 0 done; 1 error; 3 size limit reached, 4 disk full (in both cases the file holds\n"
+      "everything recorded before and is closed with an index when possible)."};
+  std::string out, source = "synthetic:S8-QVGA", info_path, cut_path, out_dir, codec = "g1";
+  double duration = 10, step_mm = 1.0, sync_mb = 8, segment_s = 2;
+  uint64_t max_bytes = 0;
+  bool no_audio = false, realtime = false, overwrite = false, deep = false, json = false, salvage = false,
+       quiet = false;
+  auto* out_opt = app.add_option("-o,--out", out, "record into this file (must not exist unless --overwrite)");
+  app.add_option("--source", source,
+                 "what to record: synthetic[:WORKLOAD] (the studio's ground-truth meshes through the geometry "
+                 "codec, plus 20 ms PCM audio+pose frames)")
+      ->capture_default_str();
+  app.add_option("--duration", duration, "seconds of media to record (0: until the size limit or Ctrl-C)")
+      ->capture_default_str();
+  app.add_option("--max-bytes", max_bytes, "size limit of the file, index included (0: none); K/M/G suffixes")
+      ->transform(CLI::AsSizeValue(false));
+  app.add_option("--codec", codec, "geometry codec: g1 or g0")->capture_default_str();
+  app.add_option("--position-step-mm", step_mm, "G1 position quantization, mm")->capture_default_str();
+  app.add_flag("--no-audio", no_audio, "no audio+pose frames");
+  app.add_flag("--realtime", realtime, "pace the synthetic source like a live site (30 fps)");
+  app.add_flag("--overwrite", overwrite, "replace an existing --out file");
+  app.add_option("--sync-mb", sync_mb, "fdatasync after this many MB (0: only at the end)")->capture_default_str();
+  auto* info_opt = app.add_option("--info", info_path, "validate FILE and print duration, frames, size, index");
+  app.add_flag("--deep", deep, "--info: also decode every geometry blob");
+  app.add_flag("--json", json, "--info: one JSON object instead of text");
+  app.add_flag("--salvage", salvage, "--info: read a damaged, unclosed file up to the damage");
+  auto* cut_opt = app.add_option("--cut", cut_path, "cut FILE into independently playable segments (needs --out-dir)");
+  app.add_option("--out-dir", out_dir, "--cut: directory for seg_NNNNN.hrec and manifest.json");
+  app.add_option("--segment-seconds", segment_s, "--cut: target segment length")->capture_default_str();
+  app.add_flag("-q,--quiet", quiet, "no progress output");
+  out_opt->excludes(info_opt)->excludes(cut_opt);
+  info_opt->excludes(cut_opt);
+  CLI11_PARSE(app, argc, argv);
+
+  if (!info_path.empty()) return Info(info_path, deep, json, salvage);
+  if (!cut_path.empty()) {
+    if (out_dir.empty()) return Fail(holo::InvalidArgument("--cut needs --out-dir DIR"));
+    return Cut(cut_path, segment_s, out_dir, quiet);
+  }
+  if (out.empty()) return Fail(holo::InvalidArgument("nothing to do: pass --out FILE, --info FILE or --cut FILE (see --help)"));
+  return Record(out, source, duration, max_bytes, codec, step_mm, !no_audio, realtime, overwrite, sync_mb, quiet);
+}
