@@ -1,0 +1,343 @@
+// holoport-bench client-pose: head-pose prediction error and offloaded
+// rendering with reprojection (docs/prediction.md).
+//
+// Prediction: every model (none, cv, kalman) at horizons 20/50/100 ms on the
+// synthetic generator (looking around and walking, 60 s each at 90 Hz) and
+// on the recorded trace tests/data/head/lookaround_72hz.csv:
+//   {"metric":"pred_err_deg","model":"cv","horizon_ms":"50","trace":"synthetic",...}
+// Reprojection: see RunReprojectionBench below:
+//   {"metric":"reproj_psnr_db","mode":"predicted","latency_ms":"50","region":"frame",...}
+//   {"metric":"black_border_fraction",...}, reproj_gain_db, rendered_frame_kb, reproj_cpu_ms
+//
+// Extra options: --part pred|reproj|all (default all); --trace FILE (recorded
+// trace, default the sample); tuning of the Kalman model: --jerk_pos X
+// --jerk_ang X --accel_tau X --vel_tau X --cv_window X. Reprojection:
+// --scene foreground|studio|both, --method none|rotation|plane|depth,
+// --filter bilinear|bicubic, --latencies 30,50,80, --margin 0.25,
+// --size 640x360, --hfov 90, --quality 90, --distance 2.6, --png DIR;
+// --frames N sets the display frames of both scenes (default 120 / 60).
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "bench.h"
+#include "client/pose/head_motion.h"
+#include "client/pose/predictor.h"
+#include "client/pose/trace.h"
+#include "client/reproject/offload_sim.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+
+namespace {
+
+using holo::pose::PredictorModel;
+
+int RunPrediction(const holo::bench::BenchArgs& args, const holo::pose::PredictorOptions& options,
+                  const std::string& trace_path) {
+  struct Trace {
+    std::string name, kind;
+    std::vector<holo::pose::PoseSample> samples;
+  };
+  std::vector<Trace> traces;
+  for (auto kind : {holo::pose::HeadMotionKind::kLookAround, holo::pose::HeadMotionKind::kWalk}) {
+    holo::pose::HeadMotionOptions o;
+    o.kind = kind;
+    o.duration_s = 60;
+    o.seed = 7;
+    auto samples = holo::pose::GenerateHeadMotion(o);
+    if (!samples.ok()) {
+      std::fprintf(stderr, "client-pose: %s\n", samples.status().ToString().c_str());
+      return 1;
+    }
+    traces.push_back({"synthetic", kind == holo::pose::HeadMotionKind::kWalk ? "walk" : "lookaround", *samples});
+  }
+  auto recorded = holo::pose::ReadHeadTrace(trace_path);
+  if (!recorded.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", recorded.status().ToString().c_str());
+    return 1;
+  }
+  traces.push_back({"recorded", "lookaround", *recorded});
+  for (const Trace& t : traces) {
+    for (int horizon_ms : {20, 50, 100}) {
+      for (PredictorModel m : {PredictorModel::kNone, PredictorModel::kConstantVelocity, PredictorModel::kKalman}) {
+        // Judged against what the tracker reports (noise included), as
+        // recorded data must be.
+        auto e = holo::pose::EvaluatePredictor(m, options, t.samples, t.samples, horizon_ms * 1e-3);
+        if (!e.ok()) {
+          std::fprintf(stderr, "client-pose: %s\n", e.status().ToString().c_str());
+          return 1;
+        }
+        const std::string model = holo::pose::PredictorModelName(m);
+        std::map<std::string, std::string> q = {{"model", model},
+                                                {"horizon_ms", std::to_string(horizon_ms)},
+                                                {"trace", t.name},
+                                                {"motion", t.kind}};
+        q["stat"] = "mean";
+        holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_deg", e->mean_deg, "deg", q);
+        holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_mm", e->mean_mm, "mm", q);
+        q["stat"] = "p95";
+        holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_deg", e->p95_deg, "deg", q);
+        holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_mm", e->p95_mm, "mm", q);
+        if (!args.json) {
+          std::fprintf(stderr, "%-9s %-10s %3d ms %-6s  %6.2f deg (p95 %6.2f)  %6.1f mm (p95 %6.1f)\n", t.name.c_str(),
+                       t.kind.c_str(), horizon_ms, model.c_str(), e->mean_deg, e->p95_deg, e->mean_mm, e->p95_mm);
+        }
+      }
+    }
+  }
+  return 0;
+}
+
+// Offloaded rendering on the synthetic studio with the recorded head trace
+// (client/reproject/offload_sim.h): for display times spread over the trace
+// and each simulated host latency L, the modes ideal (zero latency: the
+// ceiling), stale, reprojected, predicted (Kalman) and enlarged (FOV margin).
+// Scenes: "foreground" — the studio's ground-truth textured foreground mesh
+// (people and props) drawn by the CPU mesh renderer on black, as a viewer of
+// the received mesh shows it; "studio" — the whole studio (room included)
+// from its ground-truth renderer, which fills the frame.
+int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::PredictorOptions& predictor_options,
+                         const std::string& trace_path, const std::vector<std::string>& extra) {
+  using namespace holo::reproject;
+  OffloadSimOptions o;
+  o.predictor_options = predictor_options;
+  o.encode.jpeg_quality = 90;
+  double view_distance_m = 2.6;
+  std::string scenes = "both", method_name = "plane";
+  // Display frames per scene (the room renders 3× slower than the person).
+  const int fg_frames = args.frames > 0 ? args.frames : 120;
+  const int studio_frames = args.frames > 0 ? args.frames : 60;
+  for (size_t i = 0; i < extra.size(); ++i) {
+    const bool has_value = i + 1 < extra.size();
+    if (extra[i] == "--size" && has_value) {
+      if (std::sscanf(extra[++i].c_str(), "%dx%d", &o.width, &o.height) != 2) {
+        std::fprintf(stderr, "client-pose: --size must be WxH, got %s\n", extra[i].c_str());
+        return 2;
+      }
+    } else if (extra[i] == "--hfov" && has_value) {
+      o.hfov_deg = std::strtod(extra[++i].c_str(), nullptr);
+    } else if (extra[i] == "--margin" && has_value) {
+      o.margin = std::strtod(extra[++i].c_str(), nullptr);
+    } else if (extra[i] == "--scene" && has_value) {
+      scenes = extra[++i];
+    } else if (extra[i] == "--method" && has_value) {
+      method_name = extra[++i];
+    } else if (extra[i] == "--filter" && has_value) {
+      const std::string f = extra[++i];
+      if (f != "bilinear" && f != "bicubic") {
+        std::fprintf(stderr, "client-pose: --filter must be bilinear or bicubic, got %s\n", f.c_str());
+        return 2;
+      }
+      o.filter = f == "bilinear" ? ReprojectFilter::kBilinear : ReprojectFilter::kBicubic;
+    } else if (extra[i] == "--quality" && has_value) {
+      o.encode.jpeg_quality = std::atoi(extra[++i].c_str());
+    } else if (extra[i] == "--distance" && has_value) {
+      view_distance_m = std::strtod(extra[++i].c_str(), nullptr);
+    } else if (extra[i] == "--png" && has_value) {
+      o.png_dir = extra[++i];
+    } else if (extra[i] == "--latencies" && has_value) {
+      o.latencies_ms.clear();
+      const std::string list = extra[++i];
+      for (size_t start = 0; start <= list.size();) {
+        const size_t comma = std::min(list.find(',', start), list.size());
+        o.latencies_ms.push_back(std::atoi(list.substr(start, comma - start).c_str()));
+        start = comma + 1;
+      }
+    } else {
+      std::fprintf(stderr, "client-pose: unknown option %s\n", extra[i].c_str());
+      return 2;
+    }
+  }
+  if (scenes != "foreground" && scenes != "studio" && scenes != "both") {
+    std::fprintf(stderr, "client-pose: --scene must be foreground, studio or both, got %s\n", scenes.c_str());
+    return 2;
+  }
+  auto method = ParseReprojectMethod(method_name);
+  if (!method.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", method.status().ToString().c_str());
+    return 2;
+  }
+  o.method = *method;
+  if (auto s = o.Check(); !s.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", s.ToString().c_str());
+    return 2;
+  }
+  auto trace = holo::pose::ReadHeadTrace(trace_path);
+  if (!trace.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", trace.status().ToString().c_str());
+    return 1;
+  }
+  auto workload = holo::GetWorkload(args.workload);
+  if (!workload.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", workload.status().ToString().c_str());
+    return 1;
+  }
+  holo::StudioOptions studio_options = workload->studio;
+  studio_options.threads = 2;
+  auto studio = holo::SyntheticStudio::Create(workload->rig, studio_options);
+  if (!studio.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", studio.status().ToString().c_str());
+    return 1;
+  }
+  o.content_fps = workload->studio.fps;
+  // The trace's room frame (yaw 0 = +x) is placed `view_distance_m` from the
+  // studio's centre on −x, so the viewer faces the people.
+  std::vector<holo::pose::PoseSample> samples = *trace;
+  for (holo::pose::PoseSample& s : samples) s.position += Eigen::Vector3d(-view_distance_m, 0, 0);
+
+  std::vector<std::string> scene_list;
+  if (scenes != "studio") scene_list.push_back("foreground");
+  if (scenes != "foreground") scene_list.push_back("studio");
+  for (const std::string& scene : scene_list) {
+    o.display_frames = scene == "studio" ? studio_frames : fg_frames;
+    holo::Mesh mesh;
+    int64_t mesh_frame = -1;
+    SceneAtFrame scene_at = [&](int64_t frame) -> SceneRenderFn {
+      if (scene == "studio") {
+        return [&, frame](const holo::CameraModel& cam, holo::ImageRgb8* c, holo::ImageDepth16* d, holo::ImageGray8* m) {
+          (*studio)->RenderView(frame, cam, c, d, nullptr);
+          if (m) m->Resize(cam.intrinsics.width, cam.intrinsics.height, 255);  // the room covers every pixel
+          return holo::OkStatus();
+        };
+      }
+      if (frame != mesh_frame) {
+        mesh = (*studio)->ForegroundMesh(frame);
+        mesh_frame = frame;
+      }
+      return MeshSceneRenderer(mesh);
+    };
+    const double cpu0 = holo::bench::ProcessCpuMs();
+    auto results = SimulateOffload(samples, scene_at, o, [&](int done, int total) {
+      if (!args.json && done % 20 == 0) std::fprintf(stderr, "client-pose: %s: %d/%d display frames\n", scene.c_str(), done, total);
+    });
+    if (!results.ok()) {
+      std::fprintf(stderr, "client-pose: %s\n", results.status().ToString().c_str());
+      return 1;
+    }
+    const std::string workload_name = args.workload + "/" + scene;
+    for (const OffloadResult& r : *results) {
+      std::map<std::string, std::string> q = {{"mode", OffloadModeName(r.mode)},
+                                              {"latency_ms", std::to_string(r.latency_ms)},
+                                              {"method", r.mode == OffloadMode::kIdeal || r.mode == OffloadMode::kStale
+                                                             ? "none"
+                                                             : ReprojectMethodName(o.method)},
+                                              {"trace", "recorded"},
+                                              {"scene", scene},
+                                              {"filter", o.filter == ReprojectFilter::kBicubic ? "bicubic" : "bilinear"},
+                                              {"size", std::to_string(o.width) + "x" + std::to_string(o.height)},
+                                              {"region", "frame"}};
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_psnr_db", r.psnr_db, "dB", q);
+      q["region"] = "content";
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_psnr_db", r.psnr_content_db, "dB", q);
+      q.erase("region");
+      holo::bench::EmitFigure("client-pose", workload_name, "black_border_fraction", r.black_border_fraction, "1", q);
+      if (o.method == ReprojectMethod::kDepth) {
+        holo::bench::EmitFigure("client-pose", workload_name, "hole_fraction", r.hole_fraction, "1", q);
+      }
+      holo::bench::EmitFigure("client-pose", workload_name, "rendered_frame_kb", r.wire_bytes / 1024.0, "KiB", q);
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_cpu_ms", r.reproject_cpu_ms, "ms", q);
+      if (!args.json) {
+        std::fprintf(stderr, "%-10s L=%3d ms %-11s PSNR %6.2f dB (content %6.2f)  border %.4f  %6.1f KiB  reproject %.1f ms\n",
+                     scene.c_str(), r.latency_ms, OffloadModeName(r.mode), r.psnr_db, r.psnr_content_db,
+                     r.black_border_fraction, r.wire_bytes / 1024.0, r.reproject_cpu_ms);
+      }
+    }
+    // Paired per-frame gains (same display frames): mean ± standard error.
+    auto gain = [&](int latency, OffloadMode from, OffloadMode to) {
+      const OffloadResult *a = nullptr, *b = nullptr;
+      for (const OffloadResult& r : *results) {
+        if (r.latency_ms == latency && r.mode == from) a = &r;
+        if (r.latency_ms == latency && r.mode == to) b = &r;
+      }
+      if (!a || !b || a->frame_psnr_db.size() != b->frame_psnr_db.size() || a->frame_psnr_db.size() < 2) return;
+      const size_t n = a->frame_psnr_db.size();
+      double sum = 0, sum2 = 0;
+      int better = 0;
+      for (size_t i = 0; i < n; ++i) {
+        const double d = b->frame_psnr_db[i] - a->frame_psnr_db[i];
+        sum += d;
+        sum2 += d * d;
+        better += d > 0;
+      }
+      const double mean = sum / n;
+      const double se = std::sqrt(std::max(0.0, sum2 / n - mean * mean) / (n - 1));
+      std::map<std::string, std::string> q = {{"from", OffloadModeName(from)}, {"to", OffloadModeName(to)},
+                                              {"latency_ms", std::to_string(latency)}, {"scene", scene},
+                                              {"method", ReprojectMethodName(o.method)}};
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_db", mean, "dB", q);
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_se_db", se, "dB", q);
+      holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_frames_better", static_cast<double>(better) / n,
+                              "1", q);
+      if (!args.json) {
+        std::fprintf(stderr, "%-10s L=%3d ms %s → %s: %+.2f ± %.2f dB (better in %d of %zu frames)\n", scene.c_str(),
+                     latency, OffloadModeName(from), OffloadModeName(to), mean, se, better, n);
+      }
+    };
+    for (int latency : o.latencies_ms) {
+      gain(latency, OffloadMode::kStale, OffloadMode::kReprojected);
+      gain(latency, OffloadMode::kReprojected, OffloadMode::kPredicted);
+      gain(latency, OffloadMode::kPredicted, OffloadMode::kEnlarged);
+    }
+    if (!args.json) {
+      std::fprintf(stderr, "client-pose: %s: %.1f s CPU for %d display frames\n", scene.c_str(),
+                   (holo::bench::ProcessCpuMs() - cpu0) * 1e-3, o.display_frames);
+    }
+  }
+  return 0;
+}
+
+int RunClientPoseBench(const holo::bench::BenchArgs& args) {
+  std::string part = "all";
+  std::string trace_path = std::string(HOLO_SOURCE_DIR) + "/tests/data/head/lookaround_72hz.csv";
+  holo::pose::PredictorOptions options;
+  std::vector<std::string> reproj_extra;
+  for (size_t i = 0; i < args.extra.size(); ++i) {
+    const std::string& a = args.extra[i];
+    const bool has_value = i + 1 < args.extra.size();
+    auto number = [&]() { return std::strtod(args.extra[++i].c_str(), nullptr); };
+    if (a == "--part" && has_value) {
+      part = args.extra[++i];
+    } else if (a == "--trace" && has_value) {
+      trace_path = args.extra[++i];
+    } else if (a == "--jerk_pos" && has_value) {
+      options.position_jerk_psd = number();
+    } else if (a == "--jerk_ang" && has_value) {
+      options.angle_jerk_psd = number();
+    } else if (a == "--accel_tau" && has_value) {
+      options.accel_tau_s = number();
+    } else if (a == "--vel_tau" && has_value) {
+      options.velocity_tau_s = number();
+    } else if (a == "--cv_window" && has_value) {
+      options.window_s = number();
+    } else {
+      reproj_extra.push_back(a);
+    }
+  }
+  if (part != "pred" && part != "reproj" && part != "all") {
+    std::fprintf(stderr, "client-pose: --part must be pred, reproj or all, got %s\n", part.c_str());
+    return 2;
+  }
+  if (auto s = options.Check(); !s.ok()) {
+    std::fprintf(stderr, "client-pose: %s\n", s.ToString().c_str());
+    return 2;
+  }
+  if (part != "reproj") {
+    if (!reproj_extra.empty()) {
+      std::fprintf(stderr, "client-pose: unknown option %s\n", reproj_extra[0].c_str());
+      return 2;
+    }
+    if (int rc = RunPrediction(args, options, trace_path); rc != 0) return rc;
+  }
+  if (part != "pred") return RunReprojectionBench(args, options, trace_path, reproj_extra);
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("client-pose",
+                    "head-pose prediction error (pred_err_deg/mm) and reprojection PSNR (reproj_psnr_db) for the thin client",
+                    RunClientPoseBench);
