@@ -73,6 +73,12 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   site_options.masks = MaskSource::kSegment;
   site_options.tsdf.voxel_size = workload->voxel_size_m;
   site_options.pipeline.max_frames = options.frames;
+  if (options.texture_cluster_mm >= 0)
+    site_options.texture_options.cluster_size_m = static_cast<float>(options.texture_cluster_mm * 1e-3);
+  if (options.seg_iterations >= 0) site_options.segment.crf_iterations = options.seg_iterations;
+  if (options.seg_downsample >= 0) site_options.segment.downsample = options.seg_downsample;
+  if (options.seg_grid_px >= 0) site_options.segment.grid_spatial_px = static_cast<float>(options.seg_grid_px);
+  if (options.texture_transfer >= 0) site_options.texture_options.cluster_transfer = options.texture_transfer;
 
   const std::string& src = options.source;
   if (src != "synthetic" && src != "prerendered" && src.rfind("dataset:", 0) != 0) {

@@ -19,6 +19,12 @@ struct PipelineBenchOptions {
   // workload on disk: acquire decodes PNGs). The background is always the
   // studio's empty room; scoring always uses the studio's ground truth.
   std::string source = "synthetic";
+  // Texturer clustering cell, mm (< 0: the capture site's default) and transfer mode.
+  double texture_cluster_mm = -1;
+  int texture_transfer = -1;
+  // Segmenter overrides (< 0: the capture site's defaults).
+  int seg_iterations = -1, seg_downsample = -1;
+  double seg_grid_px = -1;
   // Frames of the serial run that measures CPU-ms per stage (0: skip it).
   int cpu_frames = 20;
 };
