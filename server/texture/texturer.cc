@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <time.h>
 #include <cstdlib>
+#include <cstring>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -87,7 +88,13 @@ struct Texturer::PodState {
   Vector3f trans, center;
   Eigen::Matrix3f depth_rot;  // depth camera from world
   Vector3f depth_trans;
-  MeshRasterizer raster;
+  MeshRasterizer raster;  // single-view path (distorted cameras, non-SSE2 builds)
+  // The visibility depth map: 1/z per pixel (0 = empty), the box of drawn
+  // pixels and the largest 1/z of any projected vertex.
+  std::vector<float> iz;
+  int w = 0, h = 0;
+  int box[4] = {0, 0, -1, -1};
+  float max_iz = 0.0f;
   std::vector<uint8_t> dist;  // chessboard distance to the nearest discontinuity, px (capped)
   std::vector<uint8_t> tmp;   // region-sized scratch of the dilation
   int rx0 = 0, ry0 = 0, rx1 = -1, ry1 = -1;  // region where `dist` is valid
@@ -100,6 +107,7 @@ struct Texturer::PodSimd {
   __m128 r0[3], r1[3], r2[3];  // rows of colour camera from world
   __m128 tx, ty, tz;
   __m128 fx, fy, ccx, ccy, wmax, hmax;  // intrinsics; width − 0.5, height − 0.5
+  __m128i wlast, hlast;                 // width − 1, height − 1
 };
 #else
 struct Texturer::PodSimd {};
@@ -176,6 +184,15 @@ Texturer::Texturer(const Rig& rig, TextureOptions options) : rig_(rig), options_
         for (int c = 0; c < 3; ++c) r2[c][lane] = pi < pods_.size() ? pods_[pi]->rot(2, c) : 0.0f;
       }
       for (int c = 0; c < 3; ++c) q.r2[c] = _mm_load_ps(r2[c]);
+      alignas(16) int32_t wl[4], hl[4];
+      for (int lane = 0; lane < 4; ++lane) {
+        const size_t pi = 4 * g + static_cast<size_t>(lane);
+        // Padding lanes: an empty image (no pixel is ever inside).
+        wl[lane] = pi < pods_.size() ? pods_[pi]->color_camera.intrinsics.width - 1 : -1;
+        hl[lane] = pi < pods_.size() ? pods_[pi]->color_camera.intrinsics.height - 1 : -1;
+      }
+      q.wlast = _mm_load_si128(reinterpret_cast<const __m128i*>(wl));
+      q.hlast = _mm_load_si128(reinterpret_cast<const __m128i*>(hl));
     }
   }
 #endif
@@ -190,7 +207,7 @@ Texturer::~Texturer() = default;
 
 const std::vector<float>& Texturer::RasterInverseDepth(int pod) const {
   HOLO_CHECK(pod >= 0 && pod < static_cast<int>(pods_.size()));
-  return pods_[static_cast<size_t>(pod)]->raster.inv_z();
+  return pods_[static_cast<size_t>(pod)]->iz;
 }
 
 void Texturer::PreparePod(int pod, const Mesh& mesh) {
@@ -198,16 +215,25 @@ void Texturer::PreparePod(int pod, const Mesh& mesh) {
   // Visibility comes from the mesh itself: the nearest surface along each ray.
   s.raster.Rasterize(mesh.positions, mesh.triangles, s.color_camera, /*want_attributes=*/false,
                      options_.cull_back_faces, kNear);
+  s.iz = s.raster.inv_z();
+  s.w = s.raster.width(), s.h = s.raster.height();
+  s.box[0] = s.raster.box_x0(), s.box[1] = s.raster.box_y0(), s.box[2] = s.raster.box_x1(), s.box[3] = s.raster.box_y1();
+  s.max_iz = s.raster.max_inv_z();
+  DiscontinuityMap(pod);
+}
+
+void Texturer::DiscontinuityMap(int pod) {
+  PodState& s = *pods_[static_cast<size_t>(pod)];
   if (!options_.discontinuity_test) return;
-  const int w = s.raster.width(), h = s.raster.height();
+  const int w = s.w, h = s.h;
   // Only the region around the drawn pixels matters: every vertex projects
   // into it (2 px margin for vertices whose pixel centre the raster missed).
-  s.rx0 = std::max(0, s.raster.box_x0() - 2);
-  s.ry0 = std::max(0, s.raster.box_y0() - 2);
-  s.rx1 = std::min(w - 1, s.raster.box_x1() + 2);
-  s.ry1 = std::min(h - 1, s.raster.box_y1() + 2);
+  s.rx0 = std::max(0, s.box[0] - 2);
+  s.ry0 = std::max(0, s.box[1] - 2);
+  s.rx1 = std::min(w - 1, s.box[2] + 2);
+  s.ry1 = std::min(h - 1, s.box[3] + 2);
   if (s.rx0 > s.rx1 || s.ry0 > s.ry1) return;
-  const std::vector<float>& iz = s.raster.inv_z();
+  const std::vector<float>& iz = s.iz;
   s.dist.resize(iz.size());
   // Seeds: pixels with a 4-neighbour across a depth jump or a silhouette.
   // In inverse depth (0 = empty): |1/a − 1/b| > jump ⇔ |a − b| > jump·a·b,
@@ -240,7 +266,7 @@ void Texturer::PreparePod(int pod, const Mesh& mesh) {
   // Each round is a separable 3×3 min filter + 1: plain row loops that
   // vectorize, a few rounds at our resolutions.
   const float max_radius_px = options_.discontinuity_radius_m * static_cast<float>(s.color_camera.intrinsics.fx) *
-                              s.raster.max_inv_z();
+                              s.max_iz;
   const int rounds = std::min(kMaxRounds, static_cast<int>(std::floor(max_radius_px)));
   const int rh = s.ry1 - s.ry0 + 1;
   s.tmp.resize(static_cast<size_t>(rw) * rh);
@@ -341,7 +367,7 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
     // Hidden if the rasterized surface at the pixel is nearer by more than
     // the tolerance (1/iz: the raster's depth; empty pixels never hide).
     if (o.visibility_test) {
-      const float izr = s.raster.inv_z()[pix];
+      const float izr = s.iz[pix];
       if (izr > 0.0f && pcz * izr > 1.0f + o.visibility_tolerance_m * izr) return;
     }
     bool near_edge = false;
@@ -672,7 +698,14 @@ void Texturer::TextureMesh(const RgbdFrameSet& frames, Mesh* mesh, const std::ve
   mesh->colors.resize(n);
 
   const TimePoint t0 = NowCpu();
-  pool_->Run(static_cast<int>(pods_.size()), [&](int pod, int) { PreparePod(pod, *visibility_mesh); });
+#if defined(__SSE2__)
+  if (simd_pods_) {
+    RasterizeAllPods(*visibility_mesh);
+  } else
+#endif
+  {
+    pool_->Run(static_cast<int>(pods_.size()), [&](int pod, int) { PreparePod(pod, *visibility_mesh); });
+  }
   stats_.ms_raster = MsSince(t0);
 
   const TimePoint t1 = NowCpu();
@@ -797,5 +830,203 @@ void Texturer::TransferColors(Mesh* mesh) {
     }
   });
 }
+
+
+#if defined(__SSE2__)
+namespace {
+constexpr int kSubShift = 8;
+constexpr int64_t kSub = int64_t{1} << kSubShift;  // sub-pixel steps per pixel (as MeshRasterizer)
+constexpr float kMaxCoord = 1048576.0f;             // |screen coordinate| limit, pixels
+inline bool OwnsTies(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
+  const int64_t dy = by - ay;
+  return dy > 0 || (dy == 0 && bx - ax < 0);
+}
+}  // namespace
+
+// Visibility depth maps of all pods at once. Same pixels and the same 1/z
+// values as MeshRasterizer (depth only, back faces culled in screen space):
+//  1. every vertex is projected into all pods, four pods per SSE2 vector
+//     (pinhole; snapped to 1/256 px exactly as MeshRasterizer does), into
+//     one record per vertex and group of four pods (x[4], y[4], 1/z[4]);
+//  2. per group of four pods (one task each), every triangle is tested in
+//     the four pods at once: all three vertices projected, a pixel centre
+//     inside its box, not clearly back-facing (a float area with a margin: a
+//     superset of what is drawn). On a mesh finer than the pixels most
+//     triangles stop here, for a fraction of the scalar cost and without
+//     mispredicted branches. Survivors are drawn at once in their pod with
+//     MeshRasterizer's exact integer edge functions (the records are still
+//     in cache);
+//  3. per pod, the discontinuity map.
+void Texturer::RasterizeAllPods(const Mesh& mesh) {
+  const size_t n = mesh.num_vertices();
+  const size_t groups = pod_simd_.size();
+  const size_t stride = 4 * groups;
+  screen_.resize(n * groups * 12);
+  const int threads = pool_->num_threads();
+  max_iz_lanes_.assign(static_cast<size_t>(threads) * stride, 0.0f);
+  // 1. Projection.
+  const int vchunks = static_cast<int>((n + kVertexChunk - 1) / kVertexChunk);
+  pool_->Run(vchunks, [&](int chunk, int thread) {
+    const size_t begin = static_cast<size_t>(chunk) * kVertexChunk, end = std::min(n, begin + kVertexChunk);
+    const __m128 near = _mm_set1_ps(kNear), one = _mm_set1_ps(1.0f), sub = _mm_set1_ps(static_cast<float>(kSub));
+    const __m128 half = _mm_set1_ps(0.5f), lim = _mm_set1_ps(kMaxCoord);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    float* max_lane = max_iz_lanes_.data() + static_cast<size_t>(thread) * stride;
+    for (size_t g = 0; g < groups; ++g) {
+      const PodSimd& q = pod_simd_[g];
+      __m128 mx = _mm_loadu_ps(max_lane + 4 * g);
+      float* rec = screen_.data() + (g * n + begin) * 12;
+      for (size_t i = begin; i < end; ++i, rec += 12) {
+        const Vector3f& p = mesh.positions[i];
+        const __m128 px = _mm_set1_ps(p.x()), py = _mm_set1_ps(p.y()), pz = _mm_set1_ps(p.z());
+        const auto row = [&](const __m128* r, __m128 t) {
+          return _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r[0], px), _mm_mul_ps(r[1], py)), _mm_mul_ps(r[2], pz)), t);
+        };
+        const __m128 cx = row(q.r0, q.tx), cy = row(q.r1, q.ty), cz = row(q.r2, q.tz);
+        const __m128 front = _mm_cmpge_ps(cz, near);
+        const __m128 izv = _mm_div_ps(one, cz);
+        mx = _mm_max_ps(mx, _mm_and_ps(front, izv));
+        const __m128 fxp = _mm_add_ps(_mm_mul_ps(_mm_mul_ps(q.fx, cx), izv), q.ccx);
+        const __m128 fyp = _mm_add_ps(_mm_mul_ps(_mm_mul_ps(q.fy, cy), izv), q.ccy);
+        const __m128 ok = _mm_and_ps(front, _mm_and_ps(_mm_cmplt_ps(_mm_and_ps(fxp, abs_mask), lim),
+                                                        _mm_cmplt_ps(_mm_and_ps(fyp, abs_mask), lim)));
+        // floor(v·256 + 0.5) as FloorToInt: truncate, one down where it rounded up.
+        const auto snap = [&](__m128 v) {
+          const __m128 f = _mm_add_ps(_mm_mul_ps(v, sub), half);
+          const __m128i t = _mm_cvttps_epi32(f);
+          return _mm_add_epi32(t, _mm_castps_si128(_mm_cmpgt_ps(_mm_cvtepi32_ps(t), f)));  // −1 where t > f
+        };
+        const __m128i oki = _mm_castps_si128(ok);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(rec), _mm_and_si128(snap(fxp), oki));
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(rec + 4), _mm_and_si128(snap(fyp), oki));
+        _mm_storeu_ps(rec + 8, _mm_and_ps(izv, ok));
+      }
+      _mm_storeu_ps(max_lane + 4 * g, mx);
+    }
+  });
+  for (size_t pi = 0; pi < pods_.size(); ++pi) {
+    float m = 0.0f;
+    for (int t = 0; t < threads; ++t) m = std::max(m, max_iz_lanes_[static_cast<size_t>(t) * stride + pi]);
+    pods_[pi]->max_iz = m;
+  }
+  // 2. Per group of four pods: test every triangle, draw the survivors.
+  const size_t nt = mesh.num_triangles();
+  const size_t num_pods = pods_.size();
+  const bool cull = options_.cull_back_faces;
+  pool_->Run(static_cast<int>(groups), [&](int gi, int) {
+    const size_t g = static_cast<size_t>(gi);
+    const PodSimd& q = pod_simd_[g];
+    PodState* ps[4] = {nullptr, nullptr, nullptr, nullptr};
+    for (size_t lane = 0; lane < 4 && 4 * g + lane < num_pods; ++lane) {
+      PodState& s = *pods_[4 * g + lane];
+      const Intrinsics& k = s.color_camera.intrinsics;
+      s.w = k.width, s.h = k.height;
+      s.iz.assign(static_cast<size_t>(s.w) * s.h, 0.0f);
+      s.box[0] = s.w, s.box[1] = s.h, s.box[2] = -1, s.box[3] = -1;
+      ps[lane] = &s;
+    }
+    const float* recs = screen_.data() + g * n * 12;
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 margin = _mm_set1_ps(1.0f / 65536.0f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    const __m128i c255 = _mm_set1_epi32(static_cast<int>(kSub - 1)), minus1 = _mm_set1_epi32(-1);
+    for (size_t ti = 0; ti < nt; ++ti) {
+      const auto& tr = mesh.triangles[ti];
+      const float* r0 = recs + static_cast<size_t>(tr[0]) * 12;
+      const float* r1 = recs + static_cast<size_t>(tr[1]) * 12;
+      const float* r2 = recs + static_cast<size_t>(tr[2]) * 12;
+      const auto ldx = [](const float* r) {
+        return _mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r)));
+      };
+      const __m128 x0 = ldx(r0), x1 = ldx(r1), x2 = ldx(r2);
+      const __m128 y0 = ldx(r0 + 4), y1 = ldx(r1 + 4), y2 = ldx(r2 + 4);
+      const __m128 valid = _mm_and_ps(_mm_cmpgt_ps(_mm_loadu_ps(r0 + 8), zero),
+                                      _mm_and_ps(_mm_cmpgt_ps(_mm_loadu_ps(r1 + 8), zero),
+                                                 _mm_cmpgt_ps(_mm_loadu_ps(r2 + 8), zero)));
+      // Box in whole pixels (the float values of the snapped integers; far
+      // off-screen ones may round but stay off-screen on the same side).
+      const __m128i xa = _mm_srai_epi32(_mm_add_epi32(_mm_cvttps_epi32(_mm_min_ps(_mm_min_ps(x0, x1), x2)), c255), kSubShift);
+      const __m128i xb = _mm_srai_epi32(_mm_cvttps_epi32(_mm_max_ps(_mm_max_ps(x0, x1), x2)), kSubShift);
+      const __m128i ya = _mm_srai_epi32(_mm_add_epi32(_mm_cvttps_epi32(_mm_min_ps(_mm_min_ps(y0, y1), y2)), c255), kSubShift);
+      const __m128i yb = _mm_srai_epi32(_mm_cvttps_epi32(_mm_max_ps(_mm_max_ps(y0, y1), y2)), kSubShift);
+      // Inside: max(xa, 0) ≤ min(xb, w − 1) ⇔ xa ≤ xb, xa ≤ w − 1, xb ≥ 0 (same for y).
+      __m128i in = _mm_andnot_si128(_mm_cmpgt_epi32(xa, xb), minus1);
+      in = _mm_andnot_si128(_mm_cmpgt_epi32(ya, yb), in);
+      in = _mm_andnot_si128(_mm_cmpgt_epi32(xa, q.wlast), in);
+      in = _mm_andnot_si128(_mm_cmpgt_epi32(ya, q.hlast), in);
+      in = _mm_andnot_si128(_mm_cmplt_epi32(xb, _mm_setzero_si128()), in);
+      in = _mm_andnot_si128(_mm_cmplt_epi32(yb, _mm_setzero_si128()), in);
+      __m128 keep = _mm_and_ps(valid, _mm_castsi128_ps(in));
+      if (cull) {
+        // Back-facing when the area is > 0; kept unless clearly so.
+        const __m128 t1 = _mm_mul_ps(_mm_sub_ps(x1, x0), _mm_sub_ps(y2, y0));
+        const __m128 t2 = _mm_mul_ps(_mm_sub_ps(x2, x0), _mm_sub_ps(y1, y0));
+        const __m128 tol = _mm_mul_ps(margin, _mm_add_ps(_mm_and_ps(t1, abs_mask), _mm_and_ps(t2, abs_mask)));
+        keep = _mm_and_ps(keep, _mm_cmple_ps(_mm_sub_ps(t1, t2), tol));
+      }
+      for (int bits = _mm_movemask_ps(keep); bits != 0; bits &= bits - 1) {
+        const int lane = __builtin_ctz(static_cast<unsigned>(bits));
+        PodState& s = *ps[lane];
+        // The exact test and drawing, as MeshRasterizer.
+        int64_t x[3], y[3];
+        float iz[3];
+        const float* rr[3] = {r0, r1, r2};
+        for (int c = 0; c < 3; ++c) {
+          int32_t xi, yi;
+          std::memcpy(&xi, rr[c] + lane, 4);
+          std::memcpy(&yi, rr[c] + 4 + lane, 4);
+          x[c] = xi, y[c] = yi, iz[c] = rr[c][8 + lane];
+        }
+        const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
+        const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
+        const int bxa = static_cast<int>(std::max<int64_t>(0, (minx + kSub - 1) >> kSubShift));
+        const int bxb = static_cast<int>(std::min<int64_t>(s.w - 1, maxx >> kSubShift));
+        if (bxa > bxb) continue;
+        const int bya = static_cast<int>(std::max<int64_t>(0, (miny + kSub - 1) >> kSubShift));
+        const int byb = static_cast<int>(std::min<int64_t>(s.h - 1, maxy >> kSubShift));
+        if (bya > byb) continue;
+        int64_t area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+        if (area == 0) continue;
+        if (cull && area > 0) continue;
+        if (area < 0) {
+          std::swap(x[1], x[2]);
+          std::swap(y[1], y[2]);
+          std::swap(iz[1], iz[2]);
+          area = -area;
+        }
+        s.box[0] = std::min(s.box[0], bxa), s.box[1] = std::min(s.box[1], bya);
+        s.box[2] = std::max(s.box[2], bxb), s.box[3] = std::max(s.box[3], byb);
+        const float inv_area = 1.0f / static_cast<float>(area);
+        const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
+        int64_t dxp[3], dyp[3], e_row[3];
+        for (int e = 0; e < 3; ++e) {
+          const int a = ea[e], b = eb[e];
+          dxp[e] = -(y[b] - y[a]) * kSub;
+          dyp[e] = (x[b] - x[a]) * kSub;
+          e_row[e] = (x[b] - x[a]) * (int64_t{bya} * kSub - y[a]) - (y[b] - y[a]) * (int64_t{bxa} * kSub - x[a]);
+          if (!OwnsTies(x[a], y[a], x[b], y[b])) e_row[e] -= 1;
+        }
+        const float diz_dx = (static_cast<float>(dxp[0]) * iz[0] + static_cast<float>(dxp[1]) * iz[1] +
+                              static_cast<float>(dxp[2]) * iz[2]) * inv_area;
+        for (int py = bya; py <= byb; ++py) {
+          int64_t e0 = e_row[0], e1 = e_row[1], e2 = e_row[2];
+          float izp = (static_cast<float>(e0) * iz[0] + static_cast<float>(e1) * iz[1] + static_cast<float>(e2) * iz[2]) *
+                      inv_area;
+          float* buf = s.iz.data() + static_cast<size_t>(py) * s.w;
+          for (int px = bxa; px <= bxb; ++px, e0 += dxp[0], e1 += dxp[1], e2 += dxp[2], izp += diz_dx) {
+            if ((e0 | e1 | e2) < 0) continue;
+            if (izp > buf[px]) buf[px] = izp;
+          }
+          e_row[0] += dyp[0];
+          e_row[1] += dyp[1];
+          e_row[2] += dyp[2];
+        }
+      }
+    }
+  });
+  // 3. Discontinuity maps.
+  pool_->Run(static_cast<int>(num_pods), [&](int pod, int) { DiscontinuityMap(pod); });
+}
+#endif
 
 }  // namespace holo

@@ -143,6 +143,8 @@ class Texturer {
   struct PodState;
   struct ThreadScratch;
   void PreparePod(int pod, const Mesh& mesh);
+  void DiscontinuityMap(int pod);
+  void RasterizeAllPods(const Mesh& mesh);
   void ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const std::vector<Eigen::Vector3f>& normals,
                      size_t begin, size_t end, ThreadScratch* scratch);
   void FillUnobserved(const RgbdFrameSet& frames, Mesh* mesh, const std::vector<Eigen::Vector3f>& normals);
@@ -165,6 +167,9 @@ class Texturer {
   struct PodSimd;
   std::vector<PodSimd> pod_simd_;  // pods in groups of 4 (SSE2 builds, undistorted pods)
   bool simd_pods_ = false;
+  // RasterizeAllPods: projected vertices (per group of four pods and vertex:
+  // x[4], y[4] in 1/256 px as int32, 1/z[4]) and the per-thread largest 1/z per pod.
+  std::vector<float> screen_, max_iz_lanes_;
   std::vector<std::unique_ptr<ThreadScratch>> scratch_;
   std::vector<Eigen::Vector3f> normals_;  // when the mesh has none
   std::vector<uint8_t> state_;            // per vertex: how it was coloured
