@@ -32,11 +32,12 @@ void Progress(const BenchArgs& args, const char* what) {
 // pays (a copy), not the studio's rendering.
 class PrerenderedSource final : public FrameSource {
  public:
-  PrerenderedSource(const Rig& rig, std::vector<RgbdFrameSet> frames) : rig_(rig), frames_(std::move(frames)) {}
+  PrerenderedSource(const Rig& rig, std::shared_ptr<const std::vector<RgbdFrameSet>> frames)
+      : rig_(rig), frames_(std::move(frames)) {}
   const Rig& rig() const override { return rig_; }
   Status Next(RgbdFrameSet* out) override {
-    if (next_ >= frames_.size()) return OutOfRange("end of the prerendered frames");
-    const RgbdFrameSet& in = frames_[next_++];
+    if (next_ >= frames_->size()) return OutOfRange("end of the prerendered frames");
+    const RgbdFrameSet& in = (*frames_)[next_++];
     out->frame_index = in.frame_index;
     out->frames.resize(in.frames.size());
     for (size_t p = 0; p < in.frames.size(); ++p) {
@@ -45,16 +46,16 @@ class PrerenderedSource final : public FrameSource {
     }
     return OkStatus();
   }
-  int64_t num_frames() const override { return static_cast<int64_t>(frames_.size()); }
+  int64_t num_frames() const override { return static_cast<int64_t>(frames_->size()); }
   Status Seek(int64_t index) override {
-    if (index < 0 || index > static_cast<int64_t>(frames_.size())) return OutOfRange("seek past the end");
+    if (index < 0 || index > static_cast<int64_t>(frames_->size())) return OutOfRange("seek past the end");
     next_ = static_cast<size_t>(index);
     return OkStatus();
   }
 
  private:
   Rig rig_;
-  std::vector<RgbdFrameSet> frames_;
+  std::shared_ptr<const std::vector<RgbdFrameSet>> frames_;  // shared by the runs' sources
   size_t next_ = 0;
 };
 
@@ -87,7 +88,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     return 2;
   }
   // Frames for the prerendered source, rendered once (untimed).
-  std::vector<RgbdFrameSet> prerendered;
+  auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();
   if (src == "prerendered") {
     Progress(args, "prerendering the frames into memory");
     auto s = SyntheticStudio::Create(workload->rig, workload->studio);
@@ -95,8 +96,8 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
       std::fprintf(stderr, "fusion: %s\n", s.status().message().c_str());
       return 1;
     }
-    prerendered.resize(static_cast<size_t>(options.frames));
-    for (auto& f : prerendered)
+    prerendered->resize(static_cast<size_t>(options.frames));
+    for (auto& f : *prerendered)
       if (Status st = (*s)->Next(&f); !st.ok()) {
         std::fprintf(stderr, "fusion: prerendering: %s\n", st.message().c_str());
         return 1;
