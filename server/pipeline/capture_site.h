@@ -43,7 +43,7 @@ struct CaptureSiteOptions {
   bool color_calibration = true;
   // One mean-field update instead of the segmenter's default two: on S8-QVGA
   // (20 frames scored through the pipeline) mask IoU 0.9682 → 0.9687,
-  // Chamfer 6.484 → 6.491 mm, PSNR 18.892 → 18.890 dB, for 3.4 CPU-ms less
+  // Chamfer 6.484 → 6.491 mm, PSNR 18.892 → 18.890 dB, for ~3 CPU-ms less
   // per frame (docs/texturing.md, "Pipeline speed").
   SegmenterOptions segment = [] {
     SegmenterOptions o;
