@@ -146,7 +146,7 @@ Texturer::Texturer(const Rig& rig, TextureOptions options) : rig_(rig), options_
 #if defined(__SSE2__)
   // Pods in groups of four for the vectorized view tests (undistorted colour
   // cameras only; padding lanes have z = −1 and fail the depth test).
-  simd_pods_ = !pods_.empty();
+  simd_pods_ = options_.vectorize && !pods_.empty();
   for (const auto& s : pods_) simd_pods_ = simd_pods_ && !s->color_camera.intrinsics.HasDistortion();
   if (simd_pods_) {
     pod_simd_.resize((pods_.size() + 3) / 4);
@@ -401,16 +401,17 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
 #if defined(__SSE2__)
     if (simd_pods_) {
       // Facing, depth and image-bounds tests for four views at a time (the
-      // same float operations in the same order as the scalar path below,
-      // so the same results), then the rest for the views left, in pod order.
+      // same float operations in the same order as the scalar path below —
+      // Eigen sums three products as a0 + (a1 + a2) — so the same results),
+      // then the rest for the views left, in pod order.
       const __m128 px = _mm_set1_ps(p.x()), py = _mm_set1_ps(p.y()), pz = _mm_set1_ps(p.z());
       const __m128 nx = _mm_set1_ps(n.x()), ny = _mm_set1_ps(n.y()), nz = _mm_set1_ps(n.z());
       for (size_t g = 0; g < pod_simd_.size(); ++g) {
         const PodSimd& q = pod_simd_[g];
         const __m128 tx = _mm_sub_ps(q.cx, px), ty = _mm_sub_ps(q.cy, py), tz = _mm_sub_ps(q.cz, pz);
-        const __m128 ndv_raw = _mm_add_ps(_mm_add_ps(_mm_mul_ps(nx, tx), _mm_mul_ps(ny, ty)), _mm_mul_ps(nz, tz));
+        const __m128 ndv_raw = _mm_add_ps(_mm_mul_ps(nx, tx), _mm_add_ps(_mm_mul_ps(ny, ty), _mm_mul_ps(nz, tz)));
         const auto row = [&](const __m128* r, __m128 t) {
-          return _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r[0], px), _mm_mul_ps(r[1], py)), _mm_mul_ps(r[2], pz)), t);
+          return _mm_add_ps(_mm_add_ps(_mm_mul_ps(r[0], px), _mm_add_ps(_mm_mul_ps(r[1], py), _mm_mul_ps(r[2], pz))), t);
         };
         const __m128 pcx = row(q.r0, q.tx), pcy = row(q.r1, q.ty), pcz = row(q.r2, q.tz);
         const __m128 u = _mm_add_ps(_mm_div_ps(_mm_mul_ps(q.fx, pcx), pcz), q.ccx);
@@ -427,7 +428,7 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
         _mm_store_ps(av, v);
         _mm_store_ps(az, pcz);
         _mm_store_ps(andv, ndv_raw);
-        _mm_store_ps(alen, _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(tx, tx), _mm_mul_ps(ty, ty)), _mm_mul_ps(tz, tz))));
+        _mm_store_ps(alen, _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(tx, tx), _mm_add_ps(_mm_mul_ps(ty, ty), _mm_mul_ps(tz, tz)))));
         for (; bits != 0; bits &= bits - 1) {
           const int lane = __builtin_ctz(static_cast<unsigned>(bits));
           consider(4 * g + static_cast<size_t>(lane), Eigen::Vector2f(au[lane], av[lane]), az[lane], andv[lane], alen[lane]);
@@ -880,7 +881,7 @@ void Texturer::RasterizeAllPods(const Mesh& mesh) {
         const Vector3f& p = mesh.positions[i];
         const __m128 px = _mm_set1_ps(p.x()), py = _mm_set1_ps(p.y()), pz = _mm_set1_ps(p.z());
         const auto row = [&](const __m128* r, __m128 t) {
-          return _mm_add_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(r[0], px), _mm_mul_ps(r[1], py)), _mm_mul_ps(r[2], pz)), t);
+          return _mm_add_ps(_mm_add_ps(_mm_mul_ps(r[0], px), _mm_add_ps(_mm_mul_ps(r[1], py), _mm_mul_ps(r[2], pz))), t);
         };
         const __m128 cx = row(q.r0, q.tx), cy = row(q.r1, q.ty), cz = row(q.r2, q.tz);
         const __m128 front = _mm_cmpge_ps(cz, near);

@@ -78,6 +78,10 @@ struct TextureOptions {
   bool normal_weighting = true;
   // Use RgbdFrame::mask when present.
   bool use_masks = true;
+  // Use the SSE2 paths (four pods per vector) where they apply: undistorted
+  // colour cameras on an SSE2 build. Off: the scalar reference path. Both
+  // give the same results (tested); this switch exists for that test.
+  bool vectorize = true;
   // Worker threads (0 = hardware concurrency).
   int threads = 0;
   // Texturing on a simplified mesh (0 = off: every vertex is textured
