@@ -247,6 +247,14 @@ ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--pipeline-only") a.pipeline_only = true;
     else if (extra[i] == "--pipeline-frames") a.pipeline_options.frames = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--png") a.pipeline_options.png_dir = value();
+    else if (extra[i] == "--texture-cluster-mm") a.pipeline_options.texture_cluster_mm = std::atof(value().c_str());
+    else if (extra[i] == "--texture-transfer") a.pipeline_options.texture_transfer = std::atoi(value().c_str());
+    else if (extra[i] == "--seg-iterations") a.pipeline_options.seg_iterations = std::atoi(value().c_str());
+    else if (extra[i] == "--seg-downsample") a.pipeline_options.seg_downsample = std::atoi(value().c_str());
+    else if (extra[i] == "--seg-grid-px") a.pipeline_options.seg_grid_px = std::atof(value().c_str());
+    else if (extra[i] == "--eval-every") a.pipeline_options.eval_every = std::max(1, std::atoi(value().c_str()));
+    else if (extra[i] == "--pipeline-source") a.pipeline_options.source = value();
+    else if (extra[i] == "--cpu-frames") a.pipeline_options.cpu_frames = std::max(0, std::atoi(value().c_str()));
     else {
       std::fprintf(stderr, "fusion: unknown option %s\n", extra[i].c_str());
       a.ok = false;

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "common/file_util.h"
+#include "server/capture/dataset.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "fusion_pipeline.h"
@@ -26,6 +27,40 @@ void Progress(const BenchArgs& args, const char* what) {
   if (!args.json) std::fprintf(stderr, "fusion pipeline: %s\n", what);
 }
 
+// Frames rendered before the run, handed out by copy: a stand-in for pods
+// that deliver frames into memory, so that acquire costs what a live site
+// pays (a copy), not the studio's rendering.
+class PrerenderedSource final : public FrameSource {
+ public:
+  PrerenderedSource(const Rig& rig, std::shared_ptr<const std::vector<RgbdFrameSet>> frames)
+      : rig_(rig), frames_(std::move(frames)) {}
+  const Rig& rig() const override { return rig_; }
+  Status Next(RgbdFrameSet* out) override {
+    if (next_ >= frames_->size()) return OutOfRange("end of the prerendered frames");
+    const RgbdFrameSet& in = (*frames_)[next_++];
+    out->frame_index = in.frame_index;
+    out->frames.resize(in.frames.size());
+    for (size_t p = 0; p < in.frames.size(); ++p) {
+      // Assignment into the recycled item reuses its buffers once they have the size.
+      out->frames[p] = in.frames[p];
+    }
+    return OkStatus();
+  }
+  int64_t num_frames() const override { return static_cast<int64_t>(frames_->size()); }
+  Status Seek(int64_t index) override {
+    if (index < 0 || index > static_cast<int64_t>(frames_->size())) return OutOfRange("seek past the end");
+    next_ = static_cast<size_t>(index);
+    return OkStatus();
+  }
+
+ private:
+  Rig rig_;
+  std::shared_ptr<const std::vector<RgbdFrameSet>> frames_;  // shared by the runs' sources
+  size_t next_ = 0;
+};
+
+std::string SourceName(const std::string& src) { return src.rfind("dataset:", 0) == 0 ? "dataset" : src; }
+
 }  // namespace
 
 int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& options) {
@@ -39,21 +74,70 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   site_options.masks = MaskSource::kSegment;
   site_options.tsdf.voxel_size = workload->voxel_size_m;
   site_options.pipeline.max_frames = options.frames;
+  if (options.texture_cluster_mm >= 0)
+    site_options.texture_options.cluster_size_m = static_cast<float>(options.texture_cluster_mm * 1e-3);
+  if (options.seg_iterations >= 0) site_options.segment.crf_iterations = options.seg_iterations;
+  if (options.seg_downsample >= 0) site_options.segment.downsample = options.seg_downsample;
+  if (options.seg_grid_px >= 0) site_options.segment.grid_spatial_px = static_cast<float>(options.seg_grid_px);
+  if (options.texture_transfer >= 0) site_options.texture_options.cluster_transfer = options.texture_transfer;
 
-  auto make_site = [&](StudioOptions studio_options, std::unique_ptr<SyntheticStudio>* studio,
-                       std::unique_ptr<SyntheticStudio>* empty) -> StatusOr<std::unique_ptr<CaptureSite>> {
-    HOLO_ASSIGN_OR_RETURN(*studio, SyntheticStudio::Create(workload->rig, studio_options));
+  const std::string& src = options.source;
+  if (src != "synthetic" && src != "prerendered" && src.rfind("dataset:", 0) != 0) {
+    std::fprintf(stderr, "fusion: --pipeline-source must be synthetic, prerendered or dataset:DIR, got '%s'\n",
+                 src.c_str());
+    return 2;
+  }
+  // Frames for the prerendered source, rendered once (untimed).
+  auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();
+  if (src == "prerendered") {
+    Progress(args, "prerendering the frames into memory");
+    auto s = SyntheticStudio::Create(workload->rig, workload->studio);
+    if (!s.ok()) {
+      std::fprintf(stderr, "fusion: %s\n", s.status().message().c_str());
+      return 1;
+    }
+    prerendered->resize(static_cast<size_t>(options.frames));
+    for (auto& f : *prerendered)
+      if (Status st = (*s)->Next(&f); !st.ok()) {
+        std::fprintf(stderr, "fusion: prerendering: %s\n", st.message().c_str());
+        return 1;
+      }
+  }
+  // One site: `studio` is the scoring truth (and the source when synthetic).
+  struct Site {
+    std::unique_ptr<SyntheticStudio> studio, empty;
+    std::unique_ptr<FrameSource> source;  // prerendered or dataset
+    std::unique_ptr<CaptureSite> site;
+  };
+  auto make_site = [&](Site* out) -> Status {
+    StudioOptions studio_options = workload->studio;
+    HOLO_ASSIGN_OR_RETURN(out->studio, SyntheticStudio::Create(workload->rig, studio_options));
     studio_options.empty_room = true;
-    HOLO_ASSIGN_OR_RETURN(*empty, SyntheticStudio::Create(workload->rig, studio_options));
-    return CaptureSite::Create(studio->get(), empty->get(), nullptr, site_options);
+    HOLO_ASSIGN_OR_RETURN(out->empty, SyntheticStudio::Create(workload->rig, studio_options));
+    FrameSource* source = out->studio.get();
+    if (src == "prerendered") {
+      out->source = std::make_unique<PrerenderedSource>(workload->rig, prerendered);
+      source = out->source.get();
+    } else if (src.rfind("dataset:", 0) == 0) {
+      HOLO_ASSIGN_OR_RETURN(auto reader, DatasetReader::Open(src.substr(8)));
+      if (reader->rig().pods.size() != workload->rig.pods.size())
+        return InvalidArgument("dataset " + src.substr(8) + " has " + std::to_string(reader->rig().pods.size()) +
+                               " pods, workload " + wl + " has " + std::to_string(workload->rig.pods.size()));
+      out->source = std::move(reader);
+      source = out->source.get();
+    }
+    HOLO_ASSIGN_OR_RETURN(out->site, CaptureSite::Create(source, out->empty.get(), nullptr, site_options));
+    return OkStatus();
   };
 
   // 1. Throughput: as fast as the stages go. The sink keeps a few frames for scoring.
   Progress(args, "learning the background, then the throughput run");
-  std::unique_ptr<SyntheticStudio> studio, empty;
-  auto site = make_site(workload->studio, &studio, &empty);
-  if (!site.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", site.status().message().c_str());
+  Site main_site;
+  Status made = make_site(&main_site);
+  std::unique_ptr<SyntheticStudio>& studio = main_site.studio;
+  std::unique_ptr<CaptureSite>* site = &main_site.site;
+  if (!made.ok()) {
+    std::fprintf(stderr, "fusion: %s\n", made.message().c_str());
     return 1;
   }
   std::vector<Kept> kept;
@@ -75,14 +159,25 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   for (const auto& t : stats->per_frame)
     total.push_back(t.acquire_ms + t.segment_ms + t.fuse_ms + t.mesh_ms + t.texture_ms);
   const StageTimings med = MedianTimings(*stats);
-  auto q = [](const char* stage) { return std::map<std::string, std::string>{{"stage", stage}, {"mode", "pipeline"}}; };
+  auto q = [&](const char* stage) {
+    return std::map<std::string, std::string>{{"stage", stage}, {"mode", "pipeline"}, {"source", SourceName(src)}};
+  };
   EmitFigure("fusion", wl, "ms", med.acquire_ms, "ms", q("acquire"));
   EmitFigure("fusion", wl, "ms", med.segment_ms, "ms", q("segment"));
   EmitFigure("fusion", wl, "ms", med.fuse_ms, "ms", q("fuse"));
   EmitFigure("fusion", wl, "ms", med.mesh_ms, "ms", q("mesh"));
   EmitFigure("fusion", wl, "ms", med.texture_ms, "ms", q("texture"));
   EmitFigure("fusion", wl, "ms", Median(total), "ms", q("total"));
-  EmitFigure("fusion", wl, "fps", stats->fps, "1/s", {{"mode", "pipeline"}, {"frames", std::to_string(stats->frames)}});
+  EmitFigure("fusion", wl, "fps", stats->fps, "1/s",
+             {{"mode", "pipeline"}, {"source", SourceName(src)}, {"frames", std::to_string(stats->frames)}});
+  // CPU of all threads per frame in the concurrent run, and the rate two
+  // cores could sustain at that cost if nothing else ran (a capacity
+  // estimate: the shared machine's wall-clock fps depends on others' load).
+  const double cpu_per_frame = stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0;
+  EmitFigure("fusion", wl, "cpu_ms", cpu_per_frame, "ms", q("total"));
+  if (cpu_per_frame > 0)
+    EmitFigure("fusion", wl, "fps_capacity_2cores", 2000.0 / cpu_per_frame, "1/s",
+               {{"mode", "pipeline"}, {"source", SourceName(src)}, {"estimate", "2 cores / cpu_ms per frame"}});
   // The slowest stage bounds throughput.
   const std::pair<double, const char*> stages[] = {{med.acquire_ms, "acquire"},
                                                    {med.segment_ms, "segment"},
@@ -95,24 +190,57 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     std::fprintf(stderr, "fusion pipeline: %.1f fps, bottleneck stage %s (%.1f ms)\n", stats->fps, slowest->second,
                  slowest->first);
 
-  // 2. Latency: paced like a live camera a little below the measured rate, so
+  // 2. CPU per stage: the same stages one at a time (serial mode), process
+  // CPU of all threads while each ran.
+  if (options.cpu_frames > 0) {
+    Progress(args, "serial run for CPU per stage");
+    Site cs;
+    site_options.pipeline.serial = true;
+    site_options.pipeline.max_frames = std::min(options.frames, options.cpu_frames);
+    if (Status s = make_site(&cs); s.ok()) {
+      auto st = cs.site->Run([](const FrameWork&) { return OkStatus(); });
+      if (st.ok()) {
+        const StageTimings c = MedianTimings(*st);
+        EmitFigure("fusion", wl, "cpu_ms", c.acquire_cpu_ms, "ms", q("acquire_serial"));
+        EmitFigure("fusion", wl, "cpu_ms", c.segment_cpu_ms, "ms", q("segment_serial"));
+        EmitFigure("fusion", wl, "cpu_ms", c.fuse_cpu_ms, "ms", q("fuse_serial"));
+        EmitFigure("fusion", wl, "cpu_ms", c.mesh_cpu_ms, "ms", q("mesh_serial"));
+        EmitFigure("fusion", wl, "cpu_ms", c.texture_cpu_ms, "ms", q("texture_serial"));
+        const double sum = st->frames > 0 ? st->cpu_ms / static_cast<double>(st->frames) : 0;
+        EmitFigure("fusion", wl, "cpu_ms", sum, "ms", q("total_serial"));
+        if (!args.json)
+          std::fprintf(stderr,
+                       "fusion pipeline: CPU ms per frame (serial): acquire %.1f segment %.1f fuse %.1f mesh %.1f "
+                       "texture %.1f; all %.1f\n",
+                       c.acquire_cpu_ms, c.segment_cpu_ms, c.fuse_cpu_ms, c.mesh_cpu_ms, c.texture_cpu_ms, sum);
+      } else {
+        std::fprintf(stderr, "fusion: serial run: %s\n", st.status().message().c_str());
+      }
+    } else {
+      std::fprintf(stderr, "fusion: serial run: %s\n", s.message().c_str());
+    }
+    site_options.pipeline.serial = false;
+  }
+
+  // 3. Latency: paced like a live camera a little below the measured rate, so
   // queues stay short and latency is what a viewer would see.
   const double pace = std::min(workload->studio.fps, 0.85 * stats->fps);
   if (pace > 0.5) {
     Progress(args, "paced run for latency");
-    std::unique_ptr<SyntheticStudio> s2, e2;
+    Site ps_site;
     site_options.pipeline.pace_fps = pace;
     site_options.pipeline.max_frames = std::min(options.frames, 45);
-    auto paced = make_site(workload->studio, &s2, &e2);
-    if (paced.ok()) {
-      auto ps = (*paced)->Run([](const FrameWork&) { return OkStatus(); });
+    if (make_site(&ps_site).ok()) {
+      auto ps = ps_site.site->Run([](const FrameWork&) { return OkStatus(); });
       if (ps.ok())
         EmitFigure("fusion", wl, "latency_ms", MedianLatencyMs(*ps), "ms",
-                   {{"mode", "pipeline"}, {"pace_fps", std::to_string(static_cast<int>(pace + 0.5))}});
+                   {{"mode", "pipeline"},
+                    {"source", SourceName(src)},
+                    {"pace_fps", std::to_string(static_cast<int>(pace + 0.5))}});
     }
   }
 
-  // 3. Quality of the kept frames against ground truth.
+  // 4. Quality of the kept frames against ground truth.
   if (!options.png_dir.empty()) {
     if (Status s = MakeDirs(options.png_dir); !s.ok()) {
       std::fprintf(stderr, "fusion: %s\n", s.message().c_str());

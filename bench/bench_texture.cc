@@ -7,7 +7,11 @@
 // discontinuity test, no normal weighting, no voting).
 //
 // Extra options: --png DIR writes every novel view (ours and truth) of the
-// first frame there; --threads N (default 2: the 2-core budget).
+// first frame there; --threads N (default 2: the 2-core budget); --fused
+// textures the TSDF mesh (fused from the ground-truth-masked depth at the
+// workload's voxel size, cleaned up) instead of the ground-truth mesh, as in
+// the capture pipeline; --cluster_mm C sets TextureOptions::cluster_size_m;
+// --only MODE runs one mode.
 #include <chrono>
 #include <ctime>
 #include <cstdio>
@@ -17,6 +21,8 @@
 #include <vector>
 
 #include "bench.h"
+#include "server/fusion/mesh_cleanup.h"
+#include "server/fusion/tsdf.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
 #include "server/texture/novel_view.h"
@@ -37,6 +43,8 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   int threads = 2;
   holo::TextureOptions tuned;  // defaults, or as set by the options below
   float offset_mm = 0;
+  bool fused = false;
+  std::string only;
   for (size_t i = 0; i < args.extra.size(); ++i) {
     if (args.extra[i] == "--png" && i + 1 < args.extra.size()) {
       png_dir = args.extra[++i];
@@ -50,6 +58,14 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
       tuned.alpha = std::strtof(args.extra[++i].c_str(), nullptr);
     } else if (args.extra[i] == "--radius_mm" && i + 1 < args.extra.size()) {
       tuned.discontinuity_radius_m = 1e-3f * std::strtof(args.extra[++i].c_str(), nullptr);
+    } else if (args.extra[i] == "--fused") {
+      fused = true;
+    } else if (args.extra[i] == "--cluster_mm" && i + 1 < args.extra.size()) {
+      tuned.cluster_size_m = 1e-3f * std::strtof(args.extra[++i].c_str(), nullptr);
+    } else if (args.extra[i] == "--cluster_transfer" && i + 1 < args.extra.size()) {
+      tuned.cluster_transfer = std::atoi(args.extra[++i].c_str());
+    } else if (args.extra[i] == "--only" && i + 1 < args.extra.size()) {
+      only = args.extra[++i];
     } else if (args.extra[i] == "--no_fallback") {
       tuned.discontinuity_fallback = false;
     } else if (args.extra[i] == "--geometry_offset_mm" && i + 1 < args.extra.size()) {
@@ -89,6 +105,16 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   modes[2].options.normal_weighting = false;
   modes[2].options.voting_levels = 0;
   for (auto& m : modes) m.options.threads = threads;
+  if (!only.empty()) {
+    std::erase_if(modes, [&](const Mode& m) { return m.name != only; });
+    if (modes.empty()) {
+      std::fprintf(stderr, "texture: --only must be holoportation, no_discontinuity or naive\n");
+      return 2;
+    }
+  }
+  holo::TsdfOptions tsdf_options;
+  tsdf_options.voxel_size = workload->voxel_size_m;
+  holo::TsdfVolume volume(tsdf_options);
 
   holo::NovelViewOptions nv;
   nv.intrinsics = workload->rig.pods.front().color;
@@ -109,6 +135,20 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   for (int64_t f : frame_ids) {
     (*studio)->RenderFrame(f, &set, &gt);
     holo::Mesh mesh = gt.foreground_mesh;
+    if (fused) {
+      // The capture pipeline's mesh: fused from the depth inside the true masks.
+      for (size_t p = 0; p < set.frames.size(); ++p) set.frames[p].mask = gt.mask[p];
+      volume.Reset();
+      holo::Status s = volume.Integrate(workload->rig, set);
+      if (s.ok()) {
+        volume.ExtractMesh(&mesh);
+        s = holo::CleanupMesh(holo::MeshCleanupOptions{}, &mesh);
+      }
+      if (!s.ok()) {
+        std::fprintf(stderr, "texture: fusing frame %lld: %s\n", static_cast<long long>(f), s.ToString().c_str());
+        return 1;
+      }
+    }
     // Simulated reconstruction error: every vertex moved along its normal
     // (positive: an inflated surface, as TSDF meshes of noisy depth tend to be).
     if (offset_mm != 0.0f)
@@ -159,10 +199,11 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
       if (!args.json) {
         const holo::TextureStats& st = texturer.stats();
         std::fprintf(stderr,
-                     "texture %s frame %lld %-16s %zu vertices: %.2f ms (raster %.2f sample %.2f fill %.2f), "
+                     "texture %s frame %lld %-16s %zu vertices (coarse %zu): %.2f ms (cluster %.2f raster %.2f sample %.2f fill %.2f "
+                     "transfer %.2f), "
                      "observed %zu edge-only %zu voted %zu min-variance %zu filled %zu fallback %zu\n",
-                     workload->name.c_str(), static_cast<long long>(f), mode.name.c_str(), st.num_vertices, st.ms_total,
-                     st.ms_raster, st.ms_sample, st.ms_fill, st.observed, st.edge_only, st.voted, st.min_variance,
+                     workload->name.c_str(), static_cast<long long>(f), mode.name.c_str(), st.num_vertices, st.coarse_vertices,
+                     st.ms_total, st.ms_cluster, st.ms_raster, st.ms_sample, st.ms_fill, st.ms_transfer, st.observed, st.edge_only, st.voted, st.min_variance,
                      st.filled_from_neighbours, st.fallback);
       }
     }
@@ -176,6 +217,8 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
                                             {"frames", std::to_string(frame_ids.size())},
                                             {"color_variation", "0"}};
     if (offset_mm != 0.0f) q["geometry_offset_mm"] = std::to_string(offset_mm);
+    if (fused) q["mesh"] = "fused";
+    if (mode.options.cluster_size_m > 0) q["cluster_mm"] = std::to_string(1e3f * mode.options.cluster_size_m);
     holo::bench::EmitFigure("texture", workload->name, "ms", holo::bench::Median(ms[mode.name]), "ms", q);
     // CPU time of all threads per frame: what other load on the machine barely changes.
     holo::bench::EmitFigure("texture", workload->name, "cpu_ms", holo::bench::Median(cpu_ms[mode.name]), "ms", q);

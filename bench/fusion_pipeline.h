@@ -12,10 +12,27 @@ struct PipelineBenchOptions {
   int eval_every = 10;    // keep every n-th frame's mesh and masks for scoring
   bool novel_views = true;
   std::string png_dir;    // if set: novel views (truth | ours) written here
+  // Where frames come from: "synthetic" (the studio renders while the
+  // pipeline runs: its CPU counts as acquire), "prerendered" (the same frames
+  // rendered into memory before the run: acquire is a copy, as with cameras
+  // that deliver frames), or "dataset:DIR" (a studio export of the same
+  // workload on disk: acquire decodes PNGs). The background is always the
+  // studio's empty room; scoring always uses the studio's ground truth.
+  std::string source = "synthetic";
+  // Texturer clustering cell, mm (< 0: the capture site's default) and transfer mode.
+  double texture_cluster_mm = -1;
+  int texture_transfer = -1;
+  // Segmenter overrides (< 0: the capture site's defaults).
+  int seg_iterations = -1, seg_downsample = -1;
+  double seg_grid_px = -1;
+  // Frames of the serial run that measures CPU-ms per stage (0: skip it).
+  int cpu_frames = 20;
 };
 
 // Prints JSON lines: ms per stage (segment, fuse, mesh, texture, total),
-// fps, latency_ms (paced run), mask_iou, chamfer_mm, completeness and
+// fps, cpu_ms per frame of the concurrent run and the fps two cores could
+// sustain at that cost, cpu_ms per stage (serial run), latency_ms (paced
+// run), mask_iou, chamfer_mm, completeness and
 // novel_view_psnr_db / novel_view_ssim (4 viewpoints no pod has), all with
 // "mode":"pipeline". Returns a process exit code.
 int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& options);

@@ -114,14 +114,22 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
   };
   if (segmenter_) st.segment = [this](FrameWork& w) { return segmenter_->Segment(&w.frames); };
   st.fuse_mesh = [this](FrameWork& w) -> Status {
+    // Process CPU splits into fuse and mesh only when the stages run one at a time.
+    const bool cpu = options_.pipeline.serial;
+    const double cpu0 = cpu ? ProcessCpuTimeMs() : 0;
     Stopwatch sw;
     volume_->Reset();
     HOLO_RETURN_IF_ERROR(volume_->Integrate(rig_, w.frames));
     w.timings.fuse_ms = sw.ElapsedMs();
+    const double cpu1 = cpu ? ProcessCpuTimeMs() : 0;
     sw.Restart();
     volume_->ExtractMesh(&w.mesh);
     HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.mesh));
     w.timings.mesh_ms = std::max(1e-6, sw.ElapsedMs());
+    if (cpu) {
+      w.timings.fuse_cpu_ms = std::max(1e-6, cpu1 - cpu0);
+      w.timings.mesh_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
+    }
     return OkStatus();
   };
   if (texturer_) st.texture = [this](FrameWork& w) { return texturer_->Apply(w.frames, &w.mesh); };

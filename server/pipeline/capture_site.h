@@ -41,7 +41,15 @@ struct CaptureSiteOptions {
   int background_frames = 30;
   // Estimate a per-pod colour mapping to pod 0 from the empty room and apply it.
   bool color_calibration = true;
-  SegmenterOptions segment;
+  // One mean-field update instead of the segmenter's default two: on S8-QVGA
+  // (20 frames scored through the pipeline) mask IoU 0.9682 → 0.9687,
+  // Chamfer 6.484 → 6.491 mm, PSNR 18.892 → 18.890 dB, for ~3 CPU-ms less
+  // per frame (docs/texturing.md, "Pipeline speed").
+  SegmenterOptions segment = [] {
+    SegmenterOptions o;
+    o.crf_iterations = 1;
+    return o;
+  }();
   TsdfOptions tsdf;
   MeshCleanupOptions cleanup;
   bool texture = true;

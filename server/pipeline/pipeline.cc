@@ -1,5 +1,7 @@
 #include "server/pipeline/pipeline.h"
 
+#include <time.h>
+
 #include <algorithm>
 #include <mutex>
 #include <thread>
@@ -26,30 +28,43 @@ StatusOr<PipelineStats> Pipeline::Run() {
   return options_.serial ? RunSerial() : RunConcurrent();
 }
 
+double ProcessCpuTimeMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
 namespace {
 
-// Runs `fn` on `work` and stores its wall time in `*ms`.
-Status Timed(const std::function<Status(FrameWork&)>& fn, FrameWork& work, double* ms) {
+// Runs `fn` on `work` and stores its wall time in `*ms` (and, if `cpu_ms` is
+// set, the process CPU time meanwhile).
+Status Timed(const std::function<Status(FrameWork&)>& fn, FrameWork& work, double* ms, double* cpu_ms = nullptr) {
   if (!fn) return OkStatus();
+  const double cpu0 = cpu_ms ? ProcessCpuTimeMs() : 0;
   Stopwatch sw;
   Status s = fn(work);
   *ms = sw.ElapsedMs();
+  if (cpu_ms) *cpu_ms = ProcessCpuTimeMs() - cpu0;
   return s;
 }
 
-Status RunFuseMesh(const std::function<Status(FrameWork&)>& fn, FrameWork& work) {
+Status RunFuseMesh(const std::function<Status(FrameWork&)>& fn, FrameWork& work, bool cpu = false) {
   if (!fn) return OkStatus();
   work.timings.fuse_ms = work.timings.mesh_ms = 0;
+  work.timings.fuse_cpu_ms = work.timings.mesh_cpu_ms = 0;
+  const double cpu0 = cpu ? ProcessCpuTimeMs() : 0;
   Stopwatch sw;
   Status s = fn(work);
   // The stage may split its own time into fuse and mesh; else it all counts as fuse.
   if (work.timings.fuse_ms == 0 && work.timings.mesh_ms == 0) work.timings.fuse_ms = sw.ElapsedMs();
+  if (cpu && work.timings.fuse_cpu_ms == 0 && work.timings.mesh_cpu_ms == 0)
+    work.timings.fuse_cpu_ms = ProcessCpuTimeMs() - cpu0;
   return s;
 }
 
 // Acquire with optional pacing. Returns OutOfRange at the end of the source.
 Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& clock, int64_t seq, int64_t start_us,
-               FrameWork& work, int64_t* late) {
+               FrameWork& work, int64_t* late, bool cpu = false) {
   if (opt.pace_fps > 0) {
     const int64_t period_us = static_cast<int64_t>(1e6 / opt.pace_fps);
     const int64_t slot = start_us + seq * period_us;
@@ -59,7 +74,7 @@ Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& cloc
   work.sequence = seq;
   work.timings = StageTimings{};
   work.timings.acquired_us = clock.NowUs();
-  return Timed(st.acquire, work, &work.timings.acquire_ms);
+  return Timed(st.acquire, work, &work.timings.acquire_ms, cpu ? &work.timings.acquire_cpu_ms : nullptr);
 }
 
 }  // namespace
@@ -68,20 +83,22 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
   PipelineStats stats;
   FrameWork work;
   Stopwatch wall;
+  const double cpu0 = ProcessCpuTimeMs();
   const int64_t start_us = clock_.NowUs();
   for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
     if (stop_) break;
-    Status s = Acquire(stages_, options_, clock_, seq, start_us, work, &stats.late_frames);
+    Status s = Acquire(stages_, options_, clock_, seq, start_us, work, &stats.late_frames, /*cpu=*/true);
     if (s.code() == StatusCode::kOutOfRange) break;
     HOLO_RETURN_IF_ERROR(s);
-    HOLO_RETURN_IF_ERROR(Timed(stages_.segment, work, &work.timings.segment_ms));
-    HOLO_RETURN_IF_ERROR(RunFuseMesh(stages_.fuse_mesh, work));
-    HOLO_RETURN_IF_ERROR(Timed(stages_.texture, work, &work.timings.texture_ms));
+    HOLO_RETURN_IF_ERROR(Timed(stages_.segment, work, &work.timings.segment_ms, &work.timings.segment_cpu_ms));
+    HOLO_RETURN_IF_ERROR(RunFuseMesh(stages_.fuse_mesh, work, /*cpu=*/true));
+    HOLO_RETURN_IF_ERROR(Timed(stages_.texture, work, &work.timings.texture_ms, &work.timings.texture_cpu_ms));
     work.timings.ready_us = clock_.NowUs();
     if (stages_.sink) HOLO_RETURN_IF_ERROR(stages_.sink(work));
     stats.per_frame.push_back(work.timings);
     ++stats.frames;
   }
+  stats.cpu_ms = ProcessCpuTimeMs() - cpu0;
   stats.wall_seconds = wall.ElapsedMs() * 1e-3;
   stats.fps = stats.wall_seconds > 0 ? static_cast<double>(stats.frames) / stats.wall_seconds : 0;
   return stats;
@@ -110,6 +127,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   };
 
   Stopwatch wall;
+  const double cpu0 = ProcessCpuTimeMs();
   const int64_t start_us = clock_.NowUs();
   std::thread acquire_thread([&] {
     int64_t late = 0;
@@ -173,6 +191,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   });
   for (std::thread* t : {&acquire_thread, &segment_thread, &fuse_thread, &texture_thread, &sink_thread}) t->join();
   if (!first_error.ok()) return first_error;
+  stats.cpu_ms = ProcessCpuTimeMs() - cpu0;
   stats.wall_seconds = wall.ElapsedMs() * 1e-3;
   stats.fps = stats.wall_seconds > 0 ? static_cast<double>(stats.frames) / stats.wall_seconds : 0;
   return stats;
@@ -199,6 +218,11 @@ StageTimings MedianTimings(const PipelineStats& stats) {
   m.fuse_ms = med(&StageTimings::fuse_ms);
   m.mesh_ms = med(&StageTimings::mesh_ms);
   m.texture_ms = med(&StageTimings::texture_ms);
+  m.acquire_cpu_ms = med(&StageTimings::acquire_cpu_ms);
+  m.segment_cpu_ms = med(&StageTimings::segment_cpu_ms);
+  m.fuse_cpu_ms = med(&StageTimings::fuse_cpu_ms);
+  m.mesh_cpu_ms = med(&StageTimings::mesh_cpu_ms);
+  m.texture_cpu_ms = med(&StageTimings::texture_cpu_ms);
   return m;
 }
 

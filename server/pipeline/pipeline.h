@@ -32,6 +32,15 @@ struct StageTimings {
   double fuse_ms = 0;
   double mesh_ms = 0;
   double texture_ms = 0;
+  // Serial mode only (0 otherwise): CPU time of the whole process (all
+  // threads, worker pools included) while each stage ran, ms. With one stage
+  // at a time this is that stage's CPU cost, which other load on the machine
+  // barely changes. `fuse_mesh` may split its own into fuse and mesh.
+  double acquire_cpu_ms = 0;
+  double segment_cpu_ms = 0;
+  double fuse_cpu_ms = 0;
+  double mesh_cpu_ms = 0;
+  double texture_cpu_ms = 0;
   // Clock time when acquire started and when the texture stage finished (µs
   // on the pipeline's clock): latency = ready - acquired.
   int64_t acquired_us = 0;
@@ -85,6 +94,9 @@ struct PipelineStats {
   double wall_seconds = 0;
   double fps = 0;
   int64_t late_frames = 0;  // paced mode: frames acquired later than their slot
+  // CPU time of the whole process (all threads) during Run, ms: divided by
+  // `frames`, the CPU cost of a frame with every stage and all overheads.
+  double cpu_ms = 0;
   std::vector<StageTimings> per_frame;  // in order
 };
 
@@ -110,7 +122,10 @@ class Pipeline {
   std::atomic<bool> stop_{false};
 };
 
-// Median of each stage's time over `stats.per_frame` (ms).
+// CPU time of the whole process so far (all threads), ms.
+double ProcessCpuTimeMs();
+
+// Median of each stage's time over `stats.per_frame` (ms), CPU fields included.
 StageTimings MedianTimings(const PipelineStats& stats);
 double MedianLatencyMs(const PipelineStats& stats);
 

@@ -51,6 +51,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   // Project every vertex once.
   const size_t n = positions.size();
   sv_.resize(n);
+  siz_.resize(n);
   const Eigen::Matrix3f cam_from_world = camera.world_from_camera.linear().transpose();
   const Vector3f center = camera.world_from_camera.translation();
   const Vector3f t = -cam_from_world * center;
@@ -59,8 +60,9 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   const float cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
   for (size_t i = 0; i < n; ++i) {
     const Vector3f p = cam_from_world * positions[i] + t;
-    ScreenVertex& v = sv_[i];
-    v.iz = 0.0f;
+    ScreenXY& v = sv_[i];
+    siz_[i] = 0.0f;
+    v.x = v.y = 0;
     if (!(p.z() >= near_m)) continue;
     const float izv = 1.0f / p.z();
     max_iz_ = std::max(max_iz_, izv);
@@ -76,7 +78,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
     }
     // Vertices beyond ±2^20 px drop their triangles (int32/int64 safe).
     if (!(std::abs(fxp) < kMaxCoord && std::abs(fyp) < kMaxCoord)) continue;
-    v.iz = izv;
+    siz_[i] = izv;
     // Screen positions snapped to 1/256 px once per vertex: integer edge
     // functions are exact, so two triangles sharing an edge agree on every
     // pixel centre (no cracks, no double coverage).
@@ -90,12 +92,46 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
   // keep the 3D test.
   const bool screen_cull = cull_back_faces && !distorted;
   const bool world_cull = cull_back_faces && distorted;
-  for (size_t ti = 0; ti < triangles.size(); ++ti) {
+  // First pass, branch-free: the triangles that can cover a pixel centre
+  // (all vertices projected, a pixel centre inside the box, nonzero area,
+  // front-facing when culling in screen space). On a mesh finer than the
+  // pixels most triangles fail these tests, and as branches they are
+  // mispredicted about half the time; here they only decide whether the
+  // index is kept. The second pass re-tests each survivor exactly as before.
+  const size_t num_tris = triangles.size();
+  survivors_.resize(num_tris);
+  size_t num_survivors = 0;
+  {
+    const int64_t xmax = width_ - 1, ymax = height_ - 1;
+    const int64_t cull = screen_cull ? 1 : 0;
+    uint32_t* out = survivors_.data();
+    for (size_t ti = 0; ti < num_tris; ++ti) {
+      const auto& tr = triangles[ti];
+      const ScreenXY& v0 = sv_[tr[0]];
+      const ScreenXY& v1 = sv_[tr[1]];
+      const ScreenXY& v2 = sv_[tr[2]];
+      const int64_t x0 = v0.x, x1 = v1.x, x2 = v2.x, y0 = v0.y, y1 = v1.y, y2 = v2.y;
+      const int64_t xa = std::max<int64_t>(0, (std::min(std::min(x0, x1), x2) + kSub - 1) >> kSubShift);
+      const int64_t xb = std::min<int64_t>(xmax, std::max(std::max(x0, x1), x2) >> kSubShift);
+      const int64_t ya = std::max<int64_t>(0, (std::min(std::min(y0, y1), y2) + kSub - 1) >> kSubShift);
+      const int64_t yb = std::min<int64_t>(ymax, std::max(std::max(y0, y1), y2) >> kSubShift);
+      const int64_t area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+      // (A vertex not projected has x = y = 0 and may let its triangle
+      // through here; the second pass drops it by its 1/z.)
+      const bool keep = static_cast<int>(xa <= xb) & static_cast<int>(ya <= yb) &
+                        static_cast<int>(area != 0) & static_cast<int>((area & ~(area >> 63) & -cull) == 0);
+      out[num_survivors] = static_cast<uint32_t>(ti);
+      num_survivors += keep;
+    }
+  }
+  for (size_t si = 0; si < num_survivors; ++si) {
+    const size_t ti = survivors_[si];
     const auto& tr = triangles[ti];
-    const ScreenVertex& v0 = sv_[tr[0]];
-    const ScreenVertex& v1 = sv_[tr[1]];
-    const ScreenVertex& v2 = sv_[tr[2]];
-    if (!(v0.iz > 0.0f && v1.iz > 0.0f && v2.iz > 0.0f)) continue;
+    const ScreenXY& v0 = sv_[tr[0]];
+    const ScreenXY& v1 = sv_[tr[1]];
+    const ScreenXY& v2 = sv_[tr[2]];
+    const float iz0 = siz_[tr[0]], iz1 = siz_[tr[1]], iz2 = siz_[tr[2]];
+    if (!(iz0 > 0.0f && iz1 > 0.0f && iz2 > 0.0f)) continue;
     int64_t x[3] = {v0.x, v1.x, v2.x}, y[3] = {v0.y, v1.y, v2.y};
     const int64_t minx = std::min({x[0], x[1], x[2]}), maxx = std::max({x[0], x[1], x[2]});
     const int64_t miny = std::min({y[0], y[1], y[2]}), maxy = std::max({y[0], y[1], y[2]});
@@ -116,7 +152,7 @@ void MeshRasterizer::Rasterize(const std::vector<Vector3f>& positions,
       const Vector3f normal = (positions[tr[1]] - p0).cross(positions[tr[2]] - p0);
       if (normal.dot(p0 - center) >= 0.0f) continue;
     }
-    float iz[3] = {v0.iz, v1.iz, v2.iz};
+    float iz[3] = {iz0, iz1, iz2};
     int slot[3] = {0, 1, 2};  // original vertex of each screen vertex
     if (area < 0) {
       std::swap(x[1], x[2]);

@@ -68,15 +68,16 @@ class MeshRasterizer {
 
  private:
   int width_ = 0, height_ = 0;
-  // Projected vertex: pixel x, y in 1/256 px and 1/z; iz = 0 when behind the
-  // near plane or too far off screen (its triangles are dropped). One
-  // 16-byte record, so a triangle costs three cache-friendly gathers.
-  struct ScreenVertex {
+  // Projected vertex: pixel x, y in 1/256 px (8 bytes, so the first pass
+  // over the triangles gathers as little as possible) and, separately, 1/z;
+  // iz = 0 (and x = y = 0) when behind the near plane or too far off screen
+  // (its triangles are dropped).
+  struct ScreenXY {
     int32_t x, y;
-    float iz;
-    int32_t pad;
   };
-  std::vector<ScreenVertex> sv_;
+  std::vector<ScreenXY> sv_;
+  std::vector<float> siz_;
+  std::vector<uint32_t> survivors_;  // triangles left by the branch-free first pass
   std::vector<float> iz_buf_, b1_, b2_;
   std::vector<int32_t> tri_;
   int box_[4] = {0, 0, -1, -1};

@@ -78,8 +78,27 @@ struct TextureOptions {
   bool normal_weighting = true;
   // Use RgbdFrame::mask when present.
   bool use_masks = true;
+  // Use the SSE2 paths (four pods per vector) where they apply: undistorted
+  // colour cameras on an SSE2 build. Off: the scalar reference path. Both
+  // give the same results (tested); this switch exists for that test.
+  bool vectorize = true;
   // Worker threads (0 = hardware concurrency).
   int threads = 0;
+  // Texturing on a simplified mesh (0 = off: every vertex is textured
+  // against the mesh itself). If > 0, the mesh's vertices are clustered on a
+  // grid of this cell size (metres), separately per dominant normal
+  // direction (so the two sides of a thin part never merge); the cluster
+  // means form a coarse mesh that is rasterized for visibility and textured
+  // as above, and every vertex then takes a distance-weighted mean of the
+  // colours of its cluster and the clusters adjacent to it in the coarse
+  // mesh. For a mesh much finer than the pods' pixels (a TSDF mesh at QVGA)
+  // this is several times cheaper for nearly the same colours.
+  float cluster_size_m = 0.0f;
+  // With clustering: 0 = each vertex takes its cluster's colour; 1 = the
+  // distance-weighted mean over its cluster and the adjacent ones; 2 = the
+  // coarse mesh is only used for visibility (rasterized depth maps and
+  // discontinuities), every vertex is coloured itself.
+  int cluster_transfer = 1;
 
   // OK, or InvalidArgument naming the field and value.
   Status Check() const;
@@ -95,7 +114,8 @@ struct TextureStats {
   size_t filled_from_neighbours = 0;
   size_t fallback = 0;           // never observed: minimum-variance facing view, tests ignored
   size_t uncoloured = 0;         // no view at all (left grey)
-  double ms_raster = 0, ms_sample = 0, ms_fill = 0, ms_total = 0;
+  size_t coarse_vertices = 0, coarse_triangles = 0;  // with cluster_size_m > 0
+  double ms_cluster = 0, ms_raster = 0, ms_sample = 0, ms_fill = 0, ms_transfer = 0, ms_total = 0;
 };
 
 class Texturer {
@@ -127,9 +147,20 @@ class Texturer {
   struct PodState;
   struct ThreadScratch;
   void PreparePod(int pod, const Mesh& mesh);
+  void DiscontinuityMap(int pod);
+  void RasterizeAllPods(const Mesh& mesh);
   void ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const std::vector<Eigen::Vector3f>& normals,
                      size_t begin, size_t end, ThreadScratch* scratch);
   void FillUnobserved(const RgbdFrameSet& frames, Mesh* mesh, const std::vector<Eigen::Vector3f>& normals);
+  // Raster, sampling and filling of `mesh` (normals: one per vertex).
+  // `visibility_mesh` (null: `mesh`) is what is rasterized for visibility.
+  void TextureMesh(const RgbdFrameSet& frames, Mesh* mesh, const std::vector<Eigen::Vector3f>& normals,
+                   const Mesh* visibility_mesh = nullptr);
+  // Builds coarse_ and cluster_of_ from `mesh`.
+  void BuildClusters(const Mesh& mesh, const std::vector<Eigen::Vector3f>& normals);
+  // Colours of `mesh` from coarse_'s colours.
+  void TransferColors(Mesh* mesh);
+  void BuildAdjacency(const Mesh& mesh);
 
   Rig rig_;
   TextureOptions options_;
@@ -137,12 +168,25 @@ class Texturer {
   int threads_ = 1;
   std::unique_ptr<WorkerPool> pool_;
   std::vector<std::unique_ptr<PodState>> pods_;
+  struct PodSimd;
+  std::vector<PodSimd> pod_simd_;  // pods in groups of 4 (SSE2 builds, undistorted pods)
+  bool simd_pods_ = false;
+  // RasterizeAllPods: projected vertices (per group of four pods and vertex:
+  // x[4], y[4] in 1/256 px as int32, 1/z[4]) and the per-thread largest 1/z per pod.
+  std::vector<float> screen_, max_iz_lanes_;
   std::vector<std::unique_ptr<ThreadScratch>> scratch_;
   std::vector<Eigen::Vector3f> normals_;  // when the mesh has none
   std::vector<uint8_t> state_;            // per vertex: how it was coloured
   std::vector<std::array<float, 3>> accum_;
   std::vector<uint32_t> adj_offsets_, adj_;  // vertex adjacency (CSR), built when needed
   std::vector<uint32_t> frontier_, next_frontier_;
+  bool adjacency_built_ = false;
+  // Clustering (cluster_size_m > 0).
+  Mesh coarse_;
+  std::vector<uint32_t> cluster_of_;     // per vertex of the input mesh
+  std::vector<uint64_t> hash_keys_;      // open addressing: cell key, ~0 = empty
+  std::vector<uint32_t> hash_values_;
+  std::vector<uint32_t> cluster_count_;
   TextureStats stats_;
 };
 

@@ -278,6 +278,84 @@ TEST(TexturerTest, GhostOccludedWallDoesNotTakeOccluderColour) {
   EXPECT_GT(mean / hidden.size(), 60.0);
 }
 
+TEST(TexturerTest, AllPodRasterMatchesMeshRasterizer) {
+  // The texturer draws every pod's visibility map in one pass (four pods per
+  // vector); it must give exactly MeshRasterizer's depth maps, for the ghost
+  // scene and for a fine studio mesh seen by the 8 pods of S8-QVGA.
+  const GhostScene g = MakeGhostScene();
+  auto workload = GetWorkload("S8-QVGA");
+  ASSERT_TRUE(workload.ok());
+  auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
+  ASSERT_TRUE(studio.ok());
+  RgbdFrameSet set;
+  StudioGroundTruth gt;
+  (*studio)->RenderFrame(20, &set, &gt);
+  struct Case {
+    const Rig* rig;
+    const RgbdFrameSet* frames;
+    Mesh mesh;
+  };
+  const Case cases[] = {{&g.rig, &g.frames, g.scene}, {&workload->rig, &set, gt.foreground_mesh}};
+  for (const Case& c : cases) {
+    TextureOptions o;
+    o.threads = 2;
+    Texturer t(*c.rig, o);
+    Mesh mesh = c.mesh;
+    ASSERT_TRUE(t.Apply(*c.frames, &mesh).ok());
+    for (size_t pod = 0; pod < c.rig->pods.size(); ++pod) {
+      MeshRasterizer r;
+      r.Rasterize(c.mesh.positions, c.mesh.triangles, c.rig->pods[pod].ColorCamera(), false, true, 0.05f);
+      const std::vector<float>& ours = t.RasterInverseDepth(static_cast<int>(pod));
+      ASSERT_EQ(ours.size(), r.inv_z().size());
+      size_t drawn = 0, differ = 0;
+      for (size_t i = 0; i < ours.size(); ++i) {
+        drawn += r.inv_z()[i] > 0.0f;
+        differ += ours[i] != r.inv_z()[i];
+      }
+      EXPECT_GT(drawn, 100u) << "pod " << pod;
+      EXPECT_EQ(differ, 0u) << "pod " << pod;
+    }
+    // And the vectorized view tests give the scalar path's colours.
+    TextureOptions scalar = o;
+    scalar.vectorize = false;
+    Texturer ts(*c.rig, scalar);
+    Mesh reference = c.mesh;
+    ASSERT_TRUE(ts.Apply(*c.frames, &reference).ok());
+    size_t colour_differ = 0;
+    for (size_t v = 0; v < mesh.num_vertices(); ++v) colour_differ += mesh.colors[v] != reference.colors[v];
+    EXPECT_EQ(colour_differ, 0u);
+  }
+}
+
+TEST(TexturerTest, ClusteredTexturingKeepsTheGhostTest) {
+  // TextureOptions::cluster_size_m (off by default): texturing a clustered
+  // copy of the mesh must not let the occluder's colour onto the wall either.
+  const GhostScene g = MakeGhostScene();
+  const std::vector<size_t> hidden = HiddenWallVertices(g);
+  for (int transfer : {0, 1, 2}) {
+    TextureOptions o;
+    o.cluster_size_m = 0.1f;
+    o.cluster_transfer = transfer;
+    o.threads = 2;
+    Texturer t(g.rig, o);
+    Mesh mesh = g.scene;
+    mesh.colors.clear();
+    ASSERT_TRUE(t.Apply(g.frames, &mesh).ok());
+    ASSERT_EQ(mesh.colors.size(), mesh.num_vertices());
+    EXPECT_GT(t.stats().coarse_vertices, 0u);
+    EXPECT_LT(t.stats().coarse_vertices, mesh.num_vertices());
+    double worst = 0;
+    for (size_t v : hidden) worst = std::max(worst, ColorDistance(mesh.colors[v], {240, 240, 240}));
+    EXPECT_LT(worst, 12.0) << "transfer " << transfer;
+  }
+  TextureOptions bad;
+  bad.cluster_size_m = -1.0f;
+  EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
+  bad.cluster_size_m = 0.01f;
+  bad.cluster_transfer = 3;
+  EXPECT_EQ(bad.Check().code(), StatusCode::kInvalidArgument);
+}
+
 TEST(TexturerTest, TexturingTheWallAloneWouldGhost) {
   // Why the occluder must be part of the rasterized mesh: texturing the wall
   // without the bar, the bar in pod A's image lands on the wall.
