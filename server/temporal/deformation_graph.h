@@ -27,7 +27,7 @@ inline constexpr int kSkinNodes = 4;
 struct DeformationGraphOptions {
   // Node spacing on the surface, metres (a voxel grid of this size keeps the
   // point nearest to each occupied cell's centre). Holoportation: ~4–8 cm.
-  float node_spacing_m = 0.05f;
+  float node_spacing_m = 0.07f;
   // Graph edges per node: its nearest nodes within max_edge_factor · spacing.
   int edges_per_node = 6;
   float max_edge_factor = 2.5f;

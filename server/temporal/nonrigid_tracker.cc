@@ -151,8 +151,8 @@ struct BlockMatrix {
       for (size_t i = 0; i < cols[k].size(); ++i) {
         const size_t l = static_cast<size_t>(cols[k][i]);
         const Mat12& b = blocks[static_cast<size_t>(index[k][i])];
-        (*y)[k].noalias() += b * x[l];
-        if (l != k) (*y)[l].noalias() += b.transpose() * x[k];
+        (*y)[k].noalias() += b.lazyProduct(x[l]);
+        if (l != k) (*y)[l].noalias() += b.transpose().lazyProduct(x[k]);
       }
     }
   }
@@ -408,7 +408,7 @@ void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, Po
     if (pod.has_silhouette) {
       const float dt = pod.dt.at<float>(vi, ui);
       if (dt > o.hull_margin_px) {
-        if (dt > 4.0f) out->violated = true;
+        if (dt > 4.0f && dt * pc.z() / pod.fx > 0.03f) out->violated = true;
         if (o.use_hull && sh > 0) {
           const float scale = pc.z() / pod.fx;  // metres per pixel at the point
           const double r = (dt - o.hull_margin_px) * scale;
@@ -438,7 +438,16 @@ void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, Po
     const float z = pod.depth[pix];
     if (z <= 0) continue;
     if (z > pc.z() + o.association_max_m) {
-      out->violated = true;  // the pod sees through the point
+      // The pod sees through the point, unless this is an edge pixel (flying
+      // pixels, silhouettes): the whole 3×3 neighbourhood must be behind it.
+      float zmin = z;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int x = std::clamp(ui + dx, 0, pod.width - 1), y = std::clamp(vi + dy, 0, pod.height - 1);
+          const float zn = pod.depth[static_cast<size_t>(y) * pod.width + x];
+          zmin = std::min(zmin, zn <= 0 ? 0.0f : zn);
+        }
+      if (zmin > pc.z() + o.association_max_m) out->violated = true;
       continue;
     }
     const Vector3f qc((ui - pod.cx) * z / pod.fx, (vi - pod.cy) * z / pod.fy, z);
@@ -472,6 +481,14 @@ NonrigidTracker::NonrigidTracker(TrackerOptions options) : options_(options) {
 }
 
 NonrigidTracker::~NonrigidTracker() = default;
+
+const float* NonrigidTracker::SilhouetteDistance(size_t pod, int* width, int* height) const {
+  if (pod >= impl_->pods.size() || !impl_->pods[pod].has_silhouette) return nullptr;
+  const PodFrame& p = impl_->pods[pod];
+  *width = p.width;
+  *height = p.height;
+  return p.dt.ptr<float>(0);
+}
 
 Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Vector3f>& points,
                               const std::vector<Vector3f>& normals, DeformationGraph* graph, TrackResult* result) {
@@ -728,7 +745,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     m.q.resize(num_nodes);
     double rz = 0, b_norm = 0;
     for (size_t k = 0; k < num_nodes; ++k) {
-      m.z[k] = m.precond[k] * m.r[k];
+      m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
       rz += m.r[k].dot(m.z[k]);
       b_norm += m.rhs[k].squaredNorm();
     }
@@ -750,7 +767,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
       if (rr < tol2) break;
       double rz_new = 0;
       for (size_t k = 0; k < num_nodes; ++k) {
-        m.z[k] = m.precond[k] * m.r[k];
+        m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
         rz_new += m.r[k].dot(m.z[k]);
       }
       const double beta = rz_new / rz;
@@ -815,10 +832,20 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
   }
   for (size_t k = 0; k < num_nodes; ++k) {
     NodeReport& nr = result->nodes[k];
-    bool failed = nr.stretch_m > stretch_limit;
+    bool failed = false;
+    if (nr.stretch_m > stretch_limit) {
+      failed = true;
+      ++result->failed_stretch;
+    }
     if (nr.observed >= o.min_support) {
-      if (nr.violations > o.fail_violation_fraction * nr.observed) failed = true;
-      if (wcorr[k] >= o.min_support && nr.residual_m > o.fail_residual_m) failed = true;
+      if (nr.violations > o.fail_violation_fraction * nr.observed) {
+        failed = true;
+        ++result->failed_violation;
+      }
+      if (wcorr[k] >= o.min_support && nr.residual_m > o.fail_residual_m) {
+        failed = true;
+        ++result->failed_residual;
+      }
     }
     const bool finite = graph->affine(static_cast<int>(k)).allFinite() && graph->translation(static_cast<int>(k)).allFinite();
     if (!finite) {

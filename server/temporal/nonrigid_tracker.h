@@ -64,9 +64,9 @@ struct TrackerOptions {
   float regularization_weight = 2.0f;
 
   // Coarse stage: rigid ICP iterations for the global (R, T) (0 = none).
-  int rigid_iterations = 4;
+  int rigid_iterations = 3;
   // Non-rigid outer iterations (association + one GN/LM step each).
-  int iterations = 5;
+  int iterations = 3;
   // Projective association: a depth point farther than this from the warped
   // model point is not a correspondence (metres).
   float association_max_m = 0.04f;
@@ -77,8 +77,8 @@ struct TrackerOptions {
   float hull_margin_px = 1.5f;
 
   TrackerSolver solver = TrackerSolver::kGaussNewtonPcg;
-  int pcg_max_iterations = 60;
-  double pcg_relative_tolerance = 1e-4;
+  int pcg_max_iterations = 30;
+  double pcg_relative_tolerance = 1e-3;
   // Levenberg–Marquardt style damping added to the diagonal of JᵀJ (relative to it, plus
   // an absolute floor for nodes without data).
   double damping = 1e-4;
@@ -86,7 +86,7 @@ struct TrackerOptions {
   int ceres_iterations = 2;
 
   // Node judgement (NodeReport::failed).
-  float fail_residual_m = 0.02f;        // mean |data residual| of the node's associated points
+  float fail_residual_m = 0.025f;       // mean |data residual| of the node's associated points
   float fail_violation_fraction = 0.4f; // share of its observed points that violate the observation
   float fail_stretch_factor = 0.5f;     // an edge residual longer than this · node spacing
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
@@ -111,6 +111,8 @@ struct TrackResult {
   double energy_initial = 0, energy_final = 0;  // total energy at the first and the last linearisation
   std::vector<NodeReport> nodes;
   int failed_nodes = 0;
+  // Why: nodes failing each test (a node may fail several).
+  int failed_residual = 0, failed_violation = 0, failed_stretch = 0;
   // Wall time, ms.
   double rigid_ms = 0, associate_ms = 0, solve_ms = 0, total_ms = 0;
   int pcg_iterations = 0;        // summed over the outer iterations (GN solver)
@@ -134,6 +136,11 @@ class NonrigidTracker {
   // differ. An empty graph or no points is OK (nothing to do).
   Status Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Eigen::Vector3f>& points,
                const std::vector<Eigen::Vector3f>& normals, DeformationGraph* graph, TrackResult* result);
+
+  // After Track: the distance (pixels, row-major) from each pixel of pod
+  // `pod` to its nearest silhouette pixel (0 inside), or null if that pod had
+  // no usable silhouette in the last frame.
+  const float* SilhouetteDistance(size_t pod, int* width, int* height) const;
 
   struct Impl;
 
