@@ -8,6 +8,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 #include <ceres/ceres.h>
 #include <opencv2/imgproc.hpp>
 
@@ -46,6 +47,7 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(hull_margin_px, "hull_margin_px"));
   if (pcg_max_iterations < 1 || pcg_max_iterations > 10000) return InvalidArgument("pcg_max_iterations must be in [1, 10000]");
   if (!(damping >= 0)) return InvalidArgument("damping must be >= 0");
+  if (!(fail_affine_scale >= 0 && fail_affine_scale < 1)) return InvalidArgument("fail_affine_scale must be in [0, 1)");
   if (ceres_iterations < 1 || ceres_iterations > 100) return InvalidArgument("ceres_iterations must be in [1, 100]");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   return OkStatus();
@@ -408,7 +410,7 @@ void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, Po
     if (pod.has_silhouette) {
       const float dt = pod.dt.at<float>(vi, ui);
       if (dt > o.hull_margin_px) {
-        if (dt > 4.0f && dt * pc.z() / pod.fx > 0.03f) out->violated = true;
+        if (dt > 3.0f && dt * pc.z() / pod.fx > 0.02f) out->violated = true;
         if (o.use_hull && sh > 0) {
           const float scale = pc.z() / pod.fx;  // metres per pixel at the point
           const double r = (dt - o.hull_margin_px) * scale;
@@ -833,6 +835,16 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
   for (size_t k = 0; k < num_nodes; ++k) {
     NodeReport& nr = result->nodes[k];
     bool failed = false;
+    {
+      const Eigen::JacobiSVD<Matrix3f> svd(graph->affine(static_cast<int>(k)));
+      nr.scale_max = svd.singularValues()[0];
+      nr.scale_min = svd.singularValues()[2];
+      const float lo = 1.0f - o.fail_affine_scale;
+      if (o.fail_affine_scale > 0 && (nr.scale_min < lo || nr.scale_max > 1.0f / lo)) {
+        failed = true;
+        ++result->failed_affine;
+      }
+    }
     if (nr.stretch_m > stretch_limit) {
       failed = true;
       ++result->failed_stretch;

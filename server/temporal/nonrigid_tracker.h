@@ -88,7 +88,8 @@ struct TrackerOptions {
   // Node judgement (NodeReport::failed).
   float fail_residual_m = 0.025f;       // mean |data residual| of the node's associated points
   float fail_violation_fraction = 0.4f; // share of its observed points that violate the observation
-  float fail_stretch_factor = 0.5f;     // an edge residual longer than this · node spacing
+  float fail_stretch_factor = 0.3f;     // an edge residual longer than this · node spacing
+  float fail_affine_scale = 0.25f;      // a singular value of A_k outside [1 − this, 1 / (1 − this)]: torn surface
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
 
   int threads = 2;  // 0 = hardware concurrency
@@ -100,6 +101,7 @@ struct NodeReport {
   float observed = 0;     // skin-weighted count of its points with a correspondence or a violation
   float violations = 0;   // skin-weighted count of violations
   float stretch_m = 0;    // largest regularisation residual of its edges
+  float scale_min = 1, scale_max = 1;  // singular values of A_k
   bool failed = false;
 };
 
@@ -112,7 +114,7 @@ struct TrackResult {
   std::vector<NodeReport> nodes;
   int failed_nodes = 0;
   // Why: nodes failing each test (a node may fail several).
-  int failed_residual = 0, failed_violation = 0, failed_stretch = 0;
+  int failed_residual = 0, failed_violation = 0, failed_stretch = 0, failed_affine = 0;
   // Wall time, ms.
   double rigid_ms = 0, associate_ms = 0, solve_ms = 0, total_ms = 0;
   int pcg_iterations = 0;        // summed over the outer iterations (GN solver)

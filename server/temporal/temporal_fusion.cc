@@ -37,6 +37,8 @@ Status TemporalFusionOptions::Check() const {
     return InvalidArgument("track_points must be in [16, 1e7], got " + std::to_string(track_points));
   if (!(lost_node_fraction > 0 && lost_node_fraction <= 1))
     return InvalidArgument("lost_node_fraction must be in (0, 1], got " + std::to_string(lost_node_fraction));
+  if (!(lost_min_associated >= 0 && lost_min_associated <= 1))
+    return InvalidArgument("lost_min_associated must be in [0, 1], got " + std::to_string(lost_min_associated));
   if (max_lost_frames < 0 || max_lost_frames > 1000)
     return InvalidArgument("max_lost_frames must be in [0, 1000], got " + std::to_string(max_lost_frames));
   return OkStatus();
@@ -69,6 +71,7 @@ struct TemporalFusion::Impl {
   struct Sil {
     bool usable = false;
     CameraModel camera;
+    Pose camera_from_world = Pose::Identity();
     const float* dt = nullptr;  // the tracker's silhouette distance (pixels)
     int width = 0, height = 0;
   };
@@ -132,6 +135,7 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
     s.width = w;
     s.height = h;
     s.camera = rig.pods[i].DepthCamera();
+    s.camera_from_world = s.camera.world_from_camera.inverse();
     s.usable = true;
   }
 
@@ -232,27 +236,44 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
   // inverse-warped voxel centres; drop blocks outside a silhouette.
   const int ndst = static_cast<int>(dst.size());
   std::atomic<size_t> hull_dropped{0}, carried{0};
-  const float radius = bs * 0.87f;
+  const float radius = 0.5f * bs * 0.87f;  // of a 4³ sub-block
   const float cap = options_.max_weight;
   m.gather.resize(static_cast<size_t>(m.pool.num_threads()));
   m.pool.Run(ndst, [&](int d, int thread) {
     VoxelBlock& out = dst.block(d);
     const BlockCoord bc = dst.coord(d);
     const Impl::Dst& di = m.dst[static_cast<size_t>(d)];
-    const Vector3f centre = (Vector3f(bc.x, bc.y, bc.z) * kBlockSide + Vector3f::Constant(3.5f)) * vs;
-    for (const Impl::Sil& s : m.sil) {
-      if (!s.usable) continue;
-      const Vector3f pc = s.camera.world_from_camera.inverse() * centre;
-      Eigen::Vector2f px;
-      if (pc.z() < 0.1f || !s.camera.ProjectCamera(pc, &px)) continue;
-      const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
-      if (u < 0 || v < 0 || u >= s.width || v >= s.height) continue;
-      const float r_px = radius * static_cast<float>(s.camera.intrinsics.fx) / pc.z();
-      if (s.dt[static_cast<size_t>(v) * s.width + u] > r_px + 2.0f) {
-        ++hull_dropped;
-        dst.set_flags(d, 0);
-        return;  // all voxels stay unobserved (weight 0)
+    // Visual hull per 4³ sub-block: a sub-block whose centre projects
+    // farther outside a pod's silhouette than its own radius is free space.
+    bool sub_out[8];
+    int num_out = 0;
+    for (int sb = 0; sb < 8; ++sb) {
+      sub_out[sb] = false;
+      const Vector3f centre = (Vector3f(bc.x, bc.y, bc.z) * kBlockSide +
+                               Vector3f(4 * (sb & 1) + 1.5f, 4 * ((sb >> 1) & 1) + 1.5f, 4 * ((sb >> 2) & 1) + 1.5f)) * vs;
+      for (const Impl::Sil& s : m.sil) {
+        if (!s.usable) continue;
+        const Vector3f pc = s.camera_from_world * centre;
+        Eigen::Vector2f px;
+        if (pc.z() < 0.1f || !s.camera.ProjectCamera(pc, &px)) continue;
+        const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+        if (u < 0 || v < 0 || u >= s.width || v >= s.height) continue;
+        const float r_px = radius * static_cast<float>(s.camera.intrinsics.fx) / pc.z();
+        if (s.dt[static_cast<size_t>(v) * s.width + u] > r_px + 2.0f) {
+          sub_out[sb] = true;
+          ++num_out;
+          break;
+        }
       }
+    }
+    if (num_out == 8) {
+      ++hull_dropped;
+      for (int vi = 0; vi < kBlockVoxels; ++vi) {
+        out.weight[vi] = 0;
+        out.tsdf[vi] = 1;
+      }
+      dst.set_flags(d, 0);
+      return;  // all voxels stay unobserved (weight 0)
     }
     // Dense copy of the reference voxels the block's inverse warp reaches.
     Vector3f lo = Vector3f::Constant(INFINITY), hi = Vector3f::Constant(-INFINITY);
@@ -311,6 +332,7 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
       for (int j = 0; j < kBlockSide; ++j)
         for (int i = 0; i < kBlockSide; ++i) {
           const int vi = i + 8 * j + 64 * k;
+          if (sub_out[(i >> 2) + 2 * (j >> 2) + 4 * (k >> 2)]) continue;
           const Vector3f x = origin + step_x * static_cast<float>(i) + step_y * static_cast<float>(j) +
                              step_z * static_cast<float>(k);
           const float fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
@@ -393,20 +415,27 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   stats->failed_nodes = stats->track.failed_nodes;
   stats->track_ms = MsSince(t0);
 
-  const bool lost = graph_.num_nodes() == 0 ||
-                    stats->failed_nodes > options_.lost_node_fraction * static_cast<float>(graph_.num_nodes());
+  const bool lost =
+      graph_.num_nodes() == 0 ||
+      stats->failed_nodes > options_.lost_node_fraction * static_cast<float>(graph_.num_nodes()) ||
+      static_cast<float>(stats->track.associated_points) <
+          options_.lost_min_associated * static_cast<float>(stats->track.num_points);
   if (lost) {
     ++lost_frames_;
+    if (lost_frames_ <= options_.max_lost_frames) {
+      *out = reference_mesh_;  // hold the picture; track the reference into the next frame
+      stats->lost = true;
+      stats->total_ms = MsSince(t_start);
+      return OkStatus();
+    }
     HOLO_RETURN_IF_ERROR(FusePerFrame(rig, frames, live_.get(), out, stats));
-    if (lost_frames_ > options_.max_lost_frames) {
+    {
       // Full reset: this frame becomes the new reference (key frame).
       std::swap(reference_, live_);
       reference_mesh_ = *out;
       has_reference_ = !out->empty();
       lost_frames_ = 0;
       stats->full_reset = true;
-    } else {
-      stats->lost = true;
     }
     stats->total_ms = MsSince(t_start);
     return OkStatus();

@@ -17,11 +17,13 @@
 //    the new observation only.
 //  * Visual hull: carried blocks that project outside a pod's silhouette are
 //    dropped (free space by the masks).
-//  * Tracking lost (more than `lost_node_fraction` of the nodes failed, e.g.
-//    a frame of garbage depth): the frame is output as per-frame fusion and
-//    the reference is kept, to be tracked again into the next frame; after
-//    `max_lost_frames` lost frames in a row the reference is replaced by the
-//    per-frame fusion (full reset, a new key frame).
+//  * Tracking lost (more than `lost_node_fraction` of the nodes failed, or
+//    fewer than `lost_min_associated` of the model points found a
+//    correspondence, e.g. a frame of garbage depth): the frame is not fused;
+//    the reference mesh is output again (the picture holds) and the reference
+//    is tracked into the next frame. After `max_lost_frames` lost frames in a
+//    row the reference is replaced by the frame's per-frame fusion (full
+//    reset, a new key frame).
 //
 // Not thread-safe; one instance per stream.
 #pragma once
@@ -54,6 +56,9 @@ struct TemporalFusionOptions {
   bool reset_failed_regions = true;
   bool hull_carving = true;
   float lost_node_fraction = 0.5f;
+  // Also lost when fewer than this share of the model points find a
+  // correspondence in any pod (garbage depth associates almost nothing).
+  float lost_min_associated = 0.25f;
   int max_lost_frames = 2;
 
   Status Check() const;
@@ -64,7 +69,7 @@ struct TemporalFrameStats {
   // fusing the observation; marching cubes + clean-up; all.
   double track_ms = 0, warp_ms = 0, fuse_ms = 0, mesh_ms = 0, total_ms = 0;
   bool tracked = false;      // a reference existed and was tracked
-  bool lost = false;         // tracking lost: per-frame output, reference kept
+  bool lost = false;         // tracking lost: frame not fused, reference output again
   bool full_reset = false;   // reference replaced by this frame's per-frame fusion
   bool region_reset = false; // some reference blocks dropped because their nodes failed
   int nodes = 0, failed_nodes = 0;
