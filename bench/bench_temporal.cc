@@ -4,7 +4,8 @@
 //
 //   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
-//            --track-points N, --eval-every N (Chamfer every N-th frame),
+//            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
+//            --iterations N (non-rigid GN steps), --eval-every N (Chamfer every N-th frame),
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -37,6 +38,8 @@ struct Extra {
   double spacing_cm = 0;
   double max_weight = 0;
   int track_points = 0;
+  double reg_weight = -1, rot_weight = -1, hull_weight = -1;
+  int iterations = -1;
   int eval_every = 5;
   int drop_pod = 1;
   int drop_from = 10;
@@ -58,6 +61,10 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--spacing-cm") a.spacing_cm = std::atof(value().c_str());
     else if (extra[i] == "--max-weight") a.max_weight = std::atof(value().c_str());
     else if (extra[i] == "--track-points") a.track_points = std::atoi(value().c_str());
+    else if (extra[i] == "--reg-weight") a.reg_weight = std::atof(value().c_str());
+    else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
+    else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
+    else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
@@ -154,6 +161,10 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.spacing_cm > 0) base.graph.node_spacing_m = static_cast<float>(extra.spacing_cm / 100);
   if (extra.max_weight > 0) base.max_weight = static_cast<float>(extra.max_weight);
   if (extra.track_points > 0) base.track_points = extra.track_points;
+  if (extra.reg_weight >= 0) base.tracker.regularization_weight = static_cast<float>(extra.reg_weight);
+  if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
+  if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
+  if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
 
   std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);
   const char* names[4] = {"per_frame", "temporal", "per_frame_dropped", "temporal_dropped"};

@@ -61,7 +61,7 @@ struct TrackerOptions {
   bool use_rotation = true;
   float rotation_weight = 0.02f;
   bool use_regularization = true;
-  float regularization_weight = 2.0f;
+  float regularization_weight = 10.0f;
 
   // Coarse stage: rigid ICP iterations for the global (R, T) (0 = none).
   int rigid_iterations = 3;

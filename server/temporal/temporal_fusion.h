@@ -50,7 +50,7 @@ struct TemporalFusionOptions {
   // false: plain per-frame fusion (the baseline), same code path otherwise.
   bool temporal = true;
   // Cap of a carried voxel weight (one pod's observation = 1).
-  float max_weight = 12.0f;
+  float max_weight = 30.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
   bool reset_failed_regions = true;
