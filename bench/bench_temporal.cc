@@ -5,7 +5,7 @@
 //   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
 //            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
-//            --iterations N (non-rigid GN steps), --eval-every N (Chamfer every N-th frame),
+//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --eval-every N (Chamfer every N-th frame),
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -40,9 +40,11 @@ struct Extra {
   int track_points = 0;
   double reg_weight = -1, rot_weight = -1, hull_weight = -1;
   int iterations = -1;
+  double fail_residual_mm = -1;
   int eval_every = 5;
   int drop_pod = 1;
   int drop_from = 10;
+  bool predict = true;
   bool ok = true;
 };
 
@@ -65,7 +67,9 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
     else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
     else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
+    else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
+    else if (extra[i] == "--no-predict") a.predict = false;
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
     else {
@@ -82,7 +86,7 @@ struct Run {
   std::unique_ptr<TemporalFusion> fusion;
   metrics::FlickerAccumulator flicker;
   std::vector<double> track_ms, warp_ms, fuse_ms, mesh_ms, total_ms, cpu_ms;
-  std::vector<double> chamfer, completeness, exclusive;
+  std::vector<double> chamfer, completeness, accuracy, exclusive;
   int resets = 0, region_resets = 0, full_resets = 0, lost = 0;
   double failed_nodes = 0, nodes = 0;
   int tracked = 0;
@@ -164,7 +168,9 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.reg_weight >= 0) base.tracker.regularization_weight = static_cast<float>(extra.reg_weight);
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
+  base.predict_motion = extra.predict;
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
+  if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 
   std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);
   const char* names[4] = {"per_frame", "temporal", "per_frame_dropped", "temporal_dropped"};
@@ -223,6 +229,7 @@ int RunTemporal(const BenchArgs& args) {
           if (d.ok()) {
             run.chamfer.push_back(d->chamfer_mm);
             run.completeness.push_back(d->completeness);
+            run.accuracy.push_back(d->accuracy_mm);
           }
         }
       } else if (!exclusive.empty()) {
@@ -279,6 +286,7 @@ int RunTemporal(const BenchArgs& args) {
     EmitFigure("temporal", w, "flicker_mm", run.flicker.Mean(), "mm", qm);
     EmitFigure("temporal", w, "chamfer_mm", Mean(run.chamfer), "mm", qm);
     EmitFigure("temporal", w, "completeness", Mean(run.completeness), "1", qm);
+    EmitFigure("temporal", w, "accuracy_mm", Mean(run.accuracy), "mm", qm);
     if (r == 1) {
       EmitFigure("temporal", w, "resets", run.resets, "frames", qm);
       EmitFigure("temporal", w, "full_resets", run.full_resets, "frames", qm);

@@ -55,6 +55,7 @@ struct TemporalFusion::Impl {
     std::vector<BlockCoord> targets;  // live blocks it covers
   };
   std::vector<Src> src;
+  std::vector<uint8_t> near_surface;  // per reference block: 2 holds surface, 1 next to it
   // Per-thread dense copy of the reference around one live block.
   struct Gather {
     std::vector<float> tsdf, weight;
@@ -93,6 +94,8 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
 
 void TemporalFusion::Reset() {
   has_reference_ = false;
+  prev_node_pos_.clear();
+  prev_node_disp_.clear();
   lost_frames_ = 0;
   reference_->Reset();
   reference_mesh_.Clear();
@@ -139,11 +142,41 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
     s.usable = true;
   }
 
+  // Only blocks holding the cleaned reference surface and their neighbours
+  // are carried: junk the clean-up removed (flying-pixel blobs) must not
+  // accumulate over frames.
+  m.near_surface.assign(static_cast<size_t>(nsrc), 0);
+  {
+    BlockCoord last{INT32_MIN, 0, 0};
+    for (const Vector3f& p : reference_mesh_.positions) {
+      const Vector3f q = p / bs;
+      const BlockCoord c{static_cast<int32_t>(std::floor(q.x())), static_cast<int32_t>(std::floor(q.y())),
+                         static_cast<int32_t>(std::floor(q.z()))};
+      if (c == last) continue;
+      last = c;
+      if (!BlockCoordInRange(c.x, c.y, c.z)) continue;
+      const int32_t i = src.Find(c);
+      if (i != VoxelBlockMap::kNotFound) m.near_surface[static_cast<size_t>(i)] = 2;
+    }
+    for (int b = 0; b < nsrc; ++b) {
+      if (m.near_surface[static_cast<size_t>(b)] != 2) continue;
+      const BlockCoord c = src.coord(b);
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int32_t i = src.Find(BlockCoord{c.x + dx, c.y + dy, c.z + dz});
+            if (i != VoxelBlockMap::kNotFound && m.near_surface[static_cast<size_t>(i)] == 0)
+              m.near_surface[static_cast<size_t>(i)] = 1;
+          }
+    }
+  }
+
   // A: per reference block, its warp (blended node transform at the centre).
   m.pool.ParallelFor(nsrc, [&](int b) {
     Impl::Src& s = m.src[static_cast<size_t>(b)];
     s.keep = false;
     s.reset = false;
+    if (m.near_surface[static_cast<size_t>(b)] == 0) return;
     const uint8_t fl = src.flags(b);
     if (!(fl & (kBlockHasNegative | kBlockHasPositiveInBand))) return;  // free space only: nothing to carry
     const BlockCoord bc = src.coord(b);
@@ -409,6 +442,22 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
     normals_.push_back(n / len);
   }
   HOLO_RETURN_IF_ERROR(graph_.Build(points_, options_.graph));
+  if (options_.predict_motion && !prev_node_pos_.empty()) {
+    const float max_d = 2.0f * options_.graph.node_spacing_m;
+    for (size_t k = 0; k < graph_.num_nodes(); ++k) {
+      const Vector3f& g = graph_.position(static_cast<int>(k));
+      float best = max_d * max_d;
+      int bi = -1;
+      for (size_t j = 0; j < prev_node_pos_.size(); ++j) {
+        const float d = (prev_node_pos_[j] - g).squaredNorm();
+        if (d < best) {
+          best = d;
+          bi = static_cast<int>(j);
+        }
+      }
+      if (bi >= 0) graph_.translation(static_cast<int>(k)) = prev_node_disp_[static_cast<size_t>(bi)];
+    }
+  }
   HOLO_RETURN_IF_ERROR(tracker_->Track(rig, frames, points_, normals_, &graph_, &stats->track));
   stats->tracked = true;
   stats->nodes = static_cast<int>(graph_.num_nodes());
@@ -422,6 +471,8 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
           options_.lost_min_associated * static_cast<float>(stats->track.num_points);
   if (lost) {
     ++lost_frames_;
+    prev_node_pos_.clear();
+    prev_node_disp_.clear();
     if (lost_frames_ <= options_.max_lost_frames) {
       *out = reference_mesh_;  // hold the picture; track the reference into the next frame
       stats->lost = true;
@@ -441,6 +492,14 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
     return OkStatus();
   }
   lost_frames_ = 0;
+  prev_node_pos_.clear();
+  prev_node_disp_.clear();
+  for (size_t k = 0; k < graph_.num_nodes(); ++k) {
+    if (stats->track.nodes[k].failed) continue;
+    const int ki = static_cast<int>(k);
+    prev_node_pos_.push_back(graph_.position(ki) + graph_.translation(ki));
+    prev_node_disp_.push_back(graph_.translation(ki));
+  }
 
   // Warp the reference into the live frame, fuse the observation into it.
   t0 = std::chrono::steady_clock::now();

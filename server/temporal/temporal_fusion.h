@@ -53,6 +53,9 @@ struct TemporalFusionOptions {
   float max_weight = 30.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
+  // Start each node at the displacement of the nearest node of the last
+  // tracked frame (constant-velocity prediction).
+  bool predict_motion = true;
   bool reset_failed_regions = true;
   bool hull_carving = true;
   float lost_node_fraction = 0.5f;
@@ -113,6 +116,8 @@ class TemporalFusion {
   std::unique_ptr<NonrigidTracker> tracker_;
   std::unique_ptr<Impl> impl_;
   std::vector<Eigen::Vector3f> points_, normals_;
+  // Last tracked frame: warped node positions and their displacements.
+  std::vector<Eigen::Vector3f> prev_node_pos_, prev_node_disp_;
 };
 
 }  // namespace holo
