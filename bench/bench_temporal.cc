@@ -5,7 +5,7 @@
 //   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
 //            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
-//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --eval-every N (Chamfer every N-th frame),
+//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --eval-every N (Chamfer every N-th frame),
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -41,10 +41,12 @@ struct Extra {
   double reg_weight = -1, rot_weight = -1, hull_weight = -1;
   int iterations = -1;
   double fail_residual_mm = -1;
+  int pcg = -1;
   int eval_every = 5;
   int drop_pod = 1;
   int drop_from = 10;
   bool predict = true;
+  bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
   bool ok = true;
 };
 
@@ -70,6 +72,8 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
+    else if (extra[i] == "--still") a.still = true;
+    else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
     else {
@@ -169,6 +173,7 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
+  if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 
@@ -191,7 +196,7 @@ int RunTemporal(const BenchArgs& args) {
   metrics::MeshDistanceOptions mdo;
   mdo.num_threads = 2;
   for (int f = 0; f < frames; ++f) {
-    (*studio)->RenderFrame(f, &set, &gt);
+    (*studio)->RenderFrame(extra.still ? 0 : f, &set, &gt);
     for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
     const bool eval = f % extra.eval_every == extra.eval_every - 1;
     std::vector<Eigen::Vector3f> exclusive;
