@@ -5,7 +5,7 @@
 //   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
 //            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
-//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --eval-every N (Chamfer every N-th frame),
+//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --snap-mm S (still-node snap, 0 = off), --eval-every N (Chamfer every N-th frame),
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -42,6 +42,7 @@ struct Extra {
   int iterations = -1;
   double fail_residual_mm = -1;
   int pcg = -1;
+  double snap_mm = -1;
   int eval_every = 5;
   int drop_pod = 1;
   int drop_from = 10;
@@ -74,6 +75,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--no-predict") a.predict = false;
     else if (extra[i] == "--still") a.still = true;
     else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
+    else if (extra[i] == "--snap-mm") a.snap_mm = std::atof(value().c_str());
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
     else {
@@ -174,6 +176,7 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
+  if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 

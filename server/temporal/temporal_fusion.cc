@@ -37,6 +37,8 @@ Status TemporalFusionOptions::Check() const {
     return InvalidArgument("track_points must be in [16, 1e7], got " + std::to_string(track_points));
   if (!(lost_node_fraction > 0 && lost_node_fraction <= 1))
     return InvalidArgument("lost_node_fraction must be in (0, 1], got " + std::to_string(lost_node_fraction));
+  if (!(snap_still_m >= 0 && snap_still_m < 1))
+    return InvalidArgument("snap_still_m must be in [0, 1), got " + std::to_string(snap_still_m));
   if (!(lost_min_associated >= 0 && lost_min_associated <= 1))
     return InvalidArgument("lost_min_associated must be in [0, 1], got " + std::to_string(lost_min_associated));
   if (max_lost_frames < 0 || max_lost_frames > 1000)
@@ -492,6 +494,16 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
     return OkStatus();
   }
   lost_frames_ = 0;
+  if (options_.snap_still_m > 0) {
+    for (size_t k = 0; k < graph_.num_nodes(); ++k) {
+      const int ki = static_cast<int>(k);
+      if (graph_.translation(ki).norm() < options_.snap_still_m &&
+          (graph_.affine(ki) - Eigen::Matrix3f::Identity()).norm() < 10.0f * options_.snap_still_m) {
+        graph_.translation(ki).setZero();
+        graph_.affine(ki).setIdentity();
+      }
+    }
+  }
   prev_node_pos_.clear();
   prev_node_disp_.clear();
   for (size_t k = 0; k < graph_.num_nodes(); ++k) {

@@ -56,6 +56,10 @@ struct TemporalFusionOptions {
   // Start each node at the displacement of the nearest node of the last
   // tracked frame (constant-velocity prediction).
   bool predict_motion = true;
+  // Nodes that moved less than this (translation, metres; and ‖A − I‖ <
+  // 10 × this / 1 m) are set to the identity, so still regions are copied,
+  // not re-sampled (0 = off).
+  float snap_still_m = 0.002f;
   bool reset_failed_regions = true;
   bool hull_carving = true;
   float lost_node_fraction = 0.5f;
