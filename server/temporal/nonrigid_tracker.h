@@ -26,9 +26,10 @@
 // After the solve every node is judged (NodeReport): mean data residual of
 // the points it carries, the fraction of its observed points that violate
 // the observation (seen through: the depth there is behind the point; or
-// outside a silhouette), and the stretch of its graph edges (topology change:
-// neighbouring nodes no longer agree). Failed nodes mark the regions the
-// temporal fusion resets.
+// outside a silhouette), the stretch of its graph edges (topology change:
+// neighbouring nodes no longer agree) and the singular values of A_k (a torn
+// or folded surface). Failed nodes mark the regions the temporal fusion
+// resets.
 #pragma once
 
 #include <cstdint>

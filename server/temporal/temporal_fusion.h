@@ -8,7 +8,11 @@
 //
 //  * Per frame: the graph is rebuilt on the reference surface (nodes every
 //    `graph.node_spacing_m`), so the reference is always the last output —
-//    there is no long-lived canonical key volume to drift from.
+//    there is no long-lived canonical key volume to drift from. Nodes start
+//    at the previous frame's displacement (constant velocity); nodes that
+//    moved less than `snap_still_m` are set to the identity afterwards.
+//  * Only reference blocks holding (or next to) the cleaned reference mesh
+//    are carried.
 //  * Carried weights are capped at `max_weight`, so a voxel's value is an
 //    exponential average over roughly max_weight / (views per frame) frames.
 //  * Region reset: reference blocks skinned mostly (> ½) to failed nodes
