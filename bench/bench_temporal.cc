@@ -79,7 +79,12 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
     else {
-      std::fprintf(stderr, "temporal: unknown option %s\n", extra[i].c_str());
+      std::fprintf(stderr,
+                   "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
+                   "--track-points N, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
+                   "--fail-residual-mm R, --no-predict, --still, --pcg N, --snap-mm S, --eval-every N, "
+                   "--drop-pod K (-1 = none), --drop-from F\n",
+                   extra[i].c_str());
       a.ok = false;
     }
   }
