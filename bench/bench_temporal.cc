@@ -1,0 +1,338 @@
+// holoport-bench temporal: per-frame TSDF fusion vs temporal fusion
+// (non-rigid ED tracking + fusion into the warped reference volume,
+// server/temporal/) on a workload, judged against the studio's ground truth.
+//
+//   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
+//   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
+//            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
+//            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --snap-mm S (still-node snap, 0 = off), --eval-every N (Chamfer every N-th frame),
+//            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
+//            --drop-from F (first frame without it)
+//
+// Masks: the studio's ground-truth masks (MaskSource truth), so segmentation
+// cost and errors do not enter the figures. Times: wall clock per frame
+// (medians) and cpu_ms (CPU time of all threads per frame, medians).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bench.h"
+#include "common/metrics/flicker.h"
+#include "common/metrics/mesh_distance.h"
+#include "common/metrics/triangle_index.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+#include "server/temporal/temporal_fusion.h"
+
+namespace holo::bench {
+namespace {
+
+struct Extra {
+  std::string solver = "gn";
+  double spacing_cm = 0;
+  double max_weight = 0;
+  int track_points = 0;
+  double reg_weight = -1, rot_weight = -1, hull_weight = -1;
+  int iterations = -1;
+  double fail_residual_mm = -1;
+  int pcg = -1;
+  double snap_mm = -1;
+  int eval_every = 5;
+  int drop_pod = 1;
+  int drop_from = 10;
+  bool predict = true;
+  bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
+  bool ok = true;
+};
+
+Extra ParseExtra(const std::vector<std::string>& extra) {
+  Extra a;
+  for (size_t i = 0; i < extra.size(); ++i) {
+    auto value = [&]() -> std::string {
+      if (i + 1 >= extra.size()) {
+        std::fprintf(stderr, "temporal: %s needs a value\n", extra[i].c_str());
+        a.ok = false;
+        return "0";
+      }
+      return extra[++i];
+    };
+    if (extra[i] == "--solver") a.solver = value();
+    else if (extra[i] == "--spacing-cm") a.spacing_cm = std::atof(value().c_str());
+    else if (extra[i] == "--max-weight") a.max_weight = std::atof(value().c_str());
+    else if (extra[i] == "--track-points") a.track_points = std::atoi(value().c_str());
+    else if (extra[i] == "--reg-weight") a.reg_weight = std::atof(value().c_str());
+    else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
+    else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
+    else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
+    else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
+    else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
+    else if (extra[i] == "--no-predict") a.predict = false;
+    else if (extra[i] == "--still") a.still = true;
+    else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
+    else if (extra[i] == "--snap-mm") a.snap_mm = std::atof(value().c_str());
+    else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
+    else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
+    else {
+      std::fprintf(stderr,
+                   "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
+                   "--track-points N, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
+                   "--fail-residual-mm R, --no-predict, --still, --pcg N, --snap-mm S, --eval-every N, "
+                   "--drop-pod K (-1 = none), --drop-from F\n",
+                   extra[i].c_str());
+      a.ok = false;
+    }
+  }
+  return a;
+}
+
+// One fusion run (a mode) over the frames, with its figures.
+struct Run {
+  std::string mode;
+  std::unique_ptr<TemporalFusion> fusion;
+  metrics::FlickerAccumulator flicker;
+  std::vector<double> track_ms, warp_ms, fuse_ms, mesh_ms, total_ms, cpu_ms;
+  std::vector<double> chamfer, completeness, accuracy, exclusive;
+  int resets = 0, region_resets = 0, full_resets = 0, lost = 0;
+  double failed_nodes = 0, nodes = 0;
+  int tracked = 0;
+  Mesh mesh;
+};
+
+// Truth vertices that pod `pod` alone sees (noise-free depth within 15 mm,
+// front-facing), per the ground-truth depth of every pod.
+std::vector<Eigen::Vector3f> ExclusiveVertices(const Rig& rig, const StudioGroundTruth& gt, int pod) {
+  std::vector<Eigen::Vector3f> out;
+  const Mesh& m = gt.foreground_mesh;
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const Eigen::Vector3f& p = m.positions[i];
+    int seen_by = 0;
+    bool seen_by_pod = false;
+    for (size_t k = 0; k < rig.pods.size(); ++k) {
+      const CameraModel cam = rig.pods[k].DepthCamera();
+      if (!m.normals.empty() && m.normals[i].dot(cam.Center() - p) <= 0) continue;
+      const Eigen::Vector3f pc = cam.world_from_camera.inverse() * p;
+      Eigen::Vector2f px;
+      if (!cam.ProjectCamera(pc, &px)) continue;
+      const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+      if (u < 0 || v < 0 || u >= gt.depth[k].width() || v >= gt.depth[k].height()) continue;
+      const float z = gt.depth[k].at(u, v) * 0.001f;
+      if (z <= 0 || std::abs(z - pc.z()) > 0.015f) continue;
+      ++seen_by;
+      if (static_cast<int>(k) == pod) seen_by_pod = true;
+    }
+    if (seen_by_pod && seen_by == 1) out.push_back(p);
+  }
+  return out;
+}
+
+double FractionWithin(const Mesh& recon, const std::vector<Eigen::Vector3f>& pts, float threshold) {
+  if (pts.empty()) return NAN;
+  auto index = metrics::TriangleIndex::Build(recon);
+  if (!index.ok() || index->empty()) return 0.0;
+  const std::vector<float> d = index->DistanceBatch(pts, threshold * 2, 2);
+  size_t hit = 0;
+  for (float x : d) hit += x <= threshold;
+  return static_cast<double>(hit) / static_cast<double>(pts.size());
+}
+
+int RunTemporal(const BenchArgs& args) {
+  const Extra extra = ParseExtra(args.extra);
+  if (!extra.ok) return 2;
+  auto workload = GetWorkload(args.workload);
+  if (!workload.ok()) {
+    std::fprintf(stderr, "temporal: %s\n", workload.status().ToString().c_str());
+    return 2;
+  }
+  auto solver = ParseTrackerSolver(extra.solver);
+  if (!solver.ok()) {
+    std::fprintf(stderr, "temporal: %s\n", solver.status().ToString().c_str());
+    return 2;
+  }
+  const Rig& rig = workload->rig;
+  if (extra.drop_pod >= static_cast<int>(rig.pods.size())) {
+    std::fprintf(stderr, "temporal: --drop-pod %d but the rig has %zu pods\n", extra.drop_pod, rig.pods.size());
+    return 2;
+  }
+  const int frames = args.frames > 0 ? args.frames : 30;
+  StudioOptions so = workload->studio;
+  so.threads = 2;
+  auto studio = SyntheticStudio::Create(rig, so);
+  if (!studio.ok()) {
+    std::fprintf(stderr, "temporal: %s\n", studio.status().ToString().c_str());
+    return 1;
+  }
+
+  TemporalFusionOptions base;
+  base.tsdf.voxel_size = workload->voxel_size_m;
+  base.tsdf.threads = 2;
+  base.tracker.threads = 2;
+  base.tracker.solver = *solver;
+  if (extra.spacing_cm > 0) base.graph.node_spacing_m = static_cast<float>(extra.spacing_cm / 100);
+  if (extra.max_weight > 0) base.max_weight = static_cast<float>(extra.max_weight);
+  if (extra.track_points > 0) base.track_points = extra.track_points;
+  if (extra.reg_weight >= 0) base.tracker.regularization_weight = static_cast<float>(extra.reg_weight);
+  if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
+  if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
+  base.predict_motion = extra.predict;
+  if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
+  if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
+  if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
+  if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
+
+  std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);
+  const char* names[4] = {"per_frame", "temporal", "per_frame_dropped", "temporal_dropped"};
+  for (size_t r = 0; r < runs.size(); ++r) {
+    runs[r].mode = names[r];
+    TemporalFusionOptions o = base;
+    o.temporal = r % 2 == 1;
+    auto f = TemporalFusion::Create(o);
+    if (!f.ok()) {
+      std::fprintf(stderr, "temporal: %s\n", f.status().ToString().c_str());
+      return 2;
+    }
+    runs[r].fusion = std::move(*f);
+  }
+
+  RgbdFrameSet set, dropped;
+  StudioGroundTruth gt;
+  metrics::MeshDistanceOptions mdo;
+  mdo.num_threads = 2;
+  for (int f = 0; f < frames; ++f) {
+    (*studio)->RenderFrame(extra.still ? 0 : f, &set, &gt);
+    for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
+    const bool eval = f % extra.eval_every == extra.eval_every - 1;
+    std::vector<Eigen::Vector3f> exclusive;
+    if (extra.drop_pod >= 0 && f >= extra.drop_from) {
+      dropped = set;
+      dropped.frames[static_cast<size_t>(extra.drop_pod)].depth.Fill(0);
+      dropped.frames[static_cast<size_t>(extra.drop_pod)].mask.Fill(0);
+      exclusive = ExclusiveVertices(rig, gt, extra.drop_pod);
+    }
+    for (size_t r = 0; r < runs.size(); ++r) {
+      Run& run = runs[r];
+      const RgbdFrameSet& in = (r >= 2 && f >= extra.drop_from) ? dropped : set;
+      TemporalFrameStats st;
+      const double cpu0 = ProcessCpuMs();
+      if (Status s = run.fusion->Process(rig, in, &run.mesh, &st); !s.ok()) {
+        std::fprintf(stderr, "temporal: %s frame %d: %s\n", run.mode.c_str(), f, s.ToString().c_str());
+        return 1;
+      }
+      const double cpu = ProcessCpuMs() - cpu0;
+      if (r < 2) {
+        if (Status s = run.flicker.Add(run.mesh, gt.foreground_mesh); !s.ok()) {
+          std::fprintf(stderr, "temporal: flicker: %s\n", s.ToString().c_str());
+          return 1;
+        }
+        if (f > 0) {  // frame 0 is per-frame fusion in both modes
+          run.track_ms.push_back(st.track_ms);
+          run.warp_ms.push_back(st.warp_ms);
+          run.fuse_ms.push_back(st.fuse_ms + st.warp_ms);
+          run.mesh_ms.push_back(st.mesh_ms);
+          run.total_ms.push_back(st.total_ms);
+          run.cpu_ms.push_back(cpu);
+        }
+        if (eval && !run.mesh.empty()) {
+          auto d = metrics::ComputeMeshDistance(run.mesh, gt.foreground_mesh, mdo);
+          if (d.ok()) {
+            run.chamfer.push_back(d->chamfer_mm);
+            run.completeness.push_back(d->completeness);
+            run.accuracy.push_back(d->accuracy_mm);
+          }
+        }
+      } else if (!exclusive.empty()) {
+        run.exclusive.push_back(FractionWithin(run.mesh, exclusive, 0.01f));
+      }
+      if (r == 1 && extra.drop_pod >= 0 && f >= extra.drop_from && !exclusive.empty()) {
+        runs[0].exclusive.push_back(FractionWithin(runs[0].mesh, exclusive, 0.01f));
+        runs[1].exclusive.push_back(FractionWithin(runs[1].mesh, exclusive, 0.01f));
+      }
+      if (std::getenv("HOLO_TEMPORAL_VERBOSE") && st.tracked)
+        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu\n",
+                     run.mode.c_str(), f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
+                     st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
+                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations,
+                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks);
+      run.tracked += st.tracked;
+      run.nodes += st.nodes;
+      run.failed_nodes += st.failed_nodes;
+      run.region_resets += st.region_reset;
+      run.full_resets += st.full_reset;
+      run.lost += st.lost;
+      run.resets += st.region_reset || st.full_reset;
+    }
+    if (!args.json) {
+      std::fprintf(stderr, "\rframe %d/%d", f + 1, frames);
+      std::fflush(stderr);
+    }
+  }
+  if (!args.json) std::fprintf(stderr, "\n");
+
+  const std::string w = args.workload;
+  std::map<std::string, std::string> q;
+  q["solver"] = extra.solver;
+  q["masks"] = "truth";
+  q["frames"] = std::to_string(frames);
+  for (size_t r = 0; r < 2; ++r) {
+    Run& run = runs[r];
+    auto qm = q;
+    qm["mode"] = run.mode;
+    auto stage = [&](const char* name, const std::vector<double>& v) {
+      auto qs = qm;
+      qs["stage"] = name;
+      EmitFigure("temporal", w, "ms", Median(v), "ms", qs);
+    };
+    if (r == 1) stage("track", run.track_ms);
+    if (r == 1) stage("warp", run.warp_ms);
+    stage("fuse", run.fuse_ms);
+    stage("mesh", run.mesh_ms);
+    stage("total", run.total_ms);
+    auto qc = qm;
+    qc["stage"] = "total";
+    EmitFigure("temporal", w, "cpu_ms", Median(run.cpu_ms), "ms", qc);
+    EmitFigure("temporal", w, "fps", 1000.0 / std::max(1e-9, Median(run.total_ms)), "1/s", qm);
+    EmitFigure("temporal", w, "flicker_mm", run.flicker.Mean(), "mm", qm);
+    EmitFigure("temporal", w, "chamfer_mm", Mean(run.chamfer), "mm", qm);
+    EmitFigure("temporal", w, "completeness", Mean(run.completeness), "1", qm);
+    EmitFigure("temporal", w, "accuracy_mm", Mean(run.accuracy), "mm", qm);
+    if (r == 1) {
+      EmitFigure("temporal", w, "resets", run.resets, "frames", qm);
+      EmitFigure("temporal", w, "full_resets", run.full_resets, "frames", qm);
+      EmitFigure("temporal", w, "lost_frames", run.lost, "frames", qm);
+      EmitFigure("temporal", w, "nodes", run.tracked ? run.nodes / run.tracked : 0, "1", qm);
+      EmitFigure("temporal", w, "failed_nodes", run.tracked ? run.failed_nodes / run.tracked : 0, "1", qm);
+    }
+  }
+  EmitFigure("temporal", w, "flicker_ratio", runs[1].flicker.Mean() / runs[0].flicker.Mean(), "1", q);
+  if (runs.size() == 4) {
+    auto qd = q;
+    qd["dropped_pod"] = std::to_string(extra.drop_pod);
+    qd["drop_from"] = std::to_string(extra.drop_from);
+    const char* modes[4] = {"per_frame", "temporal", "per_frame", "temporal"};
+    for (size_t r = 0; r < 4; ++r) {
+      auto qe = qd;
+      qe["mode"] = modes[r];
+      qe["pods"] = r < 2 ? "all" : "dropped";
+      EmitFigure("temporal", w, "exclusive_completeness", Mean(runs[r].exclusive), "1", qe);
+    }
+    auto qe = qd;
+    qe["mode"] = "temporal";
+    qe["pods"] = "dropped";
+    EmitFigure("temporal", w, "resets", runs[3].resets, "frames", qe);
+  }
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("temporal",
+                    "per-frame vs temporal fusion (non-rigid ED tracking): ms per stage, fps, flicker, Chamfer, "
+                    "completeness, resets; a dropped pod's exclusive surface",
+                    RunTemporal);
+
+}  // namespace holo::bench
