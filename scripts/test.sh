@@ -2,7 +2,7 @@
 # Sets up a fresh machine, builds, and runs every test:
 #   1. the Release build, all tests (unit and slow);
 #   2. the sanitizer build (ASan + UBSan) on the tests that parse untrusted
-#      input (label "parsing": rig files, PLY, datasets, importers).
+#      input (label "parsing": files, network bytes, codecs, recordings).
 # ./scripts/test.sh --quick skips slow tests and the sanitizer build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,8 +26,10 @@ else
   # Configure, then build only the test programs labelled "parsing".
   GENERATOR=()
   if command -v ninja > /dev/null; then GENERATOR=(-G Ninja); fi
+  LAUNCHER=()
+  if command -v ccache > /dev/null; then LAUNCHER=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
   [[ -f build-asan/CMakeCache.txt ]] || cmake -S . -B build-asan "${GENERATOR[@]}" -DHOLO_SANITIZE=ON \
-    -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHOLO_BUILD_BENCH=OFF > /dev/null
+    -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHOLO_BUILD_BENCH=OFF "${LAUNCHER[@]}" > /dev/null
   cmake -S . -B build-asan > /dev/null
   mapfile -t targets < <(ctest --test-dir build-asan -N -L parsing | sed -n 's/^ *Test *#[0-9]*: //p')
   echo "sanitizer build of ${#targets[@]} test programs: ${targets[*]}"
