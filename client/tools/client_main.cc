@@ -104,6 +104,9 @@ int main(int argc, char** argv) {
   app.add_option("--png-every", o.png_every, "headless network run: write every K-th new frame as PNG")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
+  app.add_option("--png-interval", o.png_interval_s,
+                 "headless network run: write a PNG of the newest frame every S seconds (instead of --png-every)")
+      ->check(CLI::Range(0.0, 3600.0));
   app.add_flag("--contact-sheet", o.contact_sheet,
                "headless network run: also write contact_sheet.png (quarter-size tiles of up to 16 written frames)");
   app.add_option("--connect-timeout", o.connect_timeout_s,

@@ -627,8 +627,15 @@ class Viewer {
       } else {
         NoteLoop(loop_ms);
       }
+      bool due = false;
+      if (fresh && o_.png_interval_s > 0) {
+        due = last_png_us_ == 0 || WallNowUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
+      } else if (fresh) {
+        due = (displayed_new - 1) % std::max(1, o_.png_every) == 0;
+      }
+      if (due) last_png_us_ = WallNowUs();
       if (o_.headless && o_.write_png &&
-          ((fresh && (displayed_new - 1) % std::max(1, o_.png_every) == 0) || (!fresh && stale_renders_ % 5 == 1 &&
+          (due || (!fresh && stale_renders_ % 5 == 1 &&
                                                                              static_cast<net::ClientState>(
                                                                                  net_state_.load()) !=
                                                                                  net::ClientState::kConnected))) {
@@ -889,6 +896,7 @@ class Viewer {
   int64_t rate_t_us_ = 0;
   uint64_t rate_bytes_ = 0;
   double recent_mbps_ = 0, net_elapsed_s_ = 0;
+  int64_t last_png_us_ = 0;
   bool showing_stale_ = false;
   bool frame_has_images_ = true;
   bool image_error_reported_ = false;

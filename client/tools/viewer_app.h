@@ -47,6 +47,7 @@ struct ViewerOptions {
   std::string audio_out;  // --call: spatialized stereo WAV of the remote voices
   double seconds = 0;     // network: stop after this long (0: --frames decides)
   int png_every = 1;      // headless: write every K-th displayed frame
+  double png_interval_s = 0;  // headless network run: a PNG every S seconds instead (0: png_every)
   bool contact_sheet = false;  // headless: also a contact sheet of the written frames
   double connect_timeout_s = 10;  // give up when no site answered within this (0: wait forever)
 };
