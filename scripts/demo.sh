@@ -90,7 +90,7 @@ port_free() { ! (exec 3<> "/dev/tcp/127.0.0.1/$1") 2> /dev/null; }
 pick_port() {
   local p
   for _ in $(seq 50); do
-    p=$((20000 + RANDOM % 30000))
+    p=$((20000 + RANDOM % 12000))  # below the ephemeral range (32768+)
     if port_free "$p" && port_free $((p + 1)); then echo "$p"; return 0; fi
   done
   echo "demo.sh: no free port pair found" >&2; return 1

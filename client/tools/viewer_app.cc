@@ -200,6 +200,7 @@ class Viewer {
     co.name = o_.name;
     co.backoff_initial_s = 0.2;
     co.backoff_max_s = 2.0;
+    co.connect_timeout_s = 3.0;
     net::ClientCallbacks cb;
     cb.on_state = [this](net::ClientState st, const Status& why) {
       net_state_ = static_cast<int>(st);
@@ -809,6 +810,7 @@ class Viewer {
       j["latency_definition"] =
           "capture (site clock) to display (rendered, glFinish), through the client's clock-offset estimate";
       j["frames_new"] = frames_new_;
+      j["last_frame_index"] = last_index_;
       j["frames_received"] = cs.frames_received;
       j["drops_definition"] = "frames of the site's sequence this viewer never displayed (gaps in frame indices)";
       j["frames_dropped_local"] = cs.frames_dropped_local;
