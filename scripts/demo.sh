@@ -14,6 +14,8 @@
 #    (the spatialized stereo audio each participant hears); then a summary:
 #    fps, latency capture->display, bitrate, drops, audio delay.
 # Options: --out DIR, --seconds N (20), --headless, --size WxH (960x540),
+#   --color vertex|projective (default vertex: no pod images are sent; projective
+#   texturing of the 8 VGA pod images costs seconds per frame on llvmpipe),
 #   --no-setup (skip scripts/setup.sh and scripts/build.sh),
 #   --capture-only (the previous demo instead: dataset + reconstruction of
 #   one site into out/demo; with --workload W --frames N).
@@ -28,12 +30,14 @@ CAPTURE_ONLY=0
 WORKLOAD=S8-QVGA
 FRAMES=30
 OUT_SET=0
+COLOR=vertex
 while (($#)); do
   case "$1" in
     --out) OUT=$2; OUT_SET=1; shift 2 ;;
     --seconds) SECONDS_RUN=$2; shift 2 ;;
     --headless) HEADLESS=1; shift ;;
     --size) SIZE=$2; shift 2 ;;
+    --color) COLOR=$2; shift 2 ;;
     --no-setup) SETUP=0; shift ;;
     --capture-only) CAPTURE_ONLY=1; shift ;;
     --workload) WORKLOAD=$2; shift 2 ;;
@@ -145,7 +149,7 @@ fi
 VIEWERS=()
 for who in alice bob; do
   $BIN/holoport-client --call "$OUT/$who.yaml" --name "$who" "${MODE[@]}" --seconds "$SECONDS_RUN" \
-    --width "$WIDTH" --height "$HEIGHT" --connect-timeout 60 \
+    --width "$WIDTH" --height "$HEIGHT" --connect-timeout 60 --color "$COLOR" \
     --audio-in "$OUT/${who}_says.wav" --audio-out "$OUT/${who}_hears.wav" --out "$OUT/$who" \
     > "$OUT/logs/${who}_viewer.log" 2>&1 &
   PIDS+=($!)

@@ -201,6 +201,9 @@ class Viewer {
     co.backoff_initial_s = 0.2;
     co.backoff_max_s = 2.0;
     co.connect_timeout_s = 3.0;
+    // Vertex colour needs no pod images: do not subscribe to them (saves the
+    // bandwidth and the C1 decoding of every frame).
+    if (mode_ == ColorMode::kVertexColor) co.subscribe = net::kSubscribeGeometry | net::kSubscribeAudio;
     net::ClientCallbacks cb;
     cb.on_state = [this](net::ClientState st, const Status& why) {
       net_state_ = static_cast<int>(st);
@@ -247,6 +250,8 @@ class Viewer {
       return Unavailable("could not join " + SourceName() + " within " + std::to_string(static_cast<int>(wait)) +
                          " s: " + (why.ok() ? std::string("no answer") : why.message()));
     }
+    // The site sends its rig right after Welcome; wait a moment for it.
+    for (int i = 0; i < 100 && !client_->rig(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
     if (auto rig = client_->rig()) {
       net_rig_ = *rig;
       std::lock_guard<std::mutex> l(rig_mu_);
