@@ -15,7 +15,7 @@
 #    fps, latency capture->display, bitrate, drops, audio delay.
 # Options: --out DIR, --seconds N (20), --headless, --size WxH (960x540),
 #   --color vertex|projective (default vertex: no pod images are sent; projective
-#   texturing of the 8 VGA pod images costs seconds per frame on llvmpipe),
+#   texturing from the 8 VGA pod images runs at ~1 fps on llvmpipe here),
 #   --no-setup (skip scripts/setup.sh and scripts/build.sh),
 #   --capture-only (the previous demo instead: dataset + reconstruction of
 #   one site into out/demo; with --workload W --frames N).
@@ -42,7 +42,7 @@ while (($#)); do
     --capture-only) CAPTURE_ONLY=1; shift ;;
     --workload) WORKLOAD=$2; shift 2 ;;
     --frames) FRAMES=$2; shift 2 ;;
-    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "demo.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
