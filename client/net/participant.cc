@@ -55,7 +55,7 @@ protocol::HeadPose SyntheticHead(double t_s, float distance_m, float phase) {
   return p;
 }
 
-bool ParseHostPort(const std::string& spec, std::string* host, uint16_t* port) {
+bool ParseSiteAddress(const std::string& spec, std::string* host, uint16_t* port) {
   const size_t c = spec.rfind(':');
   if (c == std::string::npos || c == 0 || c + 1 >= spec.size()) return false;
   char* end = nullptr;

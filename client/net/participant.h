@@ -88,6 +88,6 @@ class Participant {
 };
 
 // HOST:PORT → host, port; false if malformed.
-bool ParseHostPort(const std::string& spec, std::string* host, uint16_t* port);
+bool ParseSiteAddress(const std::string& spec, std::string* host, uint16_t* port);
 
 }  // namespace holo::net

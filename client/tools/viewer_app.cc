@@ -234,7 +234,7 @@ class Viewer {
       // The remote room through the call's room transform (rendering and voices alike).
       call_local_from_remote_ = call.room.local_from_remote.matrix();
     } else {
-      if (!net::ParseHostPort(o_.connect, &co.host, &co.port)) {
+      if (!net::ParseSiteAddress(o_.connect, &co.host, &co.port)) {
         return InvalidArgument("--connect: expected HOST:PORT, got '" + o_.connect + "'");
       }
       co.token = !o_.token.empty() ? o_.token

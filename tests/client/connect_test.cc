@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cmath>
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -20,6 +21,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "audio/wav.h"
+#include "client/net/participant.h"
 #include "client/net/site_client.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
@@ -35,6 +38,7 @@
 #include "server/net/site_publisher.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
+#include "net/net_fixtures.h"
 #include "test_util.h"
 
 namespace holo {
@@ -443,6 +447,58 @@ TEST(ConnectTest, RigChangeMidStreamIsReportedAndRenderingContinues) {
   EXPECT_EQ(j["rig_pods"].get<int>(), 4) << r.output;
   EXPECT_GE(j["last_frame_index"].get<int64_t>(), 1000) << r.output;
   EXPECT_EQ(j["bad_frames"].get<int>(), 0) << r.output;
+}
+
+// The shared participant code (holoport-client --call, holoport-call):
+// two sites, two participants; each hears the other's voice, spatialized
+// in front of it (face to face), and writes the stereo WAV.
+TEST(ConnectTest, CallParticipantsHearEachOtherSpatialized) {
+  auto site_a = net::Server::Start(Loopback());
+  auto site_b = net::Server::Start(Loopback());
+  ASSERT_TRUE(site_a.ok() && site_b.ok());
+  const std::string dir = test::MakeTempDir("connect_call");
+  auto config = [&](uint16_t local, uint16_t remote) {
+    return "local: {name: here, address: 127.0.0.1:" + std::to_string(local) +
+           ", publisher_token: pub}\nremote: {name: there, address: 127.0.0.1:" + std::to_string(remote) +
+           ", viewer_token: view}\nroom: {preset: face-to-face, gap_m: 0.5}\n";
+  };
+  std::vector<std::unique_ptr<net::Participant>> people;
+  for (int k = 0; k < 2; ++k) {
+    auto call = net::ParseCallConfig(k == 0 ? config((*site_a)->port(), (*site_b)->port())
+                                            : config((*site_b)->port(), (*site_a)->port()));
+    ASSERT_TRUE(call.ok()) << call.status().ToString();
+    net::ParticipantOptions po;
+    po.call = *call;
+    po.name = k == 0 ? "alice" : "bob";
+    po.audio_out = dir + "/" + po.name + ".wav";  // no --audio-in: the 440 Hz tone
+    auto p = net::Participant::Start(po);
+    ASSERT_TRUE(p.ok()) << p.status().ToString();
+    people.push_back(std::move(*p));
+  }
+  ASSERT_TRUE(test::Eventually([&] {
+    return people[0]->stats().remote_audio_frames >= 100 && people[1]->stats().remote_audio_frames >= 100;
+  }, 30.0));
+  for (int k = 0; k < 2; ++k) {
+    ASSERT_TRUE(people[k]->Stop().ok());
+    const net::ParticipantStats s = people[k]->stats();
+    EXPECT_GE(s.voice_frames_sent, 100);
+    EXPECT_EQ(s.remote_speakers, 1);
+    // Face to face with a 0.5 m gap: the other head (2 m from its display) is 2.5 m in front, at eye height.
+    EXPECT_NEAR(s.remote_x, -2.5f, 0.01f);
+    EXPECT_NEAR(s.remote_z, 1.6f, 0.01f);
+    EXPECT_LT(std::abs(s.remote_azimuth_deg), 40.0f);
+    auto wav = audio::ReadWav(dir + "/" + (k == 0 ? "alice" : "bob") + ".wav");
+    ASSERT_TRUE(wav.ok()) << wav.status().ToString();
+    EXPECT_EQ(wav->channels, 2);
+    EXPECT_EQ(wav->sample_rate, 48000);
+    double sum_sq = 0;
+    for (float v : wav->samples) sum_sq += static_cast<double>(v) * v;
+    const double rms = std::sqrt(sum_sq / static_cast<double>(wav->samples.size()));
+    std::printf("%s: %zu frames heard, %.2f s of stereo, RMS %.4f, audio delay %.1f ms, azimuth %.1f deg\n",
+                k == 0 ? "alice" : "bob", static_cast<size_t>(s.remote_audio_frames), wav->frames() / 48000.0, rms,
+                s.audio_delay_ms, s.remote_azimuth_deg);
+    EXPECT_GT(rms, 1e-3);  // the tone is heard (0.1 amplitude at 2.5 m)
+  }
 }
 
 }  // namespace

@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
   std::unique_ptr<holo::net::Participant> participant;
   holo::net::SiteClient* viewer = nullptr;
   if (!watch.empty()) {
-    if (!holo::net::ParseHostPort(watch, &view.host, &view.port))
+    if (!holo::net::ParseSiteAddress(watch, &view.host, &view.port))
       return Fail(holo::InvalidArgument("--watch: expected HOST:PORT, got '" + watch + "'"));
     view.token = !token.empty() ? token : (std::getenv("HOLO_VIEWER_TOKEN") ? std::getenv("HOLO_VIEWER_TOKEN") : "");
     view.tls.enabled = tls;
