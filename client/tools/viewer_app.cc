@@ -581,9 +581,14 @@ class Viewer {
       bool fresh = false;
       if (client_->LatestFrame(&rf)) {
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;  // nothing to show in it
-        net::ReceivedFrame keep_times = rf;  // times/index only are used below
-        keep_times.mesh = Mesh();
-        keep_times.images.clear();
+        net::ReceivedFrame keep_times;  // times/index only are used below (no mesh/image copies)
+        keep_times.frame_index = rf.frame_index;
+        keep_times.capture_time_us = rf.capture_time_us;
+        keep_times.received_us = rf.received_us;
+        keep_times.latency_ms = rf.latency_ms;
+        keep_times.wire_bytes = rf.wire_bytes;
+        keep_times.has_mesh = rf.has_mesh;
+        keep_times.has_color = rf.has_color;
         ToStreamFrame(rf, &frame);
         if (Status s = Upload(frame); !s.ok()) {
           std::printf("holoport-client: frame %lld not shown: %s\n", static_cast<long long>(keep_times.frame_index),
