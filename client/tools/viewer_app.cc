@@ -76,6 +76,25 @@ Mesh MakeTable(const Eigen::Vector3f& top) {
   return table;
 }
 
+bool SameIntrinsics(const Intrinsics& a, const Intrinsics& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx &&
+         a.cy == b.cy && a.distortion == b.distortion;
+}
+
+// Same calibration (a site re-sends its rig after every reconnect).
+bool SameRig(const Rig& a, const Rig& b) {
+  if (a.name != b.name || a.pods.size() != b.pods.size()) return false;
+  for (size_t i = 0; i < a.pods.size(); ++i) {
+    const PodCalibration &p = a.pods[i], &q = b.pods[i];
+    if (p.id != q.id || !SameIntrinsics(p.depth, q.depth) || !SameIntrinsics(p.color, q.color) ||
+        !p.color_from_depth.matrix().isApprox(q.color_from_depth.matrix(), 1e-6f) ||
+        !p.world_from_depth.matrix().isApprox(q.world_from_depth.matrix(), 1e-6f)) {
+      return false;
+    }
+  }
+  return true;
+}
+
 struct FrameStats {
   std::vector<double> produce_ms, upload_ms, render_ms, latency_ms, loop_ms;
   int64_t drops = 0;
@@ -461,6 +480,7 @@ class Viewer {
       std::printf("holoport-client: the site sent an invalid rig (%s); keeping the previous one\n", s.message().c_str());
       return;
     }
+    if (SameRig(rig, net_rig_)) return;  // re-sent after a reconnect
     if (!net_rig_.pods.empty()) {
       ++rig_changes_;
       std::printf("holoport-client: rig changed mid-stream: '%s' (%zu pods) -> '%s' (%zu pods); projective texturing "
