@@ -2,8 +2,9 @@
 // locally (OpenGL 3.3 core): per-vertex colour or projective texturing from
 // the pods' images, free-viewpoint camera, miniature mode, AR compositing
 // against local geometry, a K-view mosaic for light-field displays, and an
-// overlay with fps, latency, bitrate and drops. Until the network client
-// lands, the stream is the synthetic studio's ground truth (--source).
+// overlay with fps, latency, bitrate and drops. The stream is a site server
+// (--connect HOST:PORT, or --call CONFIG for one side of a two-site call with
+// spatial voice) or the synthetic studio's ground truth (--source).
 #include <cstdio>
 #include <sstream>
 #include <string>
@@ -90,7 +91,36 @@ int main(int argc, char** argv) {
   app.add_option("--threads", o.threads, "worker threads of the synthetic source")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
+  app.add_option("--connect", o.connect, "watch the site server at HOST:PORT (instead of --source)");
+  app.add_option("--token", o.token, "viewer token for --connect (default: env HOLO_VIEWER_TOKEN)");
+  app.add_option("--call", o.call,
+                 "one side of a two-site call: call config YAML (docs/sessions.md); watches the remote site, "
+                 "publishes the own voice and head pose to the local site, spatializes the remote voices");
+  app.add_option("--name", o.name, "participant / client name (shown in the site's log)")->capture_default_str();
+  app.add_option("--audio-in", o.audio_in, "--call: own voice, a WAV file (looped; default: a 440 Hz tone)");
+  app.add_option("--audio-out", o.audio_out, "--call: write the spatialized remote voices to this stereo WAV");
+  app.add_option("--seconds", o.seconds, "--connect/--call: stop after this many seconds (0: --frames decides)")
+      ->check(CLI::Range(0.0, 1e6));
+  app.add_option("--png-every", o.png_every, "headless network run: write every K-th new frame as PNG")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--png-interval", o.png_interval_s,
+                 "headless network run: write a PNG of the newest frame every S seconds (instead of --png-every)")
+      ->check(CLI::Range(0.0, 3600.0));
+  app.add_flag("--contact-sheet", o.contact_sheet,
+               "headless network run: also write contact_sheet.png (quarter-size tiles of up to 16 written frames)");
+  app.add_option("--connect-timeout", o.connect_timeout_s,
+                 "give up when the site has not answered within this many seconds (0: wait forever)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  if (!o.connect.empty() && !o.call.empty()) {
+    std::fprintf(stderr, "holoport-client: give --connect or --call, not both\n");
+    return 2;
+  }
+  if ((!o.audio_in.empty() || !o.audio_out.empty()) && o.call.empty()) {
+    std::fprintf(stderr, "holoport-client: --audio-in/--audio-out need --call\n");
+    return 2;
+  }
 
   if (!mini_at.empty()) {
     std::vector<float> v;

@@ -1,6 +1,12 @@
 #include "client/tools/viewer_app.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <chrono>
+#include <csignal>
+#include <thread>
+#include <mutex>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +20,9 @@
 #include <GLFW/glfw3.h>
 #include <nlohmann/json.hpp>
 
+#include "audio/room.h"
+#include "client/net/participant.h"
+#include "client/net/site_client.h"
 #include "client/render/gl_context.h"
 #include "client/render/overlay.h"
 #include "client/render/renderer.h"
@@ -34,6 +43,8 @@
 
 namespace holo::client {
 namespace {
+
+std::atomic<bool> g_viewer_stop{false};
 
 using render::ColorMode;
 
@@ -63,6 +74,25 @@ Mesh MakeTable(const Eigen::Vector3f& top) {
   floor.colors.assign(floor.num_vertices(), {70, 72, 78});
   table.Append(floor);
   return table;
+}
+
+bool SameIntrinsics(const Intrinsics& a, const Intrinsics& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx &&
+         a.cy == b.cy && a.distortion == b.distortion;
+}
+
+// Same calibration (a site re-sends its rig after every reconnect).
+bool SameRig(const Rig& a, const Rig& b) {
+  if (a.name != b.name || a.pods.size() != b.pods.size()) return false;
+  for (size_t i = 0; i < a.pods.size(); ++i) {
+    const PodCalibration &p = a.pods[i], &q = b.pods[i];
+    if (p.id != q.id || !SameIntrinsics(p.depth, q.depth) || !SameIntrinsics(p.color, q.color) ||
+        !p.color_from_depth.matrix().isApprox(q.color_from_depth.matrix(), 1e-6f) ||
+        !p.world_from_depth.matrix().isApprox(q.world_from_depth.matrix(), 1e-6f)) {
+      return false;
+    }
+  }
+  return true;
 }
 
 struct FrameStats {
@@ -108,7 +138,12 @@ class Viewer {
       return Unavailable("--pose-trace needs the head-trace reader (client/pose), which this build does not have");
 #endif
     }
-    HOLO_ASSIGN_OR_RETURN(source_, SyntheticSource::Create(o_.source, o_.threads));
+    net_mode_ = !o_.connect.empty() || !o_.call.empty();
+    if (net_mode_) {
+      HOLO_RETURN_IF_ERROR(StartNetwork());
+    } else {
+      HOLO_ASSIGN_OR_RETURN(source_, SyntheticSource::Create(o_.source, o_.threads));
+    }
 
     // Context: headless (EGL surfaceless; an invisible GLFW window as the
     // fallback when there is a display) or a window.
@@ -165,13 +200,104 @@ class Viewer {
     controller_.SetOrbit(orbit_target_, std::hypot(orbit_radius_, orbit_height_ - orbit_target_.z()), 20.0f,
                          std::atan2(orbit_height_ - orbit_target_.z(), orbit_radius_) * 180.0f / static_cast<float>(M_PI));
     std::printf("holoport-client: %s, source %s (%zu pods), %dx%d, %d view(s), %s%s\n",
-                context_->Describe().c_str(), o_.source.c_str(), source_->rig().pods.size(), o_.width, o_.height,
+                context_->Describe().c_str(), SourceName().c_str(), CurrentRig().pods.size(), o_.width, o_.height,
                 o_.views, render::ColorModeName(mode_), o_.miniature_scale != 0.0f ? ", miniature" : "");
     return OkStatus();
   }
 
+  std::string SourceName() const {
+    if (!o_.call.empty()) return "call " + o_.call;
+    if (!o_.connect.empty()) return "site " + o_.connect;
+    return o_.source;
+  }
+  const Rig& CurrentRig() const { return net_mode_ ? net_rig_ : source_->rig(); }
+
+  // --connect / --call: start the client(s); waits for the first Welcome
+  // (refusals and unreachable sites are errors here; later losses reconnect).
+  Status StartNetwork() {
+    net::ClientOptions co;
+    co.name = o_.name;
+    co.backoff_initial_s = 0.2;
+    co.backoff_max_s = 2.0;
+    co.connect_timeout_s = 3.0;
+    // Vertex colour needs no pod images: do not subscribe to them (saves the
+    // bandwidth and the C1 decoding of every frame).
+    if (mode_ == ColorMode::kVertexColor) co.subscribe = net::kSubscribeGeometry | net::kSubscribeAudio;
+    net::ClientCallbacks cb;
+    cb.on_state = [this](net::ClientState st, const Status& why) {
+      net_state_ = static_cast<int>(st);
+      if (st == net::ClientState::kConnected) {
+        std::printf("holoport-client: connected to %s\n", SourceName().c_str());
+      } else if (st == net::ClientState::kBackoff || st == net::ClientState::kRefused) {
+        std::printf("holoport-client: site connection %s%s%s%s\n", net::ClientStateName(st), why.ok() ? "" : ": ",
+                    why.ok() ? "" : why.message().c_str(),
+                    st == net::ClientState::kBackoff ? " (showing the last frame; reconnecting with backoff)" : "");
+      }
+      std::fflush(stdout);
+    };
+    cb.on_rig = [this](const Rig& rig) {
+      std::lock_guard<std::mutex> l(rig_mu_);
+      pending_rig_ = rig;
+      rig_pending_ = true;
+    };
+    if (!o_.call.empty()) {
+      HOLO_ASSIGN_OR_RETURN(net::CallConfig call, net::LoadCallConfig(o_.call));
+      net::ParticipantOptions po;
+      po.call = call;
+      po.name = o_.name;
+      po.audio_in = o_.audio_in;
+      po.audio_out = o_.audio_out;
+      po.view_template = co;
+      HOLO_ASSIGN_OR_RETURN(participant_, net::Participant::Start(po, cb));
+      client_ = &participant_->viewer();
+      // The remote room through the call's room transform (rendering and voices alike).
+      call_local_from_remote_ = call.room.local_from_remote.matrix();
+    } else {
+      if (!net::ParseSiteAddress(o_.connect, &co.host, &co.port)) {
+        return InvalidArgument("--connect: expected HOST:PORT, got '" + o_.connect + "'");
+      }
+      co.token = !o_.token.empty() ? o_.token
+                                   : (std::getenv("HOLO_VIEWER_TOKEN") ? std::getenv("HOLO_VIEWER_TOKEN") : "");
+      HOLO_ASSIGN_OR_RETURN(own_client_, net::SiteClient::Start(co, cb));
+      client_ = own_client_.get();
+    }
+    std::printf("holoport-client: connecting to %s ...\n", SourceName().c_str());
+    std::fflush(stdout);
+    const double wait = o_.connect_timeout_s > 0 ? o_.connect_timeout_s : 1e9;
+    if (!client_->WaitConnected(wait)) {
+      const Status why = client_->status();
+      return Unavailable("could not join " + SourceName() + " within " + std::to_string(static_cast<int>(wait)) +
+                         " s: " + (why.ok() ? std::string("no answer") : why.message()));
+    }
+    // The site sends its rig right after Welcome; wait a moment for it.
+    for (int i = 0; i < 100 && !client_->rig(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (auto rig = client_->rig()) {
+      net_rig_ = *rig;
+      std::lock_guard<std::mutex> l(rig_mu_);
+      rig_pending_ = false;
+    }
+    net_start_us_ = WallNowUs();
+    return OkStatus();
+  }
+
+  static int64_t WallNowUs() {
+    return std::chrono::duration_cast<std::chrono::microseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  }
+
   // world_from_camera of the centre view at time t (seconds from start).
   Pose ViewPose(double t) const {
+    if (participant_ && !interactive_) {
+      // The own head (x forward, y left, z up) → camera (x right, y down, z forward).
+      const Eigen::Isometry3f head = audio::HeadToRoom(participant_->OwnHead());
+      Eigen::Matrix3f cam_to_head;
+      cam_to_head << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+      Pose p = Pose::Identity();
+      p.linear() = head.linear() * cam_to_head;
+      p.translation() = head.translation();
+      return p;
+    }
     if (!trace_.empty()) {
 #if HOLO_CLIENT_HAVE_TRACE
       const int64_t t_us = trace_.front().time_us + static_cast<int64_t>(t * 1e6);
@@ -196,8 +322,20 @@ class Viewer {
     HOLO_RETURN_IF_ERROR(renderer_->SetRemoteMesh(frame.mesh));
     std::vector<const ImageRgb8*> images;
     for (const auto& im : frame.pod_images) images.push_back(&im);
-    HOLO_RETURN_IF_ERROR(renderer_->SetPodImages(source_->rig(), images));
-    if (mode_ == ColorMode::kProjective) HOLO_RETURN_IF_ERROR(renderer_->UpdateVisibility());
+    frame_has_images_ = !images.empty();
+    if (frame_has_images_) {
+      Status st = renderer_->SetPodImages(CurrentRig(), images);
+      if (!st.ok()) {
+        // E.g. images of another rig than the one announced: vertex colour for this frame.
+        if (!image_error_reported_) {
+          std::printf("holoport-client: pod images unusable (%s); showing vertex colour until they match the rig\n",
+                      st.message().c_str());
+          image_error_reported_ = true;
+        }
+        frame_has_images_ = false;
+      }
+    }
+    if (mode_ == ColorMode::kProjective && frame_has_images_) HOLO_RETURN_IF_ERROR(renderer_->UpdateVisibility());
     glFinish();
     stats_.upload_ms.push_back(sw.ElapsedMs());
     return OkStatus();
@@ -206,9 +344,10 @@ class Viewer {
   // Draws all views and the overlay into the bound framebuffer (fb size).
   Status Draw(double t, int fb_width, int fb_height) {
     render::RenderSettings settings;
-    settings.mode = mode_;
+    settings.mode = frame_has_images_ ? mode_ : ColorMode::kVertexColor;
     settings.local_from_remote =
         o_.miniature_scale != 0.0f || o_.remote_placed ? mini_.LocalFromRemote() : Eigen::Matrix4f::Identity();
+    if (participant_ && o_.miniature_scale == 0.0f && !o_.remote_placed) settings.local_from_remote = call_local_from_remote_;
     settings.composite_local = have_local_;
     settings.show_local = !o_.see_through;
     auto layout = render::MakeMosaicLayout(o_.views, fb_width, fb_height);
@@ -246,6 +385,7 @@ class Viewer {
   }
 
   std::string OverlayText() const {
+    if (net_mode_) return NetOverlayText();
     // Figures of the previous displayed frame ("-" before the first).
     char fps[32] = "-", rms[32] = "-", lat[32] = "-";
     if (!stats_.render_ms.empty()) {
@@ -261,6 +401,297 @@ class Viewer {
                   renderer_->remote_triangles(), mode_ == ColorMode::kProjective ? "PROJECTIVE" : "VERTEX COLOUR",
                   o_.views, o_.views == 1 ? "" : "S", o_.miniature_scale != 0.0f ? "  MINIATURE" : "");
     return buf;
+  }
+
+  std::string NetOverlayText() const {
+    char fps[32] = "-", rms[32] = "-", lat[32] = "-";
+    if (!stats_.render_ms.empty()) {
+      std::snprintf(fps, sizeof fps, "%.1f", recent_fps_);
+      std::snprintf(rms, sizeof rms, "%.1f", stats_.render_ms.back());
+    }
+    if (!stats_.latency_ms.empty()) std::snprintf(lat, sizeof lat, "%.0f", stats_.latency_ms.back());
+    const auto st = static_cast<net::ClientState>(net_state_.load());
+    std::string status = "LIVE";
+    if (st != net::ClientState::kConnected) {
+      status = std::string("CONNECTION LOST (") + net::ClientStateName(st) + ") - LAST FRAME SHOWN, RECONNECTING";
+    } else if (showing_stale_) {
+      status = "WAITING FOR FRAMES - LAST FRAME SHOWN";
+    }
+    for (auto& c : status) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    char audio[160] = "";
+    if (participant_) {
+      const net::ParticipantStats ps = participant_->stats();
+      std::snprintf(audio, sizeof audio, "\nVOICE SENT %lld  HEARD %lld  AUDIO DELAY %.0f MS  AZIMUTH %.0f",
+                    static_cast<long long>(ps.voice_frames_sent), static_cast<long long>(ps.remote_audio_frames),
+                    ps.audio_delay_ms, ps.remote_audio_frames ? ps.remote_azimuth_deg : 0.0f);
+    }
+    std::string src = SourceName();
+    for (auto& c : src) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    char buf[768];
+    std::snprintf(buf, sizeof buf,
+                  "HOLOPORT VIEWER  %s\n%s\nFPS %s  RENDER %s MS\nLATENCY %s MS CAPTURE->DISPLAY\n"
+                  "BITRATE %.2f MBIT/S  DROPS %lld\n%zu TRIS  %s%s",
+                  src.c_str(), status.c_str(), fps, rms, lat, recent_mbps_, static_cast<long long>(stats_.drops),
+                  renderer_->remote_triangles(),
+                  frame_has_images_ && mode_ == ColorMode::kProjective ? "PROJECTIVE" : "VERTEX COLOUR", audio);
+    return buf;
+  }
+
+  // Received frame → what the renderer takes (pod images in rig order; none
+  // if any pod's image is missing or has another size than the rig says).
+  void ToStreamFrame(net::ReceivedFrame& f, StreamFrame* out) {
+    out->index = f.frame_index;
+    out->mesh = std::move(f.mesh);
+    out->pod_images.clear();
+    const Rig& rig = net_rig_;
+    if (!f.has_color || rig.pods.empty()) return;
+    std::vector<ImageRgb8> ordered;
+    for (const auto& pod : rig.pods) {
+      const net::DecodedImage* found = nullptr;
+      for (const auto& im : f.images) {
+        if (im.pod_id == pod.id) found = &im;
+      }
+      if (found == nullptr || found->image.width() != pod.color.width || found->image.height() != pod.color.height) {
+        if (!image_error_reported_) {
+          std::printf("holoport-client: frame %lld: pod %d image %s; showing vertex colour until images match the "
+                      "rig\n",
+                      static_cast<long long>(f.frame_index), pod.id,
+                      found == nullptr ? "missing" : "does not match the rig's colour camera size");
+          image_error_reported_ = true;
+        }
+        return;
+      }
+      ordered.push_back(std::move(const_cast<net::DecodedImage*>(found)->image));
+    }
+    out->pod_images = std::move(ordered);
+    image_error_reported_ = false;
+  }
+
+  // Applies a rig announced mid-stream (on the render thread).
+  void CheckRigChange() {
+    Rig rig;
+    {
+      std::lock_guard<std::mutex> l(rig_mu_);
+      if (!rig_pending_) return;
+      rig = std::move(pending_rig_);
+      rig_pending_ = false;
+    }
+    if (Status s = rig.Check(); !s.ok()) {
+      std::printf("holoport-client: the site sent an invalid rig (%s); keeping the previous one\n", s.message().c_str());
+      return;
+    }
+    if (SameRig(rig, net_rig_)) return;  // re-sent after a reconnect
+    if (!net_rig_.pods.empty()) {
+      ++rig_changes_;
+      std::printf("holoport-client: rig changed mid-stream: '%s' (%zu pods) -> '%s' (%zu pods); projective texturing "
+                  "uses the new calibration from the next frame\n",
+                  net_rig_.name.c_str(), net_rig_.pods.size(), rig.name.c_str(), rig.pods.size());
+      std::fflush(stdout);
+    }
+    net_rig_ = std::move(rig);
+  }
+
+  void NoteNetDisplayed(const net::ReceivedFrame& f, double loop_ms) {
+    // capture (site clock) → display: the client's latency to reception is
+    // already corrected by its clock-offset estimate; add the time since.
+    const double lat = f.latency_ms + (WallNowUs() - f.received_us) / 1000.0;
+    stats_.latency_ms.push_back(lat);
+    if (last_index_ >= 0 && f.frame_index > last_index_) stats_.drops += f.frame_index - last_index_ - 1;
+    last_index_ = f.frame_index;
+    ++frames_new_;
+    NoteLoop(loop_ms);
+  }
+
+  void NoteLoop(double loop_ms) {
+    stats_.loop_ms.push_back(loop_ms);
+    const size_t n = std::min<size_t>(stats_.loop_ms.size(), 15);
+    double sum = 0;
+    for (size_t i = stats_.loop_ms.size() - n; i < stats_.loop_ms.size(); ++i) sum += stats_.loop_ms[i];
+    recent_fps_ = sum > 0 ? 1000.0 * n / sum : 0;
+    ++stats_.frames;
+  }
+
+  void UpdateBitrate() {
+    const int64_t now = WallNowUs();
+    if (now - rate_t_us_ < 1000000) return;
+    const uint64_t bytes = client_->stats().bytes_received;
+    if (rate_t_us_ > 0) recent_mbps_ = (bytes - rate_bytes_) * 8.0 / static_cast<double>(now - rate_t_us_);
+    rate_t_us_ = now;
+    rate_bytes_ = bytes;
+  }
+
+  Status SavePng(const std::string& name, ImageRgb8* image) {
+    HOLO_RETURN_IF_ERROR(target_->ReadRgb(image));
+    const std::string path = (std::filesystem::path(o_.out_dir) / name).string();
+    HOLO_RETURN_IF_ERROR(WriteImageRgb8(path, *image));
+    pngs_.push_back(name);
+    if (o_.contact_sheet && sheet_tiles_.size() < 16) {
+      // Quarter size for the sheet.
+      ImageRgb8 small(image->width() / 4, image->height() / 4);
+      for (int y = 0; y < small.height(); ++y) {
+        for (int x = 0; x < small.width(); ++x)
+          for (int c = 0; c < 3; ++c) small.at(x, y, c) = image->at(4 * x + 2, 4 * y + 2, c);
+      }
+      sheet_tiles_.push_back(std::move(small));
+    }
+    return OkStatus();
+  }
+
+  Status WriteContactSheet() {
+    if (sheet_tiles_.empty()) return OkStatus();
+    const int cols = std::min<int>(4, static_cast<int>(sheet_tiles_.size()));
+    const int rows = (static_cast<int>(sheet_tiles_.size()) + cols - 1) / cols;
+    const int tw = sheet_tiles_[0].width(), th = sheet_tiles_[0].height();
+    ImageRgb8 sheet(cols * tw + (cols + 1) * 4, rows * th + (rows + 1) * 4);
+    for (int y = 0; y < sheet.height(); ++y) {
+      for (int x = 0; x < sheet.width(); ++x)
+        for (int c = 0; c < 3; ++c) sheet.at(x, y, c) = 20;
+    }
+    for (size_t i = 0; i < sheet_tiles_.size(); ++i) {
+      const int cx = 4 + static_cast<int>(i % cols) * (tw + 4), cy = 4 + static_cast<int>(i / cols) * (th + 4);
+      for (int y = 0; y < th; ++y) {
+        for (int x = 0; x < tw; ++x)
+          for (int c = 0; c < 3; ++c) sheet.at(cx + x, cy + y, c) = sheet_tiles_[i].at(x, y, c);
+      }
+    }
+    const std::string path = (std::filesystem::path(o_.out_dir) / "contact_sheet.png").string();
+    return WriteImageRgb8(path, sheet);
+  }
+
+  // The network loop (headless or window): shows the newest received frame;
+  // while the site is away it keeps showing the last one and says so.
+  int RunNetwork() {
+    const bool window = !o_.headless;
+    GLFWwindow* w = window ? context_->window() : nullptr;
+    if (window) {
+      interactive_ = false;
+      glfwSetWindowUserPointer(w, this);
+      glfwSetKeyCallback(w, [](GLFWwindow* win, int key, int, int action, int) {
+        if (action != GLFW_PRESS) return;
+        auto* self = static_cast<Viewer*>(glfwGetWindowUserPointer(win));
+        if (key == GLFW_KEY_ESCAPE || key == GLFW_KEY_Q) glfwSetWindowShouldClose(win, GLFW_TRUE);
+        if (key == GLFW_KEY_T) {
+          self->mode_ = self->mode_ == ColorMode::kProjective ? ColorMode::kVertexColor : ColorMode::kProjective;
+        }
+        if (key == GLFW_KEY_O) self->show_overlay_ = !self->show_overlay_;
+      });
+    }
+    std::error_code ec;
+    std::filesystem::create_directories(o_.out_dir, ec);
+    if (ec && o_.headless) return Fail(Unavailable("--out " + o_.out_dir + ": cannot create: " + ec.message()));
+    const int max_frames = o_.frames > 0 ? o_.frames : (o_.seconds > 0 ? 0 : (window ? 0 : 30));
+    const int64_t start = WallNowUs();
+    ImageRgb8 image;
+    StreamFrame frame;
+    net::ReceivedFrame rf;
+    bool have_frame = false;
+    int64_t last_render_us = 0;
+    int64_t displayed_new = 0;
+    Stopwatch loop;
+    int last_progress_s = -1;
+    while (!g_viewer_stop.load()) {
+      if (window && glfwWindowShouldClose(w)) break;
+      const int64_t now = WallNowUs();
+      const double t = (now - start) / 1e6;
+      if (o_.seconds > 0 && t >= o_.seconds) break;
+      if (max_frames > 0 && displayed_new >= max_frames) break;
+      if (window) glfwPollEvents();
+      CheckRigChange();
+      UpdateBitrate();
+      bool fresh = false;
+      if (client_->LatestFrame(&rf)) {
+        if (!rf.has_mesh || rf.mesh.positions.empty()) continue;  // nothing to show in it
+        net::ReceivedFrame keep_times;  // times/index only are used below (no mesh/image copies)
+        keep_times.frame_index = rf.frame_index;
+        keep_times.capture_time_us = rf.capture_time_us;
+        keep_times.received_us = rf.received_us;
+        keep_times.latency_ms = rf.latency_ms;
+        keep_times.wire_bytes = rf.wire_bytes;
+        keep_times.has_mesh = rf.has_mesh;
+        keep_times.has_color = rf.has_color;
+        ToStreamFrame(rf, &frame);
+        if (Status s = Upload(frame); !s.ok()) {
+          std::printf("holoport-client: frame %lld not shown: %s\n", static_cast<long long>(keep_times.frame_index),
+                      s.message().c_str());
+          ++bad_frames_;
+          continue;
+        }
+        last_rf_ = std::move(keep_times);
+        have_frame = true;
+        fresh = true;
+        showing_stale_ = false;
+      } else {
+        // Nothing new: in a call the head moves, so redraw at ~15 Hz; a lost
+        // site is redrawn once a second with the notice (the last frame stays).
+        const bool connected = static_cast<net::ClientState>(net_state_.load()) == net::ClientState::kConnected;
+        const int64_t period = !connected ? 1000000 : (participant_ ? 66000 : 1000000);
+        if (!have_frame || now - last_render_us < period) {
+          if (window) {
+            glfwWaitEventsTimeout(0.005);
+          } else {
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+          }
+          continue;
+        }
+        showing_stale_ = connected && now - last_render_us >= 1000000;
+        if (!connected) ++stale_renders_;
+      }
+      int fbw = o_.width, fbh = o_.height;
+      if (window) {
+        glfwGetFramebufferSize(w, &fbw, &fbh);
+        if (fbw < 16 || fbh < 16) continue;
+        glBindFramebuffer(GL_FRAMEBUFFER, 0);
+      } else {
+        target_->Bind();
+      }
+      Stopwatch rs;
+      if (Status s = Draw(t, fbw, fbh); !s.ok()) return Fail(s);
+      if (window) glfwSwapBuffers(w);
+      glFinish();
+      stats_.render_ms.push_back(rs.ElapsedMs());
+      last_render_us = WallNowUs();
+      const double loop_ms = loop.ElapsedMs();
+      loop.Restart();
+      if (fresh) {
+        NoteNetDisplayed(last_rf_, loop_ms);
+        ++displayed_new;
+      } else {
+        NoteLoop(loop_ms);
+      }
+      bool due = false;
+      if (fresh && o_.png_interval_s > 0) {
+        due = last_png_us_ == 0 || WallNowUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
+      } else if (fresh) {
+        due = (displayed_new - 1) % std::max(1, o_.png_every) == 0;
+      }
+      if (due) last_png_us_ = WallNowUs();
+      if (o_.headless && o_.write_png &&
+          (due || (!fresh && stale_renders_ % 5 == 1 &&
+                                                                             static_cast<net::ClientState>(
+                                                                                 net_state_.load()) !=
+                                                                                 net::ClientState::kConnected))) {
+        char name[64];
+        std::snprintf(name, sizeof name, "frame_%05lld%s.png", static_cast<long long>(stats_.frames - 1),
+                      fresh ? "" : "_stale");
+        if (Status s = SavePng(name, &image); !s.ok()) return Fail(s);
+      }
+      if (static_cast<int>(t) / 5 != last_progress_s) {
+        last_progress_s = static_cast<int>(t) / 5;
+        std::printf("%.0f s: %lld frames shown (%lld new), %.1f fps, latency %.0f ms, %.2f Mbit/s, drops %lld\n", t,
+                    static_cast<long long>(stats_.frames), static_cast<long long>(displayed_new), recent_fps_,
+                    stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_,
+                    static_cast<long long>(stats_.drops));
+        std::fflush(stdout);
+      }
+    }
+    net_elapsed_s_ = (WallNowUs() - start) / 1e6;
+    Status audio_status;
+    if (participant_) audio_status = participant_->Stop();
+    client_->Stop();
+    if (Status s = WriteContactSheet(); !s.ok()) return Fail(s);
+    const int rc = WriteStats();
+    if (!audio_status.ok()) return Fail(audio_status.WithContext("--audio-out"));
+    return rc;
   }
 
   void NoteDisplayed(const StreamFrame& frame, double loop_ms) {
@@ -376,8 +807,8 @@ class Viewer {
 
   int WriteStats() {
     nlohmann::json j;
-    j["source"] = o_.source;
-    j["workload"] = source_->workload();
+    j["source"] = SourceName();
+    j["workload"] = net_mode_ ? std::string("network") : source_->workload();
     j["gl_renderer"] = render::CurrentGlRenderer();
     j["context"] = context_->Describe();
     j["frames"] = stats_.frames;
@@ -390,7 +821,8 @@ class Viewer {
     j["triangles"] = renderer_->remote_triangles();
     j["local_triangles"] = have_local_ ? renderer_->local_triangles() : 0;
     j["miniature_scale"] = o_.miniature_scale;
-    j["camera"] = trace_.empty() ? (interactive_ ? "interactive" : "orbit") : "trace:" + o_.pose_trace;
+    j["camera"] = participant_ ? std::string("own head (synthetic head motion)")
+                               : (trace_.empty() ? (interactive_ ? "interactive" : "orbit") : "trace:" + o_.pose_trace);
     double loop_sum = 0;
     for (double v : stats_.loop_ms) loop_sum += v;
     j["fps"] = loop_sum > 0 ? 1000.0 * stats_.frames / loop_sum : 0.0;
@@ -403,8 +835,49 @@ class Viewer {
     j["latency_definition"] =
         "capture (start of producing the frame: studio render + texturing) to display (rendered, glFinish)";
     j["drops"] = stats_.drops;
-    j["bitrate_mbps"] = nullptr;
-    j["bitrate_note"] = "local synthetic source: nothing is received over a network";
+    if (net_mode_) {
+      const net::ClientStats cs = client_->stats();
+      j["latency_definition"] =
+          "capture (site clock) to display (rendered, glFinish), through the client's clock-offset estimate";
+      j["frames_new"] = frames_new_;
+      j["last_frame_index"] = last_index_;
+      j["frames_received"] = cs.frames_received;
+      j["drops_definition"] = "frames of the site's sequence this viewer never displayed (gaps in frame indices)";
+      j["frames_dropped_local"] = cs.frames_dropped_local;
+      j["bitrate_mbps"] = net_elapsed_s_ > 0 ? cs.bytes_received * 8.0 / (net_elapsed_s_ * 1e6) : 0.0;
+      j["bytes_received"] = cs.bytes_received;
+      j["connects"] = cs.connects;
+      j["connect_failures"] = cs.connect_failures;
+      j["decode_errors"] = cs.decode_errors;
+      j["bad_frames"] = bad_frames_;
+      j["stale_renders"] = stale_renders_;
+      j["rig_changes"] = rig_changes_;
+      j["rig_pods"] = net_rig_.pods.size();
+      j["rtt_min_ms"] = cs.rtt_min_ms;
+      j["clock_offset_us"] = cs.clock_offset_us;
+      j["seconds"] = net_elapsed_s_;
+      if (participant_) {
+        const net::ParticipantStats ps = participant_->stats();
+        j["audio"] = {{"voice_frames_sent", ps.voice_frames_sent},
+                      {"remote_audio_frames", ps.remote_audio_frames},
+                      {"remote_speakers", ps.remote_speakers},
+                      {"network_ms_median", ps.audio_network_ms_median},
+                      {"jitter_buffer_ms_median", ps.jitter_buffer_ms_median},
+                      {"audio_delay_ms", ps.audio_delay_ms},
+                      {"concealed", ps.concealed},
+                      {"late", ps.late},
+                      {"underflows", ps.underflows},
+                      {"output_seconds", ps.output_seconds},
+                      {"output_rms", ps.output_rms},
+                      {"hrtf", ps.hrtf_status},
+                      {"remote_voice_position_m", {ps.remote_x, ps.remote_y, ps.remote_z}},
+                      {"remote_voice_azimuth_deg", ps.remote_azimuth_deg},
+                      {"wav", o_.audio_out}};
+      }
+    } else {
+      j["bitrate_mbps"] = nullptr;
+      j["bitrate_note"] = "local synthetic source: nothing is received over a network";
+    }
     if (!pngs_.empty()) j["pngs"] = pngs_;
     std::error_code ec;
     std::filesystem::create_directories(o_.out_dir, ec);
@@ -438,6 +911,28 @@ class Viewer {
 #endif
   std::unique_ptr<SyntheticSource> source_;
   std::unique_ptr<SyntheticSource> local_source_;
+  // Network mode.
+  bool net_mode_ = false;
+  std::unique_ptr<net::Participant> participant_;
+  std::unique_ptr<net::SiteClient> own_client_;
+  net::SiteClient* client_ = nullptr;
+  Eigen::Matrix4f call_local_from_remote_ = Eigen::Matrix4f::Identity();
+  std::atomic<int> net_state_{static_cast<int>(net::ClientState::kConnecting)};
+  std::mutex rig_mu_;
+  Rig pending_rig_;
+  bool rig_pending_ = false;
+  Rig net_rig_;
+  net::ReceivedFrame last_rf_;
+  int64_t net_start_us_ = 0, last_index_ = -1, frames_new_ = 0, bad_frames_ = 0, stale_renders_ = 0,
+          rig_changes_ = 0;
+  int64_t rate_t_us_ = 0;
+  uint64_t rate_bytes_ = 0;
+  double recent_mbps_ = 0, net_elapsed_s_ = 0;
+  int64_t last_png_us_ = 0;
+  bool showing_stale_ = false;
+  bool frame_has_images_ = true;
+  bool image_error_reported_ = false;
+  std::vector<ImageRgb8> sheet_tiles_;
   StreamFrame local_frame_;
   std::unique_ptr<render::GlContext> context_;
   std::unique_ptr<render::Renderer> renderer_;
@@ -457,6 +952,11 @@ class Viewer {
 int RunViewer(const ViewerOptions& options) {
   Viewer viewer(options);
   if (Status s = viewer.Init(); !s.ok()) return viewer.Fail(s);
+  if (!options.connect.empty() || !options.call.empty()) {
+    std::signal(SIGINT, [](int) { g_viewer_stop = true; });
+    std::signal(SIGTERM, [](int) { g_viewer_stop = true; });
+    return viewer.RunNetwork();
+  }
   return options.headless ? viewer.RunHeadless() : viewer.RunInteractive();
 }
 

@@ -35,6 +35,21 @@ struct ViewerOptions {
   bool overlay = true;
   bool write_png = true;
   int threads = 2;
+  // Network (docs/viewer.md "Connecting"): --connect HOST:PORT --token T
+  // watches a site; --call CONFIG is one side of a two-site call (watch the
+  // remote site, publish the own voice + head pose, spatialize the remote
+  // voices into --audio-out). Either replaces --source.
+  std::string connect;
+  std::string token;
+  std::string call;
+  std::string name = "holoport-client";
+  std::string audio_in;   // --call: own voice (WAV); empty: a tone
+  std::string audio_out;  // --call: spatialized stereo WAV of the remote voices
+  double seconds = 0;     // network: stop after this long (0: --frames decides)
+  int png_every = 1;      // headless: write every K-th displayed frame
+  double png_interval_s = 0;  // headless network run: a PNG every S seconds instead (0: png_every)
+  bool contact_sheet = false;  // headless: also a contact sheet of the written frames
+  double connect_timeout_s = 10;  // give up when no site answered within this (0: wait forever)
 };
 
 // Runs the viewer; prints progress and errors; returns the process exit code.
