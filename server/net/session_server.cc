@@ -1,5 +1,6 @@
 #include "server/net/session_server.h"
 
+#include <fcntl.h>
 #include <pthread.h>
 #include <time.h>
 
@@ -730,6 +731,8 @@ void Server::Impl::Accept() {
       Accept();
       return;
     }
+    // Programs started by the site (popen, fork+exec) must not inherit viewer connections.
+    ::fcntl(sock.native_handle(), F_SETFD, FD_CLOEXEC);
     n.accepted++;
     std::shared_ptr<Session> s;
     {
@@ -822,6 +825,8 @@ StatusOr<std::unique_ptr<Server>> Server::Start(const ServerConfig& config, Serv
   if (ec) return InvalidArgument("listen: '" + config.host + "' is not an IP address: " + ec.message());
   const tcp::endpoint ep(addr, config.port);
   impl->acceptor.open(ep.protocol(), ec);
+  // Nor the listening socket: a child would keep the port after the site stops.
+  if (!ec) ::fcntl(impl->acceptor.native_handle(), F_SETFD, FD_CLOEXEC);
   if (!ec) impl->acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
   if (!ec) impl->acceptor.bind(ep, ec);
   if (!ec) impl->acceptor.listen(asio::socket_base::max_listen_connections, ec);
