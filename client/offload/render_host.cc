@@ -115,10 +115,23 @@ struct RenderHost::Impl {
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
         continue;
       }
+      size_t live = 0;
+      {
+        std::lock_guard<std::mutex> lock(sessions_mu);
+        for (const auto& s : sessions) live += s->done ? 0 : 1;
+      }
+      if (live >= static_cast<size_t>(o.max_thin_clients) + 16) {  // a flood of connections: no thread each
+        Log("too many connections; closing one at accept");
+        continue;  // the socket closes here
+      }
       const int fd = socket.release(ec);
       if (ec) continue;
       auto session = std::make_shared<Session>();
-      session->link = std::make_unique<MessageLink>(fd, protocol::Limits{});
+      // A thin client sends only small messages (Hello, ClientPose, Ping/Pong, Stats, Control).
+      protocol::Limits limits;
+      limits.max_frame_payload = 64 * 1024;
+      limits.max_message_bytes = 64 * 1024;
+      session->link = std::make_unique<MessageLink>(fd, limits);
       std::lock_guard<std::mutex> lock(sessions_mu);
       // Reap finished sessions (their threads have returned), keep the last 32 for stats.
       for (auto it = sessions.begin(); it != sessions.end() && sessions.size() > 32;) {

@@ -255,13 +255,24 @@ TEST(OffloadTest, MalformedClientPoseClosesOnlyThatThinClient) {
   EXPECT_TRUE(Eventually([&] { return log.Contains("(bad-client, ") && log.Contains("client_pose.rotation"); }))
       << "no clear error in the log";
 
+  // One sending garbage instead of a frame header after its Welcome.
+  auto garbage = net::RawPeer::Connect("127.0.0.1", (*host)->port());
+  ASSERT_TRUE(garbage.ok());
+  ASSERT_TRUE((*garbage)->SendHello(protocol::Role::kThinClient, "view", "garbage-client").ok());
+  ASSERT_TRUE((*garbage)->ReadMessage(5.0).ok());
+  const std::vector<uint8_t> junk(64, 0x5a);
+  ASSERT_TRUE((*garbage)->Send(junk).ok());
+  EXPECT_TRUE((*garbage)->WaitClosed(5.0));
+  EXPECT_TRUE(Eventually([&] { return log.Contains("(garbage-client, ") && log.Contains("magic"); }))
+      << "no clear error in the log";
+
   good_thread.join();
   ASSERT_TRUE(good.ok()) << good.status().ToString();
   EXPECT_EQ(good->displayed, 30);
   const RenderHostStats s = (*host)->stats();
-  EXPECT_EQ(s.thin_closed_on_error, 1u);
+  EXPECT_EQ(s.thin_closed_on_error, 2u);
   EXPECT_EQ(s.thin_refused, 1u);
-  EXPECT_EQ(s.thin_accepted, 2u);
+  EXPECT_EQ(s.thin_accepted, 3u);
 }
 
 TEST(OffloadTest, SiteGoingAwayIsReportedAndTheHostReconnects) {
