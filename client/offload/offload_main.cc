@@ -44,6 +44,8 @@ int RenderHostMain(int argc, char** argv) {
   app.add_option("--width", o.width, "pixels across the thin client's horizontal FOV")->capture_default_str();
   app.add_option("--quality", o.encode.jpeg_quality, "JPEG quality")->capture_default_str();
   app.add_option("--extra-horizon-ms", o.extra_horizon_ms, "added to the measured prediction horizon")->capture_default_str();
+  app.add_flag("--stereo", o.stereo, "render both eyes (streams 1 and 2); default mono");
+  app.add_option("--ipd", o.ipd_m, "--stereo: interpupillary distance, m")->capture_default_str();
   app.add_option("--max-thin-clients", o.max_thin_clients, "thin clients served at once")->capture_default_str();
   app.add_option("--seconds", seconds, "stop after this long (0: until Ctrl-C)")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -125,6 +127,8 @@ int ThinClientMain(int argc, char** argv) {
   app.add_option("--rate", o.rate_hz, "display and pose rate, Hz")->capture_default_str();
   app.add_option("--method", method, "reprojection: none, rotation, plane, depth")->capture_default_str();
   app.add_option("--recv-delay-ms", o.receive_delay_ms, "simulated network delay on receive, ms")->capture_default_str();
+  app.add_flag("--stereo", o.stereo, "show both eyes (the render host must run --stereo); PNGs side by side");
+  app.add_option("--ipd", o.ipd_m, "--stereo: interpupillary distance, m")->capture_default_str();
   app.add_option("--name", o.name, "name shown in the render host's log")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (!headless) std::fprintf(stderr, "thin: no window is implemented; running headless\n");

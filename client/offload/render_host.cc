@@ -37,6 +37,7 @@ Status RenderHostOptions::Check() const {
   if (!(handshake_timeout_s > 0) || !(idle_timeout_s > 0)) return InvalidArgument("render host: timeouts must be > 0");
   if (!(ping_interval_s > 0)) return InvalidArgument("render host: ping_interval_s must be > 0");
   if (!(extra_horizon_ms >= 0 && extra_horizon_ms < 1000)) return InvalidArgument("render host: extra horizon must be in [0, 1000) ms");
+  if (!(ipd_m >= 0 && ipd_m <= 0.2)) return InvalidArgument("render host: --ipd must be in [0, 0.2] m");
   if (token.empty() && site.token.empty()) return InvalidArgument("render host: no token for thin clients");
   return OkStatus();
 }
@@ -345,27 +346,40 @@ struct RenderHost::Impl {
       std::array<int, 2> size = reproject::ResolutionForFov(fov, w, h, big);
       size[0] = std::clamp(size[0], 16, 4096);
       size[1] = std::clamp(size[1], 16, 4096);
-      const auto t0 = Clock::now();
-      Status st = reproject::RenderAtPose(reproject::MeshSceneRenderer(*mesh), predicted.ToPose(), big, size[0], size[1], &view);
-      const double render_ms = MsSince(t0);
-      if (!st.ok()) {
-        CloseSession(s, "render: " + st.ToString(), true);
-        break;
+      double render_ms = 0, encode_ms = 0;
+      bool failed = false;
+      const int eyes = o.stereo ? 2 : 1;
+      for (int eye = 0; eye < eyes && !failed; ++eye) {
+        Pose at = predicted.ToPose();
+        if (o.stereo) {
+          const float dx = static_cast<float>((eye == 0 ? -0.5 : 0.5) * o.ipd_m);
+          at.translation() += at.linear() * Eigen::Vector3f(dx, 0, 0);
+        }
+        const auto t0 = Clock::now();
+        Status st = reproject::RenderAtPose(reproject::MeshSceneRenderer(*mesh), at, big, size[0], size[1], &view);
+        render_ms += MsSince(t0);
+        if (!st.ok()) {
+          CloseSession(s, "render: " + st.ToString(), true);
+          failed = true;
+          break;
+        }
+        view.frame_index = frame_index;
+        view.pose_time_us = sample.time_us;
+        const auto t1 = Clock::now();
+        auto wire = reproject::EncodeRenderedView(view, o.encode);
+        encode_ms += MsSince(t1);
+        if (!wire.ok()) {
+          CloseSession(s, "encode: " + wire.status().ToString(), true);
+          failed = true;
+          break;
+        }
+        st = s.link->Send(*wire, o.stereo ? static_cast<uint32_t>(eye + 1) : 0u, net::WallUs());
+        if (!st.ok()) {
+          CloseSession(s, st.message(), false);
+          failed = true;
+        }
       }
-      view.frame_index = frame_index;
-      view.pose_time_us = sample.time_us;
-      const auto t1 = Clock::now();
-      auto wire = reproject::EncodeRenderedView(view, o.encode);
-      const double encode_ms = MsSince(t1);
-      if (!wire.ok()) {
-        CloseSession(s, "encode: " + wire.status().ToString(), true);
-        break;
-      }
-      st = s.link->Send(*wire, 0, net::WallUs());
-      if (!st.ok()) {
-        CloseSession(s, st.message(), false);
-        break;
-      }
+      if (failed) break;
       std::lock_guard<std::mutex> lock(s.mu);
       s.stats.render_ms = Ewma(s.stats.render_ms, render_ms);
       s.stats.encode_ms = Ewma(s.stats.encode_ms, encode_ms);

@@ -4,7 +4,7 @@
 // for each thin client renders the newest site mesh at the pose predicted
 // for the client's display time, into an enlarged FOV, and sends it as a
 // RenderedFrame (JPEG + LZ4 depth, the pose and FOV used). CPU renderer
-// (client/reproject RenderAtPose); one eye (mono).
+// (client/reproject RenderAtPose); mono, or both eyes with `stereo`.
 #pragma once
 
 #include <atomic>
@@ -41,6 +41,11 @@ struct RenderHostOptions {
   double ping_interval_s = 0.5;        // RTT to each thin client
   // Added to the measured horizon (e.g. a known display pipeline delay), ms.
   double extra_horizon_ms = 0;
+  // Both eyes: each predicted head pose is rendered twice, the eyes ±ipd/2
+  // along the camera's x axis; RenderedFrames on stream 1 (left) and 2
+  // (right). Mono: the head pose itself, stream 0.
+  bool stereo = false;
+  double ipd_m = 0.064;
   reproject::FrameEncodeOptions encode;
   std::function<void(const std::string&)> log;  // default: stderr
   Status Check() const;

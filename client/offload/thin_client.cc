@@ -33,7 +33,14 @@ struct Arrived {
   Clock::time_point at;
   protocol::RenderedFrame frame;
   size_t bytes = 0;
+  uint32_t stream = 0;
 };
+
+pose::PoseSample EyePose(const pose::PoseSample& head, double dx) {
+  pose::PoseSample e = head;
+  e.position += head.rotation * Eigen::Vector3d(dx, 0, 0);
+  return e;
+}
 
 }  // namespace
 
@@ -47,6 +54,7 @@ Status ThinClientOptions::Check() const {
   if (!(receive_delay_ms >= 0 && receive_delay_ms <= 5000)) return InvalidArgument("thin client: receive delay must be 0..5000 ms");
   if (!(trace_start_s >= 0)) return InvalidArgument("thin client: trace start must be >= 0");
   if (png_every < 1) return InvalidArgument("thin client: png_every must be >= 1");
+  if (!(ipd_m >= 0 && ipd_m <= 0.2)) return InvalidArgument("thin client: --ipd must be in [0, 0.2] m");
   if (!(max_wait_s > 0)) return InvalidArgument("thin client: max_wait_s must be > 0");
   return OkStatus();
 }
@@ -90,7 +98,7 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
       if (auto* f = std::get_if<protocol::RenderedFrame>(&msg->payload)) {
         received++;
         std::lock_guard<std::mutex> lock(mu);
-        arrived.push_back({Clock::now(), std::move(*f), msg->header.payload_length});
+        arrived.push_back({Clock::now(), std::move(*f), msg->header.payload_length, msg->header.stream_id});
         while (arrived.size() > 64) arrived.pop_front();
       } else if (auto* ping = std::get_if<protocol::Ping>(&msg->payload)) {
         const int64_t now = net::WallUs();
@@ -158,15 +166,27 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
     }
     ++tick;
     // The newest frame that has "arrived" (after the simulated delay).
-    std::optional<Arrived> take;
+    std::optional<Arrived> take, take_right;
     {
       std::lock_guard<std::mutex> lock(mu);
       const auto due = now - std::chrono::microseconds(static_cast<int64_t>(o.receive_delay_ms * 1e3));
       while (!arrived.empty() && arrived.front().at <= due) {
-        take = std::move(arrived.front());
+        Arrived a = std::move(arrived.front());
         arrived.pop_front();
-        ++frame_seq;
+        if (a.stream == 2) {
+          if (o.stereo) take_right = std::move(a);  // mono: a stereo host's right eye is not shown
+        } else {
+          take = std::move(a);
+          ++frame_seq;
+        }
       }
+    }
+    if (take_right) {
+      if (auto st = reproject::DecodeRenderedFrame(take_right->frame, &d.source_right); !st.ok()) {
+        finish();
+        return DataLoss("thin client: bad RenderedFrame (right eye) from the render host: " + st.ToString());
+      }
+      bytes.push_back(static_cast<double>(take_right->bytes));
     }
     if (take) {
       if (auto st = reproject::DecodeRenderedFrame(take->frame, &d.source); !st.ok()) {
@@ -183,8 +203,9 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
     // Display: reproject the newest image to the newest pose.
     d.index = res.displayed;
     d.display_us = clock_us;
-    d.true_pose = p;
-    target.world_from_camera = p.ToPose();
+    d.true_pose = o.stereo ? EyePose(p, -0.5 * o.ipd_m) : p;
+    d.true_pose_right = EyePose(p, 0.5 * o.ipd_m);
+    target.world_from_camera = d.true_pose.ToPose();
     reproject::ReprojectStats stats;
     const auto r0 = Clock::now();
     const ImageDepth16* depth = d.source.depth.empty() ? nullptr : &d.source.depth;
@@ -194,6 +215,13 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
     }
     d.reproject_ms = MsBetween(r0, Clock::now());
     d.black_border_fraction = stats.black_border_fraction;
+    if (o.stereo && !d.source_right.color.empty()) {
+      CameraModel right = target;
+      right.world_from_camera = d.true_pose_right.ToPose();
+      const ImageDepth16* rd = d.source_right.depth.empty() ? nullptr : &d.source_right.depth;
+      reproject::ReprojectStats s2;
+      HOLO_RETURN_IF_ERROR(reproject::Reproject(d.source_right.color, rd, d.source_right.camera, right, ropt, &d.shown_right, &valid, &s2));
+    }
     if (o.keep_stale) {
       reproject::ReprojectStats s2;
       HOLO_RETURN_IF_ERROR(reproject::Reproject(d.source.color, depth, d.source.camera, target, stale_opt, &d.stale, &valid, &s2));
@@ -212,7 +240,17 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
     if (!o.out_dir.empty() && res.displayed % o.png_every == 0) {
       char name[64];
       std::snprintf(name, sizeof(name), "/frame_%05d.png", res.displayed);
-      HOLO_RETURN_IF_ERROR(WriteImageRgb8(o.out_dir + name, d.shown));
+      if (o.stereo && d.shown_right.width() == d.shown.width()) {
+        ImageRgb8 both(2 * o.width, o.height);
+        for (int y = 0; y < o.height; ++y) {
+          std::copy_n(d.shown.data() + size_t(y) * o.width * 3, o.width * 3, both.data() + size_t(y) * 2 * o.width * 3);
+          std::copy_n(d.shown_right.data() + size_t(y) * o.width * 3, o.width * 3,
+                      both.data() + (size_t(y) * 2 * o.width + o.width) * 3);
+        }
+        HOLO_RETURN_IF_ERROR(WriteImageRgb8(o.out_dir + name, both));
+      } else {
+        HOLO_RETURN_IF_ERROR(WriteImageRgb8(o.out_dir + name, d.shown));
+      }
     }
     res.displayed++;
     // Tell the host the measured pose→photon latency (its prediction horizon).
@@ -258,6 +296,7 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
                         {"receive_delay_ms", o.receive_delay_ms},
                         {"size", std::to_string(o.width) + "x" + std::to_string(o.height)},
                         {"method", reproject::ReprojectMethodName(o.method)},
+                        {"stereo", o.stereo},
                         {"duration_s", res.duration_s}};
     std::ofstream f(o.out_dir + "/stats.json");
     f << j.dump(2) << "\n";

@@ -33,6 +33,11 @@ struct ThinClientOptions {
   reproject::ReprojectMethod method = reproject::ReprojectMethod::kPlane;
   // Simulated network latency: a received frame becomes usable this much later.
   double receive_delay_ms = 0;
+  // Both eyes (the render host must run with --stereo too): RenderedFrames on
+  // stream 1 (left) and 2 (right), each reprojected to its eye, the eyes
+  // ±ipd/2 along the head's x axis. PNGs are side by side (left | right).
+  bool stereo = false;
+  double ipd_m = 0.064;
   bool keep_stale = false;        // also produce the stale image (no reprojection) per display
   std::string out_dir;            // PNGs (every png_every-th display) + stats.json
   int png_every = 10;
@@ -43,12 +48,15 @@ struct ThinClientOptions {
 struct DisplayedFrame {
   int index = 0;
   int64_t display_us = 0;         // trace clock
-  pose::PoseSample true_pose;     // the pose at display (what the truth is rendered at)
+  pose::PoseSample true_pose;     // the pose at display (what the truth is rendered at); stereo: the left eye's
+  pose::PoseSample true_pose_right;  // stereo: the right eye's pose at display
   int64_t frame_index = -1;       // site content frame the host rendered
   int64_t pose_time_us = 0;       // the pose sample the host's prediction started from
   reproject::RenderedView source; // the received image (decoded)
   ImageRgb8 shown;                // reprojected to true_pose
-  ImageRgb8 stale;                // keep_stale: the received image cropped to the display FOV
+  ImageRgb8 stale;
+  reproject::RenderedView source_right;  // stereo (empty until a right image arrived)
+  ImageRgb8 shown_right;                // keep_stale: the received image cropped to the display FOV
   double black_border_fraction = 0;
   double reproject_ms = 0;
   double pose_to_photon_ms = 0;   // display time − pose_time_us

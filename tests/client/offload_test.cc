@@ -219,6 +219,36 @@ TEST(OffloadTest, PredictingHostRendersNearTheSentPoseWithEnlargedFov) {
   EXPECT_EQ(n, 20);
 }
 
+TEST(OffloadTest, StereoRendersBothEyesAtTheirPoses) {
+  Site site;
+  Log log;
+  RenderHostOptions ho = HostOptions(site.port(), pose::PredictorModel::kNone, 0.0, &log);
+  ho.stereo = true;
+  ho.ipd_m = 0.064;
+  auto host = RenderHost::Start(ho);
+  ASSERT_TRUE(host.ok()) << host.status().ToString();
+  ThinClientOptions o = ThinOptions((*host)->port(), 20);
+  o.stereo = true;
+  o.ipd_m = 0.064;
+  int both = 0;
+  auto r = RunThinClient(o, [&](const DisplayedFrame& d) {
+    if (d.source_right.color.empty()) return;
+    const pose::PoseSample sent = pose::InterpolatePose(o.trace, d.pose_time_us);
+    const Eigen::Vector3d left = d.source.camera.world_from_camera.translation().cast<double>();
+    const Eigen::Vector3d expected_left = sent.position + sent.rotation * Eigen::Vector3d(-0.032, 0, 0);
+    EXPECT_LT((left - expected_left).norm(), 1e-4);
+    if (d.source_right.pose_time_us == d.pose_time_us) {
+      const Eigen::Vector3d right = d.source_right.camera.world_from_camera.translation().cast<double>();
+      EXPECT_LT((right - left).norm() - 0.064, 1e-4);
+      EXPECT_GT((right - left).norm() - 0.064, -1e-4);
+    }
+    EXPECT_EQ(d.shown_right.width(), 160);
+    ++both;
+  });
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_GT(both, 10);
+}
+
 TEST(OffloadTest, MalformedClientPoseClosesOnlyThatThinClient) {
   Site site;
   Log log;
