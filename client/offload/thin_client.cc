@@ -159,8 +159,9 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
     const int64_t trace_us = trace_t0 + (clock_us - trace_t0) % trace_len;
     pose::PoseSample p = pose::InterpolatePose(o.trace, trace_us);
     p.time_us = clock_us;
-    const int64_t display_us = clock_us + period.count();  // on screen at the next vsync
-    if (auto st = link->Send(reproject::ToClientPose(p, fov, display_us)); !st.ok()) {
+    // Headless: an image is "on screen" when it has been reprojected to this
+    // tick's pose (no vsync delay modelled), so display time = pose time.
+    if (auto st = link->Send(reproject::ToClientPose(p, fov, clock_us)); !st.ok()) {
       finish();
       return st;
     }
@@ -226,7 +227,7 @@ StatusOr<ThinClientResult> RunThinClient(const ThinClientOptions& o,
       reproject::ReprojectStats s2;
       HOLO_RETURN_IF_ERROR(reproject::Reproject(d.source.color, depth, d.source.camera, target, stale_opt, &d.stale, &valid, &s2));
     }
-    d.pose_to_photon_ms = (display_us - d.pose_time_us) * 1e-3;
+    d.pose_to_photon_ms = (clock_us - d.pose_time_us) * 1e-3;  // the truth is the pose at clock_us
     if (res.displayed == 0) first_display = now;
     if (frame_seq != last_used_frame_seq) {
       res.frames_used++;

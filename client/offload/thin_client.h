@@ -59,7 +59,7 @@ struct DisplayedFrame {
   ImageRgb8 shown_right;                // keep_stale: the received image cropped to the display FOV
   double black_border_fraction = 0;
   double reproject_ms = 0;
-  double pose_to_photon_ms = 0;   // display time − pose_time_us
+  double pose_to_photon_ms = 0;   // display time (= the pose shown: this tick's) − pose_time_us
 };
 
 struct ThinClientResult {
