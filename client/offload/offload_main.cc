@@ -5,6 +5,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <thread>
 
 #include <CLI/CLI.hpp>
@@ -130,6 +131,12 @@ int ThinClientMain(int argc, char** argv) {
   app.add_flag("--stereo", o.stereo, "show both eyes (the render host must run --stereo); PNGs side by side");
   app.add_option("--ipd", o.ipd_m, "--stereo: interpupillary distance, m")->capture_default_str();
   app.add_option("--name", o.name, "name shown in the render host's log")->capture_default_str();
+  for (int i = 1; i < argc; ++i) {  // "--thin --help": help, not a host named --help
+    if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") {
+      std::printf("%s", app.help().c_str());
+      return 0;
+    }
+  }
   CLI11_PARSE(app, argc, argv);
   if (!headless) std::fprintf(stderr, "thin: no window is implemented; running headless\n");
   if (o.token.empty()) o.token = EnvOr("HOLO_VIEWER_TOKEN", "");
