@@ -154,7 +154,10 @@ struct RenderHost::Impl {
   size_t OpenSessions() {
     std::lock_guard<std::mutex> lock(sessions_mu);
     size_t n = 0;
-    for (const auto& s : sessions) n += s->stats.open && !s->done ? 1 : 0;
+    for (const auto& s : sessions) {
+      std::lock_guard<std::mutex> l(s->mu);  // order: sessions_mu, then a session's mu (as in stats())
+      n += s->stats.open && !s->done ? 1 : 0;
+    }
     return n;
   }
 
