@@ -32,7 +32,7 @@ std::string EnvOr(const char* name, const std::string& fallback) {
 int RenderHostMain(int argc, char** argv) {
   CLI::App app{"holoport-client --render-host: render a site's stream for thin clients (docs/offload.md)"};
   bool render_host = false;
-  std::string connect, listen = "127.0.0.1:7300", token, thin_token, predict = "kalman";
+  std::string connect, listen = "127.0.0.1:7300", token, thin_token, predict = "kalman", renderer = "auto";
   RenderHostOptions o;
   double seconds = 0;
   app.add_flag("--render-host", render_host, "run as a render host")->required();
@@ -46,6 +46,7 @@ int RenderHostMain(int argc, char** argv) {
   app.add_option("--quality", o.encode.jpeg_quality, "JPEG quality")->capture_default_str();
   app.add_option("--extra-horizon-ms", o.extra_horizon_ms, "added to the measured prediction horizon")->capture_default_str();
   app.add_flag("--stereo", o.stereo, "render both eyes (streams 1 and 2); default mono");
+  app.add_option("--renderer", renderer, "cpu, gl (OpenGL via headless EGL) or auto (gl if available)")->capture_default_str();
   app.add_option("--ipd", o.ipd_m, "--stereo: interpupillary distance, m")->capture_default_str();
   app.add_option("--max-thin-clients", o.max_thin_clients, "thin clients served at once")->capture_default_str();
   app.add_option("--seconds", seconds, "stop after this long (0: until Ctrl-C)")->capture_default_str();
@@ -69,6 +70,12 @@ int RenderHostMain(int argc, char** argv) {
     return 2;
   }
   o.predictor = *model;
+  auto r = ParseHostRenderer(renderer);
+  if (!r.ok()) {
+    std::fprintf(stderr, "render-host: --renderer: %s\n", r.status().ToString().c_str());
+    return 2;
+  }
+  o.renderer = *r;
   o.site.token = token;
   o.site.name = "render-host";
   o.token = thin_token;
@@ -95,9 +102,10 @@ int RenderHostMain(int argc, char** argv) {
         if (!c.open) continue;
         std::fprintf(stderr,
                      "  thin client %llu '%s': poses %llu, frames %llu, render %.1f ms, encode %.1f ms, rtt %.1f ms, "
-                     "horizon %.1f ms\n",
+                     "horizon %.1f ms, renderer %s\n",
                      static_cast<unsigned long long>(c.id), c.name.c_str(), static_cast<unsigned long long>(c.poses),
-                     static_cast<unsigned long long>(c.frames_sent), c.render_ms, c.encode_ms, c.rtt_ms, c.horizon_ms);
+                     static_cast<unsigned long long>(c.frames_sent), c.render_ms, c.encode_ms, c.rtt_ms, c.horizon_ms,
+                     c.renderer.c_str());
       }
     }
   }

@@ -12,6 +12,7 @@
 
 #include <asio.hpp>
 
+#include "client/offload/gl_scene.h"
 #include "client/offload/message_link.h"
 #include "client/reproject/fov.h"
 #include "server/net/session_server.h"
@@ -29,6 +30,13 @@ double MsSince(Clock::time_point t0) {
 double Ewma(double old, double x) { return old <= 0 ? x : 0.8 * old + 0.2 * x; }
 
 }  // namespace
+
+StatusOr<HostRenderer> ParseHostRenderer(const std::string& name) {
+  if (name == "cpu") return HostRenderer::kCpu;
+  if (name == "gl") return HostRenderer::kGl;
+  if (name == "auto") return HostRenderer::kAuto;
+  return InvalidArgument("renderer must be cpu, gl or auto, got '" + name + "'");
+}
 
 Status RenderHostOptions::Check() const {
   if (!(margin >= 0 && margin <= 2)) return InvalidArgument("render host: --margin must be in [0, 2]");
@@ -309,6 +317,22 @@ struct RenderHost::Impl {
     uint64_t rendered_seq = 0;
     auto last_ping = Clock::now() - std::chrono::seconds(10);
     reproject::RenderedView view;
+    std::unique_ptr<GlMeshRenderer> gl;
+    if (o.renderer != HostRenderer::kCpu) {
+      auto r = GlMeshRenderer::Create();
+      if (r.ok()) {
+        gl = std::move(*r);
+      } else if (o.renderer == HostRenderer::kGl) {
+        CloseSession(s, r.status().ToString(), true);
+        return;
+      } else {
+        Log("thin client " + std::to_string(s.id) + ": " + r.status().ToString() + "; using the CPU renderer");
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(s.mu);
+      s.stats.renderer = gl ? "gl (" + gl->Describe() + ")" : "cpu";
+    }
     while (!stopping && !s.link->closed()) {
       if (MsSince(last_ping) >= o.ping_interval_s * 1e3) {
         last_ping = Clock::now();
@@ -359,7 +383,13 @@ struct RenderHost::Impl {
           at.translation() += at.linear() * Eigen::Vector3f(dx, 0, 0);
         }
         const auto t0 = Clock::now();
-        Status st = reproject::RenderAtPose(reproject::MeshSceneRenderer(*mesh), at, big, size[0], size[1], &view);
+        reproject::SceneRenderFn scene = reproject::MeshSceneRenderer(*mesh);
+        if (gl) {
+          scene = [&gl, &mesh, frame_index](const CameraModel& cam, ImageRgb8* c, ImageDepth16* d, ImageGray8* m) {
+            return gl->Render(*mesh, frame_index, cam, c, d, m);
+          };
+        }
+        Status st = reproject::RenderAtPose(scene, at, big, size[0], size[1], &view);
         render_ms += MsSince(t0);
         if (!st.ok()) {
           CloseSession(s, "render: " + st.ToString(), true);

@@ -25,6 +25,12 @@
 
 namespace holo::offload {
 
+// cpu: the CPU mesh renderer (client/reproject); gl: the viewer's OpenGL
+// renderer in a headless EGL context (per-vertex colour), an error if there
+// is none; auto: gl if a context can be made, else cpu.
+enum class HostRenderer { kCpu, kGl, kAuto };
+StatusOr<HostRenderer> ParseHostRenderer(const std::string& name);
+
 struct RenderHostOptions {
   net::ClientOptions site;             // the site to subscribe to (role is forced to render host)
   std::string listen_host = "127.0.0.1";
@@ -45,6 +51,7 @@ struct RenderHostOptions {
   // along the camera's x axis; RenderedFrames on stream 1 (left) and 2
   // (right). Mono: the head pose itself, stream 0.
   bool stereo = false;
+  HostRenderer renderer = HostRenderer::kCpu;
   double ipd_m = 0.064;
   reproject::FrameEncodeOptions encode;
   std::function<void(const std::string&)> log;  // default: stderr
@@ -61,6 +68,7 @@ struct ThinClientStats {
   double reported_latency_ms = -1;      // pose→photon reported by the client (Stats)
   bool open = true;
   std::string close_reason;
+  std::string renderer;                 // "cpu" or "gl (…context…)"
 };
 
 struct RenderHostStats {

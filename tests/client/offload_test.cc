@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "client/net/raw_peer.h"
+#include "client/offload/gl_scene.h"
 #include "client/offload/render_host.h"
 #include "client/offload/thin_client.h"
 #include "common/metrics/image_metrics.h"
@@ -247,6 +248,41 @@ TEST(OffloadTest, StereoRendersBothEyesAtTheirPoses) {
   });
   ASSERT_TRUE(r.ok()) << r.status().ToString();
   EXPECT_GT(both, 10);
+}
+
+TEST(OffloadTest, GlRendererMatchesTheCpuRenderer) {
+  if (auto gl = GlMeshRenderer::Create(); !gl.ok()) {
+    GTEST_SKIP() << "no headless GL: " << gl.status().ToString();
+  }
+  Site site;
+  Log log;
+  RenderHostOptions ho = HostOptions(site.port(), pose::PredictorModel::kNone, 0.0, &log);
+  ho.renderer = HostRenderer::kGl;
+  auto host = RenderHost::Start(ho);
+  ASSERT_TRUE(host.ok()) << host.status().ToString();
+  ThinClientOptions o = ThinOptions((*host)->port(), 12);
+  int checked = 0;
+  double psnr_sum = 0, depth_diff_sum = 0;
+  reproject::RenderedView cpu;
+  auto r = RunThinClient(o, [&](const DisplayedFrame& d) {
+    if (d.index % 3 != 0) return;
+    auto mesh = (*host)->MeshForFrame(d.frame_index);
+    ASSERT_NE(mesh, nullptr);
+    ASSERT_TRUE(reproject::RenderAtPose(reproject::MeshSceneRenderer(*mesh), d.source.camera.world_from_camera, d.source.fov,
+                                        d.source.color.width(), d.source.color.height(), &cpu).ok());
+    psnr_sum += *metrics::ComputePsnr(d.source.color, cpu.color);
+    ASSERT_FALSE(d.source.depth.empty());
+    depth_diff_sum += std::abs(reproject::MedianDepthM(d.source.depth, 0) - reproject::MedianDepthM(cpu.depth, 0));
+    ++checked;
+  });
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_EQ(checked, 4);
+  const auto stats = (*host)->stats();
+  ASSERT_EQ(stats.clients.size(), 1u);
+  EXPECT_EQ(stats.clients[0].renderer.rfind("gl", 0), 0u) << stats.clients[0].renderer;
+  std::printf("GL vs CPU render: %.2f dB, median depth difference %.4f m\n", psnr_sum / checked, depth_diff_sum / checked);
+  EXPECT_GT(psnr_sum / checked, 25.0);
+  EXPECT_LT(depth_diff_sum / checked, 0.01);
 }
 
 TEST(OffloadTest, MalformedClientPoseClosesOnlyThatThinClient) {
