@@ -13,7 +13,7 @@
 // mean pose→photon latency for comparison with `client-pose`.
 //
 // Options (after --): --latencies 30,50,80  --frames 120  --size 640x360
-//   --trace FILE  --trace-start 5  --sample-every 4  --no-sim
+//   --trace FILE  --trace-start 5  --sample-every 4  --renderer cpu|gl|auto  --no-sim
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -46,6 +46,7 @@ struct ConfigResult {
   std::vector<double> psnr, psnr_content, border;
   offload::ThinClientResult thin;
   double host_render_ms = 0, host_horizon_ms = 0;
+  std::string renderer;
 };
 
 int RunClientOffloadBench(const bench::BenchArgs& args) {
@@ -54,6 +55,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
   int width = 640, height = 360, sample_every = 4;
   double trace_start = 5.0, view_distance = 2.6;
   bool sim = true;
+  offload::HostRenderer renderer = offload::HostRenderer::kCpu;
   std::string trace_path = std::string(HOLO_SOURCE_DIR) + "/tests/data/head/lookaround_72hz.csv";
   for (size_t i = 0; i < args.extra.size(); ++i) {
     const bool v = i + 1 < args.extra.size();
@@ -74,12 +76,19 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
       trace_start = std::atof(args.extra[++i].c_str());
     } else if (a == "--sample-every" && v) {
       sample_every = std::max(1, std::atoi(args.extra[++i].c_str()));
+    } else if (a == "--renderer" && v) {
+      auto r = offload::ParseHostRenderer(args.extra[++i]);
+      if (!r.ok()) {
+        std::fprintf(stderr, "client-offload: %s\n", r.status().ToString().c_str());
+        return 2;
+      }
+      renderer = *r;
     } else if (a == "--no-sim") {
       sim = false;
     } else {
       std::fprintf(stderr,
                    "client-offload: unknown option %s (known: --latencies L,.. --size WxH --trace FILE --trace-start S "
-                   "--sample-every N --no-sim; --frames N)\n",
+                   "--sample-every N --renderer cpu|gl|auto --no-sim; --frames N)\n",
                    a.c_str());
       return 2;
     }
@@ -151,6 +160,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
       ho.margin = hc.margin;
       ho.predictor = hc.model;
       ho.width = width;
+      ho.renderer = renderer;
       ho.log = [](const std::string&) {};
       auto host = offload::RenderHost::Start(ho);
       if (!host.ok() || !(*host)->site()->WaitConnected(5.0)) {
@@ -192,6 +202,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
       if (!hs.clients.empty()) {
         r.host_render_ms = hs.clients[0].render_ms;
         r.host_horizon_ms = hs.clients[0].horizon_ms;
+        r.renderer = hs.clients[0].renderer.substr(0, hs.clients[0].renderer.find(' '));
       }
       if (!thin.ok()) {
         std::fprintf(stderr, "client-offload: thin client: %s\n", thin.status().ToString().c_str());
@@ -247,7 +258,8 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
     std::map<std::string, std::string> q = {{"mode", r.mode},         {"latency_ms", std::to_string(r.latency)},
                                             {"path", "network"},      {"scene", "foreground"},
                                             {"size", size},           {"trace", "recorded"},
-                                            {"method", r.mode == "stale" ? "none" : "plane"}, {"region", "frame"}};
+                                            {"method", r.mode == "stale" ? "none" : "plane"}, {"region", "frame"},
+                                            {"renderer", r.renderer}};
     bench::EmitFigure("client-offload", wl, "reproj_psnr_db", bench::Mean(r.psnr), "dB", q);
     q["region"] = "content";
     bench::EmitFigure("client-offload", wl, "reproj_psnr_db", bench::Mean(r.psnr_content), "dB", q);
