@@ -85,6 +85,7 @@ struct RenderHost::Impl {
   uint64_t next_id = 1;
   std::atomic<uint64_t> accepted{0}, refused{0}, closed_on_error{0}, site_frames{0};
   std::atomic<int64_t> last_site_frame{-1};
+  std::atomic<bool> site_connected{false};
 
   void Log(const std::string& s) {
     if (o.log) {
@@ -452,9 +453,14 @@ StatusOr<std::unique_ptr<RenderHost>> RenderHost::Start(RenderHostOptions option
   cb.on_frame = [impl](const net::ReceivedFrame& f) { impl->OnSiteFrame(f); };
   cb.on_state = [impl](net::ClientState state, const Status& status) {
     if (state == net::ClientState::kConnected) {
+      impl->site_connected = true;
       impl->Log("site: connected");
     } else if (state == net::ClientState::kBackoff) {
-      impl->Log("site: connection lost (" + status.ToString() + "); reconnecting");
+      if (impl->site_connected.exchange(false)) {
+        impl->Log("site: connection lost (" + status.ToString() + "); reconnecting");
+      } else {
+        impl->Log("site: unreachable (" + status.ToString() + "); retrying");
+      }
     } else if (state == net::ClientState::kRefused) {
       impl->Log("site: refused: " + status.ToString());
     }
