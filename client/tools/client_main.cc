@@ -12,6 +12,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "client/offload/offload_main.h"
 #include "client/tools/viewer_app.h"
 
 namespace {
@@ -37,6 +38,11 @@ bool ParseFloats(const std::string& text, std::vector<float>* out) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Render offload (docs/offload.md): its own command lines.
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--render-host") return holo::offload::RenderHostMain(argc, argv);
+    if (std::string(argv[i]) == "--thin") return holo::offload::ThinClientMain(argc, argv);
+  }
   holo::client::ViewerOptions o;
   CLI::App app{
       "holoport-client: the Holoport viewer (local OpenGL rendering of a site's stream).\n"
