@@ -5,7 +5,8 @@
 #    Bob's room (S8-VGA: two people, a ball and a crate), ground-truth meshes
 #    and pod images streamed at 30 fps;
 #  * two viewers (holoport-client --call): each watches the other room, placed
-#    face to face across a 0.5 m gap, publishes its participant's voice
+#    face to face 2.5 m apart (camera and voice at
+#    each room's own person's head), publishes its participant's voice
 #    (espeak-ng speech, a different text and voice per site) and head pose,
 #    and spatializes the other participant's voice (HRTF, listener = own head);
 #  * with a display, two windows; without one (or with --headless), headless:
@@ -109,15 +110,19 @@ espeak-ng -v en-gb+m3 -s 140 -w "$OUT/bob_says.wav" \
   "Hi Alice, Bob here in the second room. Your voice comes from in front of me, a little to the side."
 
 # Call configs: each side publishes to its own room and watches the other.
+# Each participant is a person of their own room: the camera and the voice sit
+# at that person's head (Alice: the one figure of S8-QVGA, facing +x; Bob: the
+# first figure of S8-VGA), and the remote room is turned to face them 2.5 m away.
+declare -A HEAD_AT=([alice]="0,0,1.6,0" [bob]="0.05,0.55,1.6,-20")
 cat > "$OUT/alice.yaml" << EOF
 local:  {name: alice-room, address: 127.0.0.1:$PORT_A, publisher_token: alice-pub}
 remote: {name: bob-room,   address: 127.0.0.1:$PORT_B, viewer_token: bob-view}
-room:   {preset: face-to-face, gap_m: 0.5}
+room:   {yaw_deg: 180, translation_m: [2.5, 0, 0]}
 EOF
 cat > "$OUT/bob.yaml" << EOF
 local:  {name: bob-room,   address: 127.0.0.1:$PORT_B, publisher_token: bob-pub}
 remote: {name: alice-room, address: 127.0.0.1:$PORT_A, viewer_token: alice-view}
-room:   {preset: face-to-face, gap_m: 0.5}
+room:   {yaw_deg: 180, translation_m: [2.5, 0, 0]}
 EOF
 
 echo "demo: starting Alice's site (S8-QVGA) on :$PORT_A and Bob's site (S8-VGA) on :$PORT_B"
@@ -150,7 +155,7 @@ VIEWERS=()
 for who in alice bob; do
   $BIN/holoport-client --call "$OUT/$who.yaml" --name "$who" "${MODE[@]}" --seconds "$SECONDS_RUN" \
     --width "$WIDTH" --height "$HEIGHT" --connect-timeout 60 --color "$COLOR" \
-    --audio-in "$OUT/${who}_says.wav" --audio-out "$OUT/${who}_hears.wav" --out "$OUT/$who" \
+    --head-at "${HEAD_AT[$who]}" --audio-in "$OUT/${who}_says.wav" --audio-out "$OUT/${who}_hears.wav" --out "$OUT/$who" \
     > "$OUT/logs/${who}_viewer.log" 2>&1 &
   PIDS+=($!)
   VIEWERS+=($!)

@@ -83,7 +83,10 @@ int main(int argc, char** argv) {
                  "local-site geometry for AR compositing (it occludes the remote people): 'table' (a table, the "
                  "default with --miniature), a PLY mesh in local-room coordinates, or synthetic:WORKLOAD (the local "
                  "site's people, live from a second synthetic studio)");
-  std::string remote_at;
+  std::string remote_at, head_at;
+  app.add_option("--head-at", head_at,
+                 "--call: the participant's head in the own room, X,Y,Z[,YAW_DEG] (default: 2 m in front of the "
+                 "room centre, facing it); it is the camera and where the own voice is sent from");
   app.add_option("--remote-at", remote_at,
                  "place the remote room in the local one: X,Y,Z[,YAW_DEG] (e.g. 1.6,0,0,180 puts the remote people "
                  "1.6 m away, facing the local ones)");
@@ -156,6 +159,20 @@ int main(int argc, char** argv) {
     o.remote_placed = true;
     o.remote_at = Eigen::Vector3f(v[0], v[1], v[2]);
     if (v.size() == 4) o.remote_yaw_deg = v[3];
+  }
+  if (!head_at.empty()) {
+    std::vector<float> v;
+    if (!ParseFloats(head_at, &v) || (v.size() != 3 && v.size() != 4)) {
+      std::fprintf(stderr, "holoport-client: --head-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n", head_at.c_str());
+      return 2;
+    }
+    if (o.call.empty()) {
+      std::fprintf(stderr, "holoport-client: --head-at needs --call\n");
+      return 2;
+    }
+    o.head_placed = true;
+    o.head_at = Eigen::Vector3f(v[0], v[1], v[2]);
+    if (v.size() == 4) o.head_yaw_deg = v[3];
   }
   if (o.miniature_scale != 0.0f && o.local.empty()) o.local = "table";
   return holo::client::RunViewer(o);

@@ -248,6 +248,19 @@ class Viewer {
       po.audio_in = o_.audio_in;
       po.audio_out = o_.audio_out;
       po.view_template = co;
+      if (o_.head_placed) {
+        // The default head's sway and glances around the given place and heading.
+        const Eigen::Vector3f at = o_.head_at;
+        const float yaw = o_.head_yaw_deg * 3.14159265f / 180.0f;
+        po.head = [at, yaw](int64_t t_us) {
+          protocol::HeadPose p = net::SyntheticHead(static_cast<double>(t_us % 3600000000LL) / 1e6, 0.0f);
+          p.x = at.x();
+          p.y += at.y();
+          p.z = at.z();
+          p.yaw = p.yaw - 3.14159265f + yaw;
+          return p;
+        };
+      }
       HOLO_ASSIGN_OR_RETURN(participant_, net::Participant::Start(po, cb));
       client_ = &participant_->viewer();
       // The remote room through the call's room transform (rendering and voices alike).

@@ -43,6 +43,11 @@ struct ViewerOptions {
   std::string token;
   std::string call;
   std::string name = "holoport-client";
+  // --call: where the participant's head stands in the own room (metres,
+  // degrees; x forward at yaw 0), swaying a little; unset: net::SyntheticHead.
+  bool head_placed = false;
+  Eigen::Vector3f head_at = Eigen::Vector3f::Zero();
+  float head_yaw_deg = 0.0f;
   std::string audio_in;   // --call: own voice (WAV); empty: a tone
   std::string audio_out;  // --call: spatialized stereo WAV of the remote voices
   double seconds = 0;     // network: stop after this long (0: --frames decides)
