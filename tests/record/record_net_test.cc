@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <memory>
 #include <mutex>
@@ -407,24 +408,65 @@ std::string RecorderBinary() {
   return "";
 }
 
+std::atomic<bool> g_child_stop{false};
+void OnChildSignal(int) { g_child_stop = true; }
+
+// The child's recorder when holoport-record is not built next to the tests
+// (the sanitizer build builds only test programs): the same pieces as
+// holoport-record --connect, in a forked child. Never returns.
+[[noreturn]] void ChildRecorder(uint16_t port, const std::string& path) {
+  std::signal(SIGINT, OnChildSignal);
+  record::RecordingWriterOptions wo;
+  wo.source = "child";
+  auto writer = record::RecordingWriter::Create(path, wo, true);
+  if (!writer.ok()) ::_exit(2);
+  record::RecordingSink sink(writer->get());
+  std::mutex mu;
+  net::ClientOptions o;
+  o.port = port;
+  o.role = protocol::Role::kRecorder;
+  o.token = "view-secret";
+  o.decode = false;
+  net::ClientCallbacks cb;
+  cb.on_raw = [&](const net::RawMessage& m) {
+    std::lock_guard<std::mutex> l(mu);
+    (void)sink.AddFrame(protocol::Frame{m.header, m.payload}, RealClock::Instance().NowUs());
+  };
+  auto client = net::SiteClient::Start(o, cb);
+  if (!client.ok()) ::_exit(3);
+  while (!g_child_stop) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  (*client)->Stop();
+  ::_exit((*writer)->Close().ok() ? 0 : 4);
+}
+
 void RecorderProcess(int signal_number, bool expect_clean) {
   const std::string bin = RecorderBinary();
-  if (bin.empty()) GTEST_SKIP() << "holoport-record is not built next to the tests";
-  auto server = net::Server::Start(Config());
-  ASSERT_TRUE(server.ok());
-  const std::vector<TestMessage> stream = test::MakeTestStream(600, 30, 5);
-  RecordedPublisher publisher(server->get());
-  ASSERT_TRUE(PublishAll(&publisher, {stream[0]}).ok());
   const std::string path = TempPath(signal_number == SIGKILL ? "killed.hrec" : "stopped.hrec");
   std::filesystem::remove(path);
-  const std::string port = std::to_string((*server)->port());
+  // Fork before the server starts its threads; the child waits for the port.
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
   const pid_t pid = ::fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
-    ::execl(bin.c_str(), bin.c_str(), "--connect", ("127.0.0.1:" + port).c_str(), "--token", "view-secret", "--out",
-            path.c_str(), "-q", static_cast<char*>(nullptr));
+    ::close(fds[1]);
+    uint16_t port = 0;
+    if (::read(fds[0], &port, sizeof(port)) != static_cast<ssize_t>(sizeof(port))) ::_exit(5);
+    if (bin.empty()) ChildRecorder(port, path);
+    const std::string where = "127.0.0.1:" + std::to_string(port);
+    ::execl(bin.c_str(), bin.c_str(), "--connect", where.c_str(), "--token", "view-secret", "--out", path.c_str(), "-q",
+            static_cast<char*>(nullptr));
     ::_exit(127);
   }
+  ::close(fds[0]);
+  auto server = net::Server::Start(Config());
+  ASSERT_TRUE(server.ok());
+  const uint16_t port = (*server)->port();
+  ASSERT_EQ(::write(fds[1], &port, sizeof(port)), static_cast<ssize_t>(sizeof(port)));
+  ::close(fds[1]);
+  const std::vector<TestMessage> stream = test::MakeTestStream(600, 30, 5);
+  RecordedPublisher publisher(server->get());
+  ASSERT_TRUE(PublishAll(&publisher, {stream[0]}).ok());
   const bool connected = Eventually([&] { return (*server)->num_subscribed(net::kContentGeometry) == 1; });
   // Publish until the recorder has received ~40 frames, then signal it mid-stream.
   size_t i = 1;
