@@ -395,6 +395,44 @@ TEST(RecordNet, SeekPauseSpeedOverNetwork) {
   EXPECT_FALSE(f.rs->source().state().ended);
 }
 
+// --loop over the network: the recording again and again, the Rig first on
+// every lap, frames in order within each lap.
+TEST(RecordNet, LoopOverNetwork) {
+  ReplayFixture f("loop.hrec", 8, 4.0, /*loop=*/true);
+  ASSERT_TRUE(Eventually([&] { return f.EmittedMeshes() == 1 && f.Settled(); }));
+  Collector a;
+  auto ca = Connect(f.rs->port(), protocol::Role::kViewer, &a);
+  ASSERT_TRUE(Eventually([&] { return a.Count(MessageType::kMeshFrame) == 1; }));
+  ca->Resume();
+  ASSERT_TRUE(Eventually([&] { return a.Count(MessageType::kMeshFrame) >= 1 + 8 * 3; }));
+  ca->Pause();
+  ASSERT_TRUE(Eventually([&] { return f.rs->source().state().paused && f.Settled(); }));
+  EXPECT_GE(f.rs->source().state().generation, 3u);
+  const auto meshes = OfType(f.stream, MessageType::kMeshFrame);
+  std::vector<std::vector<uint8_t>> got;
+  std::vector<MessageType> types;
+  {
+    std::lock_guard<std::mutex> l(a.mu);
+    got = a.all;
+    types = a.types;
+  }
+  // The join key frame (frame 0), then frames 1..7, then laps of 0..7, a Rig before every frame 0.
+  size_t mesh_no = 0, laps_with_rig = 0;
+  MessageType prev = MessageType::kRig;
+  for (size_t i = 0; i < got.size(); ++i) {
+    if (types[i] != MessageType::kMeshFrame) {
+      if (types[i] != MessageType::kAudioPose) prev = types[i];
+      continue;
+    }
+    const size_t k = mesh_no % meshes.size();
+    EXPECT_EQ(got[i], meshes[k]) << "mesh " << mesh_no;
+    if (k == 0 && mesh_no > 0) laps_with_rig += prev == MessageType::kRig;
+    prev = MessageType::kMeshFrame;
+    ++mesh_no;
+  }
+  EXPECT_GE(laps_with_rig, 2u);
+}
+
 // holoport-record --connect as a process: SIGKILL mid-write leaves a file
 // that opens and replays up to the last complete message; SIGINT closes it
 // cleanly with its index.
