@@ -194,8 +194,8 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
     if (quiet) return;
     if (state == holo::net::ClientState::kConnected)
       std::fprintf(stderr, "holoport-record: connected to %s; recording\n", connect.c_str());
-    else if (state == holo::net::ClientState::kBackoff || state == holo::net::ClientState::kRefused)
-      std::fprintf(stderr, "holoport-record: %s: %s\n", holo::net::ClientStateName(state), why.message().c_str());
+    else if (state == holo::net::ClientState::kBackoff)
+      std::fprintf(stderr, "holoport-record: %s (retrying): %s\n", connect.c_str(), why.message().c_str());
   };
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
@@ -252,6 +252,10 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   if (refused) {
     std::fprintf(stderr, "holoport-record: the site refused the recorder: %s\n", client_status.message().c_str());
     if (code == 0) code = 1;
+    if ((*writer)->stats().messages == 0) {
+      std::remove(out.c_str());  // nothing recorded: do not leave an empty recording behind
+      return code;
+    }
   }
   const auto& ws = (*writer)->stats();
   const auto& ss = sink.stats();
