@@ -91,7 +91,7 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
     const double late = static_cast<double>(emitted - due) * 1e-3;
     if (h.type == protocol::MessageType::kMeshFrame) {
       std::lock_guard<std::mutex> l(late_mu);
-      lateness_ms.push_back(late);
+      if (lateness_ms.size() < (1u << 20)) lateness_ms.push_back(late);  // ≈ 9.7 h at 30 fps, 8 MB
     }
     if (stats != nullptr)
       std::fprintf(stats,

@@ -51,8 +51,7 @@ int Record(const std::string& out, const std::string& source_spec, double durati
     so.workload = source_spec.substr(10);
   } else {
     return Fail(holo::InvalidArgument("--source must be synthetic[:WORKLOAD], got '" + source_spec +
-                                      "' (recording from a site over the network needs the client library, "
-                                      "which this build does not have yet)"));
+                                      "' (to record a live site, use --connect HOST:PORT --token T)"));
   }
   if (codec == "g1") {
     so.geometry.codec = holo::protocol::GeometryCodec::kG1;
@@ -309,8 +308,10 @@ int Cut(const std::string& path, double segment_s, const std::string& dir, bool 
 int main(int argc, char** argv) {
   CLI::App app{
       "holoport-record: records a Holoport protocol stream into a crash-safe, seekable file (a \"living\n"
-      "memory\"), validates and describes recordings, and cuts them into segments for an HTTP cache.\n"
-      "Replay a recording with: holoport-server --replay FILE [--speed S] [--loop].\n"
+      "memory\") — a live site (--connect HOST:PORT --token T) or the synthetic studio (--source) —,\n"
+      "validates and describes recordings, and cuts them into segments for an HTTP cache.\n"
+      "Replay a recording to viewers with: holoport-server --replay FILE --listen HOST:PORT --viewer-token T\n"
+      "[--speed S] [--loop].\n"
       "Exit codes: 0 done; 1 error; 3 size limit reached, 4 disk full (in both cases the file holds\n"
       "everything recorded before and is closed with an index when possible)."};
   std::string out, source = "synthetic:S8-QVGA", info_path, cut_path, out_dir, codec = "g1";
