@@ -876,6 +876,17 @@ void Server::SetRig(const Rig& rig) {
   for (const auto& v : viewers) v->SendRig(msg);
 }
 
+void Server::SetRigMessage(WireMessagePtr message) {
+  HOLO_CHECK(message != nullptr && message->type == MessageType::kRig);
+  std::vector<std::shared_ptr<Session>> viewers;
+  {
+    std::lock_guard<std::mutex> l(impl_->mu);
+    impl_->rig_msg = message;
+    viewers = impl_->viewers_list;
+  }
+  for (const auto& v : viewers) v->SendRig(message);
+}
+
 void Server::PublishVideo(VideoFramePtr frame) {
   impl_->n.video_frames_published++;
   for (const auto& v : impl_->Viewers()) v->EnqueueVideo(frame);

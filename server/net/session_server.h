@@ -102,6 +102,9 @@ class Server {
   void SetPublishedCodecs(protocol::GeometryCodec geometry, protocol::ColorCodec color);
   // The rig, sent to every viewer after Welcome and to all viewers now.
   void SetRig(const Rig& rig);
+  // The same with an already encoded Rig message (a replay sends the
+  // recorded bytes unchanged). `message->type` must be kRig.
+  void SetRigMessage(WireMessagePtr message);
 
   // Fan-out (any thread, never blocks on a viewer). Video frames go to every
   // viewer subscribed to geometry or colour; a viewer whose queue is full

@@ -1,17 +1,22 @@
 #include "server/record/replay_command.h"
 
 #include <algorithm>
+#include <cstdlib>
+#include <fstream>
 #include <csignal>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "common/clock.h"
 #include "common/file_util.h"
 #include "common/mesh.h"
+#include "server/net/server_config.h"
 #include "protocol/geometry_codec.h"
 #include "server/record/recording_reader.h"
 #include "server/record/replay.h"
+#include "server/record/replay_net.h"
 
 namespace holo::record {
 namespace {
@@ -30,12 +35,140 @@ double Percentile(std::vector<double> v, double p) {
   return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
 }
 
+std::string RandomToken() {
+  std::ifstream f("/dev/urandom", std::ios::binary);
+  unsigned char b[24] = {};
+  f.read(reinterpret_cast<char*>(b), sizeof(b));
+  static const char* hex = "0123456789abcdef";
+  std::string t;
+  for (unsigned char c : b) {
+    t.push_back(hex[c >> 4]);
+    t.push_back(hex[c & 15]);
+  }
+  return t;
+}
+
+int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const RecordingReader> reader) {
+  if (!o.export_dir.empty())
+    return Fail(InvalidArgument("--export is not available with --listen (viewers receive the meshes)"));
+  ReplayServerOptions so;
+  if (!o.net_config.empty()) {
+    auto c = net::LoadServerConfig(o.net_config);
+    if (!c.ok()) return Fail(c.status());
+    so.net = *c;
+  } else {
+    so.net.host = "0.0.0.0";
+  }
+  if (!o.listen.empty()) {
+    Status st = net::ParseHostPort(o.listen, &so.net.host, &so.net.port);
+    if (!st.ok()) return Fail(st.WithContext("--listen"));
+  }
+  std::string viewer_token = o.viewer_token, publisher_token = o.publisher_token;
+  if (viewer_token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) viewer_token = std::getenv("HOLO_VIEWER_TOKEN");
+  if (publisher_token.empty() && std::getenv("HOLO_PUBLISHER_TOKEN"))
+    publisher_token = std::getenv("HOLO_PUBLISHER_TOKEN");
+  if (!viewer_token.empty()) so.net.viewer_token = viewer_token;
+  if (!publisher_token.empty()) so.net.publisher_token = publisher_token;
+  if (so.net.viewer_token.empty())
+    return Fail(InvalidArgument(
+        "serving a replay needs a viewer token: --viewer-token, env HOLO_VIEWER_TOKEN or viewer_token in --net-config"));
+  if (so.net.publisher_token.empty()) so.net.publisher_token = RandomToken();
+  so.replay.speed = o.speed;
+  so.replay.loop = o.loop;
+  so.replay.start_us = static_cast<int64_t>(o.start_s * 1e6);
+  if (o.quiet) so.log = [](const std::string&) {};
+  FILE* stats = nullptr;
+  if (o.stats_path == "-") {
+    stats = stdout;
+  } else if (!o.stats_path.empty()) {
+    stats = std::fopen(o.stats_path.c_str(), "w");
+    if (stats == nullptr) return Fail(Unavailable(o.stats_path + ": cannot open for writing"));
+  }
+  RealClock& clock = RealClock::Instance();
+  std::vector<double> lateness_ms;  // mesh frames: fan-out time − due time
+  std::mutex late_mu;
+  so.on_emit = [&](const protocol::Header& h, int64_t due, int64_t emitted) {
+    const double late = static_cast<double>(emitted - due) * 1e-3;
+    if (h.type == protocol::MessageType::kMeshFrame) {
+      std::lock_guard<std::mutex> l(late_mu);
+      if (lateness_ms.size() < (1u << 20)) lateness_ms.push_back(late);  // ≈ 9.7 h at 30 fps, 8 MB
+    }
+    if (stats != nullptr)
+      std::fprintf(stats,
+                   "{\"type\":\"%s\",\"stream\":%u,\"sequence\":%u,\"capture_time_us\":%lld,\"bytes\":%u,"
+                   "\"late_ms\":%.3f}\n",
+                   protocol::MessageTypeName(h.type), h.stream_id, h.sequence,
+                   static_cast<long long>(h.capture_time_us), h.payload_length + 32u, late);
+  };
+  const RecordingSummary& sum = reader->summary();
+  auto rs = ReplayServer::Start(reader, &clock, so);
+  if (!rs.ok()) {
+    if (stats != nullptr && stats != stdout) std::fclose(stats);
+    return Fail(rs.status());
+  }
+  if (!o.quiet)
+    std::fprintf(stderr,
+                 "holoport-server: serving %s (%s, %llu messages, %zu key frames%s) at %.2fx%s on %s:%u; viewers "
+                 "control it (pause, resume, seek, speed 0.25..4; one shared timeline). Ctrl-C stops.\n",
+                 o.path.c_str(), FormatSeconds(sum.duration_us).c_str(),
+                 static_cast<unsigned long long>(sum.num_messages), sum.index.size(),
+                 sum.clean ? "" : "; not closed cleanly, index rebuilt", o.speed, o.loop ? ", looping" : "",
+                 so.net.host.c_str(), (*rs)->port());
+  std::signal(SIGINT, OnReplaySignal);
+  std::signal(SIGTERM, OnReplaySignal);
+  const int64_t start = clock.NowUs();
+  int64_t next_progress = start + 5000000;
+  bool said_end = false;
+  while (!g_replay_stop) {
+    const int64_t now = clock.NowUs();
+    if (o.max_wall_s > 0 && now - start >= static_cast<int64_t>(o.max_wall_s * 1e6)) break;
+    clock.SleepUntilUs(now + 50000);
+    const ReplayState st = (*rs)->source().state();
+    if (st.ended && !said_end && !o.quiet) {
+      std::fprintf(stderr, "holoport-server: replay reached the end (%s); still serving: viewers can seek back. "
+                           "Ctrl-C stops.\n", FormatSeconds(st.duration_us).c_str());
+    }
+    said_end = st.ended;
+    if (!o.quiet && clock.NowUs() >= next_progress) {
+      uint64_t sent = 0, dropped = 0;
+      size_t viewers = 0;
+      for (const auto& s : (*rs)->server().Sessions()) {
+        if (s.role == protocol::Role::kPublisher) continue;
+        ++viewers;
+        sent += s.video_frames_sent;
+        dropped += s.video_frames_dropped;
+      }
+      std::fprintf(stderr, "  at %s of %s%s, %.2fx: %zu viewers, %llu frames sent, %llu dropped\n",
+                   FormatSeconds(st.position_us).c_str(), FormatSeconds(st.duration_us).c_str(),
+                   st.paused ? " (paused)" : "", st.speed, viewers, static_cast<unsigned long long>(sent),
+                   static_cast<unsigned long long>(dropped));
+      next_progress = clock.NowUs() + 5000000;
+    }
+  }
+  const ReplayServerStats rst = (*rs)->stats();
+  const Status err = (*rs)->status();
+  (*rs)->Stop();
+  if (stats != nullptr && stats != stdout) std::fclose(stats);
+  if (!o.quiet) {
+    std::lock_guard<std::mutex> l(late_mu);
+    std::fprintf(stderr,
+                 "holoport-server: replay served %llu messages; controls applied %llu, rejected %llu; mesh frame "
+                 "fan-out vs schedule p50 %.2f ms, p99 %.2f ms\n",
+                 static_cast<unsigned long long>(rst.emitted), static_cast<unsigned long long>(rst.controls_applied),
+                 static_cast<unsigned long long>(rst.controls_rejected), Percentile(lateness_ms, 0.5),
+                 Percentile(lateness_ms, 0.99));
+  }
+  if (!err.ok()) return Fail(err);
+  return 0;
+}
+
 }  // namespace
 
 int RunReplayCommand(const ReplayCommandOptions& o) {
   auto reader = RecordingReader::Open(o.path);
   if (!reader.ok()) return Fail(reader.status());
   std::shared_ptr<const RecordingReader> shared(std::move(*reader));
+  if (o.network()) return RunNetworkReplay(o, shared);
   const RecordingSummary& sum = shared->summary();
   RealClock& clock = RealClock::Instance();
   ReplayOptions ro;

@@ -2,16 +2,23 @@
 // validates and describes recordings (--info), and cuts them into segments for
 // an HTTP cache (--cut). docs/recording.md describes the format and the
 // commands.
+#include <time.h>
+
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
+#include "client/net/site_client.h"
 #include "common/clock.h"
+#include "server/net/server_config.h"
 #include "server/record/inspect.h"
 #include "server/record/recording_reader.h"
+#include "server/record/recording_sink.h"
 #include "server/record/recording_writer.h"
 #include "server/record/segments.h"
 #include "server/record/synthetic_stream.h"
@@ -19,6 +26,12 @@
 namespace {
 
 volatile std::sig_atomic_t g_stop = 0;
+
+double ProcessCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
 void OnSignal(int) { g_stop = 1; }
 
 int Fail(const holo::Status& s) {
@@ -38,8 +51,7 @@ int Record(const std::string& out, const std::string& source_spec, double durati
     so.workload = source_spec.substr(10);
   } else {
     return Fail(holo::InvalidArgument("--source must be synthetic[:WORKLOAD], got '" + source_spec +
-                                      "' (recording from a site over the network needs the client library, "
-                                      "which this build does not have yet)"));
+                                      "' (to record a live site, use --connect HOST:PORT --token T)"));
   }
   if (codec == "g1") {
     so.geometry.codec = holo::protocol::GeometryCodec::kG1;
@@ -123,6 +135,145 @@ int Record(const std::string& out, const std::string& source_spec, double durati
   return code;
 }
 
+// Records a live site: subscribes like a viewer (role recorder) through
+// SiteClient and writes every message it receives (raw, exactly as sent)
+// through RecordingSink. Exit codes as Record().
+int RecordLive(const std::string& out, const std::string& connect, std::string token, double duration_s,
+               uint64_t max_bytes, bool overwrite, double sync_mb, bool tls, const std::string& ca_file,
+               double connect_timeout_s, bool quiet) {
+  holo::net::ClientOptions co;
+  holo::Status st = holo::net::ParseHostPort(connect, &co.host, &co.port);
+  if (!st.ok()) return Fail(st.WithContext("--connect"));
+  if (co.host == "0.0.0.0") co.host = "127.0.0.1";
+  if (token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) token = std::getenv("HOLO_VIEWER_TOKEN");
+  if (token.empty()) return Fail(holo::InvalidArgument("--connect needs the site's viewer token: --token or env HOLO_VIEWER_TOKEN"));
+  if (!(duration_s >= 0)) return Fail(holo::InvalidArgument("--duration must be ≥ 0"));
+  co.role = holo::protocol::Role::kRecorder;
+  co.token = token;
+  co.name = "holoport-record";
+  co.decode = false;
+  co.subscribe = holo::net::kSubscribeAll;
+  co.tls.enabled = tls;
+  co.tls.ca_file = ca_file;
+  co.connect_timeout_s = connect_timeout_s;
+  holo::Status check = co.Check();
+  if (!check.ok()) return Fail(check);
+
+  holo::record::RecordingWriterOptions wo;
+  wo.max_bytes = max_bytes;
+  wo.source = ("site:" + connect).substr(0, 31);
+  wo.sync_every_bytes = static_cast<uint64_t>(sync_mb * 1e6);
+  auto writer = holo::record::RecordingWriter::Create(out, wo, overwrite);
+  if (!writer.ok()) return Fail(writer.status());
+  holo::record::RecordingSink sink(writer->get());
+
+  holo::RealClock& clock = holo::RealClock::Instance();
+  const int64_t limit_us = duration_s > 0 ? static_cast<int64_t>(duration_s * 1e6) : INT64_MAX;
+  std::mutex mu;
+  bool done = false;     // duration reached or the recording ended (under mu)
+  holo::Status end;      // the writer's / sink's error (under mu)
+  double write_ms = 0;   // under mu
+  holo::net::ClientCallbacks cb;
+  cb.on_raw = [&](const holo::net::RawMessage& m) {
+    const int64_t now = clock.NowUs();
+    std::lock_guard<std::mutex> l(mu);
+    if (done) return;
+    holo::protocol::Frame f{m.header, m.payload};
+    holo::Stopwatch sw;
+    holo::Status s = sink.AddFrame(f, now);
+    write_ms += sw.ElapsedMs();
+    if (!s.ok()) {
+      end = s;
+      done = true;
+    } else if ((*writer)->stats().duration_us >= limit_us) {
+      done = true;
+    }
+  };
+  cb.on_state = [&](holo::net::ClientState state, const holo::Status& why) {
+    if (quiet) return;
+    if (state == holo::net::ClientState::kConnected)
+      std::fprintf(stderr, "holoport-record: connected to %s; recording\n", connect.c_str());
+    else if (state == holo::net::ClientState::kBackoff)
+      std::fprintf(stderr, "holoport-record: %s (retrying): %s\n", connect.c_str(), why.message().c_str());
+  };
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  if (!quiet)
+    std::fprintf(stderr, "holoport-record: %s → %s (%s%s)\n", connect.c_str(), out.c_str(),
+                 duration_s > 0 ? holo::record::FormatSeconds(limit_us).c_str() : "until stopped",
+                 max_bytes ? (", limit " + std::to_string(max_bytes) + " bytes").c_str() : "");
+  const int64_t start = clock.NowUs();
+  const double cpu_start = ProcessCpuMs();
+  auto client = holo::net::SiteClient::Start(co, cb);
+  if (!client.ok()) return Fail(client.status());
+  int64_t next_progress = start + 1000000;
+  bool refused = false;
+  while (!g_stop) {
+    clock.SleepUntilUs(clock.NowUs() + 50000);
+    {
+      std::lock_guard<std::mutex> l(mu);
+      if (done) break;
+    }
+    if ((*client)->state() == holo::net::ClientState::kRefused) {
+      refused = true;
+      break;
+    }
+    const int64_t now = clock.NowUs();
+    if (!quiet && now >= next_progress) {
+      std::lock_guard<std::mutex> l(mu);
+      const auto& ws = (*writer)->stats();
+      std::fprintf(stderr, "  %s recorded, %llu messages, %.2f MB, %.2f MB/min\n",
+                   holo::record::FormatSeconds(ws.duration_us).c_str(), static_cast<unsigned long long>(ws.messages),
+                   static_cast<double>(ws.bytes) / 1e6,
+                   ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us)
+                                      : 0.0);
+      next_progress = now + 1000000;
+    }
+  }
+  (*client)->Stop();  // no callback runs after this
+  const holo::Status client_status = (*client)->status();
+  int code = 0;
+  if (end.ok()) {
+    holo::Status c = (*writer)->Close();
+    if (!c.ok()) {
+      end = c;
+      code = 4;
+    }
+  } else if (end.code() == holo::StatusCode::kOutOfRange) {
+    code = 3;
+  } else if (end.code() == holo::StatusCode::kUnavailable) {
+    code = 4;
+  } else {
+    (void)(*writer)->Close();  // a malformed stream: keep what came before, closed
+    code = 1;
+  }
+  if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
+  if (refused) {
+    std::fprintf(stderr, "holoport-record: the site refused the recorder: %s\n", client_status.message().c_str());
+    if (code == 0) code = 1;
+    if ((*writer)->stats().messages == 0) {
+      std::remove(out.c_str());  // nothing recorded: do not leave an empty recording behind
+      return code;
+    }
+  }
+  const auto& ws = (*writer)->stats();
+  const auto& ss = sink.stats();
+  const double wall_s = static_cast<double>(clock.NowUs() - start) * 1e-6;
+  const double cpu_ms = ProcessCpuMs() - cpu_start;
+  if (g_stop && !quiet) std::fprintf(stderr, "holoport-record: stopped by signal; recording closed\n");
+  if (!quiet)
+    std::fprintf(stderr,
+                 "holoport-record: %s: %llu messages (%llu key frames; %llu session messages not recorded), %s, "
+                 "%.2f MB in %.1f s wall; %.2f MB per minute of media; CPU %.0f ms (%.1f%% of one core), "
+                 "writing %.1f ms\n",
+                 out.c_str(), static_cast<unsigned long long>(ws.messages),
+                 static_cast<unsigned long long>(ws.key_frames), static_cast<unsigned long long>(ss.ignored_types),
+                 holo::record::FormatSeconds(ws.duration_us).c_str(), static_cast<double>(ws.bytes) / 1e6, wall_s,
+                 ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us) : 0.0,
+                 cpu_ms, wall_s > 0 ? cpu_ms / (wall_s * 10.0) : 0.0, write_ms);
+  return code;
+}
+
 int Info(const std::string& path, bool deep, bool json, bool salvage) {
   holo::record::RecordingReaderOptions o;
   o.salvage = salvage;
@@ -157,8 +308,10 @@ int Cut(const std::string& path, double segment_s, const std::string& dir, bool 
 int main(int argc, char** argv) {
   CLI::App app{
       "holoport-record: records a Holoport protocol stream into a crash-safe, seekable file (a \"living\n"
-      "memory\"), validates and describes recordings, and cuts them into segments for an HTTP cache.\n"
-      "Replay a recording with: holoport-server --replay FILE [--speed S] [--loop].\n"
+      "memory\") — a live site (--connect HOST:PORT --token T) or the synthetic studio (--source) —,\n"
+      "validates and describes recordings, and cuts them into segments for an HTTP cache.\n"
+      "Replay a recording to viewers with: holoport-server --replay FILE --listen HOST:PORT --viewer-token T\n"
+      "[--speed S] [--loop].\n"
       "Exit codes: 0 done; 1 error; 3 size limit reached, 4 disk full (in both cases the file holds\n"
       "everything recorded before and is closed with an index when possible)."};
   std::string out, source = "synthetic:S8-QVGA", info_path, cut_path, out_dir, codec = "g1";
@@ -171,7 +324,8 @@ int main(int argc, char** argv) {
                  "what to record: synthetic[:WORKLOAD] (the studio's ground-truth meshes through the geometry "
                  "codec, plus 20 ms PCM audio+pose frames)")
       ->capture_default_str();
-  app.add_option("--duration", duration, "seconds of media to record (0: until the size limit or Ctrl-C)")
+  app.add_option("--duration", duration,
+                 "seconds of media to record (0: until the size limit or Ctrl-C; with --connect default 0)")
       ->capture_default_str();
   app.add_option("--max-bytes", max_bytes, "size limit of the file, index included (0: none); K/M/G suffixes")
       ->transform(CLI::AsSizeValue(false));
@@ -188,10 +342,23 @@ int main(int argc, char** argv) {
   auto* cut_opt = app.add_option("--cut", cut_path, "cut FILE into independently playable segments (needs --out-dir)");
   app.add_option("--out-dir", out_dir, "--cut: directory for seg_NNNNN.hrec and manifest.json");
   app.add_option("--segment-seconds", segment_s, "--cut: target segment length")->capture_default_str();
+  std::string connect, token, ca_file;
+  bool tls = false;
+  double connect_timeout_s = 5;
+  app.add_option("--connect", connect,
+                 "record a live site: connect to HOST:PORT as a recorder (needs --token) and write every message "
+                 "as received; stops after --duration, at --max-bytes, or on Ctrl-C (the file is closed with its "
+                 "index)");
+  app.add_option("--token", token, "--connect: the site's viewer token (default: env HOLO_VIEWER_TOKEN)");
+  app.add_flag("--tls", tls, "--connect: TLS");
+  app.add_option("--ca-file", ca_file, "--connect --tls: trusted certificates (PEM)");
+  app.add_option("--connect-timeout", connect_timeout_s, "--connect: seconds for connect + handshake per attempt")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "no progress output");
   out_opt->excludes(info_opt)->excludes(cut_opt);
   info_opt->excludes(cut_opt);
   CLI11_PARSE(app, argc, argv);
+  if (!connect.empty() && app.count("--duration") == 0) duration = 0;
 
   if (!info_path.empty()) return Info(info_path, deep, json, salvage);
   if (!cut_path.empty()) {
@@ -199,5 +366,8 @@ int main(int argc, char** argv) {
     return Cut(cut_path, segment_s, out_dir, quiet);
   }
   if (out.empty()) return Fail(holo::InvalidArgument("nothing to do: pass --out FILE, --info FILE or --cut FILE (see --help)"));
+  if (!connect.empty())
+    return RecordLive(out, connect, token, duration, max_bytes, overwrite, sync_mb, tls, ca_file, connect_timeout_s,
+                      quiet);
   return Record(out, source, duration, max_bytes, codec, step_mm, !no_audio, realtime, overwrite, sync_mb, quiet);
 }

@@ -108,7 +108,8 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "no progress output");
   // Replay of a recording (docs/recording.md): serves the recorded stream instead of the capture pipeline.
   holo::record::ReplayCommandOptions replay;
-  app.add_option("--replay", replay.path, "replay this recording instead of capturing (with --export / --stats)");
+  app.add_option("--replay", replay.path, "replay this recording instead of capturing: to viewers with --listen HOST:PORT --viewer-token T "
+                 "(they can pause, resume, seek, change speed), else to --export / --stats");
   app.add_option("--speed", replay.speed, "--replay: playback speed, 0.25..4")->capture_default_str();
   app.add_flag("--loop", replay.loop, "--replay: start again at the end");
   app.add_option("--start", replay.start_s, "--replay: start at this media time, seconds");
@@ -138,6 +139,10 @@ int main(int argc, char** argv) {
     replay.export_dir = export_dir;
     replay.stats_path = stats_path;
     replay.quiet = quiet;
+    replay.listen = listen_spec;
+    replay.net_config = net_config_path;
+    replay.viewer_token = viewer_token;
+    replay.publisher_token = publisher_token;
     return holo::record::RunReplayCommand(replay);
   }
   std::signal(SIGINT, OnSignal);
