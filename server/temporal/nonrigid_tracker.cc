@@ -120,6 +120,7 @@ struct BlockMatrix {
   std::vector<std::vector<int32_t>> index; // per row: block index of each column
   std::vector<Mat12, Eigen::aligned_allocator<Mat12>> blocks;
   std::vector<int32_t> diag;               // block index of (k, k)
+  std::vector<std::vector<int32_t>> tcols, tindex;  // per column: rows above the diagonal, block index
 
   void Build(size_t n, std::vector<std::vector<int32_t>>&& pattern) {
     cols = std::move(pattern);
@@ -137,6 +138,16 @@ struct BlockMatrix {
       }
     }
     blocks.resize(static_cast<size_t>(next));
+    // Transposed index: per column l, the stored blocks (k, l) with k < l.
+    tcols.assign(n, {});
+    tindex.assign(n, {});
+    for (size_t k = 0; k < n; ++k)
+      for (size_t i = 0; i < cols[k].size(); ++i) {
+        const size_t l = static_cast<size_t>(cols[k][i]);
+        if (l == k) continue;
+        tcols[l].push_back(static_cast<int32_t>(k));
+        tindex[l].push_back(index[k][i]);
+      }
   }
   int32_t Find(int32_t k, int32_t l) const {  // k ≤ l
     const auto& c = cols[static_cast<size_t>(k)];
@@ -147,15 +158,17 @@ struct BlockMatrix {
   void Zero() {
     for (auto& b : blocks) b.setZero();
   }
-  void Multiply(const std::vector<Vec12>& x, std::vector<Vec12>* y) const {
-    for (auto& v : *y) v.setZero();
-    for (size_t k = 0; k < cols.size(); ++k) {
-      for (size_t i = 0; i < cols[k].size(); ++i) {
-        const size_t l = static_cast<size_t>(cols[k][i]);
-        const Mat12& b = blocks[static_cast<size_t>(index[k][i])];
-        (*y)[k].noalias() += b.lazyProduct(x[l]);
-        if (l != k) (*y)[l].noalias() += b.transpose().lazyProduct(x[k]);
-      }
+  // y[k] for the rows k in [r0, r1) (each row complete: its stored blocks
+  // and the transposes of the blocks above it), so row ranges can run on
+  // different threads.
+  void MultiplyRows(const std::vector<Vec12>& x, std::vector<Vec12>* y, size_t r0, size_t r1) const {
+    for (size_t k = r0; k < r1; ++k) {
+      Vec12 acc = Vec12::Zero();
+      for (size_t i = 0; i < cols[k].size(); ++i)
+        acc.noalias() += blocks[static_cast<size_t>(index[k][i])].lazyProduct(x[static_cast<size_t>(cols[k][i])]);
+      for (size_t i = 0; i < tcols[k].size(); ++i)
+        acc.noalias() += blocks[static_cast<size_t>(tindex[k][i])].transpose().lazyProduct(x[static_cast<size_t>(tcols[k][i])]);
+      (*y)[k] = acc;
     }
   }
 };
@@ -309,6 +322,12 @@ struct NonrigidTracker::Impl {
   std::vector<PointLin> lin;
   BlockMatrix h;
   std::vector<std::array<int32_t, 10>> point_blocks;
+  // Parallel assembly and mat-vec: tasks own contiguous node rows
+  // [row_begin[t], row_begin[t + 1]) (balanced by stored blocks) and write
+  // only those rows' blocks and right-hand sides; task_points[t] lists the
+  // points touching a node of task t.
+  std::vector<size_t> row_begin;
+  std::vector<std::vector<int32_t>> task_points;
   std::vector<Vec12> rhs, x, r, z, p, q;
   std::vector<Eigen::Matrix<double, 12, 12>, Eigen::aligned_allocator<Mat12>> precond;
 
@@ -585,6 +604,36 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
           m.point_blocks[i][static_cast<size_t>(c++)] = (ka < 0 || kb < 0) ? -1 : m.h.Find(std::min(ka, kb), std::max(ka, kb));
         }
     }
+    // Row ranges for the parallel assembly and mat-vec: a few per thread
+    // (dynamic hand-out), balanced by the number of stored + transposed
+    // blocks per row.
+    const size_t tasks = std::min(num_nodes, static_cast<size_t>(4 * m.pool.num_threads()));
+    size_t total = 0;
+    for (size_t k = 0; k < num_nodes; ++k) total += 2 * m.h.cols[k].size() - 1;
+    m.row_begin.assign(1, 0);
+    size_t acc = 0;
+    for (size_t k = 0; k < num_nodes; ++k) {
+      acc += 2 * m.h.cols[k].size() - 1;
+      if (m.row_begin.size() < tasks && acc * tasks >= total * m.row_begin.size()) m.row_begin.push_back(k + 1);
+    }
+    if (m.row_begin.back() != num_nodes) m.row_begin.push_back(num_nodes);
+    const size_t num_tasks = m.row_begin.size() - 1;
+    std::vector<int32_t> task_of(num_nodes);
+    for (size_t t = 0; t < num_tasks; ++t)
+      for (size_t k = m.row_begin[t]; k < m.row_begin[t + 1]; ++k) task_of[k] = static_cast<int32_t>(t);
+    m.task_points.resize(num_tasks);
+    for (auto& v : m.task_points) v.clear();
+    for (size_t i = 0; i < n; ++i) {
+      const SkinWeights& s = m.skins[i];
+      std::array<int32_t, kSkinNodes> seen{};
+      int ns = 0;
+      for (int a = 0; a < kSkinNodes && s.node[static_cast<size_t>(a)] >= 0; ++a) {
+        const int32_t t = task_of[static_cast<size_t>(s.node[static_cast<size_t>(a)])];
+        if (std::find(seen.begin(), seen.begin() + ns, t) != seen.begin() + ns) continue;
+        seen[static_cast<size_t>(ns++)] = t;
+        m.task_points[static_cast<size_t>(t)].push_back(static_cast<int32_t>(i));
+      }
+    }
   }
 
   std::vector<double> params;  // Ceres
@@ -658,88 +707,110 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
       continue;
     }
 
-    // Hand-written GN: assemble JᵀJ and −Jᵀr.
-    m.h.Zero();
-    m.rhs.assign(num_nodes, Vec12::Zero());
-    for (size_t i = 0; i < n; ++i) {
-      const PointLin& l = m.lin[i];
-      const SkinWeights& s = m.skins[i];
-      if (l.g.isZero(0) || !s.valid()) continue;
-      Eigen::Vector4d hh[kSkinNodes];
-      double w[kSkinNodes];
-      int cnt = 0;
-      for (; cnt < kSkinNodes && s.node[static_cast<size_t>(cnt)] >= 0; ++cnt) {
-        const Vector3f hv = points[i] - graph->position(s.node[static_cast<size_t>(cnt)]);
-        hh[cnt] = Eigen::Vector4d(hv.x(), hv.y(), hv.z(), 1.0);
-        w[cnt] = s.weight[static_cast<size_t>(cnt)];
-      }
-      int c = 0;
-      for (int a = 0; a < kSkinNodes; ++a)
-        for (int b = a; b < kSkinNodes; ++b, ++c) {
-          if (a >= cnt || b >= cnt) continue;
-          const int32_t blk = m.point_blocks[i][static_cast<size_t>(c)];
-          if (blk < 0) continue;
-          const bool swap = s.node[static_cast<size_t>(a)] > s.node[static_cast<size_t>(b)];
-          const Eigen::Matrix4d mm = (w[a] * w[b]) * (swap ? Eigen::Matrix4d(hh[b] * hh[a].transpose())
-                                                           : Eigen::Matrix4d(hh[a] * hh[b].transpose()));
-          Mat12& B = m.h.blocks[static_cast<size_t>(blk)];
-          for (int p = 0; p < 3; ++p)
-            for (int q = 0; q < 3; ++q) B.block<4, 4>(4 * p, 4 * q) += l.g(p, q) * mm;
-        }
-      for (int a = 0; a < cnt; ++a) {
-        Vec12& bk = m.rhs[static_cast<size_t>(s.node[static_cast<size_t>(a)])];
-        for (int p = 0; p < 3; ++p) bk.segment<4>(4 * p) -= (w[a] * l.e[p]) * hh[a];
-      }
-    }
-    for (size_t k = 0; k < num_nodes; ++k) {
-      const int ki = static_cast<int>(k);
-      const Vec12 x = NodeParams(*graph, ki);
-      Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
-      if (wr > 0) {
-        Vector3d c[3];
-        for (int j = 0; j < 3; ++j) c[j] = Vector3d(x[j], x[4 + j], x[8 + j]);
-        const int pi[6] = {0, 0, 1, 0, 1, 2}, pj[6] = {1, 2, 2, 0, 1, 2};
-        for (int mm = 0; mm < 6; ++mm) {
-          Vec12 J = Vec12::Zero();
-          for (int a = 0; a < 3; ++a) {
-            J[4 * a + pi[mm]] += c[pj[mm]][a];
-            J[4 * a + pj[mm]] += c[pi[mm]][a];
-          }
-          const double r = c[pi[mm]].dot(c[pj[mm]]) - (mm >= 3 ? 1.0 : 0.0);
-          D.noalias() += wr * J * J.transpose();
-          m.rhs[k] -= wr * r * J;
-        }
-      }
-      if (wg > 0) {
-        for (int32_t l : graph->neighbors(ki)) {
-          const Vector3f df = graph->position(l) - graph->position(ki);
-          const Eigen::Vector4d hh(df.x(), df.y(), df.z(), 1.0);
-          const Vector3d r = (graph->affine(ki) * df + graph->position(ki) + graph->translation(ki) -
-                              graph->position(l) - graph->translation(l)).cast<double>();
-          Mat12& L = m.h.blocks[static_cast<size_t>(m.h.diag[static_cast<size_t>(l)])];
-          const bool j_first = ki < l;
-          const int32_t off = m.h.Find(std::min(ki, l), std::max(ki, l));
-          Mat12& O = m.h.blocks[static_cast<size_t>(off)];
-          for (int a = 0; a < 3; ++a) {
-            D.block<4, 4>(4 * a, 4 * a) += wg * hh * hh.transpose();
-            L(4 * a + 3, 4 * a + 3) += wg;
-            for (int b = 0; b < 4; ++b) {
-              if (j_first) O(4 * a + b, 4 * a + 3) -= wg * hh[b];
-              else O(4 * a + 3, 4 * a + b) -= wg * hh[b];
-            }
-            m.rhs[k].segment<4>(4 * a) -= wg * r[a] * hh;
-            m.rhs[static_cast<size_t>(l)][4 * a + 3] += wg * r[a];
-          }
-        }
-      }
-    }
-    // Damping and the block-Jacobi preconditioner.
+    // Hand-written GN: assemble JᵀJ and −Jᵀr, in parallel over row ranges
+    // (each task writes only its rows; within a block the contributions are
+    // added in the same order as a serial loop).
+    m.rhs.resize(num_nodes);
     m.precond.resize(num_nodes);
-    for (size_t k = 0; k < num_nodes; ++k) {
-      Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
-      for (int i = 0; i < 12; ++i) D(i, i) += o.damping * D(i, i) + 1e-6;
-      m.precond[k] = D.ldlt().solve(Mat12::Identity());
-    }
+    const size_t num_tasks = m.row_begin.size() - 1;
+    m.pool.ParallelFor(static_cast<int>(num_tasks), [&](int task) {
+      const size_t r0 = m.row_begin[static_cast<size_t>(task)], r1 = m.row_begin[static_cast<size_t>(task) + 1];
+      auto mine = [r0, r1](int32_t k) { return static_cast<size_t>(k) >= r0 && static_cast<size_t>(k) < r1; };
+      for (size_t k = r0; k < r1; ++k) {
+        for (int32_t bi : m.h.index[k]) m.h.blocks[static_cast<size_t>(bi)].setZero();
+        m.rhs[k].setZero();
+      }
+      for (int32_t ii : m.task_points[static_cast<size_t>(task)]) {
+        const size_t i = static_cast<size_t>(ii);
+        const PointLin& l = m.lin[i];
+        const SkinWeights& s = m.skins[i];
+        if (l.g.isZero(0) || !s.valid()) continue;
+        Eigen::Vector4d hh[kSkinNodes];
+        double w[kSkinNodes];
+        int cnt = 0;
+        for (; cnt < kSkinNodes && s.node[static_cast<size_t>(cnt)] >= 0; ++cnt) {
+          const Vector3f hv = points[i] - graph->position(s.node[static_cast<size_t>(cnt)]);
+          hh[cnt] = Eigen::Vector4d(hv.x(), hv.y(), hv.z(), 1.0);
+          w[cnt] = s.weight[static_cast<size_t>(cnt)];
+        }
+        int c = 0;
+        for (int a = 0; a < kSkinNodes; ++a)
+          for (int b = a; b < kSkinNodes; ++b, ++c) {
+            if (a >= cnt || b >= cnt) continue;
+            const int32_t blk = m.point_blocks[i][static_cast<size_t>(c)];
+            if (blk < 0) continue;
+            const int32_t na = s.node[static_cast<size_t>(a)], nb = s.node[static_cast<size_t>(b)];
+            if (!mine(std::min(na, nb))) continue;
+            const bool swap = na > nb;
+            const Eigen::Matrix4d mm = (w[a] * w[b]) * (swap ? Eigen::Matrix4d(hh[b] * hh[a].transpose())
+                                                             : Eigen::Matrix4d(hh[a] * hh[b].transpose()));
+            Mat12& B = m.h.blocks[static_cast<size_t>(blk)];
+            for (int p = 0; p < 3; ++p)
+              for (int q = 0; q < 3; ++q) B.block<4, 4>(4 * p, 4 * q) += l.g(p, q) * mm;
+          }
+        for (int a = 0; a < cnt; ++a) {
+          if (!mine(s.node[static_cast<size_t>(a)])) continue;
+          Vec12& bk = m.rhs[static_cast<size_t>(s.node[static_cast<size_t>(a)])];
+          for (int p = 0; p < 3; ++p) bk.segment<4>(4 * p) -= (w[a] * l.e[p]) * hh[a];
+        }
+      }
+      // Rotation terms (own rows) and regularisation edges touching own rows.
+      for (size_t k = 0; k < num_nodes; ++k) {
+        const int ki = static_cast<int>(k);
+        const bool own_k = mine(ki);
+        Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
+        if (wr > 0 && own_k) {
+          const Vec12 x = NodeParams(*graph, ki);
+          Vector3d c[3];
+          for (int j = 0; j < 3; ++j) c[j] = Vector3d(x[j], x[4 + j], x[8 + j]);
+          const int pi[6] = {0, 0, 1, 0, 1, 2}, pj[6] = {1, 2, 2, 0, 1, 2};
+          for (int mm = 0; mm < 6; ++mm) {
+            Vec12 J = Vec12::Zero();
+            for (int a = 0; a < 3; ++a) {
+              J[4 * a + pi[mm]] += c[pj[mm]][a];
+              J[4 * a + pj[mm]] += c[pi[mm]][a];
+            }
+            const double r = c[pi[mm]].dot(c[pj[mm]]) - (mm >= 3 ? 1.0 : 0.0);
+            D.noalias() += wr * J * J.transpose();
+            m.rhs[k] -= wr * r * J;
+          }
+        }
+        if (wg > 0) {
+          for (int32_t l : graph->neighbors(ki)) {
+            const bool own_l = mine(l), own_o = mine(std::min(ki, l));
+            if (!own_k && !own_l && !own_o) continue;
+            const Vector3f df = graph->position(l) - graph->position(ki);
+            const Eigen::Vector4d hh(df.x(), df.y(), df.z(), 1.0);
+            const Vector3d r = (graph->affine(ki) * df + graph->position(ki) + graph->translation(ki) -
+                                graph->position(l) - graph->translation(l)).cast<double>();
+            Mat12& L = m.h.blocks[static_cast<size_t>(m.h.diag[static_cast<size_t>(l)])];
+            const bool j_first = ki < l;
+            Mat12* O = own_o ? &m.h.blocks[static_cast<size_t>(m.h.Find(std::min(ki, l), std::max(ki, l)))] : nullptr;
+            for (int a = 0; a < 3; ++a) {
+              if (own_k) {
+                D.block<4, 4>(4 * a, 4 * a) += wg * hh * hh.transpose();
+                m.rhs[k].segment<4>(4 * a) -= wg * r[a] * hh;
+              }
+              if (own_l) {
+                L(4 * a + 3, 4 * a + 3) += wg;
+                m.rhs[static_cast<size_t>(l)][4 * a + 3] += wg * r[a];
+              }
+              if (O)
+                for (int b = 0; b < 4; ++b) {
+                  if (j_first) (*O)(4 * a + b, 4 * a + 3) -= wg * hh[b];
+                  else (*O)(4 * a + 3, 4 * a + b) -= wg * hh[b];
+                }
+            }
+          }
+        }
+      }
+      // Damping and the block-Jacobi preconditioner.
+      for (size_t k = r0; k < r1; ++k) {
+        Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
+        for (int i = 0; i < 12; ++i) D(i, i) += o.damping * D(i, i) + 1e-6;
+        m.precond[k] = D.ldlt().solve(Mat12::Identity());
+      }
+    });
     // PCG.
     m.x.assign(num_nodes, Vec12::Zero());
     m.r = m.rhs;
@@ -754,7 +825,9 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     m.p = m.z;
     const double tol2 = o.pcg_relative_tolerance * o.pcg_relative_tolerance * b_norm;
     for (int pit = 0; pit < o.pcg_max_iterations && b_norm > 0; ++pit) {
-      m.h.Multiply(m.p, &m.q);
+      m.pool.ParallelFor(static_cast<int>(num_tasks), [&](int task) {
+        m.h.MultiplyRows(m.p, &m.q, m.row_begin[static_cast<size_t>(task)], m.row_begin[static_cast<size_t>(task) + 1]);
+      });
       double pq = 0;
       for (size_t k = 0; k < num_nodes; ++k) pq += m.p[k].dot(m.q[k]);
       if (!(pq > 0)) break;
