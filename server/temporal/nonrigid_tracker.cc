@@ -266,6 +266,7 @@ struct NonrigidTracker::Impl {
   // regularisation edges (k, l) touching a node of task t.
   std::vector<size_t> row_begin;
   std::vector<std::vector<int32_t>> task_points;
+  std::vector<std::vector<int32_t>> task_active;  // task_points with data or hull terms (this iteration)
   std::vector<std::vector<std::pair<int32_t, int32_t>>> task_edges;
   std::vector<std::array<Eigen::Vector4d, kSkinNodes>> hh;  // (v − g_a, 1) per point and skin node
   std::vector<Mat12, Eigen::aligned_allocator<Mat12>> rot;  // rotation-term JᵀJ per node
@@ -541,6 +542,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     for (size_t t = 0; t < num_tasks; ++t)
       for (size_t k = m.row_begin[t]; k < m.row_begin[t + 1]; ++k) task_of[k] = static_cast<int32_t>(t);
     m.task_points.resize(num_tasks);
+    m.task_active.resize(num_tasks);
     m.task_edges.resize(num_tasks);
     for (auto& v : m.task_points) v.clear();
     for (auto& v : m.task_edges) v.clear();
@@ -672,9 +674,12 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
         m.rot[k].setZero();
         m.rhs[k].setZero();
       }
+      std::vector<int32_t>& active = m.task_active[static_cast<size_t>(task)];
+      active.clear();
       for (int32_t ii : m.task_points[static_cast<size_t>(task)]) {
         const size_t i = static_cast<size_t>(ii);
         if (!point_active(i)) continue;
+        active.push_back(ii);
         const PointLin& l = m.lin[i];
         const SkinWeights& s = m.skins[i];
         for (int a = 0; a < kSkinNodes && s.node[static_cast<size_t>(a)] >= 0; ++a) {
@@ -744,9 +749,8 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
           (*qv)[k].noalias() = m.rot[k] * pv[k];
           (*qv)[k] += m.damp[k].cwiseProduct(pv[k]);
         }
-        for (int32_t ii : m.task_points[static_cast<size_t>(task)]) {
+        for (int32_t ii : m.task_active[static_cast<size_t>(task)]) {
           const size_t i = static_cast<size_t>(ii);
-          if (!point_active(i)) continue;
           const SkinWeights& s = m.skins[i];
           Vector3d dv = Vector3d::Zero();
           int cnt = 0;
