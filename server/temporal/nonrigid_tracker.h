@@ -78,7 +78,7 @@ struct TrackerOptions {
   float hull_margin_px = 1.5f;
 
   TrackerSolver solver = TrackerSolver::kGaussNewtonPcg;
-  int pcg_max_iterations = 15;  // 30 → 15: S8-QVGA flicker ratio 0.460 → 0.447, Chamfer 5.06 → 5.10 mm (docs/temporal.md)
+  int pcg_max_iterations = 30;  // 15 saves CPU on S8-QVGA but costs Chamfer on S8-VGA (docs/temporal.md)
   double pcg_relative_tolerance = 1e-3;
   // Levenberg–Marquardt style damping added to the diagonal of JᵀJ (relative to it, plus
   // an absolute floor for nodes without data).
