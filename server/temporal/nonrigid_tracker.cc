@@ -742,7 +742,14 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     });
     // q = (JᵀJ + damping) p for the nodes of each task.
     auto product = [&](const std::vector<Vec12>& pv, std::vector<Vec12>* qv) {
-      m.pool.ParallelFor(static_cast<int>(num_tasks), [&](int task) {
+      auto run = [&](auto&& fn) {
+        if (o.parallel_pcg) {
+          m.pool.ParallelFor(static_cast<int>(num_tasks), fn);
+        } else {
+          for (size_t t = 0; t < num_tasks; ++t) fn(static_cast<int>(t));
+        }
+      };
+      run([&](int task) {
         const size_t r0 = m.row_begin[static_cast<size_t>(task)], r1 = m.row_begin[static_cast<size_t>(task) + 1];
         auto mine = [r0, r1](int32_t k) { return static_cast<size_t>(k) >= r0 && static_cast<size_t>(k) < r1; };
         for (size_t k = r0; k < r1; ++k) {

@@ -93,6 +93,10 @@ struct TrackerOptions {
   float fail_affine_scale = 0.25f;      // a singular value of A_k outside [1 − this, 1 / (1 − this)]: torn surface
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
 
+  // Run the PCG product on the worker pool (one hand-off per PCG iteration).
+  // Off by default: on the shared, loaded 2-core machine the ~90 hand-offs
+  // per frame cost more than they saved (docs/temporal.md, "Speed work").
+  bool parallel_pcg = false;
   int threads = 2;  // 0 = hardware concurrency
   Status Check() const;
 };
