@@ -33,7 +33,15 @@ Status CaptureSiteOptions::Check() const {
   HOLO_RETURN_IF_ERROR(cleanup.Check().WithContext("cleanup"));
   HOLO_RETURN_IF_ERROR(texture_options.Check().WithContext("texture"));
   HOLO_RETURN_IF_ERROR(pipeline.Check().WithContext("pipeline"));
+  if (temporal) HOLO_RETURN_IF_ERROR(TemporalOptions().Check().WithContext("temporal"));
   return OkStatus();
+}
+
+TemporalFusionOptions CaptureSiteOptions::TemporalOptions() const {
+  TemporalFusionOptions o = temporal_options;
+  o.tsdf = tsdf;
+  o.cleanup = cleanup;
+  return o;
 }
 
 CaptureSite::~CaptureSite() = default;
@@ -81,7 +89,11 @@ StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, 
       HOLO_RETURN_IF_ERROR(site->segmenter_->FinishBackground());
     }
   }
-  HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(options.tsdf));
+  if (options.temporal) {
+    HOLO_ASSIGN_OR_RETURN(site->temporal_, TemporalFusion::Create(options.TemporalOptions()));
+  } else {
+    HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(options.tsdf));
+  }
   if (options.texture) site->texturer_ = std::make_unique<Texturer>(site->rig_, options.texture_options);
   return site;
 }
@@ -118,6 +130,21 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
     const bool cpu = options_.pipeline.serial;
     const double cpu0 = cpu ? ProcessCpuTimeMs() : 0;
     Stopwatch sw;
+    if (temporal_) {
+      // Tracking, warping and fusing count as fuse; marching cubes + clean-up as mesh.
+      TemporalFrameStats ts;
+      HOLO_RETURN_IF_ERROR(temporal_->Process(rig_, w.frames, &w.mesh, &ts));
+      const double cpu_all = cpu ? ProcessCpuTimeMs() - cpu0 : 0;
+      w.timings.fuse_ms = std::max(1e-6, ts.total_ms - ts.mesh_ms);
+      w.timings.mesh_ms = std::max(1e-6, ts.mesh_ms);
+      if (cpu) {
+        // CPU split in the wall-time ratio (the stage's threads are not timed separately).
+        const double share = ts.total_ms > 0 ? ts.mesh_ms / ts.total_ms : 0.0;
+        w.timings.fuse_cpu_ms = std::max(1e-6, cpu_all * (1 - share));
+        w.timings.mesh_cpu_ms = std::max(1e-6, cpu_all * share);
+      }
+      return OkStatus();
+    }
     volume_->Reset();
     HOLO_RETURN_IF_ERROR(volume_->Integrate(rig_, w.frames));
     w.timings.fuse_ms = sw.ElapsedMs();

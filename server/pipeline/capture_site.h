@@ -5,6 +5,8 @@
 //            dataset masks, or none
 //   fuse     TsdfVolume::Integrate of the masked depth (fresh volume per frame)
 //   mesh     marching cubes + CleanupMesh (fragments, optional decimation)
+//            — or, with `temporal`, both by TemporalFusion (server/temporal/:
+//            the previous volume tracked non-rigidly and fused over time)
 //   texture  Texturer (Holoportation per-vertex colours)
 #pragma once
 
@@ -21,6 +23,7 @@
 #include "server/segment/color_calibration.h"
 #include "server/segment/segmenter.h"
 #include "server/studio/studio.h"
+#include "server/temporal/temporal_fusion.h"
 #include "server/texture/texturer.h"
 
 namespace holo {
@@ -52,10 +55,17 @@ struct CaptureSiteOptions {
   }();
   TsdfOptions tsdf;
   MeshCleanupOptions cleanup;
+  // Fuse + mesh by TemporalFusion (docs/temporal.md) instead of a fresh
+  // volume per frame. Its `tsdf` and `cleanup` are replaced by the ones
+  // above; the rest (graph, tracker, weight cap, reset policy) is used as is.
+  bool temporal = false;
+  TemporalFusionOptions temporal_options;
   bool texture = true;
   TextureOptions texture_options;
   PipelineOptions pipeline;
   Status Check() const;
+  // temporal_options with tsdf and cleanup taken from above.
+  TemporalFusionOptions TemporalOptions() const;
 };
 
 class CaptureSite {
@@ -87,6 +97,7 @@ class CaptureSite {
   std::unique_ptr<ColorCalibration> calibration_;
   std::unique_ptr<Segmenter> segmenter_;
   std::unique_ptr<TsdfVolume> volume_;
+  std::unique_ptr<TemporalFusion> temporal_;
   std::unique_ptr<Texturer> texturer_;
   std::unique_ptr<Pipeline> pipeline_;
 };

@@ -114,52 +114,6 @@ inline void HuberWeight(double r, double delta, double* rho_w, double* energy) {
   }
 }
 
-// Block-sparse symmetric matrix of 12×12 blocks, upper triangle stored.
-struct BlockMatrix {
-  std::vector<std::vector<int32_t>> cols;  // per row: column nodes ≥ row, sorted
-  std::vector<std::vector<int32_t>> index; // per row: block index of each column
-  std::vector<Mat12, Eigen::aligned_allocator<Mat12>> blocks;
-  std::vector<int32_t> diag;               // block index of (k, k)
-
-  void Build(size_t n, std::vector<std::vector<int32_t>>&& pattern) {
-    cols = std::move(pattern);
-    index.assign(n, {});
-    diag.assign(n, -1);
-    int32_t next = 0;
-    for (size_t k = 0; k < n; ++k) {
-      auto& c = cols[k];
-      c.push_back(static_cast<int32_t>(k));
-      std::sort(c.begin(), c.end());
-      c.erase(std::unique(c.begin(), c.end()), c.end());
-      for (int32_t l : c) {
-        if (l == static_cast<int32_t>(k)) diag[k] = next;
-        index[k].push_back(next++);
-      }
-    }
-    blocks.resize(static_cast<size_t>(next));
-  }
-  int32_t Find(int32_t k, int32_t l) const {  // k ≤ l
-    const auto& c = cols[static_cast<size_t>(k)];
-    auto it = std::lower_bound(c.begin(), c.end(), l);
-    if (it == c.end() || *it != l) return -1;
-    return index[static_cast<size_t>(k)][static_cast<size_t>(it - c.begin())];
-  }
-  void Zero() {
-    for (auto& b : blocks) b.setZero();
-  }
-  void Multiply(const std::vector<Vec12>& x, std::vector<Vec12>* y) const {
-    for (auto& v : *y) v.setZero();
-    for (size_t k = 0; k < cols.size(); ++k) {
-      for (size_t i = 0; i < cols[k].size(); ++i) {
-        const size_t l = static_cast<size_t>(cols[k][i]);
-        const Mat12& b = blocks[static_cast<size_t>(index[k][i])];
-        (*y)[k].noalias() += b.lazyProduct(x[l]);
-        if (l != k) (*y)[l].noalias() += b.transpose().lazyProduct(x[k]);
-      }
-    }
-  }
-};
-
 // Ceres cost of one model point: its linearised point terms as ≤ 3
 // residuals sqrt(λ_i) u_iᵀ Δ + u_iᵀ e / sqrt(λ_i) (G = Σ λ_i u_i u_iᵀ).
 class PointCost final : public ceres::CostFunction {
@@ -307,8 +261,16 @@ struct NonrigidTracker::Impl {
   std::vector<SkinWeights> skins;
   std::vector<Vector3f> warped, warped_normals;
   std::vector<PointLin> lin;
-  BlockMatrix h;
-  std::vector<std::array<int32_t, 10>> point_blocks;
+  // Parallel GN: tasks own contiguous node rows [row_begin[t], row_begin[t + 1])
+  // and write only those rows; task_points[t] / task_edges[t] list the points /
+  // regularisation edges (k, l) touching a node of task t.
+  std::vector<size_t> row_begin;
+  std::vector<std::vector<int32_t>> task_points;
+  std::vector<std::vector<int32_t>> task_active;  // task_points with data or hull terms (this iteration)
+  std::vector<std::vector<std::pair<int32_t, int32_t>>> task_edges;
+  std::vector<std::array<Eigen::Vector4d, kSkinNodes>> hh;  // (v − g_a, 1) per point and skin node
+  std::vector<Mat12, Eigen::aligned_allocator<Mat12>> rot;  // rotation-term JᵀJ per node
+  std::vector<Vec12> damp;                                  // damping added to the diagonal
   std::vector<Vec12> rhs, x, r, z, p, q;
   std::vector<Eigen::Matrix<double, 12, 12>, Eigen::aligned_allocator<Mat12>> precond;
 
@@ -554,37 +516,53 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
   result->rigid_ms = MsSince(t0);
 
   // ---- Fine: non-rigid GN / LM over all node parameters.
-  // Sparsity pattern: node pairs sharing a point, graph edges.
-  std::vector<std::vector<int32_t>> pattern(num_nodes);
-  for (size_t i = 0; i < n; ++i) {
-    const SkinWeights& s = m.skins[i];
-    for (int a = 0; a < kSkinNodes && s.node[static_cast<size_t>(a)] >= 0; ++a)
-      for (int b = a + 1; b < kSkinNodes && s.node[static_cast<size_t>(b)] >= 0; ++b) {
-        const int32_t k = std::min(s.node[static_cast<size_t>(a)], s.node[static_cast<size_t>(b)]);
-        const int32_t l = std::max(s.node[static_cast<size_t>(a)], s.node[static_cast<size_t>(b)]);
-        pattern[static_cast<size_t>(k)].push_back(l);
-      }
-  }
-  for (size_t j = 0; j < num_nodes; ++j)
-    for (int32_t k : graph->neighbors(static_cast<int>(j)))
-      pattern[std::min(j, static_cast<size_t>(k))].push_back(static_cast<int32_t>(std::max(j, static_cast<size_t>(k))));
-  for (auto& p : pattern) {
-    std::sort(p.begin(), p.end());
-    p.erase(std::unique(p.begin(), p.end()), p.end());
-  }
   const bool use_ceres = o.solver == TrackerSolver::kCeres;
   if (!use_ceres) {
-    m.h.Build(num_nodes, std::move(pattern));
-    m.point_blocks.resize(n);
+    // Node ranges for the parallel assembly and the matrix-free product: a
+    // few per thread (handed out dynamically), balanced by the points and
+    // edges touching each node. A task writes only its own nodes' rows;
+    // task_points / task_edges list the points / regularisation edges that
+    // touch one of its nodes.
+    std::vector<int32_t> load(num_nodes, 1);
+    for (size_t i = 0; i < n; ++i)
+      for (int a = 0; a < kSkinNodes && m.skins[i].node[static_cast<size_t>(a)] >= 0; ++a)
+        load[static_cast<size_t>(m.skins[i].node[static_cast<size_t>(a)])] += 1;
+    size_t total = 0;
+    for (int32_t v : load) total += static_cast<size_t>(v);
+    const size_t tasks = std::min(num_nodes, static_cast<size_t>(4 * m.pool.num_threads()));
+    m.row_begin.assign(1, 0);
+    size_t acc = 0;
+    for (size_t k = 0; k < num_nodes; ++k) {
+      acc += static_cast<size_t>(load[k]);
+      if (m.row_begin.size() < tasks && acc * tasks >= total * m.row_begin.size()) m.row_begin.push_back(k + 1);
+    }
+    if (m.row_begin.back() != num_nodes) m.row_begin.push_back(num_nodes);
+    const size_t num_tasks = m.row_begin.size() - 1;
+    std::vector<int32_t> task_of(num_nodes);
+    for (size_t t = 0; t < num_tasks; ++t)
+      for (size_t k = m.row_begin[t]; k < m.row_begin[t + 1]; ++k) task_of[k] = static_cast<int32_t>(t);
+    m.task_points.resize(num_tasks);
+    m.task_active.resize(num_tasks);
+    m.task_edges.resize(num_tasks);
+    for (auto& v : m.task_points) v.clear();
+    for (auto& v : m.task_edges) v.clear();
     for (size_t i = 0; i < n; ++i) {
       const SkinWeights& s = m.skins[i];
-      int c = 0;
-      for (int a = 0; a < kSkinNodes; ++a)
-        for (int b = a; b < kSkinNodes; ++b) {
-          const int32_t ka = s.node[static_cast<size_t>(a)], kb = s.node[static_cast<size_t>(b)];
-          m.point_blocks[i][static_cast<size_t>(c++)] = (ka < 0 || kb < 0) ? -1 : m.h.Find(std::min(ka, kb), std::max(ka, kb));
-        }
+      std::array<int32_t, kSkinNodes> seen{};
+      int ns = 0;
+      for (int a = 0; a < kSkinNodes && s.node[static_cast<size_t>(a)] >= 0; ++a) {
+        const int32_t t = task_of[static_cast<size_t>(s.node[static_cast<size_t>(a)])];
+        if (std::find(seen.begin(), seen.begin() + ns, t) != seen.begin() + ns) continue;
+        seen[static_cast<size_t>(ns++)] = t;
+        m.task_points[static_cast<size_t>(t)].push_back(static_cast<int32_t>(i));
+      }
     }
+    for (size_t k = 0; k < num_nodes; ++k)
+      for (int32_t l : graph->neighbors(static_cast<int>(k))) {
+        const int32_t tk = task_of[k], tl = task_of[static_cast<size_t>(l)];
+        m.task_edges[static_cast<size_t>(tk)].push_back({static_cast<int32_t>(k), l});
+        if (tl != tk) m.task_edges[static_cast<size_t>(tl)].push_back({static_cast<int32_t>(k), l});
+      }
   }
 
   std::vector<double> params;  // Ceres
@@ -658,88 +636,161 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
       continue;
     }
 
-    // Hand-written GN: assemble JᵀJ and −Jᵀr.
-    m.h.Zero();
-    m.rhs.assign(num_nodes, Vec12::Zero());
-    for (size_t i = 0; i < n; ++i) {
-      const PointLin& l = m.lin[i];
-      const SkinWeights& s = m.skins[i];
-      if (l.g.isZero(0) || !s.valid()) continue;
-      Eigen::Vector4d hh[kSkinNodes];
-      double w[kSkinNodes];
-      int cnt = 0;
-      for (; cnt < kSkinNodes && s.node[static_cast<size_t>(cnt)] >= 0; ++cnt) {
-        const Vector3f hv = points[i] - graph->position(s.node[static_cast<size_t>(cnt)]);
-        hh[cnt] = Eigen::Vector4d(hv.x(), hv.y(), hv.z(), 1.0);
-        w[cnt] = s.weight[static_cast<size_t>(cnt)];
-      }
-      int c = 0;
-      for (int a = 0; a < kSkinNodes; ++a)
-        for (int b = a; b < kSkinNodes; ++b, ++c) {
-          if (a >= cnt || b >= cnt) continue;
-          const int32_t blk = m.point_blocks[i][static_cast<size_t>(c)];
-          if (blk < 0) continue;
-          const bool swap = s.node[static_cast<size_t>(a)] > s.node[static_cast<size_t>(b)];
-          const Eigen::Matrix4d mm = (w[a] * w[b]) * (swap ? Eigen::Matrix4d(hh[b] * hh[a].transpose())
-                                                           : Eigen::Matrix4d(hh[a] * hh[b].transpose()));
-          Mat12& B = m.h.blocks[static_cast<size_t>(blk)];
-          for (int p = 0; p < 3; ++p)
-            for (int q = 0; q < 3; ++q) B.block<4, 4>(4 * p, 4 * q) += l.g(p, q) * mm;
-        }
-      for (int a = 0; a < cnt; ++a) {
-        Vec12& bk = m.rhs[static_cast<size_t>(s.node[static_cast<size_t>(a)])];
-        for (int p = 0; p < 3; ++p) bk.segment<4>(4 * p) -= (w[a] * l.e[p]) * hh[a];
-      }
-    }
-    for (size_t k = 0; k < num_nodes; ++k) {
-      const int ki = static_cast<int>(k);
-      const Vec12 x = NodeParams(*graph, ki);
-      Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
-      if (wr > 0) {
-        Vector3d c[3];
-        for (int j = 0; j < 3; ++j) c[j] = Vector3d(x[j], x[4 + j], x[8 + j]);
-        const int pi[6] = {0, 0, 1, 0, 1, 2}, pj[6] = {1, 2, 2, 0, 1, 2};
-        for (int mm = 0; mm < 6; ++mm) {
-          Vec12 J = Vec12::Zero();
-          for (int a = 0; a < 3; ++a) {
-            J[4 * a + pi[mm]] += c[pj[mm]][a];
-            J[4 * a + pj[mm]] += c[pi[mm]][a];
+    // Hand-written GN. JᵀJ is never formed off the diagonal: the PCG
+    // product JᵀJ p is evaluated matrix-free from the per-point 3×3 G (a
+    // point's 4 nodes → Δv' = Σ w_a ΔA_a h_a + Δt_a, then G Δv', scattered
+    // back), the regularisation edges and the per-node rotation blocks —
+    // ~10× fewer flops than multiplying the 12×12 blocks of every node pair.
+    // Only the diagonal blocks are assembled (for the block-Jacobi
+    // preconditioner and the damping). Tasks own node ranges and write only
+    // their own rows, so the sums do not depend on the thread count.
+    m.rhs.resize(num_nodes);
+    m.precond.resize(num_nodes);
+    m.rot.resize(num_nodes);
+    m.damp.resize(num_nodes);
+    const size_t num_tasks = m.row_begin.size() - 1;
+    // h_a = (v − g_a, 1) of each point and node.
+    m.hh.resize(n);
+    m.pool.ParallelFor(static_cast<int>((n + 511) / 512), [&](int c) {
+      const size_t i0 = static_cast<size_t>(c) * 512, i1 = std::min(n, i0 + 512);
+      for (size_t i = i0; i < i1; ++i) {
+        const SkinWeights& s = m.skins[i];
+        for (int a = 0; a < kSkinNodes; ++a) {
+          if (s.node[static_cast<size_t>(a)] < 0) {
+            m.hh[i][static_cast<size_t>(a)].setZero();
+            continue;
           }
-          const double r = c[pi[mm]].dot(c[pj[mm]]) - (mm >= 3 ? 1.0 : 0.0);
-          D.noalias() += wr * J * J.transpose();
-          m.rhs[k] -= wr * r * J;
+          const Vector3f hv = points[i] - graph->position(s.node[static_cast<size_t>(a)]);
+          m.hh[i][static_cast<size_t>(a)] = Eigen::Vector4d(hv.x(), hv.y(), hv.z(), 1.0);
         }
       }
-      if (wg > 0) {
-        for (int32_t l : graph->neighbors(ki)) {
+    });
+    auto point_active = [&](size_t i) { return !m.lin[i].g.isZero(0) && m.skins[i].valid(); };
+    m.pool.ParallelFor(static_cast<int>(num_tasks), [&](int task) {
+      const size_t r0 = m.row_begin[static_cast<size_t>(task)], r1 = m.row_begin[static_cast<size_t>(task) + 1];
+      auto mine = [r0, r1](int32_t k) { return static_cast<size_t>(k) >= r0 && static_cast<size_t>(k) < r1; };
+      for (size_t k = r0; k < r1; ++k) {
+        m.precond[k].setZero();  // holds the diagonal block D_k until inverted
+        m.rot[k].setZero();
+        m.rhs[k].setZero();
+      }
+      std::vector<int32_t>& active = m.task_active[static_cast<size_t>(task)];
+      active.clear();
+      for (int32_t ii : m.task_points[static_cast<size_t>(task)]) {
+        const size_t i = static_cast<size_t>(ii);
+        if (!point_active(i)) continue;
+        active.push_back(ii);
+        const PointLin& l = m.lin[i];
+        const SkinWeights& s = m.skins[i];
+        for (int a = 0; a < kSkinNodes && s.node[static_cast<size_t>(a)] >= 0; ++a) {
+          const int32_t na = s.node[static_cast<size_t>(a)];
+          if (!mine(na)) continue;
+          const Eigen::Vector4d& h = m.hh[i][static_cast<size_t>(a)];
+          const double w = s.weight[static_cast<size_t>(a)];
+          const Eigen::Matrix4d mm = (w * w) * (h * h.transpose());
+          Mat12& D = m.precond[static_cast<size_t>(na)];
+          for (int p = 0; p < 3; ++p)
+            for (int q = 0; q < 3; ++q) D.block<4, 4>(4 * p, 4 * q) += l.g(p, q) * mm;
+          Vec12& bk = m.rhs[static_cast<size_t>(na)];
+          for (int p = 0; p < 3; ++p) bk.segment<4>(4 * p) -= (w * l.e[p]) * h;
+        }
+      }
+      if (wr > 0)
+        for (size_t k = r0; k < r1; ++k) {
+          const Vec12 x = NodeParams(*graph, static_cast<int>(k));
+          Vector3d c[3];
+          for (int j = 0; j < 3; ++j) c[j] = Vector3d(x[j], x[4 + j], x[8 + j]);
+          const int pi[6] = {0, 0, 1, 0, 1, 2}, pj[6] = {1, 2, 2, 0, 1, 2};
+          for (int mm = 0; mm < 6; ++mm) {
+            Vec12 J = Vec12::Zero();
+            for (int a = 0; a < 3; ++a) {
+              J[4 * a + pi[mm]] += c[pj[mm]][a];
+              J[4 * a + pj[mm]] += c[pi[mm]][a];
+            }
+            const double r = c[pi[mm]].dot(c[pj[mm]]) - (mm >= 3 ? 1.0 : 0.0);
+            m.rot[k].noalias() += wr * J * J.transpose();
+            m.rhs[k] -= wr * r * J;
+          }
+          m.precond[k] += m.rot[k];
+        }
+      if (wg > 0)
+        for (const auto& [ki, l] : m.task_edges[static_cast<size_t>(task)]) {
           const Vector3f df = graph->position(l) - graph->position(ki);
           const Eigen::Vector4d hh(df.x(), df.y(), df.z(), 1.0);
           const Vector3d r = (graph->affine(ki) * df + graph->position(ki) + graph->translation(ki) -
                               graph->position(l) - graph->translation(l)).cast<double>();
-          Mat12& L = m.h.blocks[static_cast<size_t>(m.h.diag[static_cast<size_t>(l)])];
-          const bool j_first = ki < l;
-          const int32_t off = m.h.Find(std::min(ki, l), std::max(ki, l));
-          Mat12& O = m.h.blocks[static_cast<size_t>(off)];
           for (int a = 0; a < 3; ++a) {
-            D.block<4, 4>(4 * a, 4 * a) += wg * hh * hh.transpose();
-            L(4 * a + 3, 4 * a + 3) += wg;
-            for (int b = 0; b < 4; ++b) {
-              if (j_first) O(4 * a + b, 4 * a + 3) -= wg * hh[b];
-              else O(4 * a + 3, 4 * a + b) -= wg * hh[b];
+            if (mine(ki)) {
+              m.precond[static_cast<size_t>(ki)].block<4, 4>(4 * a, 4 * a) += wg * hh * hh.transpose();
+              m.rhs[static_cast<size_t>(ki)].segment<4>(4 * a) -= wg * r[a] * hh;
             }
-            m.rhs[k].segment<4>(4 * a) -= wg * r[a] * hh;
-            m.rhs[static_cast<size_t>(l)][4 * a + 3] += wg * r[a];
+            if (mine(l)) {
+              m.precond[static_cast<size_t>(l)](4 * a + 3, 4 * a + 3) += wg;
+              m.rhs[static_cast<size_t>(l)][4 * a + 3] += wg * r[a];
+            }
           }
         }
+      // Damping (kept as a diagonal for the product) and the block-Jacobi preconditioner.
+      for (size_t k = r0; k < r1; ++k) {
+        Mat12& D = m.precond[k];
+        for (int i = 0; i < 12; ++i) {
+          m.damp[k][i] = o.damping * D(i, i) + 1e-6;
+          D(i, i) += m.damp[k][i];
+        }
+        D = D.ldlt().solve(Mat12::Identity()).eval();
       }
-    }
-    // Damping and the block-Jacobi preconditioner.
-    m.precond.resize(num_nodes);
-    for (size_t k = 0; k < num_nodes; ++k) {
-      Mat12& D = m.h.blocks[static_cast<size_t>(m.h.diag[k])];
-      for (int i = 0; i < 12; ++i) D(i, i) += o.damping * D(i, i) + 1e-6;
-      m.precond[k] = D.ldlt().solve(Mat12::Identity());
-    }
+    });
+    // q = (JᵀJ + damping) p for the nodes of each task.
+    auto product = [&](const std::vector<Vec12>& pv, std::vector<Vec12>* qv) {
+      auto run = [&](auto&& fn) {
+        if (o.parallel_pcg) {
+          m.pool.ParallelFor(static_cast<int>(num_tasks), fn);
+        } else {
+          for (size_t t = 0; t < num_tasks; ++t) fn(static_cast<int>(t));
+        }
+      };
+      run([&](int task) {
+        const size_t r0 = m.row_begin[static_cast<size_t>(task)], r1 = m.row_begin[static_cast<size_t>(task) + 1];
+        auto mine = [r0, r1](int32_t k) { return static_cast<size_t>(k) >= r0 && static_cast<size_t>(k) < r1; };
+        for (size_t k = r0; k < r1; ++k) {
+          (*qv)[k].noalias() = m.rot[k] * pv[k];
+          (*qv)[k] += m.damp[k].cwiseProduct(pv[k]);
+        }
+        for (int32_t ii : m.task_active[static_cast<size_t>(task)]) {
+          const size_t i = static_cast<size_t>(ii);
+          const SkinWeights& s = m.skins[i];
+          Vector3d dv = Vector3d::Zero();
+          int cnt = 0;
+          for (; cnt < kSkinNodes && s.node[static_cast<size_t>(cnt)] >= 0; ++cnt) {
+            const Vec12& x = pv[static_cast<size_t>(s.node[static_cast<size_t>(cnt)])];
+            const Eigen::Vector4d& h = m.hh[i][static_cast<size_t>(cnt)];
+            const double w = s.weight[static_cast<size_t>(cnt)];
+            dv += w * Vector3d(x.segment<4>(0).dot(h), x.segment<4>(4).dot(h), x.segment<4>(8).dot(h));
+          }
+          const Vector3d u = m.lin[i].g * dv;
+          for (int a = 0; a < cnt; ++a) {
+            const int32_t na = s.node[static_cast<size_t>(a)];
+            if (!mine(na)) continue;
+            const Eigen::Vector4d& h = m.hh[i][static_cast<size_t>(a)];
+            const double w = s.weight[static_cast<size_t>(a)];
+            Vec12& y = (*qv)[static_cast<size_t>(na)];
+            for (int p = 0; p < 3; ++p) y.segment<4>(4 * p) += (w * u[p]) * h;
+          }
+        }
+        if (wg > 0)
+          for (const auto& [ki, l] : m.task_edges[static_cast<size_t>(task)]) {
+            const Vector3f df = graph->position(l) - graph->position(ki);
+            const Eigen::Vector4d hh(df.x(), df.y(), df.z(), 1.0);
+            const Vec12& xk = pv[static_cast<size_t>(ki)];
+            const Vec12& xl = pv[static_cast<size_t>(l)];
+            for (int a = 0; a < 3; ++a) {
+              const double jp = wg * (xk.segment<4>(4 * a).dot(hh) - xl[4 * a + 3]);
+              if (mine(ki)) (*qv)[static_cast<size_t>(ki)].segment<4>(4 * a) += jp * hh;
+              if (mine(l)) (*qv)[static_cast<size_t>(l)][4 * a + 3] -= jp;
+            }
+          }
+      });
+    };
     // PCG.
     m.x.assign(num_nodes, Vec12::Zero());
     m.r = m.rhs;
@@ -754,7 +805,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     m.p = m.z;
     const double tol2 = o.pcg_relative_tolerance * o.pcg_relative_tolerance * b_norm;
     for (int pit = 0; pit < o.pcg_max_iterations && b_norm > 0; ++pit) {
-      m.h.Multiply(m.p, &m.q);
+      product(m.p, &m.q);
       double pq = 0;
       for (size_t k = 0; k < num_nodes; ++k) pq += m.p[k].dot(m.q[k]);
       if (!(pq > 0)) break;

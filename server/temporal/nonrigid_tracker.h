@@ -78,7 +78,7 @@ struct TrackerOptions {
   float hull_margin_px = 1.5f;
 
   TrackerSolver solver = TrackerSolver::kGaussNewtonPcg;
-  int pcg_max_iterations = 30;
+  int pcg_max_iterations = 30;  // 15 saves CPU on S8-QVGA but costs Chamfer on S8-VGA (docs/temporal.md)
   double pcg_relative_tolerance = 1e-3;
   // Levenberg–Marquardt style damping added to the diagonal of JᵀJ (relative to it, plus
   // an absolute floor for nodes without data).
@@ -93,6 +93,10 @@ struct TrackerOptions {
   float fail_affine_scale = 0.25f;      // a singular value of A_k outside [1 − this, 1 / (1 − this)]: torn surface
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
 
+  // Run the PCG product on the worker pool (one hand-off per PCG iteration).
+  // Off by default: on the shared, loaded 2-core machine the ~90 hand-offs
+  // per frame cost more than they saved (docs/temporal.md, "Speed work").
+  bool parallel_pcg = false;
   int threads = 2;  // 0 = hardware concurrency
   Status Check() const;
 };

@@ -81,7 +81,7 @@ int main(int argc, char** argv) {
   double voxel_mm = 0, trunc_voxels = 4, pace = 0;
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
-  bool serial = false, no_texture = false, no_color_calibration = false, quiet = false;
+  bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
   app.add_option("-w,--workload", workload_name, "synthetic source: S8-QVGA or S8-VGA")->capture_default_str();
   app.add_option("--rig", rig_path, "synthetic source: render this rig instead of the workload's");
@@ -104,6 +104,8 @@ int main(int argc, char** argv) {
   app.add_option("--stats", stats_path, "write per-frame stats as JSON lines to this file (default stdout)");
   app.add_flag("--serial", serial, "run the stages one after another on one thread");
   app.add_flag("--no-texture", no_texture, "skip texturing (voxel colours stay)");
+  app.add_flag("--temporal", temporal,
+               "fuse over time: track the previous volume non-rigidly and fuse into it (docs/temporal.md)");
   app.add_flag("--no-color-calibration", no_color_calibration, "do not estimate and apply per-pod colour maps");
   app.add_flag("-q,--quiet", quiet, "no progress output");
   // Replay of a recording (docs/recording.md): serves the recorded stream instead of the capture pipeline.
@@ -196,6 +198,7 @@ int main(int argc, char** argv) {
   options.tsdf.truncation_voxels = static_cast<float>(trunc_voxels);
   options.cleanup.target_triangles = decimate;
   options.cleanup.min_component_triangles = min_component;
+  options.temporal = temporal;
   options.pipeline.serial = serial;
   options.pipeline.queue_capacity = queue;
   options.pipeline.pace_fps = pace;

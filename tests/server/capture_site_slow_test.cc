@@ -10,7 +10,8 @@
 namespace holo {
 namespace {
 
-std::vector<std::pair<int64_t, uint64_t>> RunS8Qvga(bool serial) {
+std::vector<std::pair<int64_t, uint64_t>> RunS8Qvga(bool serial, bool temporal = false, int frames = 100,
+                                                    std::vector<size_t>* triangles = nullptr) {
   auto wl = GetWorkload("S8-QVGA");
   HOLO_CHECK(wl.ok());
   SyntheticStudio studio(wl->rig, wl->studio);
@@ -20,7 +21,8 @@ std::vector<std::pair<int64_t, uint64_t>> RunS8Qvga(bool serial) {
   CaptureSiteOptions o;
   o.tsdf.voxel_size = wl->voxel_size_m;
   o.pipeline.serial = serial;
-  o.pipeline.max_frames = 100;
+  o.pipeline.max_frames = frames;
+  o.temporal = temporal;
   auto site = CaptureSite::Create(&studio, &empty, nullptr, o);
   HOLO_CHECK(site.ok());
   std::vector<std::pair<int64_t, uint64_t>> out;
@@ -35,6 +37,7 @@ std::vector<std::pair<int64_t, uint64_t>> RunS8Qvga(bool serial) {
     mix(w.mesh.triangles.data(), w.mesh.triangles.size() * sizeof(w.mesh.triangles[0]));
     mix(w.mesh.colors.data(), w.mesh.colors.size() * 3);
     out.push_back({w.frames.frame_index, h});
+    if (triangles) triangles->push_back(w.mesh.triangles.size());
     return OkStatus();
   });
   EXPECT_TRUE(stats.ok()) << stats.status().ToString();
@@ -46,6 +49,21 @@ TEST(CaptureSiteSlowTest, HundredFramesOfS8QvgaConcurrentEqualsSerial) {
   const auto concurrent = RunS8Qvga(false);
   ASSERT_EQ(concurrent.size(), 100u);
   for (size_t i = 0; i < concurrent.size(); ++i) EXPECT_EQ(concurrent[i].first, static_cast<int64_t>(i));
+  EXPECT_EQ(serial, concurrent);
+}
+
+// The capture site with temporal fusion (holoport-server --temporal): 20
+// frames of S8-QVGA, every frame a mesh, concurrent = serial.
+TEST(CaptureSiteSlowTest, TemporalFusionOnS8QvgaConcurrentEqualsSerial) {
+  std::vector<size_t> tris;
+  const auto serial = RunS8Qvga(true, true, 20, &tris);
+  const auto concurrent = RunS8Qvga(false, true, 20);
+  ASSERT_EQ(concurrent.size(), 20u);
+  ASSERT_EQ(tris.size(), 20u);
+  for (size_t i = 0; i < concurrent.size(); ++i) {
+    EXPECT_EQ(concurrent[i].first, static_cast<int64_t>(i));
+    EXPECT_GT(tris[i], 5000u) << "frame " << i;
+  }
   EXPECT_EQ(serial, concurrent);
 }
 

@@ -25,7 +25,7 @@ struct Result {
   std::vector<Mesh> meshes;
 };
 
-Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment) {
+Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment, bool temporal = false) {
   StudioOptions so;
   so.seed = 5;
   SyntheticStudio studio(SmallRig(), so);
@@ -39,6 +39,8 @@ Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment)
   o.tsdf.voxel_size = 0.016f;
   o.pipeline.serial = serial;
   o.pipeline.max_frames = frames;
+  o.temporal = temporal;
+  o.temporal_options.track_points = 1000;
   auto site = CaptureSite::Create(&studio, &empty, &studio, o);
   EXPECT_TRUE(site.ok()) << site.status().ToString();
   Result r;
@@ -67,6 +69,38 @@ TEST(CaptureSiteTest, ConcurrentPipelineEqualsSerialAndKeepsEveryFrameInOrder) {
     EXPECT_EQ(a.positions, b.positions) << "frame " << i;
     EXPECT_EQ(a.colors, b.colors) << "frame " << i;
   }
+}
+
+TEST(CaptureSiteTest, TemporalFusionStageRunsAndConcurrentEqualsSerial) {
+  const Result serial = RunSite(true, 8, MaskSource::kTruth, true);
+  const Result concurrent = RunSite(false, 8, MaskSource::kTruth, true);
+  ASSERT_EQ(serial.frames.size(), 8u);
+  ASSERT_EQ(concurrent.frames.size(), 8u);
+  const Result per_frame = RunSite(true, 8, MaskSource::kTruth, false);
+  ASSERT_EQ(per_frame.frames.size(), 8u);
+  bool differs = false;
+  for (size_t i = 0; i < 8; ++i) {
+    EXPECT_EQ(concurrent.frames[i], static_cast<int64_t>(i));
+    EXPECT_GT(serial.meshes[i].triangles.size(), 100u) << "frame " << i;
+    EXPECT_EQ(serial.meshes[i].positions, concurrent.meshes[i].positions) << "frame " << i;
+    EXPECT_EQ(serial.meshes[i].triangles, concurrent.meshes[i].triangles) << "frame " << i;
+    // Frame 0 is per-frame fusion in both modes; later frames carry the past.
+    if (i > 0) differs = differs || serial.meshes[i].positions != per_frame.meshes[i].positions;
+  }
+  EXPECT_TRUE(differs) << "temporal option had no effect";
+}
+
+TEST(CaptureSiteTest, TemporalOptionsAreChecked) {
+  StudioOptions so;
+  SyntheticStudio studio(SmallRig(), so);
+  CaptureSiteOptions o;
+  o.masks = MaskSource::kTruth;
+  o.color_calibration = false;
+  o.temporal = true;
+  o.temporal_options.max_weight = -1;
+  auto site = CaptureSite::Create(&studio, nullptr, &studio, o);
+  ASSERT_FALSE(site.ok());
+  EXPECT_NE(site.status().ToString().find("temporal"), std::string::npos) << site.status().ToString();
 }
 
 TEST(CaptureSiteTest, TruthMasksNeedTheStudio) {
