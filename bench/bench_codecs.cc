@@ -542,6 +542,11 @@ int RunCodecs(const BenchArgs& args) {
     o.codec = codec;
     o.jpeg_quality = IntFlag(args, "--jpeg-quality", o.jpeg_quality);
     if (HasFlag(args, "--chroma444")) o.chroma_420 = false;
+    if (HasFlag(args, "--chroma420")) o.chroma_420 = true;
+    if (HasFlag(args, "--fill-mean")) o.fill = protocol::ColorEncodeOptions::Fill::kMean;
+    if (HasFlag(args, "--fast-dct")) o.accurate_dct = false;
+    if (HasFlag(args, "--quant-standard")) o.quant = protocol::ColorEncodeOptions::Quant::kStandard;
+    if (HasFlag(args, "--no-optimize-huffman")) o.optimize_huffman = false;
     Figures fig;
     for (int rep = 0; rep < args.repeats; ++rep) {
       for (const FrameInput& in : inputs) {

@@ -12,6 +12,7 @@ PACKAGES=(
   libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev
   python3-open3d
   libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
+  libjpeg62-turbo-dev
 )
 
 missing=()
