@@ -500,7 +500,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, ImageRgb8* image, ImageGr
   }
   std::vector<uint8_t> box(static_cast<size_t>(bw) * bh * 3);
   if (tjDecompress2(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), box.data(), bw, 0, bh,
-                    TJPF_RGB, TJFLAG_FASTDCT) != 0) {
+                    TJPF_RGB, TJFLAG_ACCURATEDCT) != 0) {
     // Warnings (e.g. a truncated but partly decodable JPEG) are errors here: no guessing on the wire.
     return DataLoss(std::string("c1.jpeg: ") + tjGetErrorStr2(Decompressor()));
   }
