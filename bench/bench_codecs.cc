@@ -431,11 +431,13 @@ int RunCodecs(const BenchArgs& args) {
   const bool print_hash = HasFlag(args, "--hash");
   for (const GeomRun& run : runs) {
     Figures fig;
+    // Buffers reused from frame to frame, as a sender and a receiver would.
+    std::vector<uint8_t> blob;
+    std::vector<uint32_t> map;
+    Mesh out;
     for (int rep = 0; rep < args.repeats; ++rep) {
       for (const FrameInput& in : inputs) {
-        std::vector<uint8_t> blob;
-        std::vector<uint32_t> map;
-        Mesh out;
+        blob.clear();
         protocol::DracoOptions dopt = run.d;
         if (run.draco) {
           Eigen::Vector3f lo = Eigen::Vector3f::Constant(1e9f), hi = -lo;
