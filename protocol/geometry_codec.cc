@@ -970,20 +970,23 @@ constexpr uint32_t kColContexts = 3;  // Y, Co, Cg
 constexpr uint32_t kNrmContexts = 2;
 
 template <typename T, size_t C>
-inline std::array<int32_t, C> PredictValue(const std::vector<std::array<T, C>>& vals, const VertexPred& p,
-                                           bool parallelogram) {
+[[gnu::always_inline]] inline std::array<int32_t, C> PredictValue(const std::vector<std::array<T, C>>& vals,
+                                                                  const VertexPred& p, bool parallelogram) {
+  // One branch per vertex, not per component (a hot loop of the decoder).
   std::array<int32_t, C> r{};
-  for (size_t c = 0; c < C; ++c) {
-    if (p.a == kNil) {
-      r[c] = 0;
-    } else if (p.b == kNil) {
-      r[c] = vals[p.a][c];
-    } else if (p.d == kNil || !parallelogram) {
-      r[c] = (int32_t{vals[p.a][c]} + int32_t{vals[p.b][c]} + 1) >> 1;
-    } else {
-      r[c] = int32_t{vals[p.a][c]} + int32_t{vals[p.b][c]} - int32_t{vals[p.d][c]};
-    }
+  if (p.a == kNil) return r;
+  const std::array<T, C>& A = vals[p.a];
+  if (p.b == kNil) {
+    for (size_t c = 0; c < C; ++c) r[c] = A[c];
+    return r;
   }
+  const std::array<T, C>& B = vals[p.b];
+  if (p.d == kNil || !parallelogram) {
+    for (size_t c = 0; c < C; ++c) r[c] = (int32_t{A[c]} + int32_t{B[c]} + 1) >> 1;
+    return r;
+  }
+  const std::array<T, C>& D = vals[p.d];
+  for (size_t c = 0; c < C; ++c) r[c] = int32_t{A[c]} + int32_t{B[c]} - int32_t{D[c]};
   return r;
 }
 
