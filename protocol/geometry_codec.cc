@@ -1044,6 +1044,37 @@ Status DecodeResiduals(TokenReader& tr, const std::vector<VertexPred>& preds, in
   return tr.Finish();
 }
 
+// Decodes two attribute streams over the same vertices in one loop (as two
+// DecodeResiduals calls would). Each rANS stream alone is one long chain of
+// dependent steps (table lookups, a multiply, renormalisation); two
+// independent chains side by side let the CPU overlap them.
+template <typename T1, size_t C1, typename T2, size_t C2>
+Status DecodeResidualsPair(const std::vector<VertexPred>& preds, TokenReader& tr1, int32_t range1, bool par1,
+                           std::vector<std::array<T1, C1>>* vals1, TokenReader& tr2, int32_t range2, bool par2,
+                           std::vector<std::array<T2, C2>>* vals2) {
+  vals1->resize(preds.size());
+  vals2->resize(preds.size());
+  constexpr size_t kC = C1 > C2 ? C1 : C2;
+  for (size_t v = 0; v < preds.size(); ++v) {
+    const auto p1 = PredictValue(*vals1, preds[v], par1);
+    const auto p2 = PredictValue(*vals2, preds[v], par2);
+    for (size_t c = 0; c < kC; ++c) {
+      if (c < C1) {
+        const int32_t pc = std::clamp(p1[c], 0, range1 - 1);
+        const uint32_t z = tr1.GetValue(static_cast<uint32_t>(c));
+        (*vals1)[v][c] = static_cast<T1>(static_cast<uint32_t>(pc + UnZigZag(z)) & static_cast<uint32_t>(range1 - 1));
+      }
+      if (c < C2) {
+        const int32_t pc = std::clamp(p2[c], 0, range2 - 1);
+        const uint32_t z = tr2.GetValue(static_cast<uint32_t>(c));
+        (*vals2)[v][c] = static_cast<T2>(static_cast<uint32_t>(pc + UnZigZag(z)) & static_cast<uint32_t>(range2 - 1));
+      }
+    }
+  }
+  HOLO_RETURN_IF_ERROR(tr1.Finish());
+  return tr2.Finish();
+}
+
 // Vertex normals of `mesh` from its triangles (unit length; +Z where undefined).
 void SmoothedAreaWeightedNormals(Mesh* mesh) {
   mesh->normals.assign(mesh->num_vertices(), Eigen::Vector3f::Zero());
@@ -1250,8 +1281,17 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   std::vector<VertexPred>& preds = sc.preds;
   HOLO_RETURN_IF_ERROR(DecodeConnectivity(conn, nv, nt, &tris, &preds));
 
-  std::vector<std::array<uint16_t, 3>>& q = sc.q;
-  HOLO_RETURN_IF_ERROR(DecodeResiduals(pos, preds, 65536, true, &q));
+  std::vector<std::array<uint16_t, 3>>&q = sc.q, &ycc = sc.ycc;
+  if (colors) {
+    TokenReader tr;
+    HOLO_RETURN_IF_ERROR(tr.Init(col_b, kColContexts, "g1.colors"));
+    HOLO_RETURN_IF_ERROR(
+        DecodeResidualsPair(preds, pos, 65536, true, &q, tr, 512, !(flags & kColorsByMean), &ycc));
+    mesh->colors.resize(nv);
+    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v], chroma_shift);
+  } else {
+    HOLO_RETURN_IF_ERROR(DecodeResiduals(pos, preds, 65536, true, &q));
+  }
   mesh->positions.resize(nv);
   for (size_t v = 0; v < nv; ++v)
     for (int c = 0; c < 3; ++c) mesh->positions[v][c] = origin[c] + static_cast<float>(q[v][c]) * step;
@@ -1264,14 +1304,6 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
     for (size_t v = 0; v < nv; ++v) {
       mesh->normals[v] = OctDecode(oct[v][0] / 255.0f * 2.0f - 1.0f, oct[v][1] / 255.0f * 2.0f - 1.0f);
     }
-  }
-  if (colors) {
-    TokenReader tr;
-    HOLO_RETURN_IF_ERROR(tr.Init(col_b, kColContexts, "g1.colors"));
-    std::vector<std::array<uint16_t, 3>>& ycc = sc.ycc;
-    HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 512, !(flags & kColorsByMean), &ycc));
-    mesh->colors.resize(nv);
-    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v], chroma_shift);
   }
   mesh->triangles.resize(nt);
   if (nt > 0) std::memcpy(mesh->triangles.data(), tris.data(), tris.size() * 4);
