@@ -57,6 +57,7 @@ bool GetVarint(const uint8_t*& p, const uint8_t* end, uint32_t* v) {
   for (int shift = 0; shift <= 28; shift += 7) {
     if (p == end) return false;
     const uint8_t b = *p++;
+    if (shift == 28 && (b & 0x70)) return false;  // the value would not fit 32 bits
     r |= static_cast<uint32_t>(b & 0x7F) << shift;
     if (!(b & 0x80)) {
       *v = r;
