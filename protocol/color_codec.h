@@ -2,8 +2,11 @@
 //   C0 — the Holoportation baseline: background pixels set to the key colour
 //        (0, 0, 0), the whole image through LZ4. Lossless on the foreground
 //        except that pure-black foreground pixels become (0, 0, 1).
-//   C1 — JPEG (libturbojpeg) of the foreground's bounding box, plus the mask
-//        inside the box as run lengths through zstd.
+//   C1 — JPEG of the foreground's bounding box (encoded with libjpeg: 4:4:4,
+//        flat quantization tables, optimized Huffman tables, background
+//        filled per JPEG block so that no block holds an artificial edge;
+//        decoded with libturbojpeg), plus the mask inside the box as row
+//        transitions coded against the row above, through zstd.
 //   H264 (id 3) is reserved; this build refuses it with UnsupportedVersion.
 #pragma once
 
