@@ -534,8 +534,6 @@ class Border {
     if (vhead_.size() < n) vhead_.resize(n, kNil);
   }
   const Node& node(uint32_t i) const { return nodes_[i]; }
-  // One more than the largest edge id handed out so far.
-  size_t num_ids() const { return nodes_.size(); }
 
   // Pops the next live gate; false when the stack is empty.
   bool PopGate(uint32_t* g) {
@@ -551,14 +549,9 @@ class Border {
   }
 
   // Adds triangle (b, a, c) across gate g = a→b; `new_vertex`: c has just been created.
-  // `created` (optional) receives the ids of the new border edges a→c, c→b.
-  void Attach(uint32_t g, uint32_t c, bool new_vertex, uint32_t* created = nullptr) {
+  void Attach(uint32_t g, uint32_t c, bool new_vertex) {
     const Node gn = nodes_[g];
     const uint32_t e1 = New(gn.origin, c, gn.target), e2 = New(c, gn.target, gn.origin);
-    if (created) {
-      created[0] = e1;
-      created[1] = e2;
-    }
     if (gn.next == g) {
       Link(e1, e2);
       Link(e2, e1);
@@ -579,14 +572,8 @@ class Border {
   }
 
   // Starts a new region with triangle (u, v, w).
-  // `created` (optional) receives the ids of the border edges u→v, v→w, w→u.
-  void Seed(uint32_t u, uint32_t v, uint32_t w, uint32_t* created = nullptr) {
+  void Seed(uint32_t u, uint32_t v, uint32_t w) {
     const uint32_t s1 = New(u, v, w), s2 = New(v, w, u), s3 = New(w, u, v);
-    if (created) {
-      created[0] = s1;
-      created[1] = s2;
-      created[2] = s3;
-    }
     Link(s1, s2);
     Link(s2, s3);
     Link(s3, s1);
@@ -696,20 +683,15 @@ inline void SeedPreds(uint32_t num_before, const uint32_t* corner_ids, int new_i
 struct OutEdge {
   uint32_t target, third, tri;
 };
-// What lies across a half-edge (see EncodeConnectivity).
-struct Across {
-  uint32_t he, third;
-};
 
 // Working memory of the G1 coder, kept per thread between frames: a frame of
 // a 64k-vertex mesh needs ~25 MB of arrays, and fresh pages for them (page
 // faults, zeroing, unmapping) cost ~15% of the coding time, measured. The
 // capacity only grows (to the largest mesh this thread has coded).
 struct G1Scratch {
-  std::vector<uint32_t> weld, unique, idx, off, fill, newid, edge_he, order, tris, remap;
+  std::vector<uint32_t> weld, unique, idx, off, fill, newid, order, tris, remap;
   std::vector<uint8_t> referenced, coded, buf;
   std::vector<OutEdge> outs;
-  std::vector<Across> across;
   std::vector<VertexPred> preds;
   std::vector<std::array<uint16_t, 3>> q, ycc;
   std::vector<std::array<uint8_t, 2>> oct;
@@ -745,46 +727,10 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       outs[fill[tri[2]]++] = {tri[0], tri[1], tt};
     }
   }
-  // The triangle across every half-edge h = 3t + i (the edge idx[h] →
-  // idx[3t + (i+1) % 3] of triangle t), found once in input order, which
-  // walks the vertices' edge lists far more cache-friendly than the
-  // traversal does: across[h] = the half-edge 3t' + j' of the only triangle
-  // t' holding the reverse edge (its corner j' is the reverse edge's origin),
-  // kNone if none holds it, kMany if several do (non-manifold: the
-  // traversal then searches for the first one not yet coded, in input order).
-  // Each entry also holds the third vertex of that triangle, so that the
-  // traversal takes one cache miss per triangle, not two.
-  constexpr uint32_t kNone = kNil, kMany = kNil - 1;
-  std::vector<Across>& across = sc.across;
-  across.resize(idx.size());
-  for (size_t h = 0; h < idx.size(); ++h) {
-    const size_t t = h / 3, i = h % 3;
-    const uint32_t u = idx[h], v = idx[t * 3 + (i == 2 ? 0 : i + 1)];
-    Across found{kNone, 0};
-    for (uint32_t k = off[v]; k < off[v + 1]; ++k) {
-      if (outs[k].target != u) continue;
-      if (found.he != kNone) {
-        found.he = kMany;
-        break;
-      }
-      const uint32_t* tri = &idx[size_t{outs[k].tri} * 3];
-      const uint32_t j = tri[0] == v && tri[1] == u ? 0 : (tri[1] == v && tri[2] == u ? 1 : 2);
-      found = {outs[k].tri * 3 + j, outs[k].third};
-    }
-    across[h] = found;
-  }
   std::vector<uint8_t>& coded = sc.coded;
   coded.assign(nt, 0);
   std::vector<uint32_t>& newid = sc.newid;
   newid.assign(nu, kNil);
-  // The input half-edge of every border edge (by border edge id).
-  std::vector<uint32_t>& edge_he = sc.edge_he;
-  edge_he.clear();
-  auto set_he = [&](uint32_t e, uint32_t he) {
-    if (edge_he.size() <= e) edge_he.resize(std::max<size_t>(e + 1, edge_he.size() * 2), kNil);
-    edge_he[e] = he;
-  };
-  edge_he.reserve(1024);
   order->clear();
   order->reserve(nu);
   tris->clear();
@@ -820,34 +766,19 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
         ids[i] = newid[t[i]];
       }
       tris->insert(tris->end(), ids, ids + 3);
-      uint32_t created[3];
-      border.Seed(ids[0], ids[1], ids[2], created);
-      for (int i = 0; i < 3; ++i) set_he(created[i], static_cast<uint32_t>(seed_cursor * 3 + i));
+      border.Seed(ids[0], ids[1], ids[2]);
       continue;
     }
     const Border::Node gn = border.node(g);
     const uint32_t a = gn.origin, b = gn.target;
     const uint32_t oa = (*order)[a], ob = (*order)[b];
-    uint32_t found = kNil, oc = kNil, found_corner = 0;
-    const uint32_t he = edge_he[g];
-    const Across ac = across[he];
-    const uint32_t x = ac.he;
-    if (x < kMany) {  // the one triangle holding b→a, if it is still uncoded
-      if (!coded[x / 3]) {
-        found = x / 3;
-        found_corner = x % 3;
-        oc = ac.third;
-      }
-    } else if (x == kMany) {
-      for (uint32_t k = off[ob]; k < off[ob + 1]; ++k) {
-        const Out& e = outs[k];
-        if (e.target != oa || coded[e.tri]) continue;
-        found = e.tri;
-        oc = e.third;
-        const uint32_t* tri = &idx[size_t{found} * 3];
-        found_corner = tri[0] == ob && tri[1] == oa ? 0 : (tri[1] == ob && tri[2] == oa ? 1 : 2);
-        break;
-      }
+    uint32_t found = kNil, oc = kNil;
+    for (uint32_t k = off[ob]; k < off[ob + 1]; ++k) {
+      const Out& e = outs[k];
+      if (e.target != oa || coded[e.tri]) continue;
+      found = e.tri;
+      oc = e.third;
+      break;
     }
     if (found == kNil) {
       tw->Put(prev_sym, kBoundary);
@@ -856,10 +787,9 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     }
     coded[found] = 1;
     ++done;
-    // The next gate popped is c→b, an edge of this triangle: start loading
-    // what lies across it (a likely cache miss) while the border is updated.
-    __builtin_prefetch(&across[size_t{found} * 3]);
-    __builtin_prefetch(&across[size_t{found} * 3 + 2]);
+    // The gate a→c will scan c's outgoing edges a few steps from now: start
+    // that (likely cache-missing) load early.
+    __builtin_prefetch(&outs[off[oc]]);
     uint32_t c = newid[oc], sym;
     if (c == kNil) {
       sym = kNew;
@@ -881,11 +811,7 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
     tris->push_back(b);
     tris->push_back(a);
     tris->push_back(c);
-    uint32_t created[2];
-    border.Attach(g, c, sym == kNew, created);
-    // The found triangle is (b, a, c) with b→a at `found_corner`: a→c and c→b follow it.
-    set_he(created[0], found * 3 + (found_corner + 1) % 3);
-    set_he(created[1], found * 3 + (found_corner + 2) % 3);
+    border.Attach(g, c, sym == kNew);
   }
 }
 
