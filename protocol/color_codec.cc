@@ -475,16 +475,16 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, ImageRgb8* image, ImageGr
         next = next + gap + 1;
       }
     }
-    uint8_t* row = &mask->at(x0, y0 + y);
+    // Validate the whole row before filling: a fill needs its run's end too.
     for (size_t i = 0; i < cur.size(); ++i) {
       if (cur[i] >= bw || (i > 0 && cur[i] <= cur[i - 1])) {
         return DataLoss("c1.mask: transitions of row " + Str(y) + " out of order or outside the box");
       }
-      if (i % 2 == 0) {
-        const uint32_t stop = i + 1 < cur.size() ? cur[i + 1] : bw;
-        if (stop > bw) return DataLoss("c1.mask: transitions of row " + Str(y) + " outside the box");
-        std::memset(row + cur[i], 255, stop - cur[i]);
-      }
+    }
+    uint8_t* row = &mask->at(x0, y0 + y);
+    for (size_t i = 0; i < cur.size(); i += 2) {
+      const uint32_t stop = i + 1 < cur.size() ? cur[i + 1] : bw;
+      std::memset(row + cur[i], 255, stop - cur[i]);
     }
     prev.swap(cur);
   }

@@ -222,6 +222,7 @@ TEST(ColorCodec, C1MalformedMaskRowsAreRefused) {
       {"gaps run past the row", {3, 6, 5, 1, 1}},           // 6, then 12
       {"delta out of order", {3, 2, 3, 0, 8, 0, 1}},        // row 1: 2 + 4 = 6, then 6 + 0 = 6
       {"delta below zero", {3, 2, 3, 0, 5, 0, 1}},          // row 1: 2−3 wraps below 0
+      {"second transition before the first", {3, 2, 3, 0, 0, 9, 1}},  // row 1: 2, then 6 − 5 = 1 (regression: filled 2..1)
       {"trailing bytes", {1, 1, 1, 7}},                     // three empty rows, then a stray byte
       {"varint over 32 bits", {0x80, 0x80, 0x80, 0x80, 0x10, 1, 1}},  // 2^32 must not wrap to 0
   };
