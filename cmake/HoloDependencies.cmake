@@ -21,6 +21,7 @@ endif()
 pkg_check_modules(LZ4 REQUIRED IMPORTED_TARGET liblz4)
 pkg_check_modules(ZSTD REQUIRED IMPORTED_TARGET libzstd)
 pkg_check_modules(TURBOJPEG REQUIRED IMPORTED_TARGET libturbojpeg)
+pkg_check_modules(LIBJPEG REQUIRED IMPORTED_TARGET libjpeg)  # C1 encoder: own quantization tables
 find_package(meshoptimizer REQUIRED)
 find_package(draco REQUIRED)
 # Spatial voice (audio/): Opus and OpenAL Soft.

@@ -2,8 +2,11 @@
 //   C0 — the Holoportation baseline: background pixels set to the key colour
 //        (0, 0, 0), the whole image through LZ4. Lossless on the foreground
 //        except that pure-black foreground pixels become (0, 0, 1).
-//   C1 — JPEG (libturbojpeg) of the foreground's bounding box, plus the mask
-//        inside the box as run lengths through zstd.
+//   C1 — JPEG of the foreground's bounding box (encoded with libjpeg: 4:4:4,
+//        flat quantization tables, optimized Huffman tables, background
+//        filled per JPEG block so that no block holds an artificial edge;
+//        decoded with libturbojpeg), plus the mask inside the box as row
+//        transitions coded against the row above, through zstd.
 //   H264 (id 3) is reserved; this build refuses it with UnsupportedVersion.
 #pragma once
 
@@ -19,12 +22,33 @@ namespace holo::protocol {
 
 struct ColorEncodeOptions {
   ColorCodec codec = ColorCodec::kC1;
-  // C1: JPEG quality 1..100. 85 keeps the synthetic benchmark's 8 VGA pods
-  // at 40.8 dB foreground PSNR in 75 KB (q90: 41.2 dB, 93 KB), which with G1
-  // fits the 50 Mbit/s whole-stream budget at 30 fps.
-  int jpeg_quality = 85;
-  // C1: chroma subsampling 4:2:0 (true) or 4:4:4 (false).
-  bool chroma_420 = true;
+  // C1: JPEG quality 1..100, scaling the quantization tables as libjpeg does
+  // (with the default flat tables: step 16 at 50, 13 at 60, 12 at 61..64, 11
+  // at 65, 5 at 85). 63 (step 12) keeps the S8-VGA studio's 8 pods at 35.1 dB
+  // foreground PSNR in ~160 KB per frame (42.9 Mbit/s at 30 fps), within the
+  // 50 Mbit/s whole-stream budget with G1 (docs/codecs.md has the
+  // rate–distortion table).
+  int jpeg_quality = 63;
+  // C1: chroma subsampling 4:2:0 (true) or 4:4:4 (false). The studio's
+  // saturated stripes and checks lose 5+ dB of RGB PSNR to 4:2:0 at any
+  // quality (30.7 dB at most), so 4:4:4 is the default.
+  bool chroma_420 = false;
+  // C1: how background pixels inside the box are filled before JPEG (the
+  // decoder never shows them): kMean = the mean foreground colour (cheap, but
+  // every block on the silhouette then holds an edge); kPushPull = a smooth
+  // continuation of the foreground (fewer bits, no ringing into it).
+  enum class Fill : uint8_t { kMean, kPushPull };
+  Fill fill = Fill::kPushPull;
+  // C1: accurate integer DCT (true) or libjpeg's fast DCT (false; loses up to
+  // ~1 dB at high qualities).
+  bool accurate_dct = true;
+  // C1: quantization tables: kStandard = JPEG Annex K's (luma and chroma)
+  // scaled by `jpeg_quality`; kFlat = one step for all 64 frequencies of all
+  // three channels (16 scaled by `jpeg_quality`), better PSNR per bit.
+  enum class Quant : uint8_t { kStandard, kFlat };
+  Quant quant = Quant::kFlat;
+  // C1: Huffman tables optimized per image (a second pass; ~5% fewer bytes).
+  bool optimize_huffman = true;
   Status Check() const;
 };
 

@@ -36,7 +36,8 @@ void WeldExactPositions(const Mesh& mesh, std::vector<uint32_t>* weld, std::vect
   const size_t n = mesh.num_vertices();
   size_t cap = 16;
   while (cap < n * 2) cap <<= 1;
-  std::vector<uint32_t> table(cap, UINT32_MAX);
+  thread_local std::vector<uint32_t> table;  // kept between frames (no fresh pages each time)
+  table.assign(cap, UINT32_MAX);
   weld->resize(n);
   unique->clear();
   unique->reserve(n);
@@ -213,8 +214,11 @@ inline int32_t UnZigZag(uint32_t z) { return static_cast<int32_t>(z >> 1) ^ -sta
 // Collects tokens per context, then writes tables, the rANS bytes and the raw bits.
 class TokenWriter {
  public:
-  explicit TokenWriter(uint32_t contexts, size_t expected_symbols = 0)
-      : contexts_(contexts), counts_(size_t{contexts} * kTokens, 0) {
+  // `storage` (borrowed until Finish; may be null) keeps the symbol buffer's
+  // memory between frames.
+  explicit TokenWriter(uint32_t contexts, size_t expected_symbols = 0, std::vector<uint16_t>* storage = nullptr)
+      : contexts_(contexts), counts_(size_t{contexts} * kTokens, 0), syms_(storage ? *storage : own_) {
+    syms_.clear();
     syms_.reserve(expected_symbols);
   }
 
@@ -272,7 +276,8 @@ class TokenWriter {
     std::vector<uint64_t> recip(freq.size(), 0);
     for (size_t i = 0; i < freq.size(); ++i)
       if (freq[i]) recip[i] = ((uint64_t{1} << 44) + freq[i] - 1) / freq[i];
-    std::vector<uint8_t> rans(syms_.size() * 4 + 16);
+    thread_local std::vector<uint8_t> rans;  // kept between frames
+    rans.resize(syms_.size() * 4 + 16);
     uint8_t* p = rans.data() + rans.size();
     // Two interleaved states (symbol i uses state i mod 2) so that the
     // decoder's two dependency chains overlap.
@@ -342,7 +347,8 @@ class TokenWriter {
 
   uint32_t contexts_;
   std::vector<uint32_t> counts_;
-  std::vector<uint16_t> syms_;
+  std::vector<uint16_t> own_;
+  std::vector<uint16_t>& syms_;
   std::vector<uint8_t> bits_;
   uint64_t acc_ = 0;
   uint32_t nacc_ = 0;
@@ -672,22 +678,47 @@ inline void SeedPreds(uint32_t num_before, const uint32_t* corner_ids, int new_i
   }
 }
 
+// Outgoing edges by origin vertex: (target, third vertex, triangle), so the
+// search for the triangle across a gate reads one contiguous run.
+struct OutEdge {
+  uint32_t target, third, tri;
+};
+
+// Working memory of the G1 coder, kept per thread between frames: a frame of
+// a 64k-vertex mesh needs ~25 MB of arrays, and fresh pages for them (page
+// faults, zeroing, unmapping) cost ~15% of the coding time, measured. The
+// capacity only grows (to the largest mesh this thread has coded).
+struct G1Scratch {
+  std::vector<uint32_t> weld, unique, idx, off, fill, newid, order, tris, remap;
+  std::vector<uint8_t> referenced, coded, buf;
+  std::vector<OutEdge> outs;
+  std::vector<VertexPred> preds;
+  std::vector<std::array<uint16_t, 3>> q, ycc;
+  std::vector<std::array<uint8_t, 2>> oct;
+  std::vector<uint16_t> syms[2];
+  std::vector<Eigen::Vector3f> normal_sum;
+};
+G1Scratch& Scratch() {
+  thread_local G1Scratch s;
+  return s;
+}
+
 // Encodes the triangles `idx` (welded ids, `nu` vertices) and fills `order`
 // (new id → welded id), `tris` (decoded triangles, new ids) and `preds`.
 void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter* tw, std::vector<uint32_t>* order,
                         std::vector<uint32_t>* tris, std::vector<VertexPred>* preds) {
   const size_t nt = idx.size() / 3;
-  // Outgoing edges by origin vertex: (target, third vertex, triangle), so the
-  // search for the triangle across a gate reads one contiguous run.
-  struct Out {
-    uint32_t target, third, tri;
-  };
-  std::vector<uint32_t> off(nu + 1, 0);
-  std::vector<Out> outs(idx.size());
+  G1Scratch& sc = Scratch();
+  using Out = OutEdge;
+  std::vector<uint32_t>& off = sc.off;
+  off.assign(nu + 1, 0);
+  std::vector<Out>& outs = sc.outs;
+  outs.resize(idx.size());
   for (uint32_t v : idx) ++off[v + 1];
   for (size_t i = 0; i < nu; ++i) off[i + 1] += off[i];
   {
-    std::vector<uint32_t> fill(off.begin(), off.end() - 1);
+    std::vector<uint32_t>& fill = sc.fill;
+    fill.assign(off.begin(), off.end() - 1);
     for (size_t t = 0; t < nt; ++t) {
       const uint32_t* tri = &idx[t * 3];
       const auto tt = static_cast<uint32_t>(t);
@@ -696,8 +727,10 @@ void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter
       outs[fill[tri[2]]++] = {tri[0], tri[1], tt};
     }
   }
-  std::vector<uint8_t> coded(nt, 0);
-  std::vector<uint32_t> newid(nu, kNil);
+  std::vector<uint8_t>& coded = sc.coded;
+  coded.assign(nt, 0);
+  std::vector<uint32_t>& newid = sc.newid;
+  newid.assign(nu, kNil);
   order->clear();
   order->reserve(nu);
   tris->clear();
@@ -863,20 +896,23 @@ constexpr uint32_t kColContexts = 3;  // Y, Co, Cg
 constexpr uint32_t kNrmContexts = 2;
 
 template <typename T, size_t C>
-inline std::array<int32_t, C> PredictValue(const std::vector<std::array<T, C>>& vals, const VertexPred& p,
-                                           bool parallelogram) {
+[[gnu::always_inline]] inline std::array<int32_t, C> PredictValue(const std::vector<std::array<T, C>>& vals,
+                                                                  const VertexPred& p, bool parallelogram) {
+  // One branch per vertex, not per component (a hot loop of the decoder).
   std::array<int32_t, C> r{};
-  for (size_t c = 0; c < C; ++c) {
-    if (p.a == kNil) {
-      r[c] = 0;
-    } else if (p.b == kNil) {
-      r[c] = vals[p.a][c];
-    } else if (p.d == kNil || !parallelogram) {
-      r[c] = (int32_t{vals[p.a][c]} + int32_t{vals[p.b][c]} + 1) >> 1;
-    } else {
-      r[c] = int32_t{vals[p.a][c]} + int32_t{vals[p.b][c]} - int32_t{vals[p.d][c]};
-    }
+  if (p.a == kNil) return r;
+  const std::array<T, C>& A = vals[p.a];
+  if (p.b == kNil) {
+    for (size_t c = 0; c < C; ++c) r[c] = A[c];
+    return r;
   }
+  const std::array<T, C>& B = vals[p.b];
+  if (p.d == kNil || !parallelogram) {
+    for (size_t c = 0; c < C; ++c) r[c] = (int32_t{A[c]} + int32_t{B[c]} + 1) >> 1;
+    return r;
+  }
+  const std::array<T, C>& D = vals[p.d];
+  for (size_t c = 0; c < C; ++c) r[c] = int32_t{A[c]} + int32_t{B[c]} - int32_t{D[c]};
   return r;
 }
 
@@ -934,6 +970,37 @@ Status DecodeResiduals(TokenReader& tr, const std::vector<VertexPred>& preds, in
   return tr.Finish();
 }
 
+// Decodes two attribute streams over the same vertices in one loop (as two
+// DecodeResiduals calls would). Each rANS stream alone is one long chain of
+// dependent steps (table lookups, a multiply, renormalisation); two
+// independent chains side by side let the CPU overlap them.
+template <typename T1, size_t C1, typename T2, size_t C2>
+Status DecodeResidualsPair(const std::vector<VertexPred>& preds, TokenReader& tr1, int32_t range1, bool par1,
+                           std::vector<std::array<T1, C1>>* vals1, TokenReader& tr2, int32_t range2, bool par2,
+                           std::vector<std::array<T2, C2>>* vals2) {
+  vals1->resize(preds.size());
+  vals2->resize(preds.size());
+  constexpr size_t kC = C1 > C2 ? C1 : C2;
+  for (size_t v = 0; v < preds.size(); ++v) {
+    const auto p1 = PredictValue(*vals1, preds[v], par1);
+    const auto p2 = PredictValue(*vals2, preds[v], par2);
+    for (size_t c = 0; c < kC; ++c) {
+      if (c < C1) {
+        const int32_t pc = std::clamp(p1[c], 0, range1 - 1);
+        const uint32_t z = tr1.GetValue(static_cast<uint32_t>(c));
+        (*vals1)[v][c] = static_cast<T1>(static_cast<uint32_t>(pc + UnZigZag(z)) & static_cast<uint32_t>(range1 - 1));
+      }
+      if (c < C2) {
+        const int32_t pc = std::clamp(p2[c], 0, range2 - 1);
+        const uint32_t z = tr2.GetValue(static_cast<uint32_t>(c));
+        (*vals2)[v][c] = static_cast<T2>(static_cast<uint32_t>(pc + UnZigZag(z)) & static_cast<uint32_t>(range2 - 1));
+      }
+    }
+  }
+  HOLO_RETURN_IF_ERROR(tr1.Finish());
+  return tr2.Finish();
+}
+
 // Vertex normals of `mesh` from its triangles (unit length; +Z where undefined).
 void SmoothedAreaWeightedNormals(Mesh* mesh) {
   mesh->normals.assign(mesh->num_vertices(), Eigen::Vector3f::Zero());
@@ -948,7 +1015,8 @@ void SmoothedAreaWeightedNormals(Mesh* mesh) {
   // quantized normals are noise; their small areas let the neighbouring large
   // triangles decide. Measured on the 6 mm blob: mean error vs the SDF normals
   // 8.0° → 4.0°, 99th percentile 70° → 12° (unquantized area-weighted: 3.4°, 11°).
-  std::vector<Eigen::Vector3f> sum(mesh->num_vertices(), Eigen::Vector3f::Zero());
+  std::vector<Eigen::Vector3f>& sum = Scratch().normal_sum;
+  sum.assign(mesh->num_vertices(), Eigen::Vector3f::Zero());
   for (const auto& t : mesh->triangles) {
     const Eigen::Vector3f n = mesh->normals[t[0]] + mesh->normals[t[1]] + mesh->normals[t[2]];
     for (uint32_t v : t) sum[v] += n;
@@ -968,15 +1036,18 @@ void AppendBlob32(std::vector<uint8_t>* out, const std::vector<uint8_t>& b) {
 
 Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<uint8_t>* out,
                 std::vector<uint32_t>* vertex_map) {
-  std::vector<uint32_t> weld, unique;
+  G1Scratch& sc = Scratch();
+  std::vector<uint32_t>&weld = sc.weld, &unique = sc.unique;
   WeldExactPositions(mesh, &weld, &unique);
   const bool send_normals = o.normals == NormalMode::kTransmit && !mesh.normals.empty();
   const bool recompute = o.normals == NormalMode::kRecompute && !mesh.normals.empty();
   const bool colors = o.colors && !mesh.colors.empty();
   const size_t nt = mesh.num_triangles();
   const size_t nu = unique.size();
-  std::vector<uint32_t> idx(nt * 3);
-  std::vector<uint8_t> referenced(nu, 0);
+  std::vector<uint32_t>& idx = sc.idx;
+  idx.resize(nt * 3);
+  std::vector<uint8_t>& referenced = sc.referenced;
+  referenced.assign(nu, 0);
   for (size_t t = 0; t < nt; ++t)
     for (int c = 0; c < 3; ++c) referenced[idx[t * 3 + c] = weld[mesh.triangles[t][c]]] = 1;
 
@@ -996,9 +1067,9 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
                            std::to_string(extent / 65535.0f) + " m");
   }
 
-  TokenWriter conn(kConnContexts, nt + nt / 4);
-  std::vector<uint32_t> order, tris;
-  std::vector<VertexPred> preds;
+  TokenWriter conn(kConnContexts, nt + nt / 4, &sc.syms[0]);
+  std::vector<uint32_t>&order = sc.order, &tris = sc.tris;
+  std::vector<VertexPred>& preds = sc.preds;
   EncodeConnectivity(idx, nu, &conn, &order, &tris, &preds);
   const size_t nv = order.size();
 
@@ -1026,13 +1097,17 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   w.F32(step);
   w.U8(static_cast<uint8_t>(colors ? o.chroma_shift : 0));
 
-  std::vector<uint8_t> buf;
+  std::vector<uint8_t>& buf = sc.buf;
+  buf.clear();
   conn.Finish(&buf);
   AppendBlob32(out, buf);
 
   // Gather every attribute in traversal order in one pass (the reads are scattered).
-  std::vector<std::array<uint16_t, 3>> q(nv), ycc(colors ? nv : 0);
-  std::vector<std::array<uint8_t, 2>> oct(send_normals ? nv : 0);
+  std::vector<std::array<uint16_t, 3>>&q = sc.q, &ycc = sc.ycc;
+  q.resize(nv);
+  ycc.resize(colors ? nv : 0);
+  std::vector<std::array<uint8_t, 2>>& oct = sc.oct;
+  oct.resize(send_normals ? nv : 0);
   const float inv_step = 1.0f / step;
   for (size_t v = 0; v < nv; ++v) {
     const uint32_t src = unique[order[v]];
@@ -1051,14 +1126,14 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
     }
   }
   {
-    TokenWriter tw(kPosContexts, nv * 3);
+    TokenWriter tw(kPosContexts, nv * 3, &sc.syms[1]);
     EncodeResiduals(q, preds, 65536, true, &tw);
     buf.clear();
     tw.Finish(&buf);
     AppendBlob32(out, buf);
   }
   if (send_normals) {
-    TokenWriter tw(kNrmContexts, nv * 2);
+    TokenWriter tw(kNrmContexts, nv * 2, &sc.syms[0]);
     EncodeResiduals(oct, preds, 256, false, &tw);
     buf.clear();
     tw.Finish(&buf);
@@ -1076,7 +1151,7 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
     }
     const bool color_by_mean = cost[1] < cost[0];
     if (color_by_mean) (*out)[prefix_at + 1] |= kColorsByMean;
-    TokenWriter tw(kColContexts, nv * 3);
+    TokenWriter tw(kColContexts, nv * 3, &sc.syms[1]);
     EncodeResiduals(ycc, preds, 512, !color_by_mean, &tw);
     buf.clear();
     tw.Finish(&buf);
@@ -1084,7 +1159,8 @@ Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<ui
   }
 
   if (vertex_map) {
-    std::vector<uint32_t> remap(nu, kNil);
+    std::vector<uint32_t>& remap = sc.remap;
+    remap.assign(nu, kNil);
     for (size_t v = 0; v < nv; ++v) remap[order[v]] = static_cast<uint32_t>(v);
     vertex_map->resize(mesh.num_vertices());
     for (size_t i = 0; i < mesh.num_vertices(); ++i) (*vertex_map)[i] = remap[weld[i]];
@@ -1126,32 +1202,34 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   if (uint64_t{nv} * 3 > pos.MaxSymbols()) {
     return DataLoss("g1.num_vertices: " + Str(nv) + " vertices cannot fit in " + Str(pos_b.size()) + " bytes");
   }
-  std::vector<uint32_t> tris;
-  std::vector<VertexPred> preds;
+  G1Scratch& sc = Scratch();
+  std::vector<uint32_t>& tris = sc.tris;
+  std::vector<VertexPred>& preds = sc.preds;
   HOLO_RETURN_IF_ERROR(DecodeConnectivity(conn, nv, nt, &tris, &preds));
 
-  std::vector<std::array<uint16_t, 3>> q;
-  HOLO_RETURN_IF_ERROR(DecodeResiduals(pos, preds, 65536, true, &q));
+  std::vector<std::array<uint16_t, 3>>&q = sc.q, &ycc = sc.ycc;
+  if (colors) {
+    TokenReader tr;
+    HOLO_RETURN_IF_ERROR(tr.Init(col_b, kColContexts, "g1.colors"));
+    HOLO_RETURN_IF_ERROR(
+        DecodeResidualsPair(preds, pos, 65536, true, &q, tr, 512, !(flags & kColorsByMean), &ycc));
+    mesh->colors.resize(nv);
+    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v], chroma_shift);
+  } else {
+    HOLO_RETURN_IF_ERROR(DecodeResiduals(pos, preds, 65536, true, &q));
+  }
   mesh->positions.resize(nv);
   for (size_t v = 0; v < nv; ++v)
     for (int c = 0; c < 3; ++c) mesh->positions[v][c] = origin[c] + static_cast<float>(q[v][c]) * step;
   if (normals) {
     TokenReader tr;
     HOLO_RETURN_IF_ERROR(tr.Init(nrm_b, kNrmContexts, "g1.normals"));
-    std::vector<std::array<uint8_t, 2>> oct;
+    std::vector<std::array<uint8_t, 2>>& oct = sc.oct;
     HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 256, false, &oct));
     mesh->normals.resize(nv);
     for (size_t v = 0; v < nv; ++v) {
       mesh->normals[v] = OctDecode(oct[v][0] / 255.0f * 2.0f - 1.0f, oct[v][1] / 255.0f * 2.0f - 1.0f);
     }
-  }
-  if (colors) {
-    TokenReader tr;
-    HOLO_RETURN_IF_ERROR(tr.Init(col_b, kColContexts, "g1.colors"));
-    std::vector<std::array<uint16_t, 3>> ycc;
-    HOLO_RETURN_IF_ERROR(DecodeResiduals(tr, preds, 512, !(flags & kColorsByMean), &ycc));
-    mesh->colors.resize(nv);
-    for (size_t v = 0; v < nv; ++v) mesh->colors[v] = FromYCoCg(ycc[v], chroma_shift);
   }
   mesh->triangles.resize(nt);
   if (nt > 0) std::memcpy(mesh->triangles.data(), tris.data(), tris.size() * 4);

@@ -13,6 +13,7 @@ PACKAGES=(
   python3-open3d
   libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
   libsoxr-dev
+  libjpeg62-turbo-dev
 )
 
 missing=()

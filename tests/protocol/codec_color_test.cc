@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 #include "protocol/color_codec.h"
 #include "protocol/test_meshes.h"
@@ -100,6 +101,144 @@ TEST(ColorCodec, ReservedH264AndBadInput) {
   EXPECT_EQ(EncodeColor(im, ImageGray8(4, 4), o, &blob).code(), StatusCode::kInvalidArgument);
   o.jpeg_quality = 0;
   EXPECT_EQ(EncodeColor(im, {}, o, &blob).code(), StatusCode::kInvalidArgument);
+}
+
+
+// Every C1 option combination keeps the mask exact, including masks whose rows
+// change their number of transitions, touch both box edges, alternate pixel
+// by pixel or are empty inside the box.
+TEST(ColorCodec, C1AwkwardMasksAndAllOptions) {
+  const int w = 70, h = 41;
+  ImageRgb8 im;
+  ImageGray8 unused;
+  test::MaskedImage(w, h, &im, &unused);
+  std::vector<ImageGray8> masks;
+  {
+    ImageGray8 m(w, h, 0);
+    for (int y = 3; y < 38; ++y)
+      for (int x = 2; x < 68; ++x) {
+        if (y % 7 == 0) continue;                                  // empty rows inside the box
+        if (y < 10 && (x + y) % 2 == 0) m.at(x, y) = 255;         // alternating pixels
+        if (y >= 10 && y < 20 && x < 5 + y) m.at(x, y) = 255;     // touches the left edge
+        if (y >= 20 && (x > 60 || (x > 20 && x < 20 + (y % 5)))) m.at(x, y) = 255;  // right edge, varying runs
+      }
+    masks.push_back(m);
+  }
+  {
+    std::mt19937 rng(3);
+    std::bernoulli_distribution fg(0.3);
+    ImageGray8 m(w, h, 0);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) m.at(x, y) = fg(rng) ? 255 : 0;
+    masks.push_back(m);
+  }
+  {
+    ImageGray8 m(w, h, 0);
+    m.at(69, 40) = 255;  // one pixel in the corner
+    masks.push_back(m);
+  }
+  for (size_t k = 0; k < masks.size(); ++k) {
+    for (int variant = 0; variant < 6; ++variant) {
+      ColorEncodeOptions o;
+      o.chroma_420 = variant & 1;
+      o.fill = variant & 2 ? ColorEncodeOptions::Fill::kMean : ColorEncodeOptions::Fill::kPushPull;
+      o.quant = variant & 4 ? ColorEncodeOptions::Quant::kStandard : ColorEncodeOptions::Quant::kFlat;
+      o.accurate_dct = variant != 3;
+      o.optimize_huffman = variant != 5;
+      std::vector<uint8_t> blob;
+      ASSERT_TRUE(EncodeColor(im, masks[k], o, &blob).ok());
+      ImageRgb8 out;
+      ImageGray8 out_mask;
+      const Status s = DecodeColor(blob, &out, &out_mask);
+      ASSERT_TRUE(s.ok()) << "mask " << k << " variant " << variant << ": " << s.ToString();
+      EXPECT_TRUE(out_mask == masks[k]) << "mask " << k << " variant " << variant;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (!masks[k].at(x, y)) {
+            EXPECT_EQ(out.at(x, y, 0) | out.at(x, y, 1) | out.at(x, y, 2), 0);
+          }
+    }
+  }
+}
+
+// The flat tables and 4:4:4 (the defaults) beat the Annex K tables with 4:2:0
+// on a striped, saturated texture at the same byte budget or less.
+TEST(ColorCodec, C1DefaultsKeepSaturatedStripes) {
+  const int w = 96, h = 96;
+  ImageRgb8 im(w, h);
+  ImageGray8 mask(w, h, 255);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool red = (y / 5) % 2 == 0;
+      im.at(x, y, 0) = red ? 200 : 240;
+      im.at(x, y, 1) = red ? 30 : 240;
+      im.at(x, y, 2) = red ? 40 : 235;
+    }
+  ColorEncodeOptions old;
+  old.chroma_420 = true;
+  old.quant = ColorEncodeOptions::Quant::kStandard;
+  old.jpeg_quality = 85;
+  std::vector<uint8_t> a, b;
+  ASSERT_TRUE(EncodeColor(im, mask, old, &a).ok());
+  ASSERT_TRUE(EncodeColor(im, mask, ColorEncodeOptions{}, &b).ok());
+  ImageRgb8 out_a, out_b;
+  ImageGray8 m;
+  ASSERT_TRUE(DecodeColor(a, &out_a, &m).ok());
+  ASSERT_TRUE(DecodeColor(b, &out_b, &m).ok());
+  EXPECT_GT(Psnr(im, out_b, mask), Psnr(im, out_a, mask) + 3.0);
+}
+
+// Hand-made C1 blobs whose mask rows are malformed: each must be refused
+// with an error naming c1.mask (the JPEG after it is never reached).
+std::vector<uint8_t> ZstdRawFrame(const std::vector<uint8_t>& content) {
+  // Magic, frame header (single segment, 1-byte content size), one raw last block.
+  std::vector<uint8_t> f = {0x28, 0xB5, 0x2F, 0xFD, 0x20, static_cast<uint8_t>(content.size())};
+  const uint32_t block = 1u | (static_cast<uint32_t>(content.size()) << 3);
+  f.push_back(static_cast<uint8_t>(block));
+  f.push_back(static_cast<uint8_t>(block >> 8));
+  f.push_back(static_cast<uint8_t>(block >> 16));
+  f.insert(f.end(), content.begin(), content.end());
+  return f;
+}
+
+std::vector<uint8_t> C1Blob(uint16_t bw, uint16_t bh, const std::vector<uint8_t>& rows) {
+  std::vector<uint8_t> b = {2, 0, 20, 0, 10, 0, 1, 0, 1, 0, static_cast<uint8_t>(bw), 0, static_cast<uint8_t>(bh), 0};
+  const std::vector<uint8_t> z = ZstdRawFrame(rows);
+  for (int i = 0; i < 4; ++i) b.push_back(static_cast<uint8_t>(z.size() >> (8 * i)));
+  b.insert(b.end(), z.begin(), z.end());
+  const std::vector<uint8_t> jpeg = {0xFF, 0xD8, 0xFF, 0xD9};
+  for (int i = 0; i < 4; ++i) b.push_back(static_cast<uint8_t>(jpeg.size() >> (8 * i)));
+  b.insert(b.end(), jpeg.begin(), jpeg.end());
+  return b;
+}
+
+TEST(ColorCodec, C1MalformedMaskRowsAreRefused) {
+  // Box 10 x 3. A row is a header varint: 0 = as many transitions as the row
+  // above, each a zigzag delta to it; k + 1 = k transitions as gaps.
+  const std::vector<std::pair<const char*, std::vector<uint8_t>>> cases = {
+      {"ends early", {3, 2, 3, 0}},                         // row 1 is cut after its header
+      {"more transitions than pixels", {12, 0, 1, 1}},      // 11 transitions in a 10-pixel row
+      {"transition outside the row", {2, 10, 1, 1}},        // x = 10 in a 10-pixel row
+      {"gaps run past the row", {3, 6, 5, 1, 1}},           // 6, then 12
+      {"delta out of order", {3, 2, 3, 0, 8, 0, 1}},        // row 1: 2 + 4 = 6, then 6 + 0 = 6
+      {"delta below zero", {3, 2, 3, 0, 5, 0, 1}},          // row 1: 2−3 wraps below 0
+      {"second transition before the first", {3, 2, 3, 0, 0, 9, 1}},  // row 1: 2, then 6 − 5 = 1 (regression: filled 2..1)
+      {"trailing bytes", {1, 1, 1, 7}},                     // three empty rows, then a stray byte
+      {"varint over 32 bits", {0x80, 0x80, 0x80, 0x80, 0x10, 1, 1}},  // 2^32 must not wrap to 0
+  };
+  for (const auto& [name, rows] : cases) {
+    ImageRgb8 out;
+    ImageGray8 mask;
+    const Status s = DecodeColor(C1Blob(10, 3, rows), &out, &mask);
+    EXPECT_EQ(s.code(), StatusCode::kDataLoss) << name;
+    EXPECT_NE(s.message().find("c1.mask"), std::string::npos) << name << ": " << s.ToString();
+    EXPECT_TRUE(out.empty() && mask.empty()) << name;
+  }
+  // The same framing with well-formed rows gets past the mask to the (bad) JPEG.
+  ImageRgb8 out;
+  ImageGray8 mask;
+  const Status s = DecodeColor(C1Blob(10, 3, {3, 2, 3, 0, 2, 0, 1}), &out, &mask);
+  EXPECT_NE(s.message().find("c1.jpeg"), std::string::npos) << s.ToString();
 }
 
 }  // namespace
