@@ -370,13 +370,16 @@ void Write(ByteWriter& w, const Control& m) {
 Status Read(ByteReader& r, const Limits&, Control* m) {
   uint8_t c = 0;
   HOLO_RETURN_IF_ERROR(r.U8("control.command", &c));
-  if (c < 1 || c > 8) return DataLoss("control.command: unknown command " + Str(c));
+  if (c < 1 || c > 9) return DataLoss("control.command: unknown command " + Str(c));
   m->command = static_cast<ControlCommand>(c);
   HOLO_RETURN_IF_ERROR(r.U32("control.stream_id", &m->stream_id));
   HOLO_RETURN_IF_ERROR(r.I64("control.value", &m->value));
   HOLO_RETURN_IF_ERROR(r.F32("control.speed", &m->speed));
   if (m->command == ControlCommand::kSetSpeed && (m->speed < 0.1f || m->speed > 8.0f)) {
     return DataLoss("control.speed: must be in [0.1, 8]");
+  }
+  if (m->command == ControlCommand::kSetLoop && m->value != 0 && m->value != 1) {
+    return DataLoss("control.value: set loop takes 0 or 1, got " + std::to_string(m->value));
   }
   if (m->command == ControlCommand::kSetQuality && (m->value < 0 || m->value > 10)) {
     return DataLoss("control.value: quality level must be in [0, 10], got " + std::to_string(m->value));

@@ -229,6 +229,7 @@ enum class ControlCommand : uint8_t {
   kSeek = 6,          // value = media time, µs
   kSetSpeed = 7,      // speed = playback rate (0.1 .. 8)
   kRequestKeyFrame = 8,
+  kSetLoop = 9,       // value = 1 loop at the end of a replay, 0 stop there
 };
 
 struct Control {

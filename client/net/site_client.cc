@@ -864,6 +864,7 @@ void SiteClient::Unsubscribe(uint32_t bits) { SendControl(MakeControl(protocol::
 void SiteClient::SetQuality(int level) { SendControl(MakeControl(protocol::ControlCommand::kSetQuality, level)); }
 void SiteClient::Pause() { SendControl(MakeControl(protocol::ControlCommand::kPause)); }
 void SiteClient::Resume() { SendControl(MakeControl(protocol::ControlCommand::kResume)); }
+void SiteClient::SetLoop(bool loop) { SendControl(MakeControl(protocol::ControlCommand::kSetLoop, loop ? 1 : 0)); }
 void SiteClient::Seek(int64_t t) { SendControl(MakeControl(protocol::ControlCommand::kSeek, t)); }
 void SiteClient::SetSpeed(float s) { SendControl(MakeControl(protocol::ControlCommand::kSetSpeed, 0, s)); }
 

@@ -171,6 +171,7 @@ class SiteClient {
   void SetQuality(int level);
   void Pause();
   void Resume();
+  void SetLoop(bool loop);  // replays: start again at the end (or not)
   void Seek(int64_t media_time_us);
   void SetSpeed(float speed);
 

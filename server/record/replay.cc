@@ -248,6 +248,7 @@ Status ReplaySource::ApplyControl(const protocol::Control& c) {
     case ControlCommand::kResume: Resume(); return OkStatus();
     case ControlCommand::kSeek: return Seek(c.value);
     case ControlCommand::kSetSpeed: return SetSpeed(static_cast<double>(c.speed));
+    case ControlCommand::kSetLoop: SetLoop(c.value != 0); return OkStatus();
     case ControlCommand::kRequestKeyFrame: {
       std::lock_guard<std::mutex> lock(mu_);
       const int64_t now = clock_->NowUs();
@@ -256,7 +257,7 @@ Status ReplaySource::ApplyControl(const protocol::Control& c) {
     }
     default:
       return InvalidArgument("control command " + std::to_string(static_cast<int>(c.command)) +
-                             " is not a replay command (pause 4, resume 5, seek 6, speed 7, key frame 8)");
+                             " is not a replay command (pause 4, resume 5, seek 6, speed 7, key frame 8, loop 9)");
   }
 }
 

@@ -268,6 +268,13 @@ TEST(ProtocolMessages, SemanticChecks) {
   auto p = EncodePayload(Ping{});
   p.push_back(0);
   EXPECT_NE(DecodePayload(MessageType::kPing, p).status().message().find("trailing"), std::string::npos);
+  const Control loop{ControlCommand::kSetLoop, 0, 1, 1.0f};
+  auto decoded = DecodeMessage(EncodeMessage({}, loop));
+  ASSERT_TRUE(decoded.ok()) << decoded.status().message();
+  EXPECT_EQ(std::get<Control>(decoded->payload), loop);
+  EXPECT_NE(DecodeMessage(EncodeMessage({}, Control{ControlCommand::kSetLoop, 0, 2, 1.0f}))
+                .status().message().find("set loop takes 0 or 1"),
+            std::string::npos);
 }
 
 TEST(ByteIo, HalfFloatConversion) {

@@ -253,6 +253,13 @@ TEST_F(ReplayTest, ControlMessagesDriveIt) {
   ASSERT_TRUE(src->ApplyControl(c).ok());
   Pump(*src);
   EXPECT_EQ(Meshes().size(), 1u);
+  c.command = protocol::ControlCommand::kSetLoop;
+  c.value = 1;
+  ASSERT_TRUE(src->ApplyControl(c).ok());
+  EXPECT_TRUE(src->state().loop);
+  c.value = 0;
+  ASSERT_TRUE(src->ApplyControl(c).ok());
+  EXPECT_FALSE(src->state().loop);
   c.command = protocol::ControlCommand::kSubscribe;
   EXPECT_EQ(src->ApplyControl(c).code(), StatusCode::kInvalidArgument);
   c.command = protocol::ControlCommand::kSeek;
