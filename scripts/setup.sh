@@ -11,7 +11,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev libpng-dev
   libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev
   python3-open3d
-  libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
+  openssl libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
   libsoxr-dev
   libjpeg62-turbo-dev
 )

@@ -252,7 +252,7 @@ TEST(OffloadTest, StereoRendersBothEyesAtTheirPoses) {
 
 TEST(OffloadTest, GlRendererMatchesTheCpuRenderer) {
   if (auto gl = GlMeshRenderer::Create(); !gl.ok()) {
-    GTEST_SKIP() << "no headless GL: " << gl.status().ToString();
+    GTEST_SKIP() << "no headless GL (scripts/setup.sh installs Mesa EGL; the CPU-renderer tests still run): " << gl.status().ToString();
   }
   Site site;
   Log log;

@@ -88,7 +88,7 @@ TEST(RenderClientTest, WindowWithoutDisplayIsAClearError) {
 // The window path (GLFW, OpenGL 3.3 core) on a virtual X display the test
 // starts itself with xvfb-run.
 TEST(RenderClientTest, WindowUnderXvfb) {
-  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) GTEST_SKIP() << "xvfb-run is not installed";
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) GTEST_SKIP() << "xvfb-run is not installed (scripts/setup.sh installs xvfb); the headless EGL tests still run";
   const std::string dir = test::MakeTempDir("render_client_xvfb");
   const RunResult r = RunClient("--frames 3 --width 320 --height 240 --out " + dir,
                                 "xvfb-run -a -s '-screen 0 640x480x24'");

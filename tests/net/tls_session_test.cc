@@ -26,7 +26,7 @@ bool MakeCert(const std::string& dir, const std::string& name) {
 
 TEST(NetTls, SelfSignedSessionCarriesFramesAndRejectsOthers) {
   const std::string dir = test::MakeTempDir("holo_tls");
-  if (!MakeCert(dir, "site") || !MakeCert(dir, "other")) GTEST_SKIP() << "openssl CLI not available";
+  if (!MakeCert(dir, "site") || !MakeCert(dir, "other")) GTEST_SKIP() << "openssl CLI not available to make test certificates (scripts/setup.sh installs openssl)";
   ServerConfig cfg = test::LoopbackConfig();
   cfg.tls.enabled = true;
   cfg.queue_video_frames = 16;
