@@ -14,19 +14,33 @@ namespace {
 
 using OMesh = OpenMesh::TriMesh_ArrayKernelT<>;
 
-uint32_t FindRoot(std::vector<uint32_t>& parent, uint32_t v) {
+// Root of `v`, halving the path on the way. Roots are linked under the
+// smallest root of a union, so every parent index is ≤ its child's.
+inline uint32_t FindRoot(uint32_t* parent, uint32_t v) {
   while (parent[v] != v) {
-    parent[v] = parent[parent[v]];  // path halving
-    v = parent[v];
+    const uint32_t g = parent[parent[v]];
+    parent[v] = g;
+    v = g;
   }
   return v;
 }
 
+// Buffers reused across calls on the same thread (no per-frame heap churn).
+struct CleanupScratch {
+  std::vector<uint32_t> parent, count, remap;
+  std::vector<uint8_t> keep;
+};
+
+CleanupScratch& ThreadScratch() {
+  thread_local CleanupScratch scratch;
+  return scratch;
+}
+
 // Keeps the triangles for which keep[t] is true and the vertices they use,
 // preserving order.
-void Compact(const std::vector<uint8_t>& keep, Mesh* mesh) {
+void Compact(const std::vector<uint8_t>& keep, std::vector<uint32_t>& remap, Mesh* mesh) {
   const size_t nv = mesh->positions.size();
-  std::vector<uint32_t> remap(nv, UINT32_MAX);
+  remap.assign(nv, UINT32_MAX);
   size_t out_t = 0;
   for (size_t t = 0; t < mesh->triangles.size(); ++t) {
     if (!keep[t]) continue;
@@ -126,29 +140,48 @@ Status CleanupMesh(const MeshCleanupOptions& options, Mesh* mesh, MeshCleanupSta
   *stats = {};
   if (mesh->triangles.empty()) return OkStatus();
 
-  // Components by union-find over the vertices of each triangle.
-  std::vector<uint32_t> parent(mesh->positions.size());
-  std::iota(parent.begin(), parent.end(), 0u);
+  // Components by union-find over the vertices of each triangle: each
+  // triangle links the roots of its three vertices under the smallest, so
+  // parent[v] ≤ v throughout and one pass in index order flattens every
+  // tree (the parent's root is already final when v is reached).
+  CleanupScratch& sc = ThreadScratch();
+  const size_t nv = mesh->positions.size(), nt = mesh->triangles.size();
+  sc.parent.resize(nv);
+  uint32_t* parent = sc.parent.data();
+  std::iota(parent, parent + nv, 0u);
   for (const auto& tri : mesh->triangles) {
-    const uint32_t a = FindRoot(parent, tri[0]);
-    for (int k = 1; k < 3; ++k) {
-      const uint32_t b = FindRoot(parent, tri[static_cast<size_t>(k)]);
-      if (a != b) parent[b] = a;
-    }
+    const uint32_t a = FindRoot(parent, tri[0]), b = FindRoot(parent, tri[1]), c = FindRoot(parent, tri[2]);
+    const uint32_t r = std::min(a, std::min(b, c));
+    parent[a] = r;
+    parent[b] = r;
+    parent[c] = r;
   }
-  std::vector<uint32_t> count(mesh->positions.size(), 0);
-  for (const auto& tri : mesh->triangles) ++count[FindRoot(parent, tri[0])];
-  for (size_t v = 0; v < count.size(); ++v) {
+  for (size_t v = 0; v < nv; ++v) parent[v] = parent[parent[v]];
+  sc.count.assign(nv, 0u);
+  uint32_t* count = sc.count.data();
+  for (const auto& tri : mesh->triangles) ++count[parent[tri[0]]];
+  for (size_t v = 0; v < nv; ++v) {
     if (count[v] == 0) continue;
     ++stats->components;
     if (count[v] < options.min_component_triangles) ++stats->components_removed;
   }
-  std::vector<uint8_t> keep(mesh->triangles.size());
-  for (size_t t = 0; t < keep.size(); ++t) {
-    keep[t] = count[FindRoot(parent, mesh->triangles[t][0])] >= options.min_component_triangles;
-    stats->triangles_removed += !keep[t];
+  if (stats->components_removed == 0) {
+    // Nothing to remove: the mesh stays as it is (every vertex of a
+    // marching-cubes mesh is referenced).
+    bool all_used = true;
+    for (size_t v = 0; v < nv && all_used; ++v) all_used = count[parent[v]] > 0;
+    if (!all_used) {
+      sc.keep.assign(nt, 1);
+      Compact(sc.keep, sc.remap, mesh);
+    }
+  } else {
+    sc.keep.resize(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      sc.keep[t] = count[parent[mesh->triangles[t][0]]] >= options.min_component_triangles;
+      stats->triangles_removed += !sc.keep[t];
+    }
+    Compact(sc.keep, sc.remap, mesh);
   }
-  Compact(keep, mesh);
 
   if (options.target_triangles > 0 && mesh->triangles.size() > options.target_triangles)
     HOLO_RETURN_IF_ERROR(Decimate(options.target_triangles, mesh, stats));

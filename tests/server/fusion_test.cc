@@ -1,6 +1,7 @@
 #include "server/fusion/tsdf.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdlib>
 #include <cmath>
 #include <functional>
@@ -475,6 +476,90 @@ TEST(MeshCleanup, RemovesSmallFragmentsAndDecimatesToBudget) {
   const auto d = metrics::ComputeMeshDistance(m, metrics::MakeSphereMesh(Eigen::Vector3f(0, 0, 1), 0.3f, 6));
   ASSERT_TRUE(d.ok());
   EXPECT_LT(d->chamfer_mm, 3.0);
+}
+
+// Fragment removal against a plain breadth-first search: many random small
+// components with shuffled vertex numbering (so union-find trees are not
+// trivially ordered), unreferenced vertices, and triangles in random order.
+TEST(MeshCleanup, FragmentRemovalMatchesBreadthFirstReference) {
+  uint32_t rng = 12345;
+  auto next = [&rng](uint32_t n) {
+    rng = rng * 1664525u + 1013904223u;
+    return (rng >> 8) % n;
+  };
+  Mesh m;
+  std::vector<std::array<uint32_t, 3>> tris;
+  uint32_t nv = 0;
+  for (int comp = 0; comp < 60; ++comp) {
+    // A strip of `k` triangles over k + 2 fresh vertices (one component).
+    const uint32_t k = 1 + next(40), base = nv;
+    nv += k + 2;
+    for (uint32_t t = 0; t < k; ++t) tris.push_back({base + t, base + t + 1, base + t + 2});
+    if (comp % 7 == 0) ++nv;  // an unreferenced vertex
+  }
+  std::vector<uint32_t> perm(nv);
+  for (uint32_t v = 0; v < nv; ++v) perm[v] = v;
+  for (uint32_t v = nv - 1; v > 0; --v) std::swap(perm[v], perm[next(v + 1)]);
+  for (size_t t = tris.size() - 1; t > 0; --t) std::swap(tris[t], tris[next(static_cast<uint32_t>(t + 1))]);
+  for (uint32_t v = 0; v < nv; ++v) m.positions.emplace_back(static_cast<float>(v), 0.5f * static_cast<float>(v % 3), 0.0f);
+  for (auto& t : tris) m.triangles.push_back({perm[t[0]], perm[t[1]], perm[t[2]]});
+
+  // Reference: components by BFS over vertex adjacency.
+  std::vector<std::vector<uint32_t>> adj(nv);
+  for (const auto& t : m.triangles)
+    for (int a = 0; a < 3; ++a) adj[t[a]].push_back(t[(a + 1) % 3]), adj[t[(a + 1) % 3]].push_back(t[a]);
+  std::vector<int> label(nv, -1);
+  int num_labels = 0;
+  for (uint32_t v = 0; v < nv; ++v) {
+    if (label[v] >= 0 || adj[v].empty()) continue;
+    std::vector<uint32_t> stack{v};
+    label[v] = num_labels;
+    while (!stack.empty()) {
+      const uint32_t u = stack.back();
+      stack.pop_back();
+      for (uint32_t w : adj[u])
+        if (label[w] < 0) label[w] = num_labels, stack.push_back(w);
+    }
+    ++num_labels;
+  }
+  std::vector<size_t> size(static_cast<size_t>(num_labels), 0);
+  for (const auto& t : m.triangles) ++size[static_cast<size_t>(label[t[0]])];
+  const size_t min_tris = 20;
+  std::vector<std::array<float, 9>> expected;
+  size_t removed_components = 0;
+  for (size_t s : size) removed_components += s < min_tris;
+  for (const auto& t : m.triangles)
+    if (size[static_cast<size_t>(label[t[0]])] >= min_tris)
+      expected.push_back({m.positions[t[0]].x(), m.positions[t[0]].y(), 0, m.positions[t[1]].x(), m.positions[t[1]].y(),
+                          0, m.positions[t[2]].x(), m.positions[t[2]].y(), 0});
+  size_t expected_vertices = 0;
+  for (uint32_t v = 0; v < nv; ++v)
+    expected_vertices += label[v] >= 0 && size[static_cast<size_t>(label[v])] >= min_tris;
+
+  MeshCleanupOptions o;
+  o.min_component_triangles = min_tris;
+  MeshCleanupStats stats;
+  ASSERT_TRUE(CleanupMesh(o, &m, &stats).ok());
+  EXPECT_EQ(stats.components, static_cast<size_t>(num_labels));
+  EXPECT_EQ(stats.components_removed, removed_components);
+  EXPECT_GT(removed_components, 5u);
+  EXPECT_LT(removed_components, static_cast<size_t>(num_labels));
+  EXPECT_EQ(m.num_vertices(), expected_vertices);
+  ASSERT_EQ(m.num_triangles(), expected.size());
+  for (size_t t = 0; t < expected.size(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(m.positions[m.triangles[t][k]].x(), expected[t][3 * k]) << t;
+      EXPECT_EQ(m.positions[m.triangles[t][k]].y(), expected[t][3 * k + 1]) << t;
+    }
+
+  // Nothing below the threshold: only the unreferenced vertices go.
+  Mesh m2 = m;
+  m2.positions.emplace_back(-1.0f, 0.0f, 0.0f);
+  o.min_component_triangles = 1;
+  ASSERT_TRUE(CleanupMesh(o, &m2, &stats).ok());
+  EXPECT_EQ(stats.components_removed, 0u);
+  EXPECT_EQ(m2.num_vertices(), m.num_vertices());
+  EXPECT_EQ(m2.triangles, m.triangles);
 }
 
 TEST(MeshCleanup, FusedMeshSurvivesDecimation) {
