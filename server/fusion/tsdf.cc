@@ -830,6 +830,41 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         has_band |= observed & (t >= 0) & (t < kTsdfBandLimit);
       }
 #endif
+#if defined(__SSE2__)
+      // Colour, four voxels at a time: the scalar loop below in the same
+      // float operations (bit-identical), old colour kept where this frame
+      // added none.
+      {
+        const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), half = _mm_set1_ps(0.5f);
+        const __m128i zero_i = _mm_setzero_si128();
+        uint8_t* channels[3] = {vb.r, vb.g, vb.b};
+        const float* sums[3] = {acc.r, acc.g, acc.b};
+        for (int i = 0; i < kBlockVoxels; i += 4) {
+          const __m128 cw = _mm_load_ps(acc.color_weight + i);
+          const __m128 has = _mm_cmpgt_ps(cw, zero);
+          if (_mm_movemask_ps(has) == 0) continue;
+          const __m128 w_new = _mm_load_ps(acc.weight + i);
+          const __m128 w = _mm_load_ps(vb.weight + i);
+          const __m128 w_old = _mm_sub_ps(w, w_new);
+          const __m128 inv = _mm_div_ps(one, w);
+          const __m128 sc = _mm_div_ps(w_new, cw);
+          const __m128i keep = _mm_castps_si128(has);
+          for (int ch = 0; ch < 3; ++ch) {
+            int32_t old_bytes;
+            std::memcpy(&old_bytes, channels[ch] + i, 4);
+            const __m128i old_i = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(old_bytes), zero_i), zero_i);
+            const __m128 old_f = _mm_cvtepi32_ps(old_i);
+            const __m128 v = _mm_add_ps(
+                _mm_mul_ps(_mm_add_ps(_mm_mul_ps(old_f, w_old), _mm_mul_ps(_mm_load_ps(sums[ch] + i), sc)), inv), half);
+            const __m128i nv = _mm_cvttps_epi32(v);
+            const __m128i merged = _mm_or_si128(_mm_and_si128(keep, nv), _mm_andnot_si128(keep, old_i));
+            const __m128i packed = _mm_packus_epi16(_mm_packs_epi32(merged, zero_i), zero_i);
+            const int32_t out_bytes = _mm_cvtsi128_si32(packed);
+            std::memcpy(channels[ch] + i, &out_bytes, 4);
+          }
+        }
+      }
+#else
       for (int i = 0; i < kBlockVoxels; ++i) {
         if (!(acc.color_weight[i] > 0)) continue;
         // This frame's mean colour, with the frame's weight; an unobserved
@@ -843,6 +878,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         vb.g[i] = static_cast<uint8_t>((vb.g[i] * w_old + acc.g[i] * s) * inv + 0.5f);
         vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i] * s) * inv + 0.5f);
       }
+#endif
       const uint8_t flags = static_cast<uint8_t>((has_neg ? kBlockHasNegative : 0) | (has_pos ? kBlockHasPositive : 0) |
                                                  (has_band ? kBlockHasPositiveInBand : 0));
       blocks_.set_flags(b, flags);
