@@ -12,6 +12,10 @@
 #include "common/status.h"
 #include "server/fusion/tsdf_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace holo {
 namespace {
 
@@ -183,9 +187,9 @@ inline int RowIndex(int y, int z) { return (y + 1) + kCacheSide * (z + 1); }
 
 struct BlockCache {
   float tsdf[kCacheVoxels];
-  float weight[kCacheVoxels];
   uint16_t ok[kCacheRows];    // voxel usable as a cube corner
   uint16_t neg[kCacheRows];   // tsdf < 0
+  uint16_t seen[kCacheRows];  // weight > 0 (observed)
   uint16_t cube[kCacheRows];  // cube with origin (x, y, z) has all eight corners usable (y, z ∈ −1..7, x ∈ −1..7)
 };
 
@@ -196,56 +200,91 @@ inline uint32_t PackEdgeRef(int32_t block, int edge) {
   return (static_cast<uint32_t>(block) << kEdgeBits) | static_cast<uint32_t>(edge);
 }
 
-// Copies `N` voxels (compile-time count, so no library call) of a row.
-template <int N>
-inline void CopyRow(const VoxelBlock* vb, int src, float* tsdf, float* weight) {
-  if (vb == nullptr) {
-    for (int i = 0; i < N; ++i) tsdf[i] = weight[i] = 0.0f;
-  } else {
-    for (int i = 0; i < N; ++i) {
-      tsdf[i] = vb->tsdf[src + i];
-      weight[i] = vb->weight[src + i];
+// Per voxel row (j + 8·k) of one block, bit i: usable as a cube corner
+// (weight ≥ min_weight and, with skip_truncated_cubes, tsdf < 0.999),
+// negative, observed (weight > 0). Computed once per block per
+// ExtractMesh, then assembled into the 11-bit cache rows of every block that
+// has it as a neighbour.
+void ComputeRowMasks(const VoxelBlock& vb, float min_weight, float max_tsdf, TsdfVolume::RowMasks* m) {
+#if defined(__SSE2__)
+  const __m128 min_w = _mm_set1_ps(min_weight), max_t = _mm_set1_ps(max_tsdf), zero = _mm_setzero_ps();
+  for (int r = 0; r < kBlockSide * kBlockSide; ++r) {
+    const float* t = vb.tsdf + kBlockSide * r;
+    const float* w = vb.weight + kBlockSide * r;
+    const __m128 t0 = _mm_load_ps(t), t1 = _mm_load_ps(t + 4), w0 = _mm_load_ps(w), w1 = _mm_load_ps(w + 4);
+    auto bits = [](__m128 lo, __m128 hi) { return static_cast<uint8_t>(_mm_movemask_ps(lo) | _mm_movemask_ps(hi) << 4); };
+    m->bits[TsdfVolume::RowMasks::kOk][r] = bits(_mm_and_ps(_mm_cmpge_ps(w0, min_w), _mm_cmplt_ps(t0, max_t)),
+                    _mm_and_ps(_mm_cmpge_ps(w1, min_w), _mm_cmplt_ps(t1, max_t)));
+    m->bits[TsdfVolume::RowMasks::kNeg][r] = bits(_mm_cmplt_ps(t0, zero), _mm_cmplt_ps(t1, zero));
+    m->bits[TsdfVolume::RowMasks::kSeen][r] = bits(_mm_cmpgt_ps(w0, zero), _mm_cmpgt_ps(w1, zero));
+  }
+#else
+  for (int r = 0; r < kBlockSide * kBlockSide; ++r) {
+    unsigned ok = 0, neg = 0, seen = 0;
+    for (int x = 0; x < kBlockSide; ++x) {
+      const float t = vb.tsdf[kBlockSide * r + x], w = vb.weight[kBlockSide * r + x];
+      ok |= static_cast<unsigned>(w >= min_weight && t < max_tsdf) << x;
+      neg |= static_cast<unsigned>(t < 0.0f) << x;
+      seen |= static_cast<unsigned>(w > 0.0f) << x;
     }
+    m->bits[TsdfVolume::RowMasks::kOk][r] = static_cast<uint8_t>(ok);
+    m->bits[TsdfVolume::RowMasks::kNeg][r] = static_cast<uint8_t>(neg);
+    m->bits[TsdfVolume::RowMasks::kSeen][r] = static_cast<uint8_t>(seen);
+  }
+#endif
+}
+
+// Copies `N` tsdf values (compile-time count, so no library call) of a row.
+template <int N>
+inline void CopyRow(const VoxelBlock* vb, int src, float* tsdf) {
+  if (vb == nullptr) {
+    for (int i = 0; i < N; ++i) tsdf[i] = 0.0f;
+  } else {
+    for (int i = 0; i < N; ++i) tsdf[i] = vb->tsdf[src + i];
   }
 }
 
-void FillCache(const VoxelBlockMap& map, const int32_t nbr[27], const TsdfOptions& o, BlockCache* c) {
+void FillCache(const VoxelBlockMap& map, const TsdfVolume::RowMasks* masks, const int32_t nbr[27], BlockCache* c) {
   // Per axis, the three ranges of cache coordinates and where they come from:
   // cache coords [from, to], neighbour offset, local coordinate of `from`.
   struct Span {
     int from, to, block, local0;
   };
   static constexpr Span kSpans[3] = {{-1, -1, -1, kBlockSide - 1}, {0, kBlockSide - 1, 0, 0}, {kBlockSide, kBlockSide + 1, 1, 0}};
+  static constexpr TsdfVolume::RowMasks kNone{};
   const VoxelBlock* blocks[27];
-  for (int i = 0; i < 27; ++i) blocks[i] = nbr[i] >= 0 ? &map.block(nbr[i]) : nullptr;
+  const TsdfVolume::RowMasks* row_masks[27];
+  for (int i = 0; i < 27; ++i) {
+    blocks[i] = nbr[i] >= 0 ? &map.block(nbr[i]) : nullptr;
+    row_masks[i] = nbr[i] >= 0 ? &masks[nbr[i]] : &kNone;
+  }
   for (const Span& sz : kSpans) {
     for (int z = sz.from; z <= sz.to; ++z) {
       const int lz = sz.local0 + (z - sz.from);
       for (const Span& sy : kSpans) {
         for (int y = sy.from; y <= sy.to; ++y) {
           const int ly = sy.local0 + (y - sy.from);
-          const int row = kBlockSide * (ly + kBlockSide * lz);
+          const int r8 = ly + kBlockSide * lz;
+          const int row = kBlockSide * r8;
           const int dst = CacheIndex(-1, y, z);
-          CopyRow<1>(blocks[NeighbourIndex(-1, sy.block, sz.block)], row + kBlockSide - 1, c->tsdf + dst, c->weight + dst);
-          CopyRow<kBlockSide>(blocks[NeighbourIndex(0, sy.block, sz.block)], row, c->tsdf + dst + 1, c->weight + dst + 1);
-          CopyRow<2>(blocks[NeighbourIndex(1, sy.block, sz.block)], row, c->tsdf + dst + 1 + kBlockSide,
-                     c->weight + dst + 1 + kBlockSide);
+          const int lo = NeighbourIndex(-1, sy.block, sz.block), mid = NeighbourIndex(0, sy.block, sz.block),
+                    hi = NeighbourIndex(1, sy.block, sz.block);
+          CopyRow<1>(blocks[lo], row + kBlockSide - 1, c->tsdf + dst);
+          CopyRow<kBlockSide>(blocks[mid], row, c->tsdf + dst + 1);
+          CopyRow<2>(blocks[hi], row, c->tsdf + dst + 1 + kBlockSide);
+          // Bit x + 1 of the cache row = voxel x ∈ −1..9.
+          auto assemble = [&](int kind) {
+            return static_cast<uint16_t>((row_masks[lo]->bits[kind][r8] >> (kBlockSide - 1)) |
+                                         row_masks[mid]->bits[kind][r8] << 1 |
+                                         (row_masks[hi]->bits[kind][r8] & 3u) << (kBlockSide + 1));
+          };
+          const int r = RowIndex(y, z);
+          c->ok[r] = assemble(TsdfVolume::RowMasks::kOk);
+          c->neg[r] = assemble(TsdfVolume::RowMasks::kNeg);
+          c->seen[r] = assemble(TsdfVolume::RowMasks::kSeen);
         }
       }
     }
-  }
-  // Tsdf 1 = free space beyond the truncation band in every view.
-  const float max_tsdf = o.skip_truncated_cubes ? kTsdfBandLimit : 2.0f;
-  for (int r = 0; r < kCacheRows; ++r) {
-    const float* t = c->tsdf + kCacheSide * r;
-    const float* w = c->weight + kCacheSide * r;
-    unsigned ok = 0, neg = 0;
-    for (int x = 0; x < kCacheSide; ++x) {
-      ok |= static_cast<unsigned>(w[x] >= o.min_weight && t[x] < max_tsdf) << x;
-      neg |= static_cast<unsigned>(t[x] < 0.0f) << x;
-    }
-    c->ok[r] = static_cast<uint16_t>(ok);
-    c->neg[r] = static_cast<uint16_t>(neg);
   }
   // All eight corners usable, separably: pairs along x, then y and z.
   constexpr unsigned kCubeBits = (1u << (kBlockSide + 1)) - 1;  // origins x = −1..7
@@ -265,13 +304,18 @@ inline Eigen::Vector3f Gradient(const BlockCache& c, int x, int y, int z) {
   const int i = CacheIndex(x, y, z);
   static constexpr int kStride[3] = {1, kCacheSide, kCacheSide * kCacheSide};
   const float t0 = c.tsdf[i];
+  const unsigned row = c.seen[RowIndex(y, z)];
+  // Observed flags of the +/− neighbour on each axis.
+  const bool p[3] = {((row >> (x + 2)) & 1) != 0, ((c.seen[RowIndex(y + 1, z)] >> (x + 1)) & 1) != 0,
+                     ((c.seen[RowIndex(y, z + 1)] >> (x + 1)) & 1) != 0};
+  const bool m[3] = {((row >> x) & 1) != 0, ((c.seen[RowIndex(y - 1, z)] >> (x + 1)) & 1) != 0,
+                     ((c.seen[RowIndex(y, z - 1)] >> (x + 1)) & 1) != 0};
   Eigen::Vector3f g;
   for (int a = 0; a < 3; ++a) {
     const int ip = i + kStride[a], im = i - kStride[a];
-    const bool p = c.weight[ip] > 0, m = c.weight[im] > 0;
     // Branch-free form of: both → ½(t+ − t−), one side → one-sided, none → 0.
-    const float d = (p ? c.tsdf[ip] : t0) - (m ? c.tsdf[im] : t0);
-    g[a] = p && m ? 0.5f * d : d;
+    const float d = (p[a] ? c.tsdf[ip] : t0) - (m[a] ? c.tsdf[im] : t0);
+    g[a] = p[a] && m[a] ? 0.5f * d : d;
   }
   return g;
 }
@@ -315,10 +359,19 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   const uint8_t both = kBlockHasNegative | positive;
   std::vector<size_t> thread_mesh_blocks(static_cast<size_t>(threads), 0);
 
+  // Pass 0 (per block, in parallel): row bit masks of every block.
+  if (s.row_masks.size() < nb) s.row_masks.resize(nb);
+  const float max_tsdf = options_.skip_truncated_cubes ? kTsdfBandLimit : 2.0f;  // 1 = beyond the band in every view
+  const size_t num_tasks = (nb + 7) / 8;
+  s.pool.Run(num_tasks, [&](size_t task, int) {
+    const size_t end = std::min(nb, (task + 1) * 8);
+    for (size_t bi = task * 8; bi < end; ++bi)
+      ComputeRowMasks(blocks_.block(static_cast<int32_t>(bi)), options_.min_weight, max_tsdf, &s.row_masks[bi]);
+  });
+
   // Pass 1 (per block, in parallel): vertices on the block's own edges
   // (edges starting at its voxels, along +x, +y, +z) and triangles of its own
   // cubes (origins at its voxels), the latter as (block, edge) references.
-  const size_t num_tasks = (nb + 7) / 8;
   s.pool.Run(num_tasks, [&](size_t task, int thread) {
     BlockCache cache;
     auto& verts = s.thread_vertices[static_cast<size_t>(thread)];
@@ -348,7 +401,7 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx)
             if (dx < 0 || dy < 0 || dz < 0) nbr[NeighbourIndex(dx, dy, dz)] = blocks_.Find({bc.x + dx, bc.y + dy, bc.z + dz});
-      FillCache(blocks_, nbr, options_, &cache);
+      FillCache(blocks_, s.row_masks.data(), nbr, &cache);
 
       // Owned edges.
       uint16_t* edge_vertex = s.edge_vertex.data() + bi * kEdgesPerBlock;

@@ -123,6 +123,7 @@ class TsdfVolume {
  // Implementation details, defined in tsdf_internal.h.
   struct PodView;
   struct Scratch;
+  struct RowMasks;
 
  private:
 

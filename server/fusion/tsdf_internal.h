@@ -55,6 +55,12 @@ inline constexpr int kTileSide = 4;
 inline constexpr float kTsdfBandLimit = 0.999f;
 inline constexpr int kEdgesPerBlock = 3 * kBlockVoxels;
 
+// Per voxel row (j + 8·k) of a block, bit i = voxel i of the row (meshing).
+struct TsdfVolume::RowMasks {
+  enum Kind { kOk = 0, kNeg = 1, kSeen = 2 };  // usable as a cube corner; tsdf < 0; weight > 0
+  uint8_t bits[3][kBlockSide * kBlockSide];
+};
+
 struct TsdfVolume::Scratch {
   explicit Scratch(int threads) : pool(threads) {}
   WorkerPool pool;
@@ -91,6 +97,7 @@ struct TsdfVolume::Scratch {
   std::vector<BlockOutput> block_output;
   std::vector<uint16_t> edge_vertex;  // per block and owned edge: local vertex index
   std::vector<int32_t> mesh_blocks;   // blocks that may hold a surface
+  std::vector<RowMasks> row_masks;    // per block
 };
 
 }  // namespace holo
