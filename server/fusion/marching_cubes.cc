@@ -353,6 +353,7 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   s.block_output.assign(nb, {});
   if (s.edge_vertex.size() < nb * kEdgesPerBlock) s.edge_vertex.resize(nb * kEdgesPerBlock);
   const float voxel = options_.voxel_size;
+  const bool with_color = options_.integrate_color;
   // A usable cube needs a negative corner and a nonnegative one; with
   // skip_truncated_cubes the latter must lie inside the band (< 0.999).
   const uint8_t positive = options_.skip_truncated_cubes ? kBlockHasPositiveInBand : kBlockHasPositive;
@@ -442,6 +443,11 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
               Eigen::Vector3f n = (1.0f - f) * Gradient(cache, x, y, z) + f * Gradient(cache, xyz1[0], xyz1[1], xyz1[2]);
               const float len = n.norm();
               mv.normal = len > 1e-12f ? Eigen::Vector3f(n / len) : Eigen::Vector3f::UnitZ();
+              edge_vertex[3 * v + a] = static_cast<uint16_t>(local++);
+              if (!with_color) {
+                verts.push_back(mv);
+                continue;
+              }
               // Colour: the two end voxels (the second may be in a neighbour).
               const VoxelBlock& vb0 = blocks_.block(b);
               int32_t b1i = b;
@@ -458,7 +464,6 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
                 return static_cast<uint8_t>((1.0f - f) * static_cast<float>(c0) + f * static_cast<float>(c1) + 0.5f);
               };
               mv.color = {mix(vb0.r[v], vb1.r[v1]), mix(vb0.g[v], vb1.g[v1]), mix(vb0.b[v], vb1.b[v1])};
-              edge_vertex[3 * v + a] = static_cast<uint16_t>(local++);
               verts.push_back(mv);
             }
           }
@@ -525,7 +530,7 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
   }
   out->positions.resize(num_vertices);
   out->normals.resize(num_vertices);
-  out->colors.resize(num_vertices);
+  if (with_color) out->colors.resize(num_vertices);
   out->triangles.resize(num_tris);
 
   // Pass 2 (per block, in parallel): copy vertices.
@@ -539,7 +544,7 @@ void TsdfVolume::ExtractMesh(Mesh* out) const {
         const Scratch::MeshVertex& mv = verts[bo.vertex_begin + i];
         out->positions[bo.vertex_base + i] = mv.position;
         out->normals[bo.vertex_base + i] = mv.normal;
-        out->colors[bo.vertex_base + i] = mv.color;
+        if (with_color) out->colors[bo.vertex_base + i] = mv.color;
       }
     }
   });

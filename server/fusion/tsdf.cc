@@ -253,7 +253,10 @@ struct alignas(16) BlockAccumulator {
   float weight[kBlockVoxels];
   float color_weight[kBlockVoxels];
   float r[kBlockVoxels], g[kBlockVoxels], b[kBlockVoxels];
-  void Clear() { std::memset(static_cast<void*>(this), 0, sizeof(*this)); }
+  void Clear(bool with_color) {
+    // tsdf and weight come first: without colour only they are used.
+    std::memset(static_cast<void*>(this), 0, with_color ? sizeof(*this) : 2 * sizeof(tsdf));
+  }
 };
 
 inline void AddColor(BlockAccumulator* acc, int idx, const uint8_t* c) {
@@ -320,7 +323,7 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
         const int idx = row + i;
         acc->tsdf[idx] += std::min(1.0f, sdf * inv_trunc);
         acc->weight[idx] += 1.0f;
-        if (sdf >= trunc) continue;
+        if (sdf >= trunc || !v.with_color) continue;
         const uint8_t* c = kRegistered ? v.color + 3 * pixel : NonRegisteredColor(v, p);
         if (c) AddColor(acc, idx, c);
       }
@@ -381,6 +384,7 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
         float* aw = acc->weight + row + half;
         _mm_store_ps(at, _mm_add_ps(_mm_load_ps(at), _mm_and_ps(upd, t)));
         _mm_store_ps(aw, _mm_add_ps(_mm_load_ps(aw), _mm_and_ps(upd, one)));
+        if (!v.with_color) continue;
         const int near_bits = upd_bits & _mm_movemask_ps(_mm_cmplt_ps(sdf, pos_trunc));
         for (int l = 0; l < 4; ++l)
           if ((near_bits >> l) & 1) AddColor(acc, row + half + l, v.color + 3 * static_cast<size_t>(pix[l]));
@@ -395,6 +399,7 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
 // depth), chosen at run time when the CPU has it. The same operations in the
 // same order as the SSE2 path (no FMA), so both give bit-identical volumes.
 // A 4³ sub-block is handled two rows per vector.
+template <bool kColor>
 __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin,
                                                        float voxel, float trunc, const SubBox& box,
                                                        BlockAccumulator* acc) {
@@ -446,6 +451,7 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
       };
       add(acc->tsdf, t);
       add(acc->weight, wt);
+      if constexpr (!kColor) continue;
       const __m256 near = _mm256_and_ps(upd, _mm256_cmp_ps(sdf, pos_trunc, _CMP_LT_OQ));
       if (_mm256_movemask_ps(near) == 0) continue;
       const __m256i rgb = _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), reinterpret_cast<const int*>(v.color_words),
@@ -630,8 +636,11 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
                  s.views[k].tiles_y);
     s.views[k].depth = s.masked_depth[k].data();
     s.views[k].color_words = nullptr;
+    s.views[k].avx2 = false;
+    s.views[k].with_color = options_.integrate_color;
 #if defined(HOLO_FUSION_AVX2)
-    if (use_avx2 && s.views[k].registered && !s.views[k].distorted) {
+    s.views[k].avx2 = use_avx2 && s.views[k].registered && !s.views[k].distorted;
+    if (s.views[k].avx2 && options_.integrate_color) {
       const size_t n = static_cast<size_t>(s.views[k].width) * s.views[k].height;
       std::vector<uint32_t>& words = s.color_words[k];
       words.resize(n);
@@ -700,6 +709,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   s.thread_free.assign(static_cast<size_t>(threads), 0);
   s.thread_subs.assign(static_cast<size_t>(threads), 0);
   const size_t num_tasks = (s.active.size() + kBlocksPerTask - 1) / kBlocksPerTask;
+  const bool with_color = options_.integrate_color;
   s.pool.Run(num_tasks, [&](size_t task, int thread) {
     BlockAccumulator acc;
     BlockLattice lattice;
@@ -709,12 +719,13 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
       const BlockCoord& bc = blocks_.coord(b);
       const Eigen::Vector3f lo = Eigen::Vector3f(static_cast<float>(bc.x), static_cast<float>(bc.y),
                                                  static_cast<float>(bc.z)) * (voxel * kBlockSide);
-      acc.Clear();
+      acc.Clear(with_color);
       for (const PodView& v : s.views) {
         auto project = [&](const SubBox& box) {
 #if defined(HOLO_FUSION_AVX2)
-          if (v.color_words && !v.edge) {
-            IntegrateViewAvx2(v, lo, voxel, trunc, box, &acc);
+          if (v.avx2 && !v.edge) {
+            if (with_color) IntegrateViewAvx2<true>(v, lo, voxel, trunc, box, &acc);
+            else IntegrateViewAvx2<false>(v, lo, voxel, trunc, box, &acc);
             return;
           }
 #endif
@@ -834,7 +845,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
       // Colour, four voxels at a time: the scalar loop below in the same
       // float operations (bit-identical), old colour kept where this frame
       // added none.
-      {
+      if (with_color) {
         const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), half = _mm_set1_ps(0.5f);
         const __m128i zero_i = _mm_setzero_si128();
         uint8_t* channels[3] = {vb.r, vb.g, vb.b};
@@ -865,7 +876,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         }
       }
 #else
-      for (int i = 0; i < kBlockVoxels; ++i) {
+      for (int i = 0; i < kBlockVoxels && with_color; ++i) {
         if (!(acc.color_weight[i] > 0)) continue;
         // This frame's mean colour, with the frame's weight; an unobserved
         // old colour (w_old = 0) is simply replaced.

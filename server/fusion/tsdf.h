@@ -56,6 +56,13 @@ struct TsdfOptions {
   // space beyond the truncation distance (tsdf = +1): such a cube cannot hold
   // the surface, and skipping it removes spurious sheets where views disagree.
   bool skip_truncated_cubes = true;
+  // Per-voxel colour (weighted mean of the pods' colour in the truncation
+  // band) and per-vertex mesh colour interpolated from it. Off: Integrate
+  // fuses geometry only (voxel colours stay 0) and ExtractMesh leaves the
+  // mesh's colours empty — for callers that colour the mesh themselves
+  // (the capture site when its texture stage runs: the texturer replaces
+  // every vertex colour). Geometry and normals are the same either way.
+  bool integrate_color = true;
   // Worker threads; 0 = std::thread::hardware_concurrency().
   int threads = 0;
 

@@ -37,8 +37,10 @@ struct TsdfVolume::PodView {
   std::array<double, 5> color_distortion{};
   const uint8_t* color = nullptr;  // RGB8, cwidth × cheight
   // The colour as one 32-bit word per pixel (R | G << 8 | B << 16), for the
-  // AVX2 gather; only for registered pods on that path (else null).
+  // AVX2 gather; only for registered pods on that path with colour (else null).
   const uint32_t* color_words = nullptr;
+  bool avx2 = false;        // undistorted and registered on an AVX2 CPU: the AVX2 path
+  bool with_color = true;   // accumulate colour (TsdfOptions::integrate_color)
   // Masked depth (mm, 0 = unused) and the maximum of each 8×8 pixel tile.
   const uint16_t* depth = nullptr;
   const uint16_t* tile_max = nullptr;

