@@ -234,16 +234,6 @@ void ComputeRowMasks(const VoxelBlock& vb, float min_weight, float max_tsdf, Tsd
 #endif
 }
 
-// Copies `N` tsdf values (compile-time count, so no library call) of a row.
-template <int N>
-inline void CopyRow(const VoxelBlock* vb, int src, float* tsdf) {
-  if (vb == nullptr) {
-    for (int i = 0; i < N; ++i) tsdf[i] = 0.0f;
-  } else {
-    for (int i = 0; i < N; ++i) tsdf[i] = vb->tsdf[src + i];
-  }
-}
-
 void FillCache(const VoxelBlockMap& map, const TsdfVolume::RowMasks* masks, const int32_t nbr[27], BlockCache* c) {
   // Per axis, the three ranges of cache coordinates and where they come from:
   // cache coords [from, to], neighbour offset, local coordinate of `from`.
@@ -251,32 +241,37 @@ void FillCache(const VoxelBlockMap& map, const TsdfVolume::RowMasks* masks, cons
     int from, to, block, local0;
   };
   static constexpr Span kSpans[3] = {{-1, -1, -1, kBlockSide - 1}, {0, kBlockSide - 1, 0, 0}, {kBlockSide, kBlockSide + 1, 1, 0}};
+  // Missing neighbours read as an all-zero block (tsdf 0, never observed).
+  static const VoxelBlock kZeroBlock{};
   static constexpr TsdfVolume::RowMasks kNone{};
-  const VoxelBlock* blocks[27];
+  const float* tsdf[27];
   const TsdfVolume::RowMasks* row_masks[27];
   for (int i = 0; i < 27; ++i) {
-    blocks[i] = nbr[i] >= 0 ? &map.block(nbr[i]) : nullptr;
+    tsdf[i] = nbr[i] >= 0 ? map.block(nbr[i]).tsdf : kZeroBlock.tsdf;
     row_masks[i] = nbr[i] >= 0 ? &masks[nbr[i]] : &kNone;
   }
   for (const Span& sz : kSpans) {
-    for (int z = sz.from; z <= sz.to; ++z) {
-      const int lz = sz.local0 + (z - sz.from);
-      for (const Span& sy : kSpans) {
+    for (const Span& sy : kSpans) {
+      // The three blocks along x of this (y, z) span.
+      const int lo = NeighbourIndex(-1, sy.block, sz.block), mid = NeighbourIndex(0, sy.block, sz.block),
+                hi = NeighbourIndex(1, sy.block, sz.block);
+      const float *t_lo = tsdf[lo], *t_mid = tsdf[mid], *t_hi = tsdf[hi];
+      const TsdfVolume::RowMasks &m_lo = *row_masks[lo], &m_mid = *row_masks[mid], &m_hi = *row_masks[hi];
+      for (int z = sz.from; z <= sz.to; ++z) {
+        const int lz = sz.local0 + (z - sz.from);
         for (int y = sy.from; y <= sy.to; ++y) {
           const int ly = sy.local0 + (y - sy.from);
           const int r8 = ly + kBlockSide * lz;
           const int row = kBlockSide * r8;
-          const int dst = CacheIndex(-1, y, z);
-          const int lo = NeighbourIndex(-1, sy.block, sz.block), mid = NeighbourIndex(0, sy.block, sz.block),
-                    hi = NeighbourIndex(1, sy.block, sz.block);
-          CopyRow<1>(blocks[lo], row + kBlockSide - 1, c->tsdf + dst);
-          CopyRow<kBlockSide>(blocks[mid], row, c->tsdf + dst + 1);
-          CopyRow<2>(blocks[hi], row, c->tsdf + dst + 1 + kBlockSide);
+          float* dst = c->tsdf + CacheIndex(-1, y, z);
+          dst[0] = t_lo[row + kBlockSide - 1];
+          std::memcpy(dst + 1, t_mid + row, kBlockSide * sizeof(float));
+          dst[kBlockSide + 1] = t_hi[row];
+          dst[kBlockSide + 2] = t_hi[row + 1];
           // Bit x + 1 of the cache row = voxel x ∈ −1..9.
           auto assemble = [&](int kind) {
-            return static_cast<uint16_t>((row_masks[lo]->bits[kind][r8] >> (kBlockSide - 1)) |
-                                         row_masks[mid]->bits[kind][r8] << 1 |
-                                         (row_masks[hi]->bits[kind][r8] & 3u) << (kBlockSide + 1));
+            return static_cast<uint16_t>((m_lo.bits[kind][r8] >> (kBlockSide - 1)) | m_mid.bits[kind][r8] << 1 |
+                                         (m_hi.bits[kind][r8] & 3u) << (kBlockSide + 1));
           };
           const int r = RowIndex(y, z);
           c->ok[r] = assemble(TsdfVolume::RowMasks::kOk);
