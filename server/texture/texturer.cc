@@ -560,6 +560,25 @@ void Texturer::BuildAdjacency(const Mesh& mesh) {
     }
 }
 
+void Texturer::BuildUnsetAdjacency(const Mesh& mesh) {
+  adjacency_built_ = false;  // the lists are partial: BuildAdjacency must rebuild them
+  const size_t n = mesh.num_vertices();
+  adj_offsets_.assign(n + 1, 0);
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k)
+      if (state_[t[k]] == kUnset) adj_offsets_[t[k] + 1] += 2;
+  for (size_t v = 0; v < n; ++v) adj_offsets_[v + 1] += adj_offsets_[v];
+  adj_.resize(adj_offsets_[n]);
+  cluster_count_.assign(adj_offsets_.begin(), adj_offsets_.end() - 1);
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t a = t[k];
+      if (state_[a] != kUnset) continue;
+      adj_[cluster_count_[a]++] = t[(k + 1) % 3];
+      adj_[cluster_count_[a]++] = t[(k + 2) % 3];
+    }
+}
+
 void Texturer::FillUnobserved(const RgbdFrameSet& frames, Mesh* mesh, const std::vector<Vector3f>& normals) {
   const size_t n = mesh->num_vertices();
   frontier_.clear();
@@ -567,7 +586,7 @@ void Texturer::FillUnobserved(const RgbdFrameSet& frames, Mesh* mesh, const std:
     if (state_[v] == kUnset) frontier_.push_back(static_cast<uint32_t>(v));
   if (frontier_.empty()) return;
 
-  BuildAdjacency(*mesh);
+  BuildUnsetAdjacency(*mesh);
   // Rounds of neighbour averaging, Jacobi style (a vertex filled in this
   // round is not used before the next), so the result is order-independent.
   for (int it = 0; it < options_.fill_iterations && !frontier_.empty(); ++it) {

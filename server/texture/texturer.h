@@ -161,6 +161,10 @@ class Texturer {
   // Colours of `mesh` from coarse_'s colours.
   void TransferColors(Mesh* mesh);
   void BuildAdjacency(const Mesh& mesh);
+  // The same lists, but only for vertices whose state_ is kUnset (the only
+  // ones FillUnobserved reads; the others get empty lists). Same neighbour
+  // order per vertex as BuildAdjacency.
+  void BuildUnsetAdjacency(const Mesh& mesh);
 
   Rig rig_;
   TextureOptions options_;
