@@ -40,6 +40,7 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(hull_weight, "hull_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(rotation_weight, "rotation_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(regularization_weight, "regularization_weight"));
+  if (data_window_px < 0 || data_window_px > 16) return InvalidArgument("data_window_px must be in [0, 16]");
   if (rigid_iterations < 0 || rigid_iterations > 100) return InvalidArgument("rigid_iterations must be in [0, 100]");
   if (iterations < 0 || iterations > 100) return InvalidArgument("iterations must be in [0, 100]");
   if (!(association_max_m > 0)) return InvalidArgument("association_max_m must be > 0");
@@ -65,6 +66,7 @@ struct PodFrame {
   bool has_silhouette = false;  // mask with some foreground: the hull applies
   bool distorted = false;
   int width = 0, height = 0;
+  int window = 0;  // half-size of the data term's depth window (pixels)
   float fx = 0, fy = 0, cx = 0, cy = 0;
   Matrix3f r_cw;  // camera_from_world
   Vector3f t_cw;
@@ -274,14 +276,14 @@ struct NonrigidTracker::Impl {
   std::vector<Vec12> rhs, x, r, z, p, q;
   std::vector<Eigen::Matrix<double, 12, 12>, Eigen::aligned_allocator<Mat12>> precond;
 
-  Status Prepare(const Rig& rig, const RgbdFrameSet& frames);
+  Status Prepare(const Rig& rig, const RgbdFrameSet& frames, int data_window_px);
   void WarpPoints(const DeformationGraph& graph, const std::vector<Vector3f>& points,
                   const std::vector<Vector3f>& normals);
   void Associate(const TrackerOptions& o, size_t n);
   void AssociatePoint(const TrackerOptions& o, size_t i, PointLin* out) const;
 };
 
-Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames) {
+Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames, int data_window_px) {
   if (frames.frames.size() != rig.pods.size())
     return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
                            std::to_string(rig.pods.size()));
@@ -308,6 +310,7 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
     pod.cx = static_cast<float>(cal.depth.cx);
     pod.cy = static_cast<float>(cal.depth.cy);
     pod.distorted = cal.depth.HasDistortion();
+    pod.window = data_window_px;
     pod.camera = cal.DepthCamera();
     pod.r_wc = cal.world_from_depth.linear();
     pod.center = cal.world_from_depth.translation();
@@ -414,7 +417,32 @@ void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, Po
       if (zmin > pc.z() + o.association_max_m) out->violated = true;
       continue;
     }
-    const Vector3f qc((ui - pod.cx) * z / pod.fx, (vi - pod.cy) * z / pod.fy, z);
+    // The observed point: the mean of the window's depth pixels within the
+    // association distance of the warped point (per-pixel sensor noise is
+    // independent, so this averages it down; on a plane the mean of the
+    // back-projected pixels lies on the plane).
+    Vector3f qc((ui - pod.cx) * z / pod.fx, (vi - pod.cy) * z / pod.fy, z);
+    if (pod.window > 0) {
+      float su = 0, sv = 0, sz = 0;
+      int cnt = 0;
+      const int x0 = std::max(0, ui - pod.window), x1 = std::min(pod.width - 1, ui + pod.window);
+      const int y0 = std::max(0, vi - pod.window), y1 = std::min(pod.height - 1, vi + pod.window);
+      for (int y = y0; y <= y1; ++y) {
+        const float* row = pod.depth.data() + static_cast<size_t>(y) * pod.width;
+        for (int x = x0; x <= x1; ++x) {
+          const float zn = row[x];
+          if (zn <= 0 || std::abs(zn - pc.z()) > o.association_max_m) continue;
+          su += static_cast<float>(x) * zn;
+          sv += static_cast<float>(y) * zn;
+          sz += zn;
+          ++cnt;
+        }
+      }
+      if (cnt > 1) {
+        const float inv = 1.0f / static_cast<float>(cnt);
+        qc = Vector3f((su * inv - pod.cx * sz * inv) / pod.fx, (sv * inv - pod.cy * sz * inv) / pod.fy, sz * inv);
+      }
+    }
     const Vector3f q = pod.r_wc * qc + pod.center;
     if ((q - pw).squaredNorm() > o.association_max_m * o.association_max_m) continue;
     const double r = nw.dot(pw - q);
@@ -463,7 +491,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     return InvalidArgument("tracker: " + std::to_string(points.size()) + " points but " +
                            std::to_string(normals.size()) + " normals");
   Impl& m = *impl_;
-  HOLO_RETURN_IF_ERROR(m.Prepare(rig, frames));
+  HOLO_RETURN_IF_ERROR(m.Prepare(rig, frames, options_.data_window_px));
   const size_t n = points.size();
   const size_t num_nodes = graph->num_nodes();
   result->num_points = n;

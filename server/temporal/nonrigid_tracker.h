@@ -71,6 +71,13 @@ struct TrackerOptions {
   // Projective association: a depth point farther than this from the warped
   // model point is not a correspondence (metres).
   float association_max_m = 0.04f;
+  // The data term's observed point is the mean of the masked depth pixels in
+  // a (2r+1)² window around the projection that lie within
+  // association_max_m of the warped point (the sensor noise is per pixel, so
+  // this averages it down without blurring across depth edges). r in
+  // pixels; 0 = the single pixel. Measured (docs/temporal.md): r = 1 beats
+  // 0 and 2 on S8-VGA, and r = 1 on S8-QVGA.
+  int data_window_px = 1;
   // Huber threshold of the data term (metres) and of the hull term.
   float huber_m = 0.008f;
   float hull_huber_m = 0.02f;

@@ -57,6 +57,12 @@ struct TemporalFusionOptions {
   float max_weight = 30.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
+  // At least this many model points per graph node (more points are taken
+  // when the graph has more nodes than track_points / this, e.g. two people
+  // and a crate at S8-VGA): with too few data residuals per node (12
+  // parameters each) the tracker fits the sensor noise (docs/temporal.md).
+  // 0 = off.
+  float min_points_per_node = 7.0f;
   // Start each node at the displacement of the nearest node of the last
   // tracked frame (constant-velocity prediction).
   bool predict_motion = true;
