@@ -50,6 +50,7 @@ struct Extra {
   int drop_pod = 1;
   int drop_from = 10;
   bool predict = true;
+  int parallel_pcg = -1;
   bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
   bool ok = true;
 };
@@ -77,6 +78,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
+    else if (extra[i] == "--parallel-pcg") a.parallel_pcg = std::atoi(value().c_str());
     else if (extra[i] == "--still") a.still = true;
     else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
     else if (extra[i] == "--data-window") a.data_window = std::atoi(value().c_str());
@@ -87,7 +89,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
       std::fprintf(stderr,
                    "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
                    "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
-                   "--fail-residual-mm R, --no-predict, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
+                   "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
                    "--drop-pod K (-1 = none), --drop-from F\n",
                    extra[i].c_str());
       a.ok = false;
@@ -246,6 +248,7 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
+  if (extra.parallel_pcg >= 0) base.tracker.parallel_pcg = extra.parallel_pcg != 0;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
   if (extra.data_window >= 0) base.tracker.data_window_px = extra.data_window;
   if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
@@ -351,10 +354,10 @@ int RunTemporal(const BenchArgs& args) {
         runs[1].exclusive.push_back(FractionWithin(runs[1].mesh, exclusive, 0.01f));
       }
       if (std::getenv("HOLO_TEMPORAL_VERBOSE") && st.tracked)
-        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu\n",
+        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d it %d step %.2f mm) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu\n",
                      run.mode.c_str(), f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
                      st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
-                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations,
+                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations, st.track.iterations, st.track.last_step_m * 1000,
                      st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks);
       run.tracked += st.tracked;
       run.nodes += st.nodes;

@@ -287,22 +287,31 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
   if (frames.frames.size() != rig.pods.size())
     return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
                            std::to_string(rig.pods.size()));
-  pods.resize(rig.pods.size());
+  // Validate every pod first (state unchanged on error), then prepare the
+  // pods in parallel (depth conversion and the silhouette distance transform).
   for (size_t i = 0; i < rig.pods.size(); ++i) {
     const PodCalibration& cal = rig.pods[i];
     const RgbdFrame& f = frames.frames[i];
-    PodFrame& pod = pods[i];
-    pod.usable = false;
-    pod.has_silhouette = false;
     const int w = cal.depth.width, h = cal.depth.height;
     if (f.depth.empty()) continue;  // no data from this pod
     if (f.depth.width() != w || f.depth.height() != h)
       return InvalidArgument("pod " + std::to_string(i) + " (" + cal.name + "): depth image is " +
                              std::to_string(f.depth.width()) + "x" + std::to_string(f.depth.height()) +
                              " but the rig says " + std::to_string(w) + "x" + std::to_string(h));
-    const bool has_mask = !f.mask.empty();
-    if (has_mask && (f.mask.width() != w || f.mask.height() != h))
+    if (!f.mask.empty() && (f.mask.width() != w || f.mask.height() != h))
       return InvalidArgument("pod " + std::to_string(i) + " (" + cal.name + "): mask size differs from the depth image");
+  }
+  pods.resize(rig.pods.size());
+  pool.ParallelFor(static_cast<int>(rig.pods.size()), [&](int pi) {
+    const size_t i = static_cast<size_t>(pi);
+    const PodCalibration& cal = rig.pods[i];
+    const RgbdFrame& f = frames.frames[i];
+    PodFrame& pod = pods[i];
+    pod.usable = false;
+    pod.has_silhouette = false;
+    const int w = cal.depth.width, h = cal.depth.height;
+    if (f.depth.empty()) return;
+    const bool has_mask = !f.mask.empty();
     pod.width = w;
     pod.height = h;
     pod.fx = static_cast<float>(cal.depth.fx);
@@ -337,7 +346,7 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
       }
       cv::distanceTransform(pod.outside, pod.dt, cv::DIST_L2, 3);
     }
-  }
+  });
   return OkStatus();
 }
 
@@ -819,18 +828,40 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
           }
       });
     };
-    // PCG.
+    // PCG. Per-node vector work (updates, preconditioner) runs per task
+    // with per-task partial dot products summed in task order, so the result
+    // does not depend on the thread count.
     m.x.assign(num_nodes, Vec12::Zero());
     m.r = m.rhs;
     m.z.resize(num_nodes);
     m.q.resize(num_nodes);
-    double rz = 0, b_norm = 0;
-    for (size_t k = 0; k < num_nodes; ++k) {
-      m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
-      rz += m.r[k].dot(m.z[k]);
-      b_norm += m.rhs[k].squaredNorm();
-    }
-    m.p = m.z;
+    m.p.resize(num_nodes);
+    std::vector<double> part_a(num_tasks), part_b(num_tasks);
+    auto run_tasks = [&](auto&& fn) {
+      if (o.parallel_pcg) {
+        m.pool.ParallelFor(static_cast<int>(num_tasks), fn);
+      } else {
+        for (size_t t = 0; t < num_tasks; ++t) fn(static_cast<int>(t));
+      }
+    };
+    auto sum = [&](const std::vector<double>& v) {
+      double acc = 0;
+      for (double x : v) acc += x;
+      return acc;
+    };
+    run_tasks([&](int task) {
+      double rz_t = 0, b_t = 0;
+      for (size_t k = m.row_begin[static_cast<size_t>(task)]; k < m.row_begin[static_cast<size_t>(task) + 1]; ++k) {
+        m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
+        m.p[k] = m.z[k];
+        rz_t += m.r[k].dot(m.z[k]);
+        b_t += m.rhs[k].squaredNorm();
+      }
+      part_a[static_cast<size_t>(task)] = rz_t;
+      part_b[static_cast<size_t>(task)] = b_t;
+    });
+    double rz = sum(part_a);
+    const double b_norm = sum(part_b);
     const double tol2 = o.pcg_relative_tolerance * o.pcg_relative_tolerance * b_norm;
     for (int pit = 0; pit < o.pcg_max_iterations && b_norm > 0; ++pit) {
       product(m.p, &m.q);
@@ -838,33 +869,43 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
       for (size_t k = 0; k < num_nodes; ++k) pq += m.p[k].dot(m.q[k]);
       if (!(pq > 0)) break;
       const double alpha = rz / pq;
-      double rr = 0;
-      for (size_t k = 0; k < num_nodes; ++k) {
-        m.x[k] += alpha * m.p[k];
-        m.r[k] -= alpha * m.q[k];
-        rr += m.r[k].squaredNorm();
-      }
+      run_tasks([&](int task) {
+        double rr_t = 0, rz_t = 0;
+        for (size_t k = m.row_begin[static_cast<size_t>(task)]; k < m.row_begin[static_cast<size_t>(task) + 1]; ++k) {
+          m.x[k] += alpha * m.p[k];
+          m.r[k] -= alpha * m.q[k];
+          rr_t += m.r[k].squaredNorm();
+          m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
+          rz_t += m.r[k].dot(m.z[k]);
+        }
+        part_a[static_cast<size_t>(task)] = rr_t;
+        part_b[static_cast<size_t>(task)] = rz_t;
+      });
+      const double rr = sum(part_a);
       ++result->pcg_iterations;
       if (rr < tol2) break;
-      double rz_new = 0;
-      for (size_t k = 0; k < num_nodes; ++k) {
-        m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
-        rz_new += m.r[k].dot(m.z[k]);
-      }
+      const double rz_new = sum(part_b);
       const double beta = rz_new / rz;
       rz = rz_new;
       for (size_t k = 0; k < num_nodes; ++k) m.p[k] = m.z[k] + beta * m.p[k];
     }
     bool finite = true;
     for (const Vec12& v : m.x) finite = finite && v.allFinite();
+    double step = 0;  // largest node move of this step: |Δt| + ‖ΔA‖ · spacing
     if (finite) {
+      const double spacing = graph->options().node_spacing_m;
       for (size_t k = 0; k < num_nodes; ++k) {
-        const Vec12 x = NodeParams(*graph, static_cast<int>(k)) + m.x[k];
+        const Vec12& dx = m.x[k];
+        const double dt = Vector3d(dx[3], dx[7], dx[11]).norm();
+        const double da = std::sqrt(dx.squaredNorm() - dt * dt);
+        step = std::max(step, dt + da * spacing);
+        const Vec12 x = NodeParams(*graph, static_cast<int>(k)) + dx;
         SetNodeParams(graph, static_cast<int>(k), x.data());
       }
     }
     result->solve_ms += MsSince(t0);
     ++result->iterations;
+    result->last_step_m = step;
   }
 
   // ---- Judge the final state.

@@ -100,10 +100,11 @@ struct TrackerOptions {
   float fail_affine_scale = 0.25f;      // a singular value of A_k outside [1 − this, 1 / (1 − this)]: torn surface
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
 
-  // Run the PCG product on the worker pool (one hand-off per PCG iteration).
-  // Off by default: on the shared, loaded 2-core machine the ~90 hand-offs
-  // per frame cost more than they saved (docs/temporal.md, "Speed work").
-  bool parallel_pcg = false;
+  // Run the PCG product and the per-node PCG vector work (updates,
+  // block-Jacobi preconditioner) on the worker pool (two hand-offs per PCG
+  // iteration; the result does not depend on it). On by default since the
+  // vector work runs there too (docs/temporal.md, "Speed work, third pass").
+  bool parallel_pcg = true;
   int threads = 2;  // 0 = hardware concurrency
   Status Check() const;
 };
@@ -130,6 +131,7 @@ struct TrackResult {
   // Wall time, ms.
   double rigid_ms = 0, associate_ms = 0, solve_ms = 0, total_ms = 0;
   int pcg_iterations = 0;        // summed over the outer iterations (GN solver)
+  double last_step_m = 0;        // largest node move (|Δt| + ‖ΔA‖·spacing) of the last GN step (GN solver)
 };
 
 class NonrigidTracker {
