@@ -6,6 +6,7 @@
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
 //            --track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W,
 //            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --snap-mm S (still-node snap, 0 = off), --eval-every N (Chamfer every N-th frame),
+//            --sparse 0|1 (colour-feature term), --sparse-weight W, --parallel-pcg 0|1,
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -51,6 +52,8 @@ struct Extra {
   int drop_from = 10;
   bool predict = true;
   int parallel_pcg = -1;
+  int sparse = -1;
+  double sparse_weight = -1;
   bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
   bool ok = true;
 };
@@ -78,6 +81,8 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
+    else if (extra[i] == "--sparse") a.sparse = std::atoi(value().c_str());
+    else if (extra[i] == "--sparse-weight") a.sparse_weight = std::atof(value().c_str());
     else if (extra[i] == "--parallel-pcg") a.parallel_pcg = std::atoi(value().c_str());
     else if (extra[i] == "--still") a.still = true;
     else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
@@ -89,7 +94,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
       std::fprintf(stderr,
                    "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
                    "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
-                   "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
+                   "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --sparse 0|1, --sparse-weight W, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
                    "--drop-pod K (-1 = none), --drop-from F\n",
                    extra[i].c_str());
       a.ok = false;
@@ -248,6 +253,8 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
+  if (extra.sparse >= 0) base.tracker.use_sparse = extra.sparse != 0;
+  if (extra.sparse_weight >= 0) base.tracker.sparse_weight = static_cast<float>(extra.sparse_weight);
   if (extra.parallel_pcg >= 0) base.tracker.parallel_pcg = extra.parallel_pcg != 0;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
   if (extra.data_window >= 0) base.tracker.data_window_px = extra.data_window;
@@ -354,11 +361,12 @@ int RunTemporal(const BenchArgs& args) {
         runs[1].exclusive.push_back(FractionWithin(runs[1].mesh, exclusive, 0.01f));
       }
       if (std::getenv("HOLO_TEMPORAL_VERBOSE") && st.tracked)
-        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d it %d step %.2f mm) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu\n",
+        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d it %d step %.2f mm) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu features %.1f ms %zu pairs rms %.1f mm\n",
                      run.mode.c_str(), f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
                      st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
                      st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations, st.track.iterations, st.track.last_step_m * 1000,
-                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks);
+                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks, st.features_ms,
+                     st.feature_pairs, st.track.sparse_rms_m * 1000);
       run.tracked += st.tracked;
       run.nodes += st.nodes;
       run.failed_nodes += st.failed_nodes;

@@ -40,6 +40,9 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(hull_weight, "hull_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(rotation_weight, "rotation_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(regularization_weight, "regularization_weight"));
+  HOLO_RETURN_IF_ERROR(nonneg(sparse_weight, "sparse_weight"));
+  if (!(sparse_huber_m > 0)) return InvalidArgument("sparse_huber_m must be > 0");
+  if (!(sparse_reject_m > 0)) return InvalidArgument("sparse_reject_m must be > 0");
   if (data_window_px < 0 || data_window_px > 16) return InvalidArgument("data_window_px must be in [0, 16]");
   if (rigid_iterations < 0 || rigid_iterations > 100) return InvalidArgument("rigid_iterations must be in [0, 100]");
   if (iterations < 0 || iterations > 100) return InvalidArgument("iterations must be in [0, 100]");
@@ -260,6 +263,10 @@ struct NonrigidTracker::Impl {
   explicit Impl(int threads) : pool(threads) {}
   WorkerPool pool;
   std::vector<PodFrame> pods;
+  // Model points come first; points from n_model on are sparse feature
+  // points with targets sparse_to[i − n_model].
+  size_t n_model = 0;
+  std::vector<Vector3f> all_points, all_normals, sparse_to;
   std::vector<SkinWeights> skins;
   std::vector<Vector3f> warped, warped_normals;
   std::vector<PointLin> lin;
@@ -371,6 +378,17 @@ void NonrigidTracker::Impl::WarpPoints(const DeformationGraph& graph, const std:
 void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, PointLin* out) const {
   *out = PointLin();
   const Vector3f& pw = warped[i];
+  if (i >= n_model) {
+    // Sparse colour correspondence: point-to-point, Huber on the distance.
+    const Vector3d r = (pw - sparse_to[i - n_model]).cast<double>();
+    if (r.norm() > o.sparse_reject_m) return;  // a wrong match (repeated texture): no term
+    double rho, en;
+    HuberWeight(r.norm(), o.sparse_huber_m, &rho, &en);
+    out->g = o.sparse_weight * rho * Matrix3d::Identity();
+    out->e = o.sparse_weight * rho * r;
+    out->energy = o.sparse_weight * en;
+    return;
+  }
   const Vector3f& nw = warped_normals[i];
   const double sd = o.data_weight, sh = o.hull_weight;
   for (const PodFrame& pod : pods) {
@@ -491,22 +509,42 @@ const float* NonrigidTracker::SilhouetteDistance(size_t pod, int* width, int* he
   return p.dt.ptr<float>(0);
 }
 
-Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Vector3f>& points,
-                              const std::vector<Vector3f>& normals, DeformationGraph* graph, TrackResult* result) {
+Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Vector3f>& model_points,
+                              const std::vector<Vector3f>& model_normals, DeformationGraph* graph, TrackResult* result,
+                              const std::vector<FeatureCorrespondence>* features) {
   const auto t_start = std::chrono::steady_clock::now();
   HOLO_RETURN_IF_ERROR(options_.Check());
   *result = TrackResult();
-  if (points.size() != normals.size())
-    return InvalidArgument("tracker: " + std::to_string(points.size()) + " points but " +
-                           std::to_string(normals.size()) + " normals");
+  if (model_points.size() != model_normals.size())
+    return InvalidArgument("tracker: " + std::to_string(model_points.size()) + " points but " +
+                           std::to_string(model_normals.size()) + " normals");
   Impl& m = *impl_;
   HOLO_RETURN_IF_ERROR(m.Prepare(rig, frames, options_.data_window_px));
-  const size_t n = points.size();
   const size_t num_nodes = graph->num_nodes();
-  result->num_points = n;
+  result->num_points = model_points.size();
   result->nodes.assign(num_nodes, NodeReport());
-  if (n == 0 || num_nodes == 0) return OkStatus();
+  if (model_points.empty() || num_nodes == 0) return OkStatus();
   const TrackerOptions& o = options_;
+  // Points of the solve: the model points, then (sparse term) the previous
+  // frame's ends of the feature correspondences, warped like model points;
+  // their targets are the current frame's ends.
+  m.n_model = model_points.size();
+  m.sparse_to.clear();
+  const bool sparse = o.use_sparse && o.sparse_weight > 0 && features != nullptr && !features->empty();
+  if (sparse) {
+    m.all_points = model_points;
+    m.all_normals = model_normals;
+    for (const FeatureCorrespondence& c : *features) {
+      if (!c.from.allFinite() || !c.to.allFinite()) continue;
+      m.all_points.push_back(c.from);
+      m.all_normals.push_back(Vector3f::Zero());
+      m.sparse_to.push_back(c.to);
+    }
+    result->sparse_pairs = m.sparse_to.size();
+  }
+  const std::vector<Vector3f>& points = sparse ? m.all_points : model_points;
+  const std::vector<Vector3f>& normals = sparse ? m.all_normals : model_normals;
+  const size_t n = points.size();
 
   // Skinning (rest pose, fixed for this call).
   m.skins.resize(n);
@@ -908,15 +946,20 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
     result->last_step_m = step;
   }
 
-  // ---- Judge the final state.
+  // ---- Judge the final state (model points only).
   t0 = std::chrono::steady_clock::now();
   m.WarpPoints(*graph, points, normals);
   m.Associate(o, n);
   result->associate_ms += MsSince(t0);
+  if (sparse) {
+    double s2 = 0;
+    for (size_t i = m.n_model; i < n; ++i) s2 += (m.warped[i] - m.sparse_to[i - m.n_model]).squaredNorm();
+    result->sparse_rms_m = std::sqrt(s2 / static_cast<double>(n - m.n_model));
+  }
   double sq = 0;
   size_t cnt = 0;
   std::vector<float> wres(num_nodes, 0), wcorr(num_nodes, 0);
-  for (size_t i = 0; i < n; ++i) {
+  for (size_t i = 0; i < m.n_model; ++i) {
     const PointLin& l = m.lin[i];
     const SkinWeights& s = m.skins[i];
     if (l.correspondences > 0) ++result->associated_points;

@@ -34,6 +34,7 @@ Status TemporalFusionOptions::Check() const {
   HOLO_RETURN_IF_ERROR(cleanup.Check());
   HOLO_RETURN_IF_ERROR(graph.Check());
   HOLO_RETURN_IF_ERROR(tracker.Check());
+  HOLO_RETURN_IF_ERROR(features.Check());
   if (!(max_weight >= 1.0f && max_weight <= 1e6f))
     return InvalidArgument("max_weight must be in [1, 1e6], got " + std::to_string(max_weight));
   if (track_points < 16 || track_points > 10000000)
@@ -95,12 +96,15 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
   f->reference_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->live_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->tracker_ = std::make_unique<NonrigidTracker>(options.tracker);
+  f->matcher_ = std::make_unique<FeatureMatcher>(options.features);
   f->impl_ = std::make_unique<Impl>(options.tsdf.threads);
   return f;
 }
 
 void TemporalFusion::Reset() {
   has_reference_ = false;
+  prev_fused_ = false;
+  matcher_->Reset();
   prev_node_pos_.clear();
   prev_node_disp_.clear();
   lost_frames_ = 0;
@@ -456,8 +460,22 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   if (frames.frames.size() != rig.pods.size())
     return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
                            std::to_string(rig.pods.size()));
+  // Colour features of this frame, matched to the previous frame's. They
+  // are used only if the previous frame was fused (its observation is then
+  // what the reference shows).
+  const bool use_features = options_.temporal && options_.tracker.use_sparse;
+  pairs_.clear();
+  if (use_features) {
+    const auto tf = std::chrono::steady_clock::now();
+    HOLO_RETURN_IF_ERROR(matcher_->Match(rig, frames, &pairs_));
+    if (!prev_fused_) pairs_.clear();
+    stats->features_ms = MsSince(tf);
+    stats->feature_pairs = pairs_.size();
+  }
+  prev_fused_ = false;
   if (!options_.temporal || !has_reference_) {
     HOLO_RETURN_IF_ERROR(FusePerFrame(rig, frames, live_.get(), out, stats));
+    prev_fused_ = true;
     if (options_.temporal) {
       std::swap(reference_, live_);
       reference_mesh_ = *out;
@@ -508,11 +526,12 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       if (bi >= 0) graph_.translation(static_cast<int>(k)) = prev_node_disp_[static_cast<size_t>(bi)];
     }
   }
-  HOLO_RETURN_IF_ERROR(tracker_->Track(rig, frames, points_, normals_, &graph_, &stats->track));
+  HOLO_RETURN_IF_ERROR(tracker_->Track(rig, frames, points_, normals_, &graph_, &stats->track,
+                                       use_features ? &pairs_ : nullptr));
   stats->tracked = true;
   stats->nodes = static_cast<int>(graph_.num_nodes());
   stats->failed_nodes = stats->track.failed_nodes;
-  stats->track_ms = MsSince(t0);
+  stats->track_ms = MsSince(t0) + stats->features_ms;
 
   const bool lost =
       graph_.num_nodes() == 0 ||
@@ -537,6 +556,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       has_reference_ = !out->empty();
       lost_frames_ = 0;
       stats->full_reset = true;
+      prev_fused_ = true;
     }
     stats->total_ms = MsSince(t_start);
     return OkStatus();
@@ -584,6 +604,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   std::swap(reference_, live_);
   reference_mesh_ = *out;
   has_reference_ = !out->empty();
+  prev_fused_ = true;
   stats->total_ms = MsSince(t_start);
   return OkStatus();
 }
