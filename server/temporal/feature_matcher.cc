@@ -8,6 +8,8 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "common/worker_pool.h"
+
 
 namespace holo {
 
@@ -22,6 +24,7 @@ Status FeatureMatchOptions::Check() const {
     return InvalidArgument("max_motion_m must be in (0, 10), got " + std::to_string(max_motion_m));
   if (depth_window_px < 0 || depth_window_px > 8) return InvalidArgument("depth_window_px must be in [0, 8]");
   if (mask_erode_px < 0 || mask_erode_px > 32) return InvalidArgument("mask_erode_px must be in [0, 32]");
+  if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   return OkStatus();
 }
 
@@ -36,14 +39,16 @@ struct PodFeatures {
 }  // namespace
 
 struct FeatureMatcher::Impl {
-  cv::Ptr<cv::ORB> orb;
+  explicit Impl(int threads) : pool(threads) {}
+  WorkerPool pool;
+  std::vector<cv::Ptr<cv::ORB>> orb;  // one per pod (detectors keep state)
   std::vector<PodFeatures> prev, cur;
   bool has_prev = false;
 };
 
-FeatureMatcher::FeatureMatcher(FeatureMatchOptions options) : options_(options), impl_(std::make_unique<Impl>()) {
+FeatureMatcher::FeatureMatcher(FeatureMatchOptions options) : options_(options) {
   HOLO_CHECK(options_.Check().ok());
-  impl_->orb = cv::ORB::create(options_.max_features_per_pod);
+  impl_ = std::make_unique<Impl>(options_.threads);
 }
 
 FeatureMatcher::~FeatureMatcher() = default;
@@ -62,15 +67,18 @@ Status FeatureMatcher::Match(const Rig& rig, const RgbdFrameSet& frames, std::ve
   m.cur.assign(rig.pods.size(), PodFeatures());
   last_keypoints_ = 0;
   const int r = options_.depth_window_px;
-  for (size_t i = 0; i < rig.pods.size(); ++i) {
+  while (m.orb.size() < rig.pods.size()) m.orb.push_back(cv::ORB::create(options_.max_features_per_pod));
+  // Detection per pod in parallel (each pod writes only its own entry).
+  m.pool.ParallelFor(static_cast<int>(rig.pods.size()), [&](int pi) {
+    const size_t i = static_cast<size_t>(pi);
     const PodCalibration& cal = rig.pods[i];
     const RgbdFrame& f = frames.frames[i];
     const int w = cal.depth.width, h = cal.depth.height;
-    if (!cal.IsRegistered() || cal.depth.HasDistortion()) continue;
-    if (f.color.empty() || f.depth.empty() || f.mask.empty()) continue;
+    if (!cal.IsRegistered() || cal.depth.HasDistortion()) return;
+    if (f.color.empty() || f.depth.empty() || f.mask.empty()) return;
     if (f.color.width() != w || f.color.height() != h || f.depth.width() != w || f.depth.height() != h ||
         f.mask.width() != w || f.mask.height() != h)
-      continue;  // sizes differ from the calibration: this pod gives no features
+      return;  // sizes differ from the calibration: this pod gives no features
     cv::Mat rgb(h, w, CV_8UC3, const_cast<uint8_t*>(f.color.data()));
     cv::Mat gray;
     cv::cvtColor(rgb, gray, cv::COLOR_RGB2GRAY);
@@ -83,7 +91,7 @@ Status FeatureMatcher::Match(const Rig& rig, const RgbdFrameSet& frames, std::ve
     }
     std::vector<cv::KeyPoint> kps;
     cv::Mat desc;
-    m.orb->detectAndCompute(gray, inner, kps, desc);
+    m.orb[i]->detectAndCompute(gray, inner, kps, desc);
     PodFeatures& pf = m.cur[i];
     const uint16_t* depth = f.depth.data();
     const uint8_t* mk = f.mask.data();
@@ -106,8 +114,8 @@ Status FeatureMatcher::Match(const Rig& rig, const RgbdFrameSet& frames, std::ve
       pf.world.push_back(cal.world_from_depth * pc);
       pf.descriptors.push_back(desc.row(static_cast<int>(k)));
     }
-    last_keypoints_ += pf.world.size();
-  }
+  });
+  for (const PodFeatures& pf : m.cur) last_keypoints_ += pf.world.size();
 
   if (m.has_prev && m.prev.size() == m.cur.size()) {
     cv::BFMatcher matcher(cv::NORM_HAMMING);

@@ -32,6 +32,7 @@ struct FeatureMatchOptions {
   float max_motion_m = 0.25f;      // 3D displacement of a pair between the two frames
   int depth_window_px = 2;         // depth of a keypoint: median of the (2r+1)² masked pixels
   int mask_erode_px = 3;           // keypoints this far inside the mask (no silhouette mixing)
+  int threads = 2;                 // detection runs per pod on this many threads (0 = hardware concurrency)
   Status Check() const;
 };
 

@@ -5,7 +5,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <string>
 
 #include <Eigen/LU>
@@ -22,8 +21,6 @@ namespace {
 double MsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
-
-constexpr float kTruncated = 0.999f;  // the mesher's band limit (TsdfOptions::skip_truncated_cubes)
 
 int FloorDiv8(int64_t v) { return static_cast<int>(v >= 0 ? v / 8 : -((-v + 7) / 8)); }
 
@@ -282,8 +279,6 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
   std::atomic<size_t> hull_dropped{0}, carried{0};
   const float radius = 0.5f * bs * 0.87f;  // of a 4³ sub-block
   const float cap = options_.max_weight;
-  const bool keep_truncated_ = std::getenv("HOLO_KT") != nullptr;
-  const int sample_mode_ = std::getenv("HOLO_SAMPLE") ? std::atoi(std::getenv("HOLO_SAMPLE")) : 0;
   m.gather.resize(static_cast<size_t>(m.pool.num_threads()));
   m.pool.Run(ndst, [&](int d, int thread) {
     VoxelBlock& out = dst.block(d);
@@ -402,39 +397,8 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
               bi = gi;
             }
           }
-          if (sw < (sample_mode_ == 1 ? 0.999f : sample_mode_ == 5 ? 0.75f : 0.5f)) continue;
-          if (sample_mode_ == 4) {
-            const size_t ni = base + (ax >= 0.5f) + sy * (ay >= 0.5f) + sz * (az >= 0.5f);
-            if (g.weight[ni] <= 0) continue;
-          }
-          if (sample_mode_ == 2) {
-            out.tsdf[vi] = g.tsdf[bi];
-            out.weight[vi] = std::min(cap, g.weight[bi]);
-            out.r[vi] = g.rgb[bi][0];
-            out.g[vi] = g.rgb[bi][1];
-            out.b[vi] = g.rgb[bi][2];
-            any = true;
-            const float t = g.tsdf[bi];
-            if (t < 0) flags |= kBlockHasNegative;
-            else {
-              flags |= kBlockHasPositive;
-              if (t < 0.999f) flags |= kBlockHasPositiveInBand;
-            }
-            continue;
-          }
-          if (sample_mode_ == 3) {
-            bool tr = false;
-            for (int c = 0; c < 8; ++c) {
-              const size_t gi = base + (c & 1) + sy * ((c >> 1) & 1) + sz * ((c >> 2) & 1);
-              if (g.weight[gi] > 0 && g.tsdf[gi] >= kTruncated) tr = true;
-            }
-            if (tr) st = sw;
-          }
-          // Free space beyond the truncation distance (+1) stays +1 where the
-          // nearest source voxel is: interpolating it with in-band values
-          // would hide it from the mesher's truncated-cube test and grow
-          // the spurious sheets that test removes (docs/temporal.md).
-          const float t = (keep_truncated_ && g.tsdf[bi] >= kTruncated) ? 1.0f : st / sw;
+          if (sw < 0.5f) continue;
+          const float t = st / sw;
           out.tsdf[vi] = t;
           out.weight[vi] = std::min(cap, swt / sw);
           out.r[vi] = g.rgb[bi][0];
@@ -562,11 +526,6 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
     return OkStatus();
   }
   lost_frames_ = 0;
-  if (std::getenv("HOLO_IDENTITY"))
-    for (size_t k = 0; k < graph_.num_nodes(); ++k) {
-      graph_.translation(static_cast<int>(k)).setZero();
-      graph_.affine(static_cast<int>(k)).setIdentity();
-    }
   if (options_.snap_still_m > 0) {
     for (size_t k = 0; k < graph_.num_nodes(); ++k) {
       const int ki = static_cast<int>(k);
