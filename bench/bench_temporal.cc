@@ -10,6 +10,11 @@
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
+// HOLO_TEMPORAL_VERBOSE=1: per-frame tracking details on stderr.
+// HOLO_TEMPORAL_DIAG=1: per evaluated frame a histogram of the output's
+// vertex distances to the truth and Chamfer; at the end the flicker of each
+// connected component of the truth mesh (figures' parts, props), both modes.
+//
 // Masks: the studio's ground-truth masks (MaskSource truth), so segmentation
 // cost and errors do not enter the figures. Times: wall clock per frame
 // (medians) and cpu_ms (CPU time of all threads per frame, medians).
@@ -318,15 +323,12 @@ int RunTemporal(const BenchArgs& args) {
           run.cpu_ms.push_back(cpu);
         }
         if (diag_on) diag.Add(static_cast<int>(r), run.mesh, gt.foreground_mesh);
-        if (const char* dump = std::getenv("HOLO_TEMPORAL_DUMP"); dump && f == std::atoi(dump)) {
-          (void)WritePly("/tmp/w-temporal3/" + run.mode + ".ply", run.mesh);
-          (void)WritePly("/tmp/w-temporal3/truth.ply", gt.foreground_mesh);
-        }
         if (eval && !run.mesh.empty()) {
           auto d = metrics::ComputeMeshDistance(run.mesh, gt.foreground_mesh, mdo);
           if (d.ok()) {
-            if (diag_on) {
-              auto ti = metrics::TriangleIndex::Build(gt.foreground_mesh);
+            auto ti = diag_on ? metrics::TriangleIndex::Build(gt.foreground_mesh)
+                              : StatusOr<metrics::TriangleIndex>(InvalidArgument("diagnostics off"));
+            if (ti.ok()) {
               const std::vector<float> dd = ti->DistanceBatch(run.mesh.positions, 1.0f, 2);
               int hist[6] = {0, 0, 0, 0, 0, 0};
               double sums[6] = {0, 0, 0, 0, 0, 0};
