@@ -50,7 +50,7 @@ struct Extra {
   int iterations = -1;
   double fail_residual_mm = -1;
   int pcg = -1;
-  int data_window = -1;
+  int data_window = -2;
   double snap_mm = -1;
   int eval_every = 5;
   int drop_pod = 1;
@@ -262,7 +262,7 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.sparse_weight >= 0) base.tracker.sparse_weight = static_cast<float>(extra.sparse_weight);
   if (extra.parallel_pcg >= 0) base.tracker.parallel_pcg = extra.parallel_pcg != 0;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
-  if (extra.data_window >= 0) base.tracker.data_window_px = extra.data_window;
+  if (extra.data_window >= -1) base.tracker.data_window_px = extra.data_window;
   if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);

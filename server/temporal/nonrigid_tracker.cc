@@ -43,7 +43,7 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(sparse_weight, "sparse_weight"));
   if (!(sparse_huber_m > 0)) return InvalidArgument("sparse_huber_m must be > 0");
   if (!(sparse_reject_m > 0)) return InvalidArgument("sparse_reject_m must be > 0");
-  if (data_window_px < 0 || data_window_px > 16) return InvalidArgument("data_window_px must be in [0, 16]");
+  if (data_window_px < -1 || data_window_px > 16) return InvalidArgument("data_window_px must be in [-1, 16]");
   if (rigid_iterations < 0 || rigid_iterations > 100) return InvalidArgument("rigid_iterations must be in [0, 100]");
   if (iterations < 0 || iterations > 100) return InvalidArgument("iterations must be in [0, 100]");
   if (!(association_max_m > 0)) return InvalidArgument("association_max_m must be > 0");
@@ -326,7 +326,7 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
     pod.cx = static_cast<float>(cal.depth.cx);
     pod.cy = static_cast<float>(cal.depth.cy);
     pod.distorted = cal.depth.HasDistortion();
-    pod.window = data_window_px;
+    pod.window = data_window_px >= 0 ? data_window_px : w / 640;
     pod.camera = cal.DepthCamera();
     pod.r_wc = cal.world_from_depth.linear();
     pod.center = cal.world_from_depth.translation();

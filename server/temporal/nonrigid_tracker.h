@@ -87,9 +87,12 @@ struct TrackerOptions {
   // a (2r+1)² window around the projection that lie within
   // association_max_m of the warped point (the sensor noise is per pixel, so
   // this averages it down without blurring across depth edges). r in
-  // pixels; 0 = the single pixel. Measured (docs/temporal.md): r = 1 beats
-  // 0 and 2 on S8-VGA, and r = 1 on S8-QVGA.
-  int data_window_px = 1;
+  // pixels; 0 = the single pixel; -1 = by resolution, floor(width / 640):
+  // a window of about the same surface footprint (S8-VGA 3×3, S8-QVGA 1
+  // pixel). Measured (docs/temporal.md): on S8-VGA r = 1 beats 0 and 2; on
+  // S8-QVGA r = 1 lowers flicker but costs Chamfer and the dropped pod's
+  // kept surface.
+  int data_window_px = -1;
   // Huber threshold of the data term (metres) and of the hull term.
   float huber_m = 0.008f;
   float hull_huber_m = 0.02f;
