@@ -93,7 +93,7 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
   f->reference_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->live_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->tracker_ = std::make_unique<NonrigidTracker>(options.tracker);
-  f->matcher_ = std::make_unique<FeatureMatcher>(options.features);
+  if (options.temporal && options.tracker.use_sparse) f->matcher_ = std::make_unique<FeatureMatcher>(options.features);
   f->impl_ = std::make_unique<Impl>(options.tsdf.threads);
   return f;
 }
@@ -101,7 +101,7 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
 void TemporalFusion::Reset() {
   has_reference_ = false;
   prev_fused_ = false;
-  matcher_->Reset();
+  if (matcher_) matcher_->Reset();
   prev_node_pos_.clear();
   prev_node_disp_.clear();
   lost_frames_ = 0;
@@ -427,7 +427,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   // Colour features of this frame, matched to the previous frame's. They
   // are used only if the previous frame was fused (its observation is then
   // what the reference shows).
-  const bool use_features = options_.temporal && options_.tracker.use_sparse;
+  const bool use_features = matcher_ != nullptr;  // temporal mode with the sparse term on
   pairs_.clear();
   if (use_features) {
     const auto tf = std::chrono::steady_clock::now();

@@ -15,6 +15,7 @@
 #include "server/temporal/deformation_graph.h"
 #include "server/temporal/feature_matcher.h"
 #include "server/temporal/nonrigid_tracker.h"
+#include "server/temporal/temporal_fusion.h"
 #include "server/texture/mesh_renderer.h"
 
 namespace holo {
@@ -180,6 +181,37 @@ TEST_F(FeatureTrackingTest, SparseTermTracksTangentialMotion) {
   EXPECT_GT(err_without, 0.01);
   EXPECT_LT(err_with, 0.006);
   EXPECT_LT(err_with, 0.5 * err_without);
+}
+
+// In TemporalFusion: pairs are matched between consecutive fused frames and
+// reach the tracker; none on the first frame; none when the switch is off.
+TEST_F(FeatureTrackingTest, TemporalFusionPassesPairsToTheTracker) {
+  for (bool sparse : {true, false}) {
+    TemporalFusionOptions o;
+    o.tsdf.voxel_size = 0.008f;
+    o.tsdf.threads = 2;
+    o.tracker.use_sparse = sparse;
+    auto fusion = TemporalFusion::Create(o);
+    ASSERT_TRUE(fusion.ok()) << fusion.status().message();
+    for (int f = 0; f < 3; ++f) {
+      const RgbdFrameSet set = Render(rig_, TexturedSlab(motion_ * (0.6f * static_cast<float>(f))));
+      Mesh mesh;
+      TemporalFrameStats st;
+      ASSERT_TRUE((*fusion)->Process(rig_, set, &mesh, &st).ok());
+      EXPECT_FALSE(mesh.empty());
+      if (f == 0 || !sparse) {
+        EXPECT_EQ(st.feature_pairs, 0u) << "frame " << f;
+        EXPECT_EQ(st.track.sparse_pairs, 0u) << "frame " << f;
+      } else {
+        EXPECT_TRUE(st.tracked && !st.lost);
+        EXPECT_GT(st.feature_pairs, 30u) << "frame " << f;
+        EXPECT_EQ(st.track.sparse_pairs, st.feature_pairs) << "frame " << f;
+      }
+    }
+  }
+  TemporalFusionOptions bad;
+  bad.features.max_motion_m = -1;
+  EXPECT_FALSE(TemporalFusion::Create(bad).ok());
 }
 
 }  // namespace
