@@ -4,10 +4,16 @@
 //
 //   holoport-bench temporal --workload S8-QVGA|S8-VGA [--frames 30] [--json]
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
-//            --track-points N, --reg-weight W, --rot-weight W, --hull-weight W,
+//            --track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W,
 //            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --snap-mm S (still-node snap, 0 = off), --eval-every N (Chamfer every N-th frame),
+//            --sparse 0|1 (colour-feature term), --sparse-weight W, --parallel-pcg 0|1,
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
+//
+// HOLO_TEMPORAL_VERBOSE=1: per-frame tracking details on stderr.
+// HOLO_TEMPORAL_DIAG=1: per evaluated frame a histogram of the output's
+// vertex distances to the truth and Chamfer; at the end the flicker of each
+// connected component of the truth mesh (figures' parts, props), both modes.
 //
 // Masks: the studio's ground-truth masks (MaskSource truth), so segmentation
 // cost and errors do not enter the figures. Times: wall clock per frame
@@ -25,6 +31,7 @@
 #include "bench.h"
 #include "common/metrics/flicker.h"
 #include "common/metrics/mesh_distance.h"
+#include "common/metrics/surface_sampling.h"
 #include "common/metrics/triangle_index.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
@@ -38,15 +45,20 @@ struct Extra {
   double spacing_cm = 0;
   double max_weight = 0;
   int track_points = 0;
+  double points_per_node = -1;
   double reg_weight = -1, rot_weight = -1, hull_weight = -1;
   int iterations = -1;
   double fail_residual_mm = -1;
   int pcg = -1;
+  int data_window = -2;
   double snap_mm = -1;
   int eval_every = 5;
   int drop_pod = 1;
   int drop_from = 10;
   bool predict = true;
+  int parallel_pcg = -1;
+  int sparse = -1;
+  double sparse_weight = -1;
   bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
   bool ok = true;
 };
@@ -66,6 +78,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--spacing-cm") a.spacing_cm = std::atof(value().c_str());
     else if (extra[i] == "--max-weight") a.max_weight = std::atof(value().c_str());
     else if (extra[i] == "--track-points") a.track_points = std::atoi(value().c_str());
+    else if (extra[i] == "--points-per-node") a.points_per_node = std::atof(value().c_str());
     else if (extra[i] == "--reg-weight") a.reg_weight = std::atof(value().c_str());
     else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
     else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
@@ -73,16 +86,20 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
+    else if (extra[i] == "--sparse") a.sparse = std::atoi(value().c_str());
+    else if (extra[i] == "--sparse-weight") a.sparse_weight = std::atof(value().c_str());
+    else if (extra[i] == "--parallel-pcg") a.parallel_pcg = std::atoi(value().c_str());
     else if (extra[i] == "--still") a.still = true;
     else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
+    else if (extra[i] == "--data-window") a.data_window = std::atoi(value().c_str());
     else if (extra[i] == "--snap-mm") a.snap_mm = std::atof(value().c_str());
     else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
     else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
     else {
       std::fprintf(stderr,
                    "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
-                   "--track-points N, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
-                   "--fail-residual-mm R, --no-predict, --still, --pcg N, --snap-mm S, --eval-every N, "
+                   "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
+                   "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --sparse 0|1, --sparse-weight W, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
                    "--drop-pod K (-1 = none), --drop-from F\n",
                    extra[i].c_str());
       a.ok = false;
@@ -141,6 +158,66 @@ double FractionWithin(const Mesh& recon, const std::vector<Eigen::Vector3f>& pts
   return static_cast<double>(hit) / static_cast<double>(pts.size());
 }
 
+// HOLO_TEMPORAL_DIAG=1: flicker per connected component of the truth mesh
+// (figures, props), per mode, on stderr.
+struct Diag {
+  std::vector<metrics::SurfaceSample> samples;
+  std::vector<int> comp;  // per sample
+  int num_comp = 0;
+  std::vector<std::vector<float>> prev;                 // per mode
+  std::vector<std::vector<double>> sum, cnt;            // per mode, per component
+  void Init(const Mesh& truth) {
+    std::vector<int> parent(truth.positions.size());
+    for (size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<int>(i);
+    auto find = [&](int x) {
+      while (parent[static_cast<size_t>(x)] != x) x = parent[static_cast<size_t>(x)] = parent[static_cast<size_t>(parent[static_cast<size_t>(x)])];
+      return x;
+    };
+    for (const auto& t : truth.triangles) {
+      const int a = find(static_cast<int>(t[0])), b = find(static_cast<int>(t[1])), c = find(static_cast<int>(t[2]));
+      parent[static_cast<size_t>(b)] = a;
+      parent[static_cast<size_t>(find(c))] = find(a);
+    }
+    metrics::SamplingOptions so;
+    so.num_samples = 20000;
+    samples = *metrics::SampleSurface(truth, so);
+    std::map<int, int> ids;
+    for (const auto& sm : samples) {
+      const int r = find(static_cast<int>(truth.triangles[sm.triangle][0]));
+      auto it = ids.find(r);
+      if (it == ids.end()) it = ids.emplace(r, static_cast<int>(ids.size())).first;
+      comp.push_back(it->second);
+    }
+    num_comp = static_cast<int>(ids.size());
+    prev.assign(2, {});
+    sum.assign(2, std::vector<double>(static_cast<size_t>(num_comp), 0));
+    cnt = sum;
+  }
+  void Add(int mode, const Mesh& recon, const Mesh& truth) {
+    metrics::FlickerOptions fo;
+    fo.num_threads = 2;
+    auto d = metrics::ComputeNormalOffsets(recon, truth, samples, fo);
+    if (!d.ok()) return;
+    if (!prev[static_cast<size_t>(mode)].empty())
+      for (size_t i = 0; i < samples.size(); ++i) {
+        const float a = prev[static_cast<size_t>(mode)][i], b = (*d)[i];
+        if (std::isnan(a) || std::isnan(b)) continue;
+        sum[static_cast<size_t>(mode)][static_cast<size_t>(comp[i])] += std::abs(b - a) * 1000;
+        cnt[static_cast<size_t>(mode)][static_cast<size_t>(comp[i])] += 1;
+      }
+    prev[static_cast<size_t>(mode)] = *d;
+  }
+  void Print() const {
+    for (int c = 0; c < num_comp; ++c) {
+      size_t n = 0;
+      for (int x : comp) n += x == c;
+      std::fprintf(stderr, "diag component %d: %zu samples, flicker per_frame %.2f temporal %.2f mm\n", c, n,
+                   sum[0][static_cast<size_t>(c)] / std::max(1.0, cnt[0][static_cast<size_t>(c)]),
+                   sum[1][static_cast<size_t>(c)] / std::max(1.0, cnt[1][static_cast<size_t>(c)]));
+    }
+  }
+};
+
 int RunTemporal(const BenchArgs& args) {
   const Extra extra = ParseExtra(args.extra);
   if (!extra.ok) return 2;
@@ -176,11 +253,16 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.spacing_cm > 0) base.graph.node_spacing_m = static_cast<float>(extra.spacing_cm / 100);
   if (extra.max_weight > 0) base.max_weight = static_cast<float>(extra.max_weight);
   if (extra.track_points > 0) base.track_points = extra.track_points;
+  if (extra.points_per_node >= 0) base.min_points_per_node = static_cast<float>(extra.points_per_node);
   if (extra.reg_weight >= 0) base.tracker.regularization_weight = static_cast<float>(extra.reg_weight);
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
+  if (extra.sparse >= 0) base.tracker.use_sparse = extra.sparse != 0;
+  if (extra.sparse_weight >= 0) base.tracker.sparse_weight = static_cast<float>(extra.sparse_weight);
+  if (extra.parallel_pcg >= 0) base.tracker.parallel_pcg = extra.parallel_pcg != 0;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
+  if (extra.data_window >= -1) base.tracker.data_window_px = extra.data_window;
   if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
@@ -199,6 +281,8 @@ int RunTemporal(const BenchArgs& args) {
     runs[r].fusion = std::move(*f);
   }
 
+  const bool diag_on = std::getenv("HOLO_TEMPORAL_DIAG") != nullptr;
+  Diag diag;
   RgbdFrameSet set, dropped;
   StudioGroundTruth gt;
   metrics::MeshDistanceOptions mdo;
@@ -207,6 +291,7 @@ int RunTemporal(const BenchArgs& args) {
     (*studio)->RenderFrame(extra.still ? 0 : f, &set, &gt);
     for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
     const bool eval = f % extra.eval_every == extra.eval_every - 1;
+    if (diag_on && f == 0) diag.Init(gt.foreground_mesh);
     std::vector<Eigen::Vector3f> exclusive;
     if (extra.drop_pod >= 0 && f >= extra.drop_from) {
       dropped = set;
@@ -237,9 +322,34 @@ int RunTemporal(const BenchArgs& args) {
           run.total_ms.push_back(st.total_ms);
           run.cpu_ms.push_back(cpu);
         }
+        if (diag_on) diag.Add(static_cast<int>(r), run.mesh, gt.foreground_mesh);
         if (eval && !run.mesh.empty()) {
           auto d = metrics::ComputeMeshDistance(run.mesh, gt.foreground_mesh, mdo);
           if (d.ok()) {
+            auto ti = diag_on ? metrics::TriangleIndex::Build(gt.foreground_mesh)
+                              : StatusOr<metrics::TriangleIndex>(InvalidArgument("diagnostics off"));
+            if (ti.ok()) {
+              const std::vector<float> dd = ti->DistanceBatch(run.mesh.positions, 1.0f, 2);
+              int hist[6] = {0, 0, 0, 0, 0, 0};
+              double sums[6] = {0, 0, 0, 0, 0, 0};
+              const float edges[6] = {0.005f, 0.01f, 0.02f, 0.05f, 0.1f, 1e9f};
+              for (float x : dd)
+                for (int b = 0; b < 6; ++b)
+                  if (x < edges[b]) {
+                    ++hist[b];
+                    sums[b] += x;
+                    break;
+                  }
+              std::fprintf(stderr, "diag %s f%d verts %zu: <5mm %d <10 %d <20 %d <50 %d <100 %d more %d; sum-mm share:", run.mode.c_str(), f,
+                           dd.size(), hist[0], hist[1], hist[2], hist[3], hist[4], hist[5]);
+              double tot = 0;
+              for (double x : sums) tot += x;
+              for (double x : sums) std::fprintf(stderr, " %.2f", x / tot);
+              std::fprintf(stderr, "\n");
+            }
+            if (diag_on)
+              std::fprintf(stderr, "diag %s f%d chamfer %.2f accuracy %.2f completeness %.3f\n", run.mode.c_str(), f,
+                           d->chamfer_mm, d->accuracy_mm, d->completeness);
             run.chamfer.push_back(d->chamfer_mm);
             run.completeness.push_back(d->completeness);
             run.accuracy.push_back(d->accuracy_mm);
@@ -253,11 +363,12 @@ int RunTemporal(const BenchArgs& args) {
         runs[1].exclusive.push_back(FractionWithin(runs[1].mesh, exclusive, 0.01f));
       }
       if (std::getenv("HOLO_TEMPORAL_VERBOSE") && st.tracked)
-        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu\n",
+        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d it %d step %.2f mm) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu features %.1f ms %zu pairs rms %.1f mm\n",
                      run.mode.c_str(), f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
                      st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
-                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations,
-                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks);
+                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations, st.track.iterations, st.track.last_step_m * 1000,
+                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks, st.features_ms,
+                     st.feature_pairs, st.track.sparse_rms_m * 1000);
       run.tracked += st.tracked;
       run.nodes += st.nodes;
       run.failed_nodes += st.failed_nodes;
@@ -272,6 +383,7 @@ int RunTemporal(const BenchArgs& args) {
     }
   }
   if (!args.json) std::fprintf(stderr, "\n");
+  if (diag_on) diag.Print();
 
   const std::string w = args.workload;
   std::map<std::string, std::string> q;

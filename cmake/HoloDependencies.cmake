@@ -2,7 +2,7 @@
 find_package(Threads REQUIRED)
 find_package(PkgConfig REQUIRED)
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
-find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs video)
+find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs video features2d)
 find_package(OpenMesh REQUIRED)
 find_package(yaml-cpp REQUIRED)
 find_package(spdlog REQUIRED)

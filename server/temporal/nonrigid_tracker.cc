@@ -40,6 +40,10 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(hull_weight, "hull_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(rotation_weight, "rotation_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(regularization_weight, "regularization_weight"));
+  HOLO_RETURN_IF_ERROR(nonneg(sparse_weight, "sparse_weight"));
+  if (!(sparse_huber_m > 0)) return InvalidArgument("sparse_huber_m must be > 0");
+  if (!(sparse_reject_m > 0)) return InvalidArgument("sparse_reject_m must be > 0");
+  if (data_window_px < -1 || data_window_px > 16) return InvalidArgument("data_window_px must be in [-1, 16]");
   if (rigid_iterations < 0 || rigid_iterations > 100) return InvalidArgument("rigid_iterations must be in [0, 100]");
   if (iterations < 0 || iterations > 100) return InvalidArgument("iterations must be in [0, 100]");
   if (!(association_max_m > 0)) return InvalidArgument("association_max_m must be > 0");
@@ -65,6 +69,7 @@ struct PodFrame {
   bool has_silhouette = false;  // mask with some foreground: the hull applies
   bool distorted = false;
   int width = 0, height = 0;
+  int window = 0;  // half-size of the data term's depth window (pixels)
   float fx = 0, fy = 0, cx = 0, cy = 0;
   Matrix3f r_cw;  // camera_from_world
   Vector3f t_cw;
@@ -258,6 +263,10 @@ struct NonrigidTracker::Impl {
   explicit Impl(int threads) : pool(threads) {}
   WorkerPool pool;
   std::vector<PodFrame> pods;
+  // Model points come first; points from n_model on are sparse feature
+  // points with targets sparse_to[i − n_model].
+  size_t n_model = 0;
+  std::vector<Vector3f> all_points, all_normals, sparse_to;
   std::vector<SkinWeights> skins;
   std::vector<Vector3f> warped, warped_normals;
   std::vector<PointLin> lin;
@@ -274,33 +283,42 @@ struct NonrigidTracker::Impl {
   std::vector<Vec12> rhs, x, r, z, p, q;
   std::vector<Eigen::Matrix<double, 12, 12>, Eigen::aligned_allocator<Mat12>> precond;
 
-  Status Prepare(const Rig& rig, const RgbdFrameSet& frames);
+  Status Prepare(const Rig& rig, const RgbdFrameSet& frames, int data_window_px);
   void WarpPoints(const DeformationGraph& graph, const std::vector<Vector3f>& points,
                   const std::vector<Vector3f>& normals);
   void Associate(const TrackerOptions& o, size_t n);
   void AssociatePoint(const TrackerOptions& o, size_t i, PointLin* out) const;
 };
 
-Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames) {
+Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames, int data_window_px) {
   if (frames.frames.size() != rig.pods.size())
     return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
                            std::to_string(rig.pods.size()));
-  pods.resize(rig.pods.size());
+  // Validate every pod first (state unchanged on error), then prepare the
+  // pods in parallel (depth conversion and the silhouette distance transform).
   for (size_t i = 0; i < rig.pods.size(); ++i) {
     const PodCalibration& cal = rig.pods[i];
     const RgbdFrame& f = frames.frames[i];
-    PodFrame& pod = pods[i];
-    pod.usable = false;
-    pod.has_silhouette = false;
     const int w = cal.depth.width, h = cal.depth.height;
     if (f.depth.empty()) continue;  // no data from this pod
     if (f.depth.width() != w || f.depth.height() != h)
       return InvalidArgument("pod " + std::to_string(i) + " (" + cal.name + "): depth image is " +
                              std::to_string(f.depth.width()) + "x" + std::to_string(f.depth.height()) +
                              " but the rig says " + std::to_string(w) + "x" + std::to_string(h));
-    const bool has_mask = !f.mask.empty();
-    if (has_mask && (f.mask.width() != w || f.mask.height() != h))
+    if (!f.mask.empty() && (f.mask.width() != w || f.mask.height() != h))
       return InvalidArgument("pod " + std::to_string(i) + " (" + cal.name + "): mask size differs from the depth image");
+  }
+  pods.resize(rig.pods.size());
+  pool.ParallelFor(static_cast<int>(rig.pods.size()), [&](int pi) {
+    const size_t i = static_cast<size_t>(pi);
+    const PodCalibration& cal = rig.pods[i];
+    const RgbdFrame& f = frames.frames[i];
+    PodFrame& pod = pods[i];
+    pod.usable = false;
+    pod.has_silhouette = false;
+    const int w = cal.depth.width, h = cal.depth.height;
+    if (f.depth.empty()) return;
+    const bool has_mask = !f.mask.empty();
     pod.width = w;
     pod.height = h;
     pod.fx = static_cast<float>(cal.depth.fx);
@@ -308,6 +326,7 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
     pod.cx = static_cast<float>(cal.depth.cx);
     pod.cy = static_cast<float>(cal.depth.cy);
     pod.distorted = cal.depth.HasDistortion();
+    pod.window = data_window_px >= 0 ? data_window_px : w / 640;
     pod.camera = cal.DepthCamera();
     pod.r_wc = cal.world_from_depth.linear();
     pod.center = cal.world_from_depth.translation();
@@ -334,7 +353,7 @@ Status NonrigidTracker::Impl::Prepare(const Rig& rig, const RgbdFrameSet& frames
       }
       cv::distanceTransform(pod.outside, pod.dt, cv::DIST_L2, 3);
     }
-  }
+  });
   return OkStatus();
 }
 
@@ -359,6 +378,17 @@ void NonrigidTracker::Impl::WarpPoints(const DeformationGraph& graph, const std:
 void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, PointLin* out) const {
   *out = PointLin();
   const Vector3f& pw = warped[i];
+  if (i >= n_model) {
+    // Sparse colour correspondence: point-to-point, Huber on the distance.
+    const Vector3d r = (pw - sparse_to[i - n_model]).cast<double>();
+    if (r.norm() > o.sparse_reject_m) return;  // a wrong match (repeated texture): no term
+    double rho, en;
+    HuberWeight(r.norm(), o.sparse_huber_m, &rho, &en);
+    out->g = o.sparse_weight * rho * Matrix3d::Identity();
+    out->e = o.sparse_weight * rho * r;
+    out->energy = o.sparse_weight * en;
+    return;
+  }
   const Vector3f& nw = warped_normals[i];
   const double sd = o.data_weight, sh = o.hull_weight;
   for (const PodFrame& pod : pods) {
@@ -414,7 +444,32 @@ void NonrigidTracker::Impl::AssociatePoint(const TrackerOptions& o, size_t i, Po
       if (zmin > pc.z() + o.association_max_m) out->violated = true;
       continue;
     }
-    const Vector3f qc((ui - pod.cx) * z / pod.fx, (vi - pod.cy) * z / pod.fy, z);
+    // The observed point: the mean of the window's depth pixels within the
+    // association distance of the warped point (per-pixel sensor noise is
+    // independent, so this averages it down; on a plane the mean of the
+    // back-projected pixels lies on the plane).
+    Vector3f qc((ui - pod.cx) * z / pod.fx, (vi - pod.cy) * z / pod.fy, z);
+    if (pod.window > 0) {
+      float su = 0, sv = 0, sz = 0;
+      int cnt = 0;
+      const int x0 = std::max(0, ui - pod.window), x1 = std::min(pod.width - 1, ui + pod.window);
+      const int y0 = std::max(0, vi - pod.window), y1 = std::min(pod.height - 1, vi + pod.window);
+      for (int y = y0; y <= y1; ++y) {
+        const float* row = pod.depth.data() + static_cast<size_t>(y) * pod.width;
+        for (int x = x0; x <= x1; ++x) {
+          const float zn = row[x];
+          if (zn <= 0 || std::abs(zn - pc.z()) > o.association_max_m) continue;
+          su += static_cast<float>(x) * zn;
+          sv += static_cast<float>(y) * zn;
+          sz += zn;
+          ++cnt;
+        }
+      }
+      if (cnt > 1) {
+        const float inv = 1.0f / static_cast<float>(cnt);
+        qc = Vector3f((su * inv - pod.cx * sz * inv) / pod.fx, (sv * inv - pod.cy * sz * inv) / pod.fy, sz * inv);
+      }
+    }
     const Vector3f q = pod.r_wc * qc + pod.center;
     if ((q - pw).squaredNorm() > o.association_max_m * o.association_max_m) continue;
     const double r = nw.dot(pw - q);
@@ -454,22 +509,42 @@ const float* NonrigidTracker::SilhouetteDistance(size_t pod, int* width, int* he
   return p.dt.ptr<float>(0);
 }
 
-Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Vector3f>& points,
-                              const std::vector<Vector3f>& normals, DeformationGraph* graph, TrackResult* result) {
+Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Vector3f>& model_points,
+                              const std::vector<Vector3f>& model_normals, DeformationGraph* graph, TrackResult* result,
+                              const std::vector<FeatureCorrespondence>* features) {
   const auto t_start = std::chrono::steady_clock::now();
   HOLO_RETURN_IF_ERROR(options_.Check());
   *result = TrackResult();
-  if (points.size() != normals.size())
-    return InvalidArgument("tracker: " + std::to_string(points.size()) + " points but " +
-                           std::to_string(normals.size()) + " normals");
+  if (model_points.size() != model_normals.size())
+    return InvalidArgument("tracker: " + std::to_string(model_points.size()) + " points but " +
+                           std::to_string(model_normals.size()) + " normals");
   Impl& m = *impl_;
-  HOLO_RETURN_IF_ERROR(m.Prepare(rig, frames));
-  const size_t n = points.size();
+  HOLO_RETURN_IF_ERROR(m.Prepare(rig, frames, options_.data_window_px));
   const size_t num_nodes = graph->num_nodes();
-  result->num_points = n;
+  result->num_points = model_points.size();
   result->nodes.assign(num_nodes, NodeReport());
-  if (n == 0 || num_nodes == 0) return OkStatus();
+  if (model_points.empty() || num_nodes == 0) return OkStatus();
   const TrackerOptions& o = options_;
+  // Points of the solve: the model points, then (sparse term) the previous
+  // frame's ends of the feature correspondences, warped like model points;
+  // their targets are the current frame's ends.
+  m.n_model = model_points.size();
+  m.sparse_to.clear();
+  const bool sparse = o.use_sparse && o.sparse_weight > 0 && features != nullptr && !features->empty();
+  if (sparse) {
+    m.all_points = model_points;
+    m.all_normals = model_normals;
+    for (const FeatureCorrespondence& c : *features) {
+      if (!c.from.allFinite() || !c.to.allFinite()) continue;
+      m.all_points.push_back(c.from);
+      m.all_normals.push_back(Vector3f::Zero());
+      m.sparse_to.push_back(c.to);
+    }
+    result->sparse_pairs = m.sparse_to.size();
+  }
+  const std::vector<Vector3f>& points = sparse ? m.all_points : model_points;
+  const std::vector<Vector3f>& normals = sparse ? m.all_normals : model_normals;
+  const size_t n = points.size();
 
   // Skinning (rest pose, fixed for this call).
   m.skins.resize(n);
@@ -791,18 +866,40 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
           }
       });
     };
-    // PCG.
+    // PCG. Per-node vector work (updates, preconditioner) runs per task
+    // with per-task partial dot products summed in task order, so the result
+    // does not depend on the thread count.
     m.x.assign(num_nodes, Vec12::Zero());
     m.r = m.rhs;
     m.z.resize(num_nodes);
     m.q.resize(num_nodes);
-    double rz = 0, b_norm = 0;
-    for (size_t k = 0; k < num_nodes; ++k) {
-      m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
-      rz += m.r[k].dot(m.z[k]);
-      b_norm += m.rhs[k].squaredNorm();
-    }
-    m.p = m.z;
+    m.p.resize(num_nodes);
+    std::vector<double> part_a(num_tasks), part_b(num_tasks);
+    auto run_tasks = [&](auto&& fn) {
+      if (o.parallel_pcg) {
+        m.pool.ParallelFor(static_cast<int>(num_tasks), fn);
+      } else {
+        for (size_t t = 0; t < num_tasks; ++t) fn(static_cast<int>(t));
+      }
+    };
+    auto sum = [&](const std::vector<double>& v) {
+      double acc = 0;
+      for (double x : v) acc += x;
+      return acc;
+    };
+    run_tasks([&](int task) {
+      double rz_t = 0, b_t = 0;
+      for (size_t k = m.row_begin[static_cast<size_t>(task)]; k < m.row_begin[static_cast<size_t>(task) + 1]; ++k) {
+        m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
+        m.p[k] = m.z[k];
+        rz_t += m.r[k].dot(m.z[k]);
+        b_t += m.rhs[k].squaredNorm();
+      }
+      part_a[static_cast<size_t>(task)] = rz_t;
+      part_b[static_cast<size_t>(task)] = b_t;
+    });
+    double rz = sum(part_a);
+    const double b_norm = sum(part_b);
     const double tol2 = o.pcg_relative_tolerance * o.pcg_relative_tolerance * b_norm;
     for (int pit = 0; pit < o.pcg_max_iterations && b_norm > 0; ++pit) {
       product(m.p, &m.q);
@@ -810,44 +907,59 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
       for (size_t k = 0; k < num_nodes; ++k) pq += m.p[k].dot(m.q[k]);
       if (!(pq > 0)) break;
       const double alpha = rz / pq;
-      double rr = 0;
-      for (size_t k = 0; k < num_nodes; ++k) {
-        m.x[k] += alpha * m.p[k];
-        m.r[k] -= alpha * m.q[k];
-        rr += m.r[k].squaredNorm();
-      }
+      run_tasks([&](int task) {
+        double rr_t = 0, rz_t = 0;
+        for (size_t k = m.row_begin[static_cast<size_t>(task)]; k < m.row_begin[static_cast<size_t>(task) + 1]; ++k) {
+          m.x[k] += alpha * m.p[k];
+          m.r[k] -= alpha * m.q[k];
+          rr_t += m.r[k].squaredNorm();
+          m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
+          rz_t += m.r[k].dot(m.z[k]);
+        }
+        part_a[static_cast<size_t>(task)] = rr_t;
+        part_b[static_cast<size_t>(task)] = rz_t;
+      });
+      const double rr = sum(part_a);
       ++result->pcg_iterations;
       if (rr < tol2) break;
-      double rz_new = 0;
-      for (size_t k = 0; k < num_nodes; ++k) {
-        m.z[k].noalias() = m.precond[k].lazyProduct(m.r[k]);
-        rz_new += m.r[k].dot(m.z[k]);
-      }
+      const double rz_new = sum(part_b);
       const double beta = rz_new / rz;
       rz = rz_new;
       for (size_t k = 0; k < num_nodes; ++k) m.p[k] = m.z[k] + beta * m.p[k];
     }
     bool finite = true;
     for (const Vec12& v : m.x) finite = finite && v.allFinite();
+    double step = 0;  // largest node move of this step: |Δt| + ‖ΔA‖ · spacing
     if (finite) {
+      const double spacing = graph->options().node_spacing_m;
       for (size_t k = 0; k < num_nodes; ++k) {
-        const Vec12 x = NodeParams(*graph, static_cast<int>(k)) + m.x[k];
+        const Vec12& dx = m.x[k];
+        const double dt = Vector3d(dx[3], dx[7], dx[11]).norm();
+        const double da = std::sqrt(dx.squaredNorm() - dt * dt);
+        step = std::max(step, dt + da * spacing);
+        const Vec12 x = NodeParams(*graph, static_cast<int>(k)) + dx;
         SetNodeParams(graph, static_cast<int>(k), x.data());
       }
     }
     result->solve_ms += MsSince(t0);
     ++result->iterations;
+    result->last_step_m = step;
   }
 
-  // ---- Judge the final state.
+  // ---- Judge the final state (model points only).
   t0 = std::chrono::steady_clock::now();
   m.WarpPoints(*graph, points, normals);
   m.Associate(o, n);
   result->associate_ms += MsSince(t0);
+  if (sparse) {
+    double s2 = 0;
+    for (size_t i = m.n_model; i < n; ++i) s2 += (m.warped[i] - m.sparse_to[i - m.n_model]).squaredNorm();
+    result->sparse_rms_m = std::sqrt(s2 / static_cast<double>(n - m.n_model));
+  }
   double sq = 0;
   size_t cnt = 0;
   std::vector<float> wres(num_nodes, 0), wcorr(num_nodes, 0);
-  for (size_t i = 0; i < n; ++i) {
+  for (size_t i = 0; i < m.n_model; ++i) {
     const PointLin& l = m.lin[i];
     const SkinWeights& s = m.skins[i];
     if (l.correspondences > 0) ++result->associated_points;

@@ -14,7 +14,10 @@
 //   rotation each A_k close to a rotation (Sumner: column orthonormality)
 //   regularization  neighbouring nodes predict each other's positions:
 //            A_j (g_k − g_j) + g_j + t_j − (g_k + t_k)
-// Not implemented: sparse colour-feature correspondences (docs/temporal.md).
+//   sparse   optional colour-feature correspondences (feature_matcher.h):
+//            a point of the previous frame's observed surface, warped like a
+//            model point, must land on its match in this frame
+//            (point-to-point, Huber-robust)
 //
 // Solve: a rigid point-to-plane ICP for the global (R, T) first (coarse),
 // then outer iterations of (re-associate, one Gauss–Newton step over all node
@@ -42,6 +45,7 @@
 #include "common/rig.h"
 #include "common/status.h"
 #include "server/temporal/deformation_graph.h"
+#include "server/temporal/feature_matcher.h"
 
 namespace holo {
 
@@ -63,6 +67,14 @@ struct TrackerOptions {
   float rotation_weight = 0.02f;
   bool use_regularization = true;
   float regularization_weight = 10.0f;
+  // Sparse colour-feature correspondences (only when Track gets features).
+  bool use_sparse = false;
+  float sparse_weight = 1.0f;
+  float sparse_huber_m = 0.02f;
+  // A pair whose warped point is farther than this from its target at the
+  // current linearisation contributes nothing (mismatches on repeated
+  // texture such as stripes).
+  float sparse_reject_m = 0.06f;
 
   // Coarse stage: rigid ICP iterations for the global (R, T) (0 = none).
   int rigid_iterations = 3;
@@ -71,6 +83,16 @@ struct TrackerOptions {
   // Projective association: a depth point farther than this from the warped
   // model point is not a correspondence (metres).
   float association_max_m = 0.04f;
+  // The data term's observed point is the mean of the masked depth pixels in
+  // a (2r+1)² window around the projection that lie within
+  // association_max_m of the warped point (the sensor noise is per pixel, so
+  // this averages it down without blurring across depth edges). r in
+  // pixels; 0 = the single pixel; -1 = by resolution, floor(width / 640):
+  // a window of about the same surface footprint (S8-VGA 3×3, S8-QVGA 1
+  // pixel). Measured (docs/temporal.md): on S8-VGA r = 1 beats 0 and 2; on
+  // S8-QVGA r = 1 lowers flicker but costs Chamfer and the dropped pod's
+  // kept surface.
+  int data_window_px = -1;
   // Huber threshold of the data term (metres) and of the hull term.
   float huber_m = 0.008f;
   float hull_huber_m = 0.02f;
@@ -93,10 +115,11 @@ struct TrackerOptions {
   float fail_affine_scale = 0.25f;      // a singular value of A_k outside [1 − this, 1 / (1 − this)]: torn surface
   float min_support = 2.0f;             // sum of skin weights of observed points needed to judge residuals
 
-  // Run the PCG product on the worker pool (one hand-off per PCG iteration).
-  // Off by default: on the shared, loaded 2-core machine the ~90 hand-offs
-  // per frame cost more than they saved (docs/temporal.md, "Speed work").
-  bool parallel_pcg = false;
+  // Run the PCG product and the per-node PCG vector work (updates,
+  // block-Jacobi preconditioner) on the worker pool (two hand-offs per PCG
+  // iteration; the result does not depend on it). On by default since the
+  // vector work runs there too (docs/temporal.md, "Speed work, third pass").
+  bool parallel_pcg = true;
   int threads = 2;  // 0 = hardware concurrency
   Status Check() const;
 };
@@ -123,6 +146,9 @@ struct TrackResult {
   // Wall time, ms.
   double rigid_ms = 0, associate_ms = 0, solve_ms = 0, total_ms = 0;
   int pcg_iterations = 0;        // summed over the outer iterations (GN solver)
+  size_t sparse_pairs = 0;        // feature pairs used by the sparse term
+  double sparse_rms_m = 0;        // RMS distance of the warped pairs to their targets (final state)
+  double last_step_m = 0;        // largest node move (|Δt| + ‖ΔA‖·spacing) of the last GN step (GN solver)
 };
 
 class NonrigidTracker {
@@ -141,8 +167,11 @@ class NonrigidTracker {
   // nodes) onto the masked depth of `frames`. Errors (InvalidArgument): pod
   // count or image sizes differ from the rig, sizes of points and normals
   // differ. An empty graph or no points is OK (nothing to do).
+  // `features` (optional): colour-feature pairs from the previous frame (the
+  // model's frame) to this one, used by the sparse term if use_sparse.
   Status Track(const Rig& rig, const RgbdFrameSet& frames, const std::vector<Eigen::Vector3f>& points,
-               const std::vector<Eigen::Vector3f>& normals, DeformationGraph* graph, TrackResult* result);
+               const std::vector<Eigen::Vector3f>& normals, DeformationGraph* graph, TrackResult* result,
+               const std::vector<FeatureCorrespondence>* features = nullptr);
 
   // After Track: the distance (pixels, row-major) from each pixel of pod
   // `pod` to its nearest silhouette pixel (0 inside), or null if that pod had

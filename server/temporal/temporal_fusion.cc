@@ -31,12 +31,15 @@ Status TemporalFusionOptions::Check() const {
   HOLO_RETURN_IF_ERROR(cleanup.Check());
   HOLO_RETURN_IF_ERROR(graph.Check());
   HOLO_RETURN_IF_ERROR(tracker.Check());
+  HOLO_RETURN_IF_ERROR(features.Check());
   if (!(max_weight >= 1.0f && max_weight <= 1e6f))
     return InvalidArgument("max_weight must be in [1, 1e6], got " + std::to_string(max_weight));
   if (track_points < 16 || track_points > 10000000)
     return InvalidArgument("track_points must be in [16, 1e7], got " + std::to_string(track_points));
   if (!(lost_node_fraction > 0 && lost_node_fraction <= 1))
     return InvalidArgument("lost_node_fraction must be in (0, 1], got " + std::to_string(lost_node_fraction));
+  if (!(min_points_per_node >= 0 && min_points_per_node <= 1000))
+    return InvalidArgument("min_points_per_node must be in [0, 1000], got " + std::to_string(min_points_per_node));
   if (!(snap_still_m >= 0 && snap_still_m < 1))
     return InvalidArgument("snap_still_m must be in [0, 1), got " + std::to_string(snap_still_m));
   if (!(lost_min_associated >= 0 && lost_min_associated <= 1))
@@ -90,12 +93,15 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
   f->reference_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->live_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->tracker_ = std::make_unique<NonrigidTracker>(options.tracker);
+  if (options.temporal && options.tracker.use_sparse) f->matcher_ = std::make_unique<FeatureMatcher>(options.features);
   f->impl_ = std::make_unique<Impl>(options.tsdf.threads);
   return f;
 }
 
 void TemporalFusion::Reset() {
   has_reference_ = false;
+  prev_fused_ = false;
+  if (matcher_) matcher_->Reset();
   prev_node_pos_.clear();
   prev_node_disp_.clear();
   lost_frames_ = 0;
@@ -418,8 +424,22 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   if (frames.frames.size() != rig.pods.size())
     return InvalidArgument("frame set has " + std::to_string(frames.frames.size()) + " pods but the rig has " +
                            std::to_string(rig.pods.size()));
+  // Colour features of this frame, matched to the previous frame's. They
+  // are used only if the previous frame was fused (its observation is then
+  // what the reference shows).
+  const bool use_features = matcher_ != nullptr;  // temporal mode with the sparse term on
+  pairs_.clear();
+  if (use_features) {
+    const auto tf = std::chrono::steady_clock::now();
+    HOLO_RETURN_IF_ERROR(matcher_->Match(rig, frames, &pairs_));
+    if (!prev_fused_) pairs_.clear();
+    stats->features_ms = MsSince(tf);
+    stats->feature_pairs = pairs_.size();
+  }
+  prev_fused_ = false;
   if (!options_.temporal || !has_reference_) {
     HOLO_RETURN_IF_ERROR(FusePerFrame(rig, frames, live_.get(), out, stats));
+    prev_fused_ = true;
     if (options_.temporal) {
       std::swap(reference_, live_);
       reference_mesh_ = *out;
@@ -431,19 +451,29 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
 
   // Track the reference surface into this frame.
   auto t0 = std::chrono::steady_clock::now();
-  points_.clear();
-  normals_.clear();
   const size_t nv = reference_mesh_.positions.size();
-  const size_t stride = std::max<size_t>(1, nv / static_cast<size_t>(options_.track_points));
   const bool has_normals = reference_mesh_.normals.size() == nv;
-  for (size_t i = 0; i < nv; i += stride) {
-    const Vector3f n = has_normals ? reference_mesh_.normals[i] : Vector3f::Zero();
-    const float len = n.norm();
-    if (!(len > 1e-6f)) continue;
-    points_.push_back(reference_mesh_.positions[i]);
-    normals_.push_back(n / len);
-  }
+  auto sample = [&](size_t count) {
+    points_.clear();
+    normals_.clear();
+    const size_t stride = std::max<size_t>(1, nv / std::max<size_t>(1, count));
+    for (size_t i = 0; i < nv; i += stride) {
+      const Vector3f n = has_normals ? reference_mesh_.normals[i] : Vector3f::Zero();
+      const float len = n.norm();
+      if (!(len > 1e-6f)) continue;
+      points_.push_back(reference_mesh_.positions[i]);
+      normals_.push_back(n / len);
+    }
+  };
+  sample(static_cast<size_t>(options_.track_points));
   HOLO_RETURN_IF_ERROR(graph_.Build(points_, options_.graph));
+  if (options_.min_points_per_node > 0) {
+    const size_t want = static_cast<size_t>(options_.min_points_per_node * static_cast<float>(graph_.num_nodes()));
+    if (want > points_.size() * 11 / 10) {
+      sample(want);
+      HOLO_RETURN_IF_ERROR(graph_.Build(points_, options_.graph));
+    }
+  }
   if (options_.predict_motion && !prev_node_pos_.empty()) {
     const float max_d = 2.0f * options_.graph.node_spacing_m;
     for (size_t k = 0; k < graph_.num_nodes(); ++k) {
@@ -460,11 +490,12 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       if (bi >= 0) graph_.translation(static_cast<int>(k)) = prev_node_disp_[static_cast<size_t>(bi)];
     }
   }
-  HOLO_RETURN_IF_ERROR(tracker_->Track(rig, frames, points_, normals_, &graph_, &stats->track));
+  HOLO_RETURN_IF_ERROR(tracker_->Track(rig, frames, points_, normals_, &graph_, &stats->track,
+                                       use_features ? &pairs_ : nullptr));
   stats->tracked = true;
   stats->nodes = static_cast<int>(graph_.num_nodes());
   stats->failed_nodes = stats->track.failed_nodes;
-  stats->track_ms = MsSince(t0);
+  stats->track_ms = MsSince(t0) + stats->features_ms;
 
   const bool lost =
       graph_.num_nodes() == 0 ||
@@ -489,6 +520,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       has_reference_ = !out->empty();
       lost_frames_ = 0;
       stats->full_reset = true;
+      prev_fused_ = true;
     }
     stats->total_ms = MsSince(t_start);
     return OkStatus();
@@ -531,6 +563,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   std::swap(reference_, live_);
   reference_mesh_ = *out;
   has_reference_ = !out->empty();
+  prev_fused_ = true;
   stats->total_ms = MsSince(t_start);
   return OkStatus();
 }

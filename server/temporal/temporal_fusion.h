@@ -42,6 +42,7 @@
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
 #include "server/temporal/deformation_graph.h"
+#include "server/temporal/feature_matcher.h"
 #include "server/temporal/nonrigid_tracker.h"
 
 namespace holo {
@@ -51,12 +52,21 @@ struct TemporalFusionOptions {
   MeshCleanupOptions cleanup;
   DeformationGraphOptions graph;
   TrackerOptions tracker;
+  // Colour features for the tracker's sparse term (matched only when
+  // tracker.use_sparse is on).
+  FeatureMatchOptions features;
   // false: plain per-frame fusion (the baseline), same code path otherwise.
   bool temporal = true;
   // Cap of a carried voxel weight (one pod's observation = 1).
   float max_weight = 30.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
+  // At least this many model points per graph node (more points are taken
+  // when the graph has more nodes than track_points / this, e.g. two people
+  // and a crate at S8-VGA): with too few data residuals per node (12
+  // parameters each) the tracker fits the sensor noise (docs/temporal.md).
+  // 0 = off.
+  float min_points_per_node = 7.0f;
   // Start each node at the displacement of the nearest node of the last
   // tracked frame (constant-velocity prediction).
   bool predict_motion = true;
@@ -79,6 +89,8 @@ struct TemporalFrameStats {
   // Wall time, ms: tracking; warping the reference into the live frame;
   // fusing the observation; marching cubes + clean-up; all.
   double track_ms = 0, warp_ms = 0, fuse_ms = 0, mesh_ms = 0, total_ms = 0;
+  double features_ms = 0;    // colour features (detect + match; part of track_ms)
+  size_t feature_pairs = 0;  // correspondences handed to the tracker
   bool tracked = false;      // a reference existed and was tracked
   bool lost = false;         // tracking lost: frame not fused, reference output again
   bool full_reset = false;   // reference replaced by this frame's per-frame fusion
@@ -122,6 +134,11 @@ class TemporalFusion {
   int lost_frames_ = 0;
   DeformationGraph graph_;
   std::unique_ptr<NonrigidTracker> tracker_;
+  std::unique_ptr<FeatureMatcher> matcher_;
+  std::vector<FeatureCorrespondence> pairs_;
+  // The previous Process() call fused its frame (so the matcher's previous
+  // features belong to the reference).
+  bool prev_fused_ = false;
   std::unique_ptr<Impl> impl_;
   std::vector<Eigen::Vector3f> points_, normals_;
   // Last tracked frame: warped node positions and their displacements.
