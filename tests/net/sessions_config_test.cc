@@ -61,6 +61,7 @@ TEST(NetConfig, ServerConfigErrorsNameTheKey) {
   expect_error("publisher_token: p\nviewer_token: v\ntls: {enabled: true, crt: x}\n", "tls.crt: unknown key");
   expect_error("publisher_token: [p\n", "not valid YAML");
   expect_error("- a\n- b\n", "map");
+  expect_error("publisher_token: p\nviewer_token: v\n[a]: 1\n", "keys must be names");
 }
 
 TEST(NetConfig, CallConfigFaceToFace) {
@@ -122,6 +123,7 @@ TEST(NetConfig, CallConfigErrorsNameTheKey) {
                "room: {preset: face-to-face}\n",
                "remote.address");
   expect_error(sites + "room: {preset: face-to-face}\nextra: 1\n", "extra: unknown key");
+  expect_error(sites + "room: {preset: face-to-face, [yaw_deg]: 1}\n", "room: keys must be names");
 }
 
 }  // namespace
