@@ -136,9 +136,7 @@ StatusOr<CallConfig> ParseCallConfig(const std::string& yaml_text, const std::st
 StatusOr<CallConfig> LoadCallConfig(const std::string& path) {
   HOLO_ASSIGN_OR_RETURN(std::string text, ReadFileToString(path));
   HOLO_ASSIGN_OR_RETURN(CallConfig c, ParseCallConfig(text, path));
-  const size_t slash = path.rfind('/');
-  if (!c.tls_ca_file.empty() && c.tls_ca_file[0] != '/' && slash != std::string::npos)
-    c.tls_ca_file = path.substr(0, slash + 1) + c.tls_ca_file;
+  c.tls_ca_file = PathNextTo(path, c.tls_ca_file);
   return c;
 }
 

@@ -127,12 +127,8 @@ StatusOr<ServerConfig> LoadServerConfig(const std::string& path) {
   HOLO_ASSIGN_OR_RETURN(std::string text, ReadFileToString(path));
   HOLO_ASSIGN_OR_RETURN(ServerConfig c, ParseServerConfig(text, path));
   // Relative TLS paths are relative to the config file's folder.
-  const size_t slash = path.rfind('/');
-  if (slash != std::string::npos) {
-    const std::string dir = path.substr(0, slash + 1);
-    if (!c.tls.cert_file.empty() && c.tls.cert_file[0] != '/') c.tls.cert_file = dir + c.tls.cert_file;
-    if (!c.tls.key_file.empty() && c.tls.key_file[0] != '/') c.tls.key_file = dir + c.tls.key_file;
-  }
+  c.tls.cert_file = PathNextTo(path, c.tls.cert_file);
+  c.tls.key_file = PathNextTo(path, c.tls.key_file);
   return c;
 }
 
