@@ -107,54 +107,6 @@ StatusOr<Content> PrepareContent(const Workload& wl, int frames) {
   return c;
 }
 
-// A viewer on a raw socket reading `bytes_per_10ms` every 10 ms (0: never).
-class RawViewer {
- public:
-  RawViewer(uint16_t port, size_t bytes_per_10ms, const std::string& name, Status* status) : budget_(bytes_per_10ms) {
-    auto p = net::RawPeer::Connect("127.0.0.1", port);
-    if (!p.ok()) {
-      *status = p.status();
-      return;
-    }
-    peer_ = std::move(*p);
-    peer_->SetReceiveBuffer(64 << 10);
-    *status = peer_->SendHello(protocol::Role::kViewer, "bench-view", name);
-    if (!status->ok()) return;
-    auto w = peer_->ReadMessage(10.0);
-    if (!w.ok() || w->header.type != protocol::MessageType::kWelcome) {
-      *status = Unavailable(name + ": no Welcome");
-      return;
-    }
-    protocol::Control c;
-    c.command = protocol::ControlCommand::kSubscribe;
-    c.value = net::kContentGeometry | net::kContentColor;
-    *status = peer_->SendMessage(c);
-    if (budget_ > 0) thread_ = std::thread([this] { Run(); });
-  }
-  ~RawViewer() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  int64_t meshes() const { return meshes_; }
-
- private:
-  void Run() {
-    while (!stop_) {
-      std::vector<protocol::Frame> frames;
-      if (!peer_->ReadFrames(budget_, 0.01, &frames).ok()) return;
-      for (const auto& f : frames)
-        if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments))
-          ++meshes_;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  }
-  size_t budget_;
-  std::unique_ptr<net::RawPeer> peer_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<int64_t> meshes_{0};
-};
-
 // The capture site's own output: fused, meshed and textured frames (exact
 // masks, to keep the preparation short), encoded like holoport-server does.
 StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
@@ -287,14 +239,26 @@ int RunSessions(const BenchArgs& args) {
     }
   // 1/10 of the stream's byte rate, per 10 ms slice.
   const size_t slow_budget = static_cast<size_t>(content->bytes_per_frame * fps / 10 / 100);
-  Status slow_status, stalled_status;
-  RawViewer slow(port, std::max<size_t>(512, slow_budget), "slow", &slow_status);
-  RawViewer stalled(port, 0, "stalled", &stalled_status);
-  if (!slow_status.ok() || !stalled_status.ok()) {
-    std::fprintf(stderr, "sessions: slow/stalled viewer: %s %s\n", slow_status.ToString().c_str(),
-                 stalled_status.ToString().c_str());
+  // Raw-socket viewers of geometry and colour, reading `bytes_per_10ms` every 10 ms (0: never).
+  net::RawViewerOptions ro;
+  ro.port = port;
+  ro.token = "bench-view";
+  ro.subscribe = net::kSubscribeGeometry | net::kSubscribeColor;
+  ro.receive_buffer = 64 << 10;
+  ro.welcome_timeout_s = 10.0;
+  ro.name = "slow";
+  ro.bytes_per_10ms = std::max<size_t>(512, slow_budget);
+  auto slow_viewer = net::RawViewer::Start(ro);
+  ro.name = "stalled";
+  ro.bytes_per_10ms = 0;
+  auto stalled_viewer = net::RawViewer::Start(ro);
+  if (!slow_viewer.ok() || !stalled_viewer.ok()) {
+    std::fprintf(stderr, "sessions: slow/stalled viewer: %s %s\n", slow_viewer.status().ToString().c_str(),
+                 stalled_viewer.status().ToString().c_str());
     return 1;
   }
+  const net::RawViewer& slow = **slow_viewer;
+  const net::RawViewer& stalled = **stalled_viewer;
   while ((*server)->num_subscribed(net::kContentGeometry) < static_cast<size_t>(num_viewers + 2))
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   std::fprintf(stderr, "sessions: %d normal + 1 slow + 1 stalled viewers connected; streaming %d s at %.0f fps\n",

@@ -1,7 +1,6 @@
 #include "common/camera.h"
 
 #include <cmath>
-#include <sstream>
 
 namespace holo {
 
@@ -11,27 +10,21 @@ bool Intrinsics::HasDistortion() const {
   return false;
 }
 
-namespace {
-std::string Num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-}  // namespace
-
 Status Intrinsics::Check() const {
-  if (width <= 0 || width > 16384) return InvalidArgument("width must be in [1, 16384], got " + Num(width));
-  if (height <= 0 || height > 16384) return InvalidArgument("height must be in [1, 16384], got " + Num(height));
-  if (!(fx > 0) || !std::isfinite(fx)) return InvalidArgument("fx must be > 0, got " + Num(fx));
-  if (!(fy > 0) || !std::isfinite(fy)) return InvalidArgument("fy must be > 0, got " + Num(fy));
+  if (width <= 0 || width > 16384)
+    return InvalidArgument("width must be in [1, 16384], got " + FormatNumber(width));
+  if (height <= 0 || height > 16384)
+    return InvalidArgument("height must be in [1, 16384], got " + FormatNumber(height));
+  if (!(fx > 0) || !std::isfinite(fx)) return InvalidArgument("fx must be > 0, got " + FormatNumber(fx));
+  if (!(fy > 0) || !std::isfinite(fy)) return InvalidArgument("fy must be > 0, got " + FormatNumber(fy));
   if (!std::isfinite(cx) || cx < -width || cx > 2.0 * width)
-    return InvalidArgument("cx must lie near the image (width " + Num(width) + "), got " + Num(cx));
+    return InvalidArgument("cx must lie near the image (width " + FormatNumber(width) + "), got " + FormatNumber(cx));
   if (!std::isfinite(cy) || cy < -height || cy > 2.0 * height)
-    return InvalidArgument("cy must lie near the image (height " + Num(height) + "), got " + Num(cy));
+    return InvalidArgument("cy must lie near the image (height " + FormatNumber(height) + "), got " + FormatNumber(cy));
   for (size_t i = 0; i < distortion.size(); ++i) {
     if (!std::isfinite(distortion[i]) || std::abs(distortion[i]) > 10.0)
-      return InvalidArgument("distortion[" + Num(static_cast<double>(i)) + "] must be finite and |.| <= 10, got " +
-                             Num(distortion[i]));
+      return InvalidArgument("distortion[" + FormatNumber(static_cast<double>(i)) +
+                             "] must be finite and |.| <= 10, got " + FormatNumber(distortion[i]));
   }
   return OkStatus();
 }

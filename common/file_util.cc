@@ -43,4 +43,10 @@ bool FileExists(const std::string& path) {
   return std::filesystem::exists(path, ec);
 }
 
+std::string PathNextTo(const std::string& base, const std::string& path) {
+  const size_t slash = base.rfind('/');
+  if (path.empty() || path[0] == '/' || slash == std::string::npos) return path;
+  return base.substr(0, slash + 1) + path;
+}
+
 }  // namespace holo

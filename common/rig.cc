@@ -7,6 +7,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "common/file_util.h"
+#include "common/yaml_util.h"
 
 namespace holo {
 
@@ -41,10 +42,7 @@ Status Rig::Check() const {
 
 namespace {
 
-// Errors carry "key: message"; the caller prefixes the source name.
-struct YamlError {
-  std::string key, message;
-};
+// Errors carry "key: message" (KeyError); the caller prefixes the source name.
 
 std::string Repr(const YAML::Node& n) {
   if (!n.IsDefined() || n.IsNull()) return "(missing)";
@@ -54,35 +52,33 @@ std::string Repr(const YAML::Node& n) {
   return e.c_str();
 }
 
-Status Bad(const std::string& key, const std::string& message) { return InvalidArgument(key + ": " + message); }
-
 Status GetDouble(const YAML::Node& parent, const std::string& field, const std::string& key, double* out,
                  bool required = true) {
   const YAML::Node n = parent[field];
   if (!n.IsDefined() || n.IsNull()) {
     if (!required) return OkStatus();
-    return Bad(key, "missing (a number is required)");
+    return KeyError(key, "missing (a number is required)");
   }
-  if (!n.IsScalar()) return Bad(key, "must be a number, got " + Repr(n));
+  if (!n.IsScalar()) return KeyError(key, "must be a number, got " + Repr(n));
   double v;
   try {
     v = n.as<double>();
   } catch (const YAML::Exception&) {
-    return Bad(key, "must be a number, got " + Repr(n));
+    return KeyError(key, "must be a number, got " + Repr(n));
   }
-  if (!std::isfinite(v)) return Bad(key, "must be finite, got " + Repr(n));
+  if (!std::isfinite(v)) return KeyError(key, "must be finite, got " + Repr(n));
   *out = v;
   return OkStatus();
 }
 
 Status GetInt(const YAML::Node& parent, const std::string& field, const std::string& key, int* out) {
   const YAML::Node n = parent[field];
-  if (!n.IsDefined() || n.IsNull()) return Bad(key, "missing (an integer is required)");
-  if (!n.IsScalar()) return Bad(key, "must be an integer, got " + Repr(n));
+  if (!n.IsDefined() || n.IsNull()) return KeyError(key, "missing (an integer is required)");
+  if (!n.IsScalar()) return KeyError(key, "must be an integer, got " + Repr(n));
   try {
     *out = n.as<int>();
   } catch (const YAML::Exception&) {
-    return Bad(key, "must be an integer, got " + Repr(n));
+    return KeyError(key, "must be an integer, got " + Repr(n));
   }
   return OkStatus();
 }
@@ -90,25 +86,25 @@ Status GetInt(const YAML::Node& parent, const std::string& field, const std::str
 Status GetVector(const YAML::Node& parent, const std::string& field, const std::string& key, size_t size,
                  std::vector<double>* out) {
   const YAML::Node n = parent[field];
-  if (!n.IsDefined() || n.IsNull()) return Bad(key, "missing (a list of " + std::to_string(size) + " numbers)");
+  if (!n.IsDefined() || n.IsNull()) return KeyError(key, "missing (a list of " + std::to_string(size) + " numbers)");
   if (!n.IsSequence() || n.size() != size)
-    return Bad(key, "must be a list of " + std::to_string(size) + " numbers, got " + Repr(n));
+    return KeyError(key, "must be a list of " + std::to_string(size) + " numbers, got " + Repr(n));
   out->clear();
   for (size_t i = 0; i < size; ++i) {
     double v;
     try {
       v = n[i].as<double>();
     } catch (const YAML::Exception&) {
-      return Bad(key + "[" + std::to_string(i) + "]", "must be a number, got " + Repr(n[i]));
+      return KeyError(key + "[" + std::to_string(i) + "]", "must be a number, got " + Repr(n[i]));
     }
-    if (!std::isfinite(v)) return Bad(key + "[" + std::to_string(i) + "]", "must be finite");
+    if (!std::isfinite(v)) return KeyError(key + "[" + std::to_string(i) + "]", "must be finite");
     out->push_back(v);
   }
   return OkStatus();
 }
 
 Status ParseIntrinsics(const YAML::Node& n, const std::string& key, Intrinsics* k) {
-  if (!n.IsDefined() || !n.IsMap()) return Bad(key, "missing or not a map of width/height/fx/fy/cx/cy");
+  if (!n.IsDefined() || !n.IsMap()) return KeyError(key, "missing or not a map of width/height/fx/fy/cx/cy");
   HOLO_RETURN_IF_ERROR(GetInt(n, "width", key + ".width", &k->width));
   HOLO_RETURN_IF_ERROR(GetInt(n, "height", key + ".height", &k->height));
   HOLO_RETURN_IF_ERROR(GetDouble(n, "fx", key + ".fx", &k->fx));
@@ -126,7 +122,7 @@ Status ParseIntrinsics(const YAML::Node& n, const std::string& key, Intrinsics* 
     const std::string& m = s.message();
     const size_t sp = m.find(' ');
     const std::string field = m.substr(0, sp);
-    return Bad(key + "." + field, m.substr(sp + 1));
+    return KeyError(key + "." + field, m.substr(sp + 1));
   }
   return OkStatus();
 }
@@ -134,7 +130,7 @@ Status ParseIntrinsics(const YAML::Node& n, const std::string& key, Intrinsics* 
 // A pose is either {translation: [x,y,z], quaternion_wxyz: [w,x,y,z]} or
 // {eye: [x,y,z], target: [x,y,z], up: [x,y,z] (optional, default z)}.
 Status ParsePose(const YAML::Node& n, const std::string& key, Pose* pose) {
-  if (!n.IsDefined() || !n.IsMap()) return Bad(key, "missing or not a map");
+  if (!n.IsDefined() || !n.IsMap()) return KeyError(key, "missing or not a map");
   std::vector<double> a, b, c;
   if (n["eye"].IsDefined()) {
     HOLO_RETURN_IF_ERROR(GetVector(n, "eye", key + ".eye", 3, &a));
@@ -143,10 +139,10 @@ Status ParsePose(const YAML::Node& n, const std::string& key, Pose* pose) {
     if (n["up"].IsDefined()) {
       HOLO_RETURN_IF_ERROR(GetVector(n, "up", key + ".up", 3, &c));
       up = Eigen::Vector3f(c[0], c[1], c[2]);
-      if (up.norm() < 1e-6f) return Bad(key + ".up", "must not be zero");
+      if (up.norm() < 1e-6f) return KeyError(key + ".up", "must not be zero");
     }
     const Eigen::Vector3f eye(a[0], a[1], a[2]), target(b[0], b[1], b[2]);
-    if ((target - eye).norm() < 1e-6f) return Bad(key + ".target", "must differ from eye");
+    if ((target - eye).norm() < 1e-6f) return KeyError(key + ".target", "must differ from eye");
     *pose = LookAt(eye, target, up);
     return OkStatus();
   }
@@ -155,7 +151,7 @@ Status ParsePose(const YAML::Node& n, const std::string& key, Pose* pose) {
   Eigen::Quaterniond q(b[0], b[1], b[2], b[3]);
   const double norm = q.norm();
   if (std::abs(norm - 1.0) > 1e-3)
-    return Bad(key + ".quaternion_wxyz", "must be a unit quaternion, got norm " + std::to_string(norm));
+    return KeyError(key + ".quaternion_wxyz", "must be a unit quaternion, got norm " + std::to_string(norm));
   q.normalize();
   *pose = Pose::Identity();
   pose->linear() = q.toRotationMatrix().cast<float>();
@@ -166,31 +162,26 @@ Status ParsePose(const YAML::Node& n, const std::string& key, Pose* pose) {
 }  // namespace
 
 StatusOr<Rig> ParseRigYaml(const std::string& yaml_text, const std::string& source_name) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    return InvalidArgument(source_name + ": not valid YAML: " + e.what());
-  }
+  HOLO_ASSIGN_OR_RETURN(YAML::Node root, LoadYaml(yaml_text, source_name));
   auto fail = [&](const Status& s) { return s.WithContext(source_name); };
   if (!root.IsMap()) return InvalidArgument(source_name + ": top level must be a map with 'name' and 'pods'");
   Rig rig;
   if (root["name"].IsDefined() && root["name"].IsScalar()) rig.name = root["name"].Scalar();
   const YAML::Node pods = root["pods"];
   if (!pods.IsDefined() || !pods.IsSequence() || pods.size() == 0)
-    return fail(Bad("pods", "missing or not a non-empty list"));
-  if (pods.size() > 64) return fail(Bad("pods", "at most 64 pods, got " + std::to_string(pods.size())));
+    return fail(KeyError("pods", "missing or not a non-empty list"));
+  if (pods.size() > 64) return fail(KeyError("pods", "at most 64 pods, got " + std::to_string(pods.size())));
   for (size_t i = 0; i < pods.size(); ++i) {
     const std::string key = "pods[" + std::to_string(i) + "]";
     const YAML::Node p = pods[i];
-    if (!p.IsMap()) return fail(Bad(key, "must be a map"));
+    if (!p.IsMap()) return fail(KeyError(key, "must be a map"));
     PodCalibration pod;
     pod.id = static_cast<int>(i);
     if (p["id"].IsDefined()) {
       Status s = GetInt(p, "id", key + ".id", &pod.id);
       if (!s.ok()) return fail(s);
       if (pod.id != static_cast<int>(i))
-        return fail(Bad(key + ".id", "pods must be numbered 0..N-1 in order, got " + std::to_string(pod.id)));
+        return fail(KeyError(key + ".id", "pods must be numbered 0..N-1 in order, got " + std::to_string(pod.id)));
     }
     pod.name = p["name"].IsDefined() && p["name"].IsScalar() ? p["name"].Scalar() : "pod" + std::to_string(i);
     Status s = ParseIntrinsics(p["depth"], key + ".depth", &pod.depth);

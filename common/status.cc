@@ -1,6 +1,14 @@
 #include "common/status.h"
 
+#include <sstream>
+
 namespace holo {
+
+std::string FormatNumber(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
 
 const char* StatusCodeName(StatusCode code) {
   switch (code) {

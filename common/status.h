@@ -45,6 +45,10 @@ class [[nodiscard]] Status {
   std::string message_;
 };
 
+// A number as error messages show it, in the stream's default format ("640",
+// "0.25", "1e+30", "nan"): "fx must be > 0, got -1".
+std::string FormatNumber(double v);
+
 inline Status OkStatus() { return Status(); }
 inline Status InvalidArgument(std::string m) { return {StatusCode::kInvalidArgument, std::move(m)}; }
 inline Status NotFound(std::string m) { return {StatusCode::kNotFound, std::move(m)}; }

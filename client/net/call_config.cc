@@ -2,36 +2,14 @@
 
 #include <cmath>
 #include <numbers>
-#include <set>
 
 #include <yaml-cpp/yaml.h>
 
 #include "common/file_util.h"
+#include "common/yaml_util.h"
 
 namespace holo::net {
 namespace {
-
-Status Bad(const std::string& key, const std::string& msg) { return InvalidArgument(key + ": " + msg); }
-
-Status CheckKeys(const YAML::Node& map, const std::set<std::string>& known, const std::string& where) {
-  for (const auto& kv : map) {
-    const std::string k = kv.first.as<std::string>();
-    if (!known.count(k)) {
-      std::string list;
-      for (const auto& s : known) list += (list.empty() ? "" : ", ") + s;
-      return Bad(where + k, "unknown key (known: " + list + ")");
-    }
-  }
-  return OkStatus();
-}
-
-Status GetString(const YAML::Node& m, const std::string& key, const std::string& where, std::string* out) {
-  const YAML::Node n = m[key];
-  if (!n.IsDefined()) return OkStatus();
-  if (!n.IsScalar()) return Bad(where + key, "must be a string");
-  *out = n.Scalar();
-  return OkStatus();
-}
 
 Status GetFloat(const YAML::Node& m, const std::string& key, const std::string& where, float lo, float hi, float* out) {
   const YAML::Node n = m[key];
@@ -41,44 +19,45 @@ Status GetFloat(const YAML::Node& m, const std::string& key, const std::string& 
     if (!n.IsScalar()) throw YAML::Exception(YAML::Mark(), "");
     v = n.as<double>();
   } catch (const YAML::Exception&) {
-    return Bad(where + key, "must be a number");
+    return KeyError(where + key, "must be a number");
   }
   if (!std::isfinite(v) || v < lo || v > hi)
-    return Bad(where + key, "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
+    return KeyError(where + key, "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
   *out = static_cast<float>(v);
   return OkStatus();
 }
 
 Status ParseAddress(const std::string& spec, const std::string& key, std::string* host, uint16_t* port) {
   const size_t colon = spec.rfind(':');
-  if (spec.empty()) return Bad(key, "must be set (HOST:PORT)");
-  if (colon == std::string::npos || colon == 0) return Bad(key, "'" + spec + "': expected HOST:PORT");
+  if (spec.empty()) return KeyError(key, "must be set (HOST:PORT)");
+  if (colon == std::string::npos || colon == 0) return KeyError(key, "'" + spec + "': expected HOST:PORT");
   std::string h = spec.substr(0, colon);
   const std::string p = spec.substr(colon + 1);
   if (h.size() >= 2 && h.front() == '[' && h.back() == ']') h = h.substr(1, h.size() - 2);
   if (p.empty() || p.size() > 5 || p.find_first_not_of("0123456789") != std::string::npos || std::stol(p) < 1 ||
       std::stol(p) > 65535)
-    return Bad(key, "'" + spec + "': port must be 1..65535");
+    return KeyError(key, "'" + spec + "': port must be 1..65535");
   *host = h;
   *port = static_cast<uint16_t>(std::stol(p));
   return OkStatus();
 }
 
 Status ParseSite(const YAML::Node& n, const std::string& where, bool local, CallSite* site) {
-  if (!n.IsDefined()) return Bad(where, "missing");
-  if (!n.IsMap()) return Bad(where, "must be a map (name, address, tokens)");
-  HOLO_RETURN_IF_ERROR(CheckKeys(n, {"name", "address", "publisher_token", "viewer_token"}, where + "."));
-  HOLO_RETURN_IF_ERROR(GetString(n, "name", where + ".", &site->name));
+  if (!n.IsDefined()) return KeyError(where, "missing");
+  if (!n.IsMap()) return KeyError(where, "must be a map (name, address, tokens)");
+  HOLO_RETURN_IF_ERROR(CheckYamlKeys(n, {"name", "address", "publisher_token", "viewer_token"}, where + "."));
+  HOLO_RETURN_IF_ERROR(GetYamlString(n, "name", where + ".", &site->name));
   std::string address;
-  HOLO_RETURN_IF_ERROR(GetString(n, "address", where + ".", &address));
+  HOLO_RETURN_IF_ERROR(GetYamlString(n, "address", where + ".", &address));
   HOLO_RETURN_IF_ERROR(ParseAddress(address, where + ".address", &site->host, &site->port));
-  HOLO_RETURN_IF_ERROR(GetString(n, "publisher_token", where + ".", &site->publisher_token));
-  HOLO_RETURN_IF_ERROR(GetString(n, "viewer_token", where + ".", &site->viewer_token));
+  HOLO_RETURN_IF_ERROR(GetYamlString(n, "publisher_token", where + ".", &site->publisher_token));
+  HOLO_RETURN_IF_ERROR(GetYamlString(n, "viewer_token", where + ".", &site->viewer_token));
   if (local && site->publisher_token.empty())
-    return Bad(where + ".publisher_token", "must be set (the own audio+pose is published to the local site)");
-  if (!local && site->viewer_token.empty()) return Bad(where + ".viewer_token", "must be set (to watch the remote site)");
+    return KeyError(where + ".publisher_token", "must be set (the own audio+pose is published to the local site)");
+  if (!local && site->viewer_token.empty())
+    return KeyError(where + ".viewer_token", "must be set (to watch the remote site)");
   if (site->publisher_token.size() > 256 || site->viewer_token.size() > 256)
-    return Bad(where, "tokens are at most 256 bytes");
+    return KeyError(where, "tokens are at most 256 bytes");
   if (site->name.empty()) site->name = local ? "local" : "remote";
   return OkStatus();
 }
@@ -86,36 +65,32 @@ Status ParseSite(const YAML::Node& n, const std::string& where, bool local, Call
 }  // namespace
 
 StatusOr<CallConfig> ParseCallConfig(const std::string& yaml_text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    return InvalidArgument(source + ": not valid YAML: " + e.what());
-  }
+  HOLO_ASSIGN_OR_RETURN(YAML::Node root, LoadYaml(yaml_text, source));
   CallConfig c;
   auto parse = [&]() -> Status {
     if (!root.IsMap()) return InvalidArgument("expected a map with local, remote, room");
-    HOLO_RETURN_IF_ERROR(CheckKeys(root, {"local", "remote", "room", "tls"}, ""));
+    HOLO_RETURN_IF_ERROR(CheckYamlKeys(root, {"local", "remote", "room", "tls"}, ""));
     HOLO_RETURN_IF_ERROR(ParseSite(root["local"], "local", true, &c.local));
     HOLO_RETURN_IF_ERROR(ParseSite(root["remote"], "remote", false, &c.remote));
     if (c.local.host == c.remote.host && c.local.port == c.remote.port)
-      return Bad("remote.address", "is the local site's address");
+      return KeyError("remote.address", "is the local site's address");
     const YAML::Node room = root["room"];
-    if (!room.IsDefined()) return Bad("room", "missing (preset: face-to-face, or yaw_deg/pitch_deg/roll_deg + translation_m)");
-    if (!room.IsMap()) return Bad("room", "must be a map");
+    if (!room.IsDefined())
+      return KeyError("room", "missing (preset: face-to-face, or yaw_deg/pitch_deg/roll_deg + translation_m)");
+    if (!room.IsMap()) return KeyError("room", "must be a map");
     HOLO_RETURN_IF_ERROR(
-        CheckKeys(room, {"preset", "gap_m", "yaw_deg", "pitch_deg", "roll_deg", "translation_m"}, "room."));
+        CheckYamlKeys(room, {"preset", "gap_m", "yaw_deg", "pitch_deg", "roll_deg", "translation_m"}, "room."));
     std::string preset;
-    HOLO_RETURN_IF_ERROR(GetString(room, "preset", "room.", &preset));
+    HOLO_RETURN_IF_ERROR(GetYamlString(room, "preset", "room.", &preset));
     if (!preset.empty()) {
-      if (preset != "face-to-face") return Bad("room.preset", "'" + preset + "': known presets: face-to-face");
+      if (preset != "face-to-face") return KeyError("room.preset", "'" + preset + "': known presets: face-to-face");
       for (const char* k : {"yaw_deg", "pitch_deg", "roll_deg", "translation_m"})
-        if (room[k].IsDefined()) return Bad(std::string("room.") + k, "not with a preset");
+        if (room[k].IsDefined()) return KeyError(std::string("room.") + k, "not with a preset");
       float gap = 0;
       HOLO_RETURN_IF_ERROR(GetFloat(room, "gap_m", "room.", 0.0f, 100.0f, &gap));
       c.room = audio::FaceToFaceLink(gap);
     } else {
-      if (room["gap_m"].IsDefined()) return Bad("room.gap_m", "only with preset: face-to-face");
+      if (room["gap_m"].IsDefined()) return KeyError("room.gap_m", "only with preset: face-to-face");
       float yaw = 0, pitch = 0, roll = 0;
       HOLO_RETURN_IF_ERROR(GetFloat(room, "yaw_deg", "room.", -360.0f, 360.0f, &yaw));
       HOLO_RETURN_IF_ERROR(GetFloat(room, "pitch_deg", "room.", -90.0f, 90.0f, &pitch));
@@ -123,15 +98,16 @@ StatusOr<CallConfig> ParseCallConfig(const std::string& yaml_text, const std::st
       Eigen::Vector3f t = Eigen::Vector3f::Zero();
       const YAML::Node tn = room["translation_m"];
       if (tn.IsDefined()) {
-        if (!tn.IsSequence() || tn.size() != 3) return Bad("room.translation_m", "must be [x, y, z] in metres");
+        if (!tn.IsSequence() || tn.size() != 3) return KeyError("room.translation_m", "must be [x, y, z] in metres");
         for (int i = 0; i < 3; ++i) {
           double v = 0;
           try {
             v = tn[i].as<double>();
           } catch (const YAML::Exception&) {
-            return Bad("room.translation_m", "must be [x, y, z] in metres");
+            return KeyError("room.translation_m", "must be [x, y, z] in metres");
           }
-          if (!std::isfinite(v) || std::abs(v) > 1000) return Bad("room.translation_m", "|value| must be <= 1000 m");
+          if (!std::isfinite(v) || std::abs(v) > 1000)
+            return KeyError("room.translation_m", "|value| must be <= 1000 m");
           t[i] = static_cast<float>(v);
         }
       }
@@ -145,14 +121,10 @@ StatusOr<CallConfig> ParseCallConfig(const std::string& yaml_text, const std::st
     }
     const YAML::Node tls = root["tls"];
     if (tls.IsDefined()) {
-      if (!tls.IsMap()) return Bad("tls", "must be a map (enabled, ca)");
-      HOLO_RETURN_IF_ERROR(CheckKeys(tls, {"enabled", "ca"}, "tls."));
-      try {
-        if (tls["enabled"].IsDefined()) c.tls = tls["enabled"].as<bool>();
-      } catch (const YAML::Exception&) {
-        return Bad("tls.enabled", "must be true or false");
-      }
-      HOLO_RETURN_IF_ERROR(GetString(tls, "ca", "tls.", &c.tls_ca_file));
+      if (!tls.IsMap()) return KeyError("tls", "must be a map (enabled, ca)");
+      HOLO_RETURN_IF_ERROR(CheckYamlKeys(tls, {"enabled", "ca"}, "tls."));
+      HOLO_RETURN_IF_ERROR(GetYamlBool(tls, "enabled", "tls.", &c.tls));
+      HOLO_RETURN_IF_ERROR(GetYamlString(tls, "ca", "tls.", &c.tls_ca_file));
     }
     return OkStatus();
   };
@@ -164,9 +136,7 @@ StatusOr<CallConfig> ParseCallConfig(const std::string& yaml_text, const std::st
 StatusOr<CallConfig> LoadCallConfig(const std::string& path) {
   HOLO_ASSIGN_OR_RETURN(std::string text, ReadFileToString(path));
   HOLO_ASSIGN_OR_RETURN(CallConfig c, ParseCallConfig(text, path));
-  const size_t slash = path.rfind('/');
-  if (!c.tls_ca_file.empty() && c.tls_ca_file[0] != '/' && slash != std::string::npos)
-    c.tls_ca_file = path.substr(0, slash + 1) + c.tls_ca_file;
+  c.tls_ca_file = PathNextTo(path, c.tls_ca_file);
   return c;
 }
 

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <algorithm>
 #include <cstring>
+#include <thread>
 
 namespace holo::net {
 
@@ -157,6 +158,41 @@ bool RawPeer::WaitClosed(double timeout_s) {
     if (left <= 0) return false;
     auto n = Read(buf, sizeof(buf), static_cast<double>(left) * 1e-3);
     if (!n.ok()) return true;
+  }
+}
+
+StatusOr<std::unique_ptr<RawViewer>> RawViewer::Start(const RawViewerOptions& options) {
+  HOLO_ASSIGN_OR_RETURN(auto peer, RawPeer::Connect(options.host, options.port));
+  peer->SetReceiveBuffer(options.receive_buffer);
+  HOLO_RETURN_IF_ERROR(peer->SendHello(protocol::Role::kViewer, options.token, options.name));
+  auto w = peer->ReadMessage(options.welcome_timeout_s);
+  if (!w.ok() || w->header.type != protocol::MessageType::kWelcome)
+    return Unavailable(options.name + ": no Welcome");
+  protocol::Control c;
+  c.command = protocol::ControlCommand::kSubscribe;
+  c.value = options.subscribe;
+  HOLO_RETURN_IF_ERROR(peer->SendMessage(c));
+  return std::unique_ptr<RawViewer>(new RawViewer(std::move(peer), options.bytes_per_10ms));
+}
+
+RawViewer::RawViewer(std::unique_ptr<RawPeer> peer, size_t bytes_per_10ms)
+    : peer_(std::move(peer)), budget_(bytes_per_10ms) {
+  if (budget_ > 0) thread_ = std::thread([this] { Run(); });
+}
+
+RawViewer::~RawViewer() {
+  stop_ = true;
+  if (thread_.joinable()) thread_.join();
+}
+
+void RawViewer::Run() {
+  while (!stop_) {
+    std::vector<protocol::Frame> frames;
+    if (!peer_->ReadFrames(budget_, 0.01, &frames).ok()) return;
+    for (const auto& f : frames)
+      if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments))
+        ++meshes_;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }
 

@@ -3,10 +3,12 @@
 // and stalled viewers). Not for applications: use SiteClient.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "common/status.h"
@@ -46,6 +48,43 @@ class RawPeer {
   uint64_t bytes_read_ = 0;
   protocol::FrameParser parser_;
   protocol::MessageAssembler assembler_;
+};
+
+// A viewer on a RawPeer that reads at a limited rate or not at all, counting
+// the whole MeshFrames it gets: the slow and stalled viewers of the fan-out
+// test and the sessions benchmark.
+struct RawViewerOptions {
+  std::string host = "127.0.0.1";
+  uint16_t port = 0;
+  std::string token;
+  std::string name;
+  uint32_t subscribe = 1;            // content bits of Control.subscribe (kSubscribeGeometry, …)
+  int receive_buffer = 16 << 10;     // kernel receive buffer, bytes (small = a slow link)
+  double welcome_timeout_s = 5.0;
+  size_t bytes_per_10ms = 0;         // read at most this every 10 ms; 0: never read (stalled)
+};
+
+class RawViewer {
+ public:
+  // Connects, says Hello as a viewer, waits for the Welcome and subscribes;
+  // then reads on its own thread unless bytes_per_10ms is 0.
+  static StatusOr<std::unique_ptr<RawViewer>> Start(const RawViewerOptions& options);
+  ~RawViewer();
+  RawViewer(const RawViewer&) = delete;
+  RawViewer& operator=(const RawViewer&) = delete;
+
+  // Whole MeshFrames read so far (the last fragment of each).
+  int64_t meshes() const { return meshes_; }
+
+ private:
+  RawViewer(std::unique_ptr<RawPeer> peer, size_t bytes_per_10ms);
+  void Run();
+
+  std::unique_ptr<RawPeer> peer_;
+  size_t budget_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int64_t> meshes_{0};
 };
 
 }  // namespace holo::net

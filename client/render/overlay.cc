@@ -41,10 +41,10 @@ void main() {
 }
 )";
 
-}  // namespace
-
-void DrawTextCpu(const std::string& text, int x, int y, int scale, const std::array<uint8_t, 3>& color,
-                 ImageRgb8* image) {
+// Lays out `text` from (x, y) at `scale`: calls draw(c, cx, cy) with the top
+// left corner of each character's cell ('\n' starts a new line).
+template <typename Draw>
+void LayOutText(const std::string& text, int x, int y, int scale, Draw draw) {
   int cx = x, cy = y;
   for (char c : text) {
     if (c == '\n') {
@@ -52,6 +52,16 @@ void DrawTextCpu(const std::string& text, int x, int y, int scale, const std::ar
       cy += kLineH * scale;
       continue;
     }
+    draw(c, cx, cy);
+    cx += kCellW * scale;
+  }
+}
+
+}  // namespace
+
+void DrawTextCpu(const std::string& text, int x, int y, int scale, const std::array<uint8_t, 3>& color,
+                 ImageRgb8* image) {
+  LayOutText(text, x, y, scale, [&](char c, int cx, int cy) {
     const auto& g = Glyph5x7(c);
     for (int r = 0; r < 7; ++r) {
       for (int col = 0; col < 5; ++col) {
@@ -65,8 +75,7 @@ void DrawTextCpu(const std::string& text, int x, int y, int scale, const std::ar
         }
       }
     }
-    cx += kCellW * scale;
-  }
+  });
 }
 
 Overlay::~Overlay() {
@@ -135,13 +144,7 @@ Status Overlay::Draw(const std::string& text, int x, int y, int scale, int fb_wi
   add_quad(x - pad, y - pad, x + cols * kCellW * scale + pad, y + (lines - 1) * kLineH * scale + 7 * scale + pad, 0, 0, 0,
            0);
   const float aw = static_cast<float>(kAtlasGlyphs * kCellW);
-  int cx = x, cy = y;
-  for (char c : text) {
-    if (c == '\n') {
-      cx = x;
-      cy += kLineH * scale;
-      continue;
-    }
+  LayOutText(text, x, y, scale, [&](char c, int cx, int cy) {
     // Atlas cell g holds Glyph5x7(g): lowercase cells already hold the
     // uppercase shapes, unknown ones the box.
     unsigned char g = static_cast<unsigned char>(c);
@@ -151,8 +154,7 @@ Status Overlay::Draw(const std::string& text, int x, int y, int scale, int fb_wi
       add_quad(static_cast<float>(cx), static_cast<float>(cy), static_cast<float>(cx + 5 * scale),
                static_cast<float>(cy + 7 * scale), u0, 0.0f, u1, 7.0f / kCellH);
     }
-    cx += kCellW * scale;
-  }
+  });
   glViewport(0, 0, fb_width, fb_height);
   glDisable(GL_DEPTH_TEST);
   glDisable(GL_SCISSOR_TEST);

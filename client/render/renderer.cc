@@ -21,6 +21,18 @@ struct GpuVertex {
 };
 static_assert(sizeof(GpuVertex) == 28);
 
+// The pods' lens model (as Intrinsics: k1, k2, p1, p2 in d, then k3) on
+// normalized camera coordinates, shared by the draw and pod-depth shaders:
+// they declare it and BuildProgram gets their source with this appended.
+constexpr const char* kDistortGlsl = R"(
+vec2 Distort(vec2 x, vec4 d, float k3) {
+  float r2 = dot(x, x);
+  float radial = 1.0 + r2 * (d.x + r2 * (d.y + r2 * k3));
+  return vec2(x.x * radial + 2.0 * d.z * x.x * x.y + d.w * (r2 + 2.0 * x.x * x.x),
+              x.y * radial + d.z * (r2 + 2.0 * x.y * x.y) + 2.0 * d.w * x.x * x.y);
+}
+)";
+
 // The pods' blending weights are computed per vertex (as Holoportation
 // does) and interpolated. The fragment shader transforms the surface point
 // into each pod's camera, projects it (with distortion), tests visibility and
@@ -89,13 +101,7 @@ uniform vec2 u_array_size;
 uniform sampler2DArray u_pod_color;
 uniform sampler2DArray u_pod_depth;
 uniform float u_vis_tol;
-
-vec2 Distort(vec2 x, vec4 d, float k3) {
-  float r2 = dot(x, x);
-  float radial = 1.0 + r2 * (d.x + r2 * (d.y + r2 * k3));
-  return vec2(x.x * radial + 2.0 * d.z * x.x * x.y + d.w * (r2 + 2.0 * x.x * x.x),
-              x.y * radial + d.z * (r2 + 2.0 * x.y * x.y) + 2.0 * d.w * x.x * x.y);
-}
+vec2 Distort(vec2 x, vec4 d, float k3);  // kDistortGlsl, appended when the program is built
 
 void main() {
   if (u_mode == 0 || u_num_pods == 0) {
@@ -151,12 +157,7 @@ uniform vec2 u_size;
 uniform float u_near;
 uniform float u_far;
 out float v_z;
-vec2 Distort(vec2 x, vec4 d, float k3) {
-  float r2 = dot(x, x);
-  float radial = 1.0 + r2 * (d.x + r2 * (d.y + r2 * k3));
-  return vec2(x.x * radial + 2.0 * d.z * x.x * x.y + d.w * (r2 + 2.0 * x.x * x.x),
-              x.y * radial + d.z * (r2 + 2.0 * x.y * x.y) + 2.0 * d.w * x.x * x.y);
-}
+vec2 Distort(vec2 x, vec4 d, float k3);  // kDistortGlsl, appended when the program is built
 void main() {
   vec4 pc = u_cam_from_world * vec4(a_pos, 1.0);
   float z = pc.z;
@@ -327,8 +328,10 @@ Status Renderer::Init() {
     return Unavailable("the renderer needs OpenGL 3.3, the context has " + std::to_string(major) + "." +
                        std::to_string(minor));
   }
-  HOLO_ASSIGN_OR_RETURN(draw_program_, BuildProgram("mesh", kDrawVs, kDrawFs));
-  HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", kDepthVs, kDepthFs));
+  const std::string draw_fs = std::string(kDrawFs) + kDistortGlsl;
+  const std::string depth_vs = std::string(kDepthVs) + kDistortGlsl;
+  HOLO_ASSIGN_OR_RETURN(draw_program_, BuildProgram("mesh", kDrawVs, draw_fs.c_str()));
+  HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", depth_vs.c_str(), kDepthFs));
   HOLO_ASSIGN_OR_RETURN(edge_program_, BuildProgram("pod discontinuities", kEdgeVs, kEdgeFs));
   glGenVertexArrays(1, &empty_vao_);
   glUseProgram(draw_program_);

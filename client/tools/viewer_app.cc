@@ -710,12 +710,7 @@ class Viewer {
   void NoteDisplayed(const StreamFrame& frame, double loop_ms) {
     const int64_t now = RealClock::Instance().NowUs();
     stats_.latency_ms.push_back((now - frame.capture_us) / 1000.0);
-    stats_.loop_ms.push_back(loop_ms);
-    const size_t n = std::min<size_t>(stats_.loop_ms.size(), 15);
-    double sum = 0;
-    for (size_t i = stats_.loop_ms.size() - n; i < stats_.loop_ms.size(); ++i) sum += stats_.loop_ms[i];
-    recent_fps_ = sum > 0 ? 1000.0 * n / sum : 0;
-    ++stats_.frames;
+    NoteLoop(loop_ms);
   }
 
   int RunHeadless() {

@@ -1,24 +1,14 @@
 #include "server/net/server_config.h"
 
 #include <cmath>
-#include <set>
 
 #include <yaml-cpp/yaml.h>
 
 #include "common/file_util.h"
+#include "common/yaml_util.h"
 
 namespace holo::net {
 namespace {
-
-Status Bad(const std::string& key, const std::string& msg) { return InvalidArgument(key + ": " + msg); }
-
-Status GetString(const YAML::Node& root, const std::string& key, std::string* out) {
-  const YAML::Node n = root[key];
-  if (!n.IsDefined()) return OkStatus();
-  if (!n.IsScalar()) return Bad(key, "must be a string");
-  *out = n.Scalar();
-  return OkStatus();
-}
 
 template <typename T>
 Status GetNumber(const YAML::Node& root, const std::string& key, T* out) {
@@ -28,30 +18,8 @@ Status GetNumber(const YAML::Node& root, const std::string& key, T* out) {
     if (!n.IsScalar()) throw YAML::Exception(YAML::Mark(), "");
     *out = n.as<T>();
   } catch (const YAML::Exception&) {
-    return Bad(key, "must be a number, got '" + (n.IsScalar() ? n.Scalar() : std::string("(not a scalar)")) + "'");
-  }
-  return OkStatus();
-}
-
-Status GetBool(const YAML::Node& root, const std::string& key, bool* out) {
-  const YAML::Node n = root[key];
-  if (!n.IsDefined()) return OkStatus();
-  try {
-    *out = n.as<bool>();
-  } catch (const YAML::Exception&) {
-    return Bad(key, "must be true or false");
-  }
-  return OkStatus();
-}
-
-Status CheckKeys(const YAML::Node& map, const std::set<std::string>& known, const std::string& where) {
-  for (const auto& kv : map) {
-    const std::string k = kv.first.as<std::string>();
-    if (!known.count(k)) {
-      std::string list;
-      for (const auto& s : known) list += (list.empty() ? "" : ", ") + s;
-      return Bad(where + k, "unknown key (known: " + list + ")");
-    }
+    return KeyError(key,
+                    "must be a number, got '" + (n.IsScalar() ? n.Scalar() : std::string("(not a scalar)")) + "'");
   }
   return OkStatus();
 }
@@ -75,42 +43,38 @@ Status ParseHostPort(const std::string& spec, std::string* host, uint16_t* port)
 }
 
 Status ServerConfig::Check() const {
-  if (name.empty() || name.size() > 1024) return Bad("name", "1..1024 bytes");
-  if (host.empty()) return Bad("listen", "host must not be empty");
+  if (name.empty() || name.size() > 1024) return KeyError("name", "1..1024 bytes");
+  if (host.empty()) return KeyError("listen", "host must not be empty");
   if (publisher_token.empty() || publisher_token.size() > 256)
-    return Bad("publisher_token", "must be set, 1..256 bytes");
-  if (viewer_token.empty() || viewer_token.size() > 256) return Bad("viewer_token", "must be set, 1..256 bytes");
+    return KeyError("publisher_token", "must be set, 1..256 bytes");
+  if (viewer_token.empty() || viewer_token.size() > 256)
+    return KeyError("viewer_token", "must be set, 1..256 bytes");
   if (publisher_token == viewer_token)
-    return Bad("publisher_token", "must differ from viewer_token (a viewer could publish otherwise)");
-  if (max_viewers < 1 || max_viewers > 100000) return Bad("max_viewers", "1..100000");
-  if (max_publishers < 0 || max_publishers > 1000) return Bad("max_publishers", "0..1000");
-  if (max_pending < 1 || max_pending > 100000) return Bad("max_pending", "1..100000");
+    return KeyError("publisher_token", "must differ from viewer_token (a viewer could publish otherwise)");
+  if (max_viewers < 1 || max_viewers > 100000) return KeyError("max_viewers", "1..100000");
+  if (max_publishers < 0 || max_publishers > 1000) return KeyError("max_publishers", "0..1000");
+  if (max_pending < 1 || max_pending > 100000) return KeyError("max_pending", "1..100000");
   if (max_message_bytes < 1024 || max_message_bytes > (64u << 20))
-    return Bad("max_message_bytes", "1024..67108864 (the protocol's hard limit)");
+    return KeyError("max_message_bytes", "1024..67108864 (the protocol's hard limit)");
   auto finite_pos = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
-  if (!finite_pos(handshake_timeout_s, 0.01, 3600)) return Bad("handshake_timeout_s", "0.01..3600 seconds");
-  if (!finite_pos(idle_timeout_s, 0.01, 86400)) return Bad("idle_timeout_s", "0.01..86400 seconds");
+  if (!finite_pos(handshake_timeout_s, 0.01, 3600)) return KeyError("handshake_timeout_s", "0.01..3600 seconds");
+  if (!finite_pos(idle_timeout_s, 0.01, 86400)) return KeyError("idle_timeout_s", "0.01..86400 seconds");
   if (!(ping_interval_s == 0 || finite_pos(ping_interval_s, 0.01, 3600)))
-    return Bad("ping_interval_s", "0 (off) or 0.01..3600 seconds");
-  if (queue_video_frames < 1 || queue_video_frames > 1000) return Bad("queue_video_frames", "1..1000");
+    return KeyError("ping_interval_s", "0 (off) or 0.01..3600 seconds");
+  if (queue_video_frames < 1 || queue_video_frames > 1000) return KeyError("queue_video_frames", "1..1000");
   if (queue_priority_messages < 16 || queue_priority_messages > 1000000)
-    return Bad("queue_priority_messages", "16..1000000");
+    return KeyError("queue_priority_messages", "16..1000000");
   if (socket_send_buffer != 0 && (socket_send_buffer < 4096 || socket_send_buffer > (64 << 20)))
-    return Bad("socket_send_buffer", "0 (kernel default) or 4096..67108864 bytes");
-  if (fragment_bytes < 1024 || fragment_bytes > (4u << 20)) return Bad("fragment_bytes", "1024..4194304");
-  if (threads < 1 || threads > 64) return Bad("threads", "1..64");
+    return KeyError("socket_send_buffer", "0 (kernel default) or 4096..67108864 bytes");
+  if (fragment_bytes < 1024 || fragment_bytes > (4u << 20)) return KeyError("fragment_bytes", "1024..4194304");
+  if (threads < 1 || threads > 64) return KeyError("threads", "1..64");
   if (tls.enabled && (tls.cert_file.empty() || tls.key_file.empty()))
-    return Bad("tls", "enabled needs cert and key files");
+    return KeyError("tls", "enabled needs cert and key files");
   return OkStatus();
 }
 
 StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    return InvalidArgument(source + ": not valid YAML: " + e.what());
-  }
+  HOLO_ASSIGN_OR_RETURN(YAML::Node root, LoadYaml(yaml_text, source));
   ServerConfig c;
   if (root.IsNull()) {
     Status s = c.Check();
@@ -119,18 +83,19 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
   }
   if (!root.IsMap()) return InvalidArgument(source + ": expected a map of settings at the top level");
   auto parse = [&]() -> Status {
-    HOLO_RETURN_IF_ERROR(CheckKeys(root,
-                                   {"name", "listen", "publisher_token", "viewer_token", "max_viewers", "max_publishers",
-                                    "max_pending", "max_message_bytes", "handshake_timeout_s", "idle_timeout_s",
-                                    "ping_interval_s", "queue_video_frames", "queue_priority_messages",
-                                    "socket_send_buffer", "fragment_bytes", "threads", "tls"},
-                                   ""));
-    HOLO_RETURN_IF_ERROR(GetString(root, "name", &c.name));
+    HOLO_RETURN_IF_ERROR(CheckYamlKeys(root,
+                                       {"name", "listen", "publisher_token", "viewer_token", "max_viewers",
+                                        "max_publishers", "max_pending", "max_message_bytes", "handshake_timeout_s",
+                                        "idle_timeout_s", "ping_interval_s", "queue_video_frames",
+                                        "queue_priority_messages", "socket_send_buffer", "fragment_bytes", "threads",
+                                        "tls"},
+                                       ""));
+    HOLO_RETURN_IF_ERROR(GetYamlString(root, "name", "", &c.name));
     std::string listen;
-    HOLO_RETURN_IF_ERROR(GetString(root, "listen", &listen));
+    HOLO_RETURN_IF_ERROR(GetYamlString(root, "listen", "", &listen));
     if (!listen.empty()) HOLO_RETURN_IF_ERROR(ParseHostPort(listen, &c.host, &c.port).WithContext("listen"));
-    HOLO_RETURN_IF_ERROR(GetString(root, "publisher_token", &c.publisher_token));
-    HOLO_RETURN_IF_ERROR(GetString(root, "viewer_token", &c.viewer_token));
+    HOLO_RETURN_IF_ERROR(GetYamlString(root, "publisher_token", "", &c.publisher_token));
+    HOLO_RETURN_IF_ERROR(GetYamlString(root, "viewer_token", "", &c.viewer_token));
     HOLO_RETURN_IF_ERROR(GetNumber(root, "max_viewers", &c.max_viewers));
     HOLO_RETURN_IF_ERROR(GetNumber(root, "max_publishers", &c.max_publishers));
     HOLO_RETURN_IF_ERROR(GetNumber(root, "max_pending", &c.max_pending));
@@ -145,11 +110,11 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
     HOLO_RETURN_IF_ERROR(GetNumber(root, "threads", &c.threads));
     const YAML::Node tls = root["tls"];
     if (tls.IsDefined()) {
-      if (!tls.IsMap()) return Bad("tls", "must be a map (enabled, cert, key)");
-      HOLO_RETURN_IF_ERROR(CheckKeys(tls, {"enabled", "cert", "key"}, "tls."));
-      HOLO_RETURN_IF_ERROR(GetBool(tls, "enabled", &c.tls.enabled).WithContext("tls"));
-      HOLO_RETURN_IF_ERROR(GetString(tls, "cert", &c.tls.cert_file).WithContext("tls"));
-      HOLO_RETURN_IF_ERROR(GetString(tls, "key", &c.tls.key_file).WithContext("tls"));
+      if (!tls.IsMap()) return KeyError("tls", "must be a map (enabled, cert, key)");
+      HOLO_RETURN_IF_ERROR(CheckYamlKeys(tls, {"enabled", "cert", "key"}, "tls."));
+      HOLO_RETURN_IF_ERROR(GetYamlBool(tls, "enabled", "", &c.tls.enabled).WithContext("tls"));
+      HOLO_RETURN_IF_ERROR(GetYamlString(tls, "cert", "", &c.tls.cert_file).WithContext("tls"));
+      HOLO_RETURN_IF_ERROR(GetYamlString(tls, "key", "", &c.tls.key_file).WithContext("tls"));
     }
     return c.Check();
   };
@@ -162,12 +127,8 @@ StatusOr<ServerConfig> LoadServerConfig(const std::string& path) {
   HOLO_ASSIGN_OR_RETURN(std::string text, ReadFileToString(path));
   HOLO_ASSIGN_OR_RETURN(ServerConfig c, ParseServerConfig(text, path));
   // Relative TLS paths are relative to the config file's folder.
-  const size_t slash = path.rfind('/');
-  if (slash != std::string::npos) {
-    const std::string dir = path.substr(0, slash + 1);
-    if (!c.tls.cert_file.empty() && c.tls.cert_file[0] != '/') c.tls.cert_file = dir + c.tls.cert_file;
-    if (!c.tls.key_file.empty() && c.tls.key_file[0] != '/') c.tls.key_file = dir + c.tls.key_file;
-  }
+  c.tls.cert_file = PathNextTo(path, c.tls.cert_file);
+  c.tls.key_file = PathNextTo(path, c.tls.key_file);
   return c;
 }
 

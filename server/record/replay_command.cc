@@ -48,6 +48,19 @@ std::string RandomToken() {
   return t;
 }
 
+// The --stats output: "-" stdout, "" none (nullptr), else the file.
+StatusOr<FILE*> OpenStats(const std::string& path) {
+  if (path == "-") return stdout;
+  if (path.empty()) return static_cast<FILE*>(nullptr);
+  FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) return Unavailable(path + ": cannot open for writing");
+  return f;
+}
+
+void CloseStats(FILE* stats) {
+  if (stats != nullptr && stats != stdout) std::fclose(stats);
+}
+
 int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const RecordingReader> reader) {
   if (!o.export_dir.empty())
     return Fail(InvalidArgument("--export is not available with --listen (viewers receive the meshes)"));
@@ -77,13 +90,9 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
   so.replay.loop = o.loop;
   so.replay.start_us = static_cast<int64_t>(o.start_s * 1e6);
   if (o.quiet) so.log = [](const std::string&) {};
-  FILE* stats = nullptr;
-  if (o.stats_path == "-") {
-    stats = stdout;
-  } else if (!o.stats_path.empty()) {
-    stats = std::fopen(o.stats_path.c_str(), "w");
-    if (stats == nullptr) return Fail(Unavailable(o.stats_path + ": cannot open for writing"));
-  }
+  auto stats_file = OpenStats(o.stats_path);
+  if (!stats_file.ok()) return Fail(stats_file.status());
+  FILE* const stats = *stats_file;
   RealClock& clock = RealClock::Instance();
   std::vector<double> lateness_ms;  // mesh frames: fan-out time − due time
   std::mutex late_mu;
@@ -103,7 +112,7 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
   const RecordingSummary& sum = reader->summary();
   auto rs = ReplayServer::Start(reader, &clock, so);
   if (!rs.ok()) {
-    if (stats != nullptr && stats != stdout) std::fclose(stats);
+    CloseStats(stats);
     return Fail(rs.status());
   }
   if (!o.quiet)
@@ -148,7 +157,7 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
   const ReplayServerStats rst = (*rs)->stats();
   const Status err = (*rs)->status();
   (*rs)->Stop();
-  if (stats != nullptr && stats != stdout) std::fclose(stats);
+  CloseStats(stats);
   if (!o.quiet) {
     std::lock_guard<std::mutex> l(late_mu);
     std::fprintf(stderr,
@@ -181,13 +190,9 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
     Status s = MakeDirs(o.export_dir);
     if (!s.ok()) return Fail(s);
   }
-  FILE* stats = nullptr;
-  if (o.stats_path == "-") {
-    stats = stdout;
-  } else if (!o.stats_path.empty()) {
-    stats = std::fopen(o.stats_path.c_str(), "w");
-    if (stats == nullptr) return Fail(Unavailable(o.stats_path + ": cannot open for writing"));
-  }
+  auto stats_file = OpenStats(o.stats_path);
+  if (!stats_file.ok()) return Fail(stats_file.status());
+  FILE* const stats = *stats_file;
   if (!o.quiet)
     std::fprintf(stderr, "holoport-server: replaying %s (%s, %llu messages, %zu key frames%s) at %.2fx%s\n",
                  o.path.c_str(), FormatSeconds(sum.duration_us).c_str(),
@@ -265,7 +270,7 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
       next_progress = clock.NowUs() + 2000000;
     }
   }
-  if (stats != nullptr && stats != stdout) std::fclose(stats);
+  CloseStats(stats);
   if (!sink_error.ok()) return Fail(sink_error);
   const double wall = static_cast<double>(clock.NowUs() - start) * 1e-6;
   if (!o.quiet)

@@ -7,45 +7,36 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
-#include <sstream>
 #include <thread>
 
 #include "server/studio/render.h"
 #include "server/studio/scene.h"
 
 namespace holo {
-namespace {
-
-std::string Num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-
-
-}  // namespace
-
 Status DepthNoiseOptions::Check() const {
   if (!(sigma_at_1m_mm >= 0.0f && sigma_at_1m_mm <= 100.0f))
-    return InvalidArgument("noise.sigma_at_1m_mm must be in [0, 100], got " + Num(sigma_at_1m_mm));
+    return InvalidArgument("noise.sigma_at_1m_mm must be in [0, 100], got " + FormatNumber(sigma_at_1m_mm));
   if (!(grazing_dropout_deg > 0.0f && grazing_dropout_deg <= 90.0f))
-    return InvalidArgument("noise.grazing_dropout_deg must be in (0, 90], got " + Num(grazing_dropout_deg));
+    return InvalidArgument("noise.grazing_dropout_deg must be in (0, 90], got " + FormatNumber(grazing_dropout_deg));
   if (!(flying_edge_mm > 0.0f && std::isfinite(flying_edge_mm)))
-    return InvalidArgument("noise.flying_edge_mm must be > 0, got " + Num(flying_edge_mm));
+    return InvalidArgument("noise.flying_edge_mm must be > 0, got " + FormatNumber(flying_edge_mm));
   if (!(flying_pixel_prob >= 0.0f && flying_pixel_prob <= 1.0f))
-    return InvalidArgument("noise.flying_pixel_prob must be in [0, 1], got " + Num(flying_pixel_prob));
+    return InvalidArgument("noise.flying_pixel_prob must be in [0, 1], got " + FormatNumber(flying_pixel_prob));
   if (!(random_dropout_prob >= 0.0f && random_dropout_prob <= 1.0f))
-    return InvalidArgument("noise.random_dropout_prob must be in [0, 1], got " + Num(random_dropout_prob));
+    return InvalidArgument("noise.random_dropout_prob must be in [0, 1], got " + FormatNumber(random_dropout_prob));
   if (!(max_range_m > 0.0f && max_range_m <= 65.0f))
-    return InvalidArgument("noise.max_range_m must be in (0, 65], got " + Num(max_range_m));
+    return InvalidArgument("noise.max_range_m must be in (0, 65], got " + FormatNumber(max_range_m));
   return OkStatus();
 }
 
 Status StudioOptions::Check() const {
-  if (num_figures < 1 || num_figures > 2) return InvalidArgument("num_figures must be 1 or 2, got " + Num(num_figures));
-  if (num_props < 0 || num_props > 2) return InvalidArgument("num_props must be in [0, 2], got " + Num(num_props));
-  if (!(fps > 0.0 && fps <= 1000.0)) return InvalidArgument("fps must be in (0, 1000], got " + Num(fps));
-  if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256], got " + Num(threads));
+  if (num_figures < 1 || num_figures > 2)
+    return InvalidArgument("num_figures must be 1 or 2, got " + FormatNumber(num_figures));
+  if (num_props < 0 || num_props > 2)
+    return InvalidArgument("num_props must be in [0, 2], got " + FormatNumber(num_props));
+  if (!(fps > 0.0 && fps <= 1000.0)) return InvalidArgument("fps must be in (0, 1000], got " + FormatNumber(fps));
+  if (threads < 0 || threads > 256)
+    return InvalidArgument("threads must be in [0, 256], got " + FormatNumber(threads));
   return noise.Check();
 }
 

@@ -39,6 +39,22 @@ int Fail(const holo::Status& s) {
   return 1;
 }
 
+// The exit code for how a recording ended, `end` being the writer's (or the
+// sink's) error or OK: OK closes the recording, 0 (a failing close becomes
+// *end, 4); kOutOfRange the size limit, 3; kUnavailable disk full or a write
+// failure, 4; anything else 1, the recording left open for the caller.
+int EndCode(holo::record::RecordingWriter* writer, holo::Status* end) {
+  if (end->ok()) {
+    holo::Status c = writer->Close();
+    if (c.ok()) return 0;
+    *end = c;
+    return 4;
+  }
+  if (end->code() == holo::StatusCode::kOutOfRange) return 3;
+  if (end->code() == holo::StatusCode::kUnavailable) return 4;
+  return 1;
+}
+
 // Exit codes: 0 done, 1 error (nothing or a damaged file), 3 size limit
 // reached and 4 disk full / write failure (the recording is valid up to there).
 int Record(const std::string& out, const std::string& source_spec, double duration_s, uint64_t max_bytes,
@@ -105,20 +121,8 @@ int Record(const std::string& out, const std::string& source_spec, double durati
       next_progress = now + 1000000;
     }
   }
-  int code = 0;
-  if (end.ok()) {
-    holo::Status c = (*writer)->Close();
-    if (!c.ok()) {
-      end = c;
-      code = 4;
-    }
-  } else if (end.code() == holo::StatusCode::kOutOfRange) {
-    code = 3;
-  } else if (end.code() == holo::StatusCode::kUnavailable) {
-    code = 4;
-  } else {
-    return Fail(end);  // a message the writer refused (should not happen with our own source)
-  }
+  const int code = EndCode(writer->get(), &end);
+  if (code == 1) return Fail(end);  // a message the writer refused (should not happen with our own source)
   const auto& st = (*writer)->stats();
   const double wall_s = static_cast<double>(clock.NowUs() - start) * 1e-6;
   if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
@@ -232,21 +236,8 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   }
   (*client)->Stop();  // no callback runs after this
   const holo::Status client_status = (*client)->status();
-  int code = 0;
-  if (end.ok()) {
-    holo::Status c = (*writer)->Close();
-    if (!c.ok()) {
-      end = c;
-      code = 4;
-    }
-  } else if (end.code() == holo::StatusCode::kOutOfRange) {
-    code = 3;
-  } else if (end.code() == holo::StatusCode::kUnavailable) {
-    code = 4;
-  } else {
-    (void)(*writer)->Close();  // a malformed stream: keep what came before, closed
-    code = 1;
-  }
+  int code = EndCode(writer->get(), &end);
+  if (code == 1) (void)(*writer)->Close();  // a malformed stream: keep what came before, closed
   if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
   if (refused) {
     std::fprintf(stderr, "holoport-record: the site refused the recorder: %s\n", client_status.message().c_str());

@@ -5,7 +5,6 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <array>
@@ -38,6 +37,7 @@
 #include "server/net/site_publisher.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
+#include "client/client_program.h"
 #include "net/net_fixtures.h"
 #include "test_util.h"
 
@@ -52,15 +52,10 @@ namespace {
 constexpr double kReceivedPsnrThresholdDb = 22.0;
 
 net::ServerConfig Loopback(uint16_t port = 0) {
-  net::ServerConfig c;
+  net::ServerConfig c = test::LoopbackConfig(port);
   c.name = "connect-test-site";
-  c.host = "127.0.0.1";
-  c.port = port;
   c.publisher_token = "pub";
   c.viewer_token = "view";
-  c.handshake_timeout_s = 2.0;
-  c.idle_timeout_s = 10.0;
-  c.ping_interval_s = 0.05;
   c.threads = 1;
   return c;
 }
@@ -190,35 +185,15 @@ TEST(ConnectTest, ReceivedSyntheticSiteRendersLikeGroundTruth) {
 
 // ---- the program ----
 
-std::string ClientPath() {
-  std::array<char, 4096> buf{};
-  const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
-  HOLO_CHECK(n > 0);
-  return (std::filesystem::path(std::string(buf.data(), n)).parent_path().parent_path() / "bin" / "holoport-client")
-      .string();
-}
-
-struct RunResult {
-  int exit_code = -1;
-  bool signaled = false;
-  std::string output;
-};
+using test::ClientPath;
+using test::RunResult;
 
 // Runs holoport-client with `args` in a thread; Wait() collects the result.
 class ClientRun {
  public:
   explicit ClientRun(const std::string& args) {
     thread_ = std::thread([this, args] {
-      const std::string cmd = "env -u DISPLAY " + ClientPath() + " " + args + " 2>&1";
-      FILE* p = popen(cmd.c_str(), "r");
-      HOLO_CHECK(p != nullptr);
-      started_ = true;
-      std::array<char, 4096> buf;
-      size_t n;
-      while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r_.output.append(buf.data(), n);
-      const int status = pclose(p);
-      r_.signaled = WIFSIGNALED(status);
-      r_.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+      r_ = test::RunCommand("env -u DISPLAY " + ClientPath() + " " + args, [this] { started_ = true; });
       done_ = true;
     });
     // The child exists before the caller opens sockets (which it would inherit).
@@ -273,15 +248,6 @@ uint16_t PickPort() {
   return 0;
 }
 
-StatusOr<std::unique_ptr<net::Server>> StartOn(uint16_t port) {
-  auto server = net::Server::Start(Loopback(port));
-  for (int i = 0; i < 50 && !server.ok(); ++i) {  // the port may take a moment to be free again
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    server = net::Server::Start(Loopback(port));
-  }
-  return server;
-}
-
 // The programs start before the sites: a listening socket created before
 // popen() would be inherited by the child and keep the port open.
 TEST(ConnectTest, ProgramReconnectsWhenTheSiteRestarts) {
@@ -294,14 +260,14 @@ TEST(ConnectTest, ProgramReconnectsWhenTheSiteRestarts) {
   const std::string dir = test::MakeTempDir("connect_restart");
   ClientRun run("--connect 127.0.0.1:" + std::to_string(port) +
                 " --token view --headless --seconds 9 --no-png --width 160 --height 120 --out " + dir);
-  auto server = StartOn(port);
+  auto server = test::StartServerRetrying(Loopback(port));
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   PublishSpheres(server->get(), 0, 45);  // ~1.5 s
   (*server)->Stop();
   server->reset();
   std::this_thread::sleep_for(std::chrono::milliseconds(800));  // the site is away
-  auto again = StartOn(port);
+  auto again = test::StartServerRetrying(Loopback(port));
   ASSERT_TRUE(again.ok()) << again.status().ToString();
   // Frames resume with new indices, until the program ends (at 9 s; a
   // reconnect attempt that hit the old site's closing socket waits out its
@@ -420,7 +386,7 @@ TEST(ConnectTest, RigChangeMidStreamIsReportedAndRenderingContinues) {
   const std::string dir = test::MakeTempDir("connect_rig");
   ClientRun run("--connect 127.0.0.1:" + std::to_string(port) +
                 " --token view --headless --seconds 6 --no-png --width 160 --height 120 --out " + dir);
-  auto server = StartOn(port);
+  auto server = test::StartServerRetrying(Loopback(port));
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   (*server)->SetRig(a.rig);
   net::SitePublisher pub(server->get(), {});

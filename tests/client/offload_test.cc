@@ -23,36 +23,17 @@
 #include "server/net/wire_message.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
+#include "net/net_fixtures.h"
 
 namespace holo::offload {
 namespace {
 
+// test::Eventually with this file's longer default wait.
 bool Eventually(const std::function<bool()>& pred, double timeout_s = 10.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<int>(timeout_s * 1000));
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return pred();
+  return test::Eventually(pred, timeout_s);
 }
 
-struct Log {
-  std::mutex mu;
-  std::vector<std::string> lines;
-  std::function<void(const std::string&)> Hook() {
-    return [this](const std::string& s) {
-      std::lock_guard<std::mutex> l(mu);
-      lines.push_back(s);
-    };
-  }
-  bool Contains(const std::string& needle) {
-    std::lock_guard<std::mutex> l(mu);
-    for (const auto& s : lines) {
-      if (s.find(needle) != std::string::npos) return true;
-    }
-    return false;
-  }
-};
+using Log = test::LogCapture;
 
 const Mesh& StudioMesh() {
   static const Mesh mesh = [] {
@@ -77,17 +58,11 @@ class Site {
     c.viewer_token = "view";
     c.ping_interval_s = 0.1;
     c.threads = 1;
-    for (int attempt = 0; attempt < 50; ++attempt) {  // the port of a stopped site may take a moment
-      net::ServerHooks hooks;
-      hooks.log = [](const std::string&) {};
-      auto s = net::Server::Start(c, hooks);
-      if (s.ok()) {
-        server_ = std::move(*s);
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    }
-    HOLO_CHECK(server_ != nullptr);
+    net::ServerHooks hooks;
+    hooks.log = [](const std::string&) {};
+    auto s = test::StartServerRetrying(c, hooks);  // the port of a stopped site may take a moment
+    HOLO_CHECK_MSG(s.ok(), s.status().ToString());
+    server_ = std::move(*s);
     thread_ = std::thread([this] {
       net::SitePublisher pub(server_.get(), {});
       for (int64_t i = 0; !stop_; ++i) {

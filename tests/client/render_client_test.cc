@@ -1,10 +1,6 @@
 // holoport-client as a program: headless runs write PNGs and stats.json
 // (EGL surfaceless, no X server), the mosaic has K tiles, a window without a
 // display is a clear error (exit code, message), bad options are refused.
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -14,39 +10,18 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "client/client_program.h"
 #include "common/image_io.h"
 #include "test_util.h"
 
 namespace holo {
 namespace {
 
-std::string ClientPath() {
-  std::array<char, 4096> buf{};
-  const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
-  HOLO_CHECK(n > 0);
-  // Tests live in build/tests/, programs in build/bin/.
-  return (std::filesystem::path(std::string(buf.data(), n)).parent_path().parent_path() / "bin" / "holoport-client")
-      .string();
-}
-
-struct RunResult {
-  int exit_code = -1;
-  bool signaled = false;
-  std::string output;
-};
+using test::ClientPath;
+using test::RunResult;
 
 RunResult RunClient(const std::string& args, const std::string& env = "") {
-  const std::string cmd = env + " " + ClientPath() + " " + args + " 2>&1";
-  RunResult r;
-  FILE* p = popen(cmd.c_str(), "r");
-  HOLO_CHECK(p != nullptr);
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  const int status = pclose(p);
-  r.signaled = WIFSIGNALED(status);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return test::RunCommand(env + " " + ClientPath() + " " + args);
 }
 
 TEST(RenderClientTest, ProgramExists) { ASSERT_TRUE(std::filesystem::exists(ClientPath())) << ClientPath(); }

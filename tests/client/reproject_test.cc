@@ -54,6 +54,9 @@ class ReprojectTest : public ::testing::Test {
 SyntheticStudio* ReprojectTest::studio_ = nullptr;
 Mesh* ReprojectTest::mesh_ = nullptr;
 
+constexpr ReprojectMethod kAllMethods[] = {ReprojectMethod::kNone, ReprojectMethod::kRotation, ReprojectMethod::kPlane,
+                                           ReprojectMethod::kDepth};
+
 double Psnr(const ImageRgb8& a, const ImageRgb8& b, const ImageGray8* mask = nullptr) {
   return metrics::ComputePsnr(a, b, mask).value();
 }
@@ -82,8 +85,7 @@ TEST(Fov, IntrinsicsRoundTrip) {
 TEST_F(ReprojectTest, IdentityIsExact) {
   RenderedView v;
   ASSERT_TRUE(RenderAtPose(Studio(), Eye(0), FieldOfView::FromHorizontalDeg(80, 16.0 / 9), 160, 90, &v).ok());
-  for (ReprojectMethod m : {ReprojectMethod::kNone, ReprojectMethod::kRotation, ReprojectMethod::kPlane,
-                            ReprojectMethod::kDepth}) {
+  for (ReprojectMethod m : kAllMethods) {
     ReprojectOptions o;
     o.method = m;
     ImageRgb8 out;
@@ -132,8 +134,7 @@ TEST_F(ReprojectTest, DepthHandlesParallaxBetterThanAPlane) {
   ASSERT_TRUE(RenderAtPose(Studio(), Eye(0), fov, 320, 180, &a).ok());
   ASSERT_TRUE(RenderAtPose(Studio(), Eye(0, Eigen::Vector3f(0, 0.15f, 0)), fov, 320, 180, &b).ok());
   double psnr[4] = {};
-  for (ReprojectMethod m : {ReprojectMethod::kNone, ReprojectMethod::kRotation, ReprojectMethod::kPlane,
-                            ReprojectMethod::kDepth}) {
+  for (ReprojectMethod m : kAllMethods) {
     ReprojectOptions o;
     o.method = m;
     ImageRgb8 out;

@@ -1,3 +1,4 @@
+#include <cmath>
 #include <thread>
 #include <vector>
 
@@ -5,6 +6,7 @@
 
 #include "common/bounded_queue.h"
 #include "common/clock.h"
+#include "common/file_util.h"
 #include "common/status.h"
 
 namespace holo {
@@ -84,6 +86,22 @@ TEST(StatusTest, PropagationMacros) {
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(s.ToString(), "InvalidArgument: odd: 3");
   EXPECT_EQ(s.WithContext("file.yaml").message(), "file.yaml: odd: 3");
+}
+
+TEST(StatusTest, FormatNumberAsMessagesShowIt) {
+  EXPECT_EQ(FormatNumber(640), "640");
+  EXPECT_EQ(FormatNumber(-1), "-1");
+  EXPECT_EQ(FormatNumber(0.25), "0.25");
+  EXPECT_EQ(FormatNumber(1e30), "1e+30");
+  EXPECT_EQ(FormatNumber(std::nan("")), "nan");
+}
+
+TEST(FileUtilTest, PathNextTo) {
+  EXPECT_EQ(PathNextTo("sites/call.yaml", "ca.pem"), "sites/ca.pem");
+  EXPECT_EQ(PathNextTo("/etc/holo/site.yaml", "tls/site.key"), "/etc/holo/tls/site.key");
+  EXPECT_EQ(PathNextTo("sites/call.yaml", "/abs/ca.pem"), "/abs/ca.pem");
+  EXPECT_EQ(PathNextTo("call.yaml", "ca.pem"), "ca.pem");
+  EXPECT_EQ(PathNextTo("sites/call.yaml", ""), "");
 }
 
 TEST(StatusDeathTest, ValueOfErrorAborts) {

@@ -88,47 +88,19 @@ TEST(NetFanout, TwoViewersReceiveEveryFrameInOrderWithRigAndDecodedContent) {
   }));
 }
 
-// Reads a viewer's stream through a raw socket at a limited rate
-// (bytes per 10 ms slice) or not at all; counts MeshFrames.
-class RawViewer {
- public:
-  RawViewer(uint16_t port, size_t bytes_per_10ms, const std::string& name) : budget_(bytes_per_10ms) {
-    auto p = RawPeer::Connect("127.0.0.1", port);
-    HOLO_CHECK(p.ok());
-    peer_ = std::move(*p);
-    peer_->SetReceiveBuffer(16 << 10);
-    HOLO_CHECK(peer_->SendHello(protocol::Role::kViewer, "view-secret", name).ok());
-    auto w = peer_->ReadMessage(5.0);
-    HOLO_CHECK(w.ok() && w->header.type == protocol::MessageType::kWelcome);
-    protocol::Control c;
-    c.command = protocol::ControlCommand::kSubscribe;
-    c.value = kContentGeometry;
-    HOLO_CHECK(peer_->SendMessage(c).ok());
-    if (budget_ > 0) thread_ = std::thread([this] { Run(); });
-  }
-  ~RawViewer() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  int meshes() const { return meshes_; }
-
- private:
-  void Run() {
-    while (!stop_) {
-      std::vector<protocol::Frame> frames;
-      if (!peer_->ReadFrames(budget_, 0.01, &frames).ok()) return;
-      for (const auto& f : frames)
-        if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments))
-          ++meshes_;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  }
-  size_t budget_;
-  std::unique_ptr<RawPeer> peer_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<int> meshes_{0};
-};
+// A raw-socket viewer of the geometry reading `bytes_per_10ms` every 10 ms
+// (0: never reads).
+std::unique_ptr<RawViewer> StartRawViewer(uint16_t port, size_t bytes_per_10ms, const std::string& name) {
+  RawViewerOptions o;
+  o.port = port;
+  o.token = "view-secret";
+  o.name = name;
+  o.subscribe = kSubscribeGeometry;
+  o.bytes_per_10ms = bytes_per_10ms;
+  auto v = RawViewer::Start(o);
+  HOLO_CHECK_MSG(v.ok(), v.status().ToString());
+  return std::move(*v);
+}
 
 TEST(NetFanout, RecorderGetsRawMessagesByteIdentical) {
   ServerConfig cfg = LoopbackConfig();
@@ -196,8 +168,8 @@ TEST(NetFanout, SlowAndStalledViewersDoNotAffectNormalViewers) {
     normal.push_back(std::move(*c));
   }
   // 30 fps × frame_bytes per second; 1/10 of that per second = frame_bytes·3/100 per 10 ms.
-  RawViewer slow((*server)->port(), std::max<size_t>(256, frame_bytes * 3 / 100), "slow");
-  RawViewer stalled((*server)->port(), 0, "stalled");
+  const auto slow = StartRawViewer((*server)->port(), std::max<size_t>(256, frame_bytes * 3 / 100), "slow");
+  const auto stalled = StartRawViewer((*server)->port(), 0, "stalled");
   ASSERT_TRUE(Eventually([&] { return (*server)->num_subscribed(kContentGeometry) == 6; }));
 
   const int kFrames = 90;
@@ -227,7 +199,7 @@ TEST(NetFanout, SlowAndStalledViewersDoNotAffectNormalViewers) {
   }
   EXPECT_GT(stalled_dropped, static_cast<uint64_t>(kFrames / 2)) << "the stalled viewer should lose most frames";
   EXPECT_GT(slow_dropped, 0u) << "the slow viewer should lose frames";
-  EXPECT_LT(slow.meshes(), kFrames);
+  EXPECT_LT(slow->meshes(), kFrames);
 }
 
 TEST(NetFanout, AudioPoseFromPublisherReachesEveryAudioSubscriber) {

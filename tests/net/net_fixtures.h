@@ -1,9 +1,12 @@
-// Shared pieces of the session tests: a loopback server config with short
-// timeouts, encoded frames of a procedural mesh, waiting for a condition.
+// Shared pieces of the session tests (tests/net, tests/client, tests/record):
+// a loopback server config with short timeouts, starting a server on a port
+// that may still be taken, encoded frames of a procedural mesh, waiting for a
+// condition, capturing log lines.
 #pragma once
 
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -16,11 +19,11 @@
 
 namespace holo::test {
 
-inline net::ServerConfig LoopbackConfig() {
+inline net::ServerConfig LoopbackConfig(uint16_t port = 0) {
   net::ServerConfig c;
   c.name = "test-site";
   c.host = "127.0.0.1";
-  c.port = 0;
+  c.port = port;
   c.publisher_token = "pub-secret";
   c.viewer_token = "view-secret";
   c.handshake_timeout_s = 2.0;
@@ -28,6 +31,18 @@ inline net::ServerConfig LoopbackConfig() {
   c.ping_interval_s = 0.05;
   c.threads = 2;
   return c;
+}
+
+// Starts a server, retrying every 100 ms for up to 5 s while its port (of a
+// site just stopped) is not free yet.
+inline StatusOr<std::unique_ptr<net::Server>> StartServerRetrying(const net::ServerConfig& config,
+                                                                  const net::ServerHooks& hooks = {}) {
+  auto server = net::Server::Start(config, hooks);
+  for (int i = 0; i < 50 && !server.ok(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    server = net::Server::Start(config, hooks);
+  }
+  return server;
 }
 
 // Polls `pred` every 5 ms until it holds or `timeout_s` passes.

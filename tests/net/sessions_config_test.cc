@@ -4,7 +4,9 @@
 #include <cmath>
 
 #include "client/net/call_config.h"
+#include "common/file_util.h"
 #include "server/net/server_config.h"
+#include "test_util.h"
 
 namespace holo::net {
 namespace {
@@ -61,6 +63,25 @@ TEST(NetConfig, ServerConfigErrorsNameTheKey) {
   expect_error("publisher_token: p\nviewer_token: v\ntls: {enabled: true, crt: x}\n", "tls.crt: unknown key");
   expect_error("publisher_token: [p\n", "not valid YAML");
   expect_error("- a\n- b\n", "map");
+  expect_error("publisher_token: p\nviewer_token: v\n[a]: 1\n", "keys must be names");
+}
+
+TEST(NetConfig, RelativeTlsFilesAreNextToTheConfigFile) {
+  const std::string dir = test::MakeTempDir("sessions_config");
+  ASSERT_TRUE(WriteStringToFile(dir + "/site.yaml", "publisher_token: p\nviewer_token: v\n"
+                                                    "tls: {enabled: true, cert: site.crt, key: /keys/site.key}\n")
+                  .ok());
+  auto s = LoadServerConfig(dir + "/site.yaml");
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  EXPECT_EQ(s->tls.cert_file, dir + "/site.crt");
+  EXPECT_EQ(s->tls.key_file, "/keys/site.key");
+  ASSERT_TRUE(WriteStringToFile(dir + "/call.yaml", "local: {address: 'a:1', publisher_token: p}\n"
+                                                    "remote: {address: 'b:2', viewer_token: v}\n"
+                                                    "room: {preset: face-to-face}\ntls: {enabled: true, ca: ca.pem}\n")
+                  .ok());
+  auto c = LoadCallConfig(dir + "/call.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_EQ(c->tls_ca_file, dir + "/ca.pem");
 }
 
 TEST(NetConfig, CallConfigFaceToFace) {
@@ -122,6 +143,7 @@ TEST(NetConfig, CallConfigErrorsNameTheKey) {
                "room: {preset: face-to-face}\n",
                "remote.address");
   expect_error(sites + "room: {preset: face-to-face}\nextra: 1\n", "extra: unknown key");
+  expect_error(sites + "room: {preset: face-to-face, [yaw_deg]: 1}\n", "room: keys must be names");
 }
 
 }  // namespace

@@ -33,32 +33,7 @@ std::vector<std::pair<std::string, std::vector<uint8_t>>> Seeds() {
   big.data.assign(3000, 7);
   for (const auto& f : EncodeFragmented({}, big, 1000)) stream.insert(stream.end(), f.begin(), f.end());
   seeds.emplace_back("seed-stream", FuzzInput(FuzzTarget::kStream, stream));
-  const Mesh mesh = test::NoisySphere(6, 9);
-  for (GeometryCodec c : {GeometryCodec::kG0, GeometryCodec::kG1}) {
-    GeometryEncodeOptions o;
-    o.codec = c;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
-    seeds.emplace_back(c == GeometryCodec::kG0 ? "seed-geometry-g0" : "seed-geometry-g1",
-                       FuzzInput(FuzzTarget::kGeometry, b));
-  }
-  {
-    GeometryEncodeOptions o;
-    o.normals = NormalMode::kTransmit;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
-    seeds.emplace_back("seed-geometry-g1-normals", FuzzInput(FuzzTarget::kGeometry, b));
-  }
-  ImageRgb8 im;
-  ImageGray8 mask;
-  test::MaskedImage(24, 18, &im, &mask);
-  for (ColorCodec c : {ColorCodec::kC0, ColorCodec::kC1}) {
-    ColorEncodeOptions o;
-    o.codec = c;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeColor(im, mask, o, &b).ok());
-    seeds.emplace_back(c == ColorCodec::kC0 ? "seed-color-c0" : "seed-color-c1", FuzzInput(FuzzTarget::kColor, b));
-  }
+  for (auto& seed : test::SampleCodecInputs(6, 9, 24, 18)) seeds.push_back(std::move(seed));
   return seeds;
 }
 

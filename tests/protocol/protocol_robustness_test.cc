@@ -32,31 +32,7 @@ std::vector<std::vector<uint8_t>> SampleMessages() {
 
 std::vector<std::vector<uint8_t>> SampleBlobs() {
   std::vector<std::vector<uint8_t>> out;
-  const Mesh mesh = test::NoisySphere(5, 8);
-  for (GeometryCodec c : {GeometryCodec::kG0, GeometryCodec::kG1}) {
-    GeometryEncodeOptions o;
-    o.codec = c;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
-    out.push_back(FuzzInput(FuzzTarget::kGeometry, b));
-  }
-  {  // G1 with normals sent rather than recomputed
-    GeometryEncodeOptions o;
-    o.normals = NormalMode::kTransmit;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeGeometry(mesh, o, &b).ok());
-    out.push_back(FuzzInput(FuzzTarget::kGeometry, b));
-  }
-  ImageRgb8 im;
-  ImageGray8 mask;
-  test::MaskedImage(20, 14, &im, &mask);
-  for (ColorCodec c : {ColorCodec::kC0, ColorCodec::kC1}) {
-    ColorEncodeOptions o;
-    o.codec = c;
-    std::vector<uint8_t> b;
-    EXPECT_TRUE(EncodeColor(im, mask, o, &b).ok());
-    out.push_back(FuzzInput(FuzzTarget::kColor, b));
-  }
+  for (auto& [name, bytes] : test::SampleCodecInputs(5, 8, 20, 14)) out.push_back(std::move(bytes));
   return out;
 }
 

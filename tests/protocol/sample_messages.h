@@ -2,10 +2,13 @@
 // the protocol tests.
 #pragma once
 
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "common/rig.h"
 #include "protocol/color_codec.h"
+#include "protocol/fuzz_decoders.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
 #include "protocol/test_meshes.h"
@@ -99,6 +102,42 @@ inline std::vector<protocol::Payload> SamplePayloads() {
   s.values = {{"fps", 30.0}, {"encode_ms", 4.5}};
   v.push_back(s);
   return v;
+}
+
+// Codec blobs as inputs of the fuzz entry point, named as the corpus seeds:
+// geometry (G0, G1, G1 with normals sent) of NoisySphere(rows, cols) and
+// colour (C0, C1) of MaskedImage(width, height).
+inline std::vector<std::pair<std::string, std::vector<uint8_t>>> SampleCodecInputs(int rows, int cols, int width,
+                                                                                   int height) {
+  using namespace protocol;
+  std::vector<std::pair<std::string, std::vector<uint8_t>>> out;
+  const Mesh mesh = NoisySphere(rows, cols);
+  for (GeometryCodec c : {GeometryCodec::kG0, GeometryCodec::kG1}) {
+    GeometryEncodeOptions o;
+    o.codec = c;
+    std::vector<uint8_t> b;
+    HOLO_CHECK(EncodeGeometry(mesh, o, &b).ok());
+    out.emplace_back(c == GeometryCodec::kG0 ? "seed-geometry-g0" : "seed-geometry-g1",
+                     FuzzInput(FuzzTarget::kGeometry, b));
+  }
+  {
+    GeometryEncodeOptions o;
+    o.normals = NormalMode::kTransmit;
+    std::vector<uint8_t> b;
+    HOLO_CHECK(EncodeGeometry(mesh, o, &b).ok());
+    out.emplace_back("seed-geometry-g1-normals", FuzzInput(FuzzTarget::kGeometry, b));
+  }
+  ImageRgb8 im;
+  ImageGray8 mask;
+  MaskedImage(width, height, &im, &mask);
+  for (ColorCodec c : {ColorCodec::kC0, ColorCodec::kC1}) {
+    ColorEncodeOptions o;
+    o.codec = c;
+    std::vector<uint8_t> b;
+    HOLO_CHECK(EncodeColor(im, mask, o, &b).ok());
+    out.emplace_back(c == ColorCodec::kC0 ? "seed-color-c0" : "seed-color-c1", FuzzInput(FuzzTarget::kColor, b));
+  }
+  return out;
 }
 
 }  // namespace holo::test

@@ -23,6 +23,7 @@
 
 #include "client/net/site_client.h"
 #include "common/clock.h"
+#include "net/net_fixtures.h"
 #include "record_test_util.h"
 #include "server/net/session_server.h"
 #include "server/record/recording_reader.h"
@@ -53,13 +54,9 @@ net::ServerConfig Config() {
   return c;
 }
 
+// test::Eventually with this file's longer default wait.
 bool Eventually(const std::function<bool()>& pred, double timeout_s = 20.0) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1e3));
-  while (std::chrono::steady_clock::now() < end) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return pred();
+  return test::Eventually(pred, timeout_s);
 }
 
 std::vector<uint8_t> Bytes(const net::RawMessage& m) {
