@@ -542,12 +542,23 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
 
 void Texturer::BuildAdjacency(const Mesh& mesh) {
   if (adjacency_built_) return;
+  FillAdjacency(mesh, /*only_unset=*/false);
   adjacency_built_ = true;
+}
+
+void Texturer::BuildUnsetAdjacency(const Mesh& mesh) {
+  FillAdjacency(mesh, /*only_unset=*/true);
+  adjacency_built_ = false;  // the lists are partial: BuildAdjacency must rebuild them
+}
+
+void Texturer::FillAdjacency(const Mesh& mesh, bool only_unset) {
   const size_t n = mesh.num_vertices();
+  const auto wanted = [&](uint32_t v) { return !only_unset || state_[v] == kUnset; };
   // Vertex adjacency (CSR) from the triangles' edges; duplicates are harmless.
   adj_offsets_.assign(n + 1, 0);
   for (const auto& t : mesh.triangles)
-    for (int k = 0; k < 3; ++k) adj_offsets_[t[k] + 1] += 2;
+    for (int k = 0; k < 3; ++k)
+      if (wanted(t[k])) adj_offsets_[t[k] + 1] += 2;
   for (size_t v = 0; v < n; ++v) adj_offsets_[v + 1] += adj_offsets_[v];
   adj_.resize(adj_offsets_[n]);
   // cluster_count_ serves as the per-vertex write cursor.
@@ -555,25 +566,7 @@ void Texturer::BuildAdjacency(const Mesh& mesh) {
   for (const auto& t : mesh.triangles)
     for (int k = 0; k < 3; ++k) {
       const uint32_t a = t[k];
-      adj_[cluster_count_[a]++] = t[(k + 1) % 3];
-      adj_[cluster_count_[a]++] = t[(k + 2) % 3];
-    }
-}
-
-void Texturer::BuildUnsetAdjacency(const Mesh& mesh) {
-  adjacency_built_ = false;  // the lists are partial: BuildAdjacency must rebuild them
-  const size_t n = mesh.num_vertices();
-  adj_offsets_.assign(n + 1, 0);
-  for (const auto& t : mesh.triangles)
-    for (int k = 0; k < 3; ++k)
-      if (state_[t[k]] == kUnset) adj_offsets_[t[k] + 1] += 2;
-  for (size_t v = 0; v < n; ++v) adj_offsets_[v + 1] += adj_offsets_[v];
-  adj_.resize(adj_offsets_[n]);
-  cluster_count_.assign(adj_offsets_.begin(), adj_offsets_.end() - 1);
-  for (const auto& t : mesh.triangles)
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t a = t[k];
-      if (state_[a] != kUnset) continue;
+      if (!wanted(a)) continue;
       adj_[cluster_count_[a]++] = t[(k + 1) % 3];
       adj_[cluster_count_[a]++] = t[(k + 2) % 3];
     }

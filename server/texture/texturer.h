@@ -165,6 +165,8 @@ class Texturer {
   // ones FillUnobserved reads; the others get empty lists). Same neighbour
   // order per vertex as BuildAdjacency.
   void BuildUnsetAdjacency(const Mesh& mesh);
+  // The CSR lists of every vertex (`only_unset` false) or of the unset ones.
+  void FillAdjacency(const Mesh& mesh, bool only_unset);
 
   Rig rig_;
   TextureOptions options_;
