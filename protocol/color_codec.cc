@@ -1,14 +1,18 @@
 #include "protocol/color_codec.h"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cstring>
 #include <memory>
+#include <new>
 
 #include <csetjmp>
 #include <cstdio>
 #include <cstdlib>
 
 #include <jpeglib.h>
+#include <jerror.h>
 #include <lz4.h>
 #include <turbojpeg.h>
 #include <zstd.h>
@@ -75,8 +79,6 @@ Status CheckSize(const char* field, uint32_t w, uint32_t h, const Limits& limits
   return OkStatus();
 }
 
-bool IsFg(const ImageGray8& mask, int x, int y) { return mask.empty() || mask.at(x, y) != 0; }
-
 // ------------------------------------------------------------------ C0
 
 Status EncodeC0(const ImageRgb8& image, const ImageGray8& mask, std::vector<uint8_t>* out) {
@@ -124,125 +126,136 @@ Status DecodeC0(ByteReader& r, uint32_t w, uint32_t h, ImageRgb8* image, ImageGr
 
 // ------------------------------------------------------------------ C1
 
-// Fills the background pixels (`fg[i] == 0`) of the `w` × `h` RGB image `rgb`
-// by push-pull: a pyramid of 2×2 means of the foreground (push), then every
-// background pixel takes its value from the coarsest-needed level, bilinearly
-// interpolated from the next coarser level (pull). The result continues the
-// foreground smoothly across the silhouette, so that the JPEG blocks that
-// straddle it carry no artificial edge (no ringing into the foreground, fewer
-// AC bits) and blocks of pure background are nearly flat (DC only).
-void PushPullFill(int w, int h, const uint8_t* fg, uint8_t* rgb) {
-  struct Level {
-    int w, h;
-    std::vector<float> c;   // 3 per pixel: mean colour of the foreground below it
-    std::vector<uint8_t> has;  // any foreground below it
-  };
-  std::vector<Level> lv;
-  lv.push_back({w, h, std::vector<float>(static_cast<size_t>(w) * h * 3), std::vector<uint8_t>(fg, fg + size_t{1} * w * h)});
-  for (size_t i = 0; i < lv[0].c.size(); ++i) lv[0].c[i] = rgb[i];
-  while (lv.back().w > 1 || lv.back().h > 1) {
-    const Level& f = lv.back();
-    Level c{(f.w + 1) / 2, (f.h + 1) / 2, {}, {}};
-    c.c.assign(static_cast<size_t>(c.w) * c.h * 3, 0.0f);
-    c.has.assign(static_cast<size_t>(c.w) * c.h, 0);
-    for (int y = 0; y < c.h; ++y)
-      for (int x = 0; x < c.w; ++x) {
-        float s[3] = {0, 0, 0};
-        int n = 0;
-        for (int dy = 0; dy < 2; ++dy)
-          for (int dx = 0; dx < 2; ++dx) {
-            const int fx = 2 * x + dx, fy = 2 * y + dy;
-            if (fx >= f.w || fy >= f.h) continue;
-            const size_t fi = static_cast<size_t>(fy) * f.w + fx;
-            if (!f.has[fi]) continue;
-            for (int k = 0; k < 3; ++k) s[k] += f.c[fi * 3 + k];
-            ++n;
-          }
-        const size_t ci = static_cast<size_t>(y) * c.w + x;
-        if (n) {
-          c.has[ci] = 1;
-          for (int k = 0; k < 3; ++k) c.c[ci * 3 + k] = s[k] / static_cast<float>(n);
-        }
-      }
-    lv.push_back(std::move(c));
+// Byte scans of mask rows, eight bytes at a time (masks are mostly long runs).
+// Little-endian loads: the lowest address is the lowest byte.
+int FirstSet(const uint8_t* p, int n) {
+  int i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i, 8);
+    if (v) return i + (std::countr_zero(v) >> 3);
   }
-  // Pull: coarse to fine, holes take the bilinear interpolation of the level above.
-  for (size_t l = lv.size() - 1; l-- > 0;) {
-    Level& f = lv[l];
-    const Level& c = lv[l + 1];
-    for (int y = 0; y < f.h; ++y) {
-      const float cy = std::clamp((static_cast<float>(y) - 0.5f) * 0.5f, 0.0f, static_cast<float>(c.h - 1));
-      const int y0 = static_cast<int>(cy), y1 = std::min(y0 + 1, c.h - 1);
-      const float ty = cy - static_cast<float>(y0);
-      for (int x = 0; x < f.w; ++x) {
-        const size_t fi = static_cast<size_t>(y) * f.w + x;
-        if (f.has[fi]) continue;
-        const float cx = std::clamp((static_cast<float>(x) - 0.5f) * 0.5f, 0.0f, static_cast<float>(c.w - 1));
-        const int x0 = static_cast<int>(cx), x1 = std::min(x0 + 1, c.w - 1);
-        const float tx = cx - static_cast<float>(x0);
-        const float* a = &c.c[(static_cast<size_t>(y0) * c.w + x0) * 3];
-        const float* b = &c.c[(static_cast<size_t>(y0) * c.w + x1) * 3];
-        const float* d = &c.c[(static_cast<size_t>(y1) * c.w + x0) * 3];
-        const float* e = &c.c[(static_cast<size_t>(y1) * c.w + x1) * 3];
-        for (int k = 0; k < 3; ++k) {
-          f.c[fi * 3 + k] = (1 - ty) * ((1 - tx) * a[k] + tx * b[k]) + ty * ((1 - tx) * d[k] + tx * e[k]);
-        }
-      }
-    }
+  for (; i < n; ++i)
+    if (p[i]) return i;
+  return -1;
+}
+int FirstClear(const uint8_t* p, int n) {
+  constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
+  int i = 0;
+  for (; i + 8 <= n; i += 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i, 8);
+    // The lowest flagged byte is the first zero byte (flags above it may be false).
+    const uint64_t z = (v - kOnes) & ~v & kHighs;
+    if (z) return i + (std::countr_zero(z) >> 3);
   }
-  for (size_t i = 0, n = static_cast<size_t>(w) * h; i < n; ++i) {
-    if (fg[i]) continue;
-    for (int k = 0; k < 3; ++k) rgb[i * 3 + k] = static_cast<uint8_t>(std::clamp(lv[0].c[i * 3 + k] + 0.5f, 0.0f, 255.0f));
+  for (; i < n; ++i)
+    if (!p[i]) return i;
+  return -1;
+}
+int LastSet(const uint8_t* p, int n) {
+  int i = n;
+  for (; i >= 8; i -= 8) {
+    uint64_t v;
+    std::memcpy(&v, p + i - 8, 8);
+    if (v) return i - 1 - (std::countl_zero(v) >> 3);
+  }
+  for (; i > 0; --i)
+    if (p[i - 1]) return i - 1;
+  return -1;
+}
+
+// The x positions in [0, n) where row `p` changes between background (0) and
+// foreground (non-zero), starting from background: the C1 mask's transitions.
+void RowTransitions(const uint8_t* p, int n, std::vector<uint32_t>* t) {
+  t->clear();
+  int x = 0;
+  bool fg = false;
+  while (x < n) {
+    const int d = fg ? FirstClear(p + x, n - x) : FirstSet(p + x, n - x);
+    if (d < 0) break;
+    x += d;
+    t->push_back(static_cast<uint32_t>(x));
+    fg = !fg;
   }
 }
 
-
-// Fills background pixels block by block on JPEG's MCU grid (`block` = 16
-// for 4:2:0, 8 for 4:4:4): a block with foreground gets a push-pull fill of
-// its own pixels (a smooth continuation of its foreground), a block without
-// gets one flat colour, the mean of the block before it in the row (so its DC
-// difference costs almost nothing and it has no AC at all). A global smooth
-// fill would put gentle gradients into every empty block, which costs AC
-// coefficients everywhere: measured +8% bytes against a flat mean fill.
-void BlockwiseFill(int w, int h, int block, const uint8_t* fg, uint8_t* rgb) {
-  std::vector<uint8_t> bm(static_cast<size_t>(block) * block), bc(bm.size() * 3);
-  float global[3] = {0, 0, 0};
-  size_t nfg = 0;
-  for (size_t i = 0, n = static_cast<size_t>(w) * h; i < n; ++i) {
-    if (!fg[i]) continue;
-    for (int k = 0; k < 3; ++k) global[k] += rgb[i * 3 + k];
-    ++nfg;
+// Fills the background pixels (`fg[i] == 0`) of one `B` × `B` block of RGB
+// pixels (`rgb`, rows `stride` bytes apart) by push-pull: a pyramid of 2×2
+// means of the foreground (push), then every background pixel takes the
+// bilinear interpolation of the next coarser level (pull). The block's
+// foreground continues smoothly into its background, so the block carries no
+// artificial edge (no ringing into the foreground, fewer AC bits). The block
+// has at least one foreground pixel.
+template <int B>
+void PushPullBlock(const uint8_t* fg, uint8_t* rgb, size_t stride) {
+  constexpr int kLevels = std::bit_width(static_cast<unsigned>(B));  // B, B/2, ..., 1
+  float c[kLevels][B * B * 3];
+  uint8_t has[kLevels][B * B];
+  // Only foreground values are read before the pull writes the rest.
+  for (int y = 0; y < B; ++y)
+    for (int x = 0; x < B; ++x) {
+      const int i = y * B + x;
+      has[0][i] = fg[i] != 0;
+      if (has[0][i])
+        for (int k = 0; k < 3; ++k) c[0][i * 3 + k] = rgb[y * stride + x * 3 + k];
+    }
+  for (int l = 1, s = B / 2; l < kLevels; ++l, s /= 2) {
+    const int fs = 2 * s;
+    for (int y = 0; y < s; ++y)
+      for (int x = 0; x < s; ++x) {
+        float sum[3] = {0, 0, 0};
+        int n = 0;
+        for (int dy = 0; dy < 2; ++dy)
+          for (int dx = 0; dx < 2; ++dx) {
+            const int fi = (2 * y + dy) * fs + 2 * x + dx;
+            if (!has[l - 1][fi]) continue;
+            for (int k = 0; k < 3; ++k) sum[k] += c[l - 1][fi * 3 + k];
+            ++n;
+          }
+        const int ci = y * s + x;
+        has[l][ci] = n > 0;
+        for (int k = 0; k < 3; ++k) c[l][ci * 3 + k] = n ? sum[k] / static_cast<float>(n) : 0.0f;
+      }
   }
-  for (int k = 0; k < 3; ++k) global[k] = nfg ? global[k] / static_cast<float>(nfg) : 128.0f;
-  for (int by = 0; by < h; by += block) {
-    uint8_t prev[3] = {static_cast<uint8_t>(global[0] + 0.5f), static_cast<uint8_t>(global[1] + 0.5f),
-                       static_cast<uint8_t>(global[2] + 0.5f)};
-    for (int bx = 0; bx < w; bx += block) {
-      const int cw = std::min(block, w - bx), ch = std::min(block, h - by);
-      int n = 0;
-      for (int y = 0; y < ch; ++y)
-        for (int x = 0; x < cw; ++x) n += fg[static_cast<size_t>(by + y) * w + bx + x] != 0;
-      if (n == 0) {
-        for (int y = 0; y < ch; ++y)
-          for (int x = 0; x < cw; ++x) std::memcpy(&rgb[(static_cast<size_t>(by + y) * w + bx + x) * 3], prev, 3);
-        continue;
+  // Pull: the holes of each level take the bilinear interpolation of the
+  // level above at the same point (cell centres: fine x ↔ coarse (x − ½) / 2),
+  // computed separably: the coarse rows interpolated along x, then those
+  // along y (the same products and sums as the 2-D formula).
+  for (int l = kLevels - 1, cs = 1; l-- > 0; cs *= 2) {
+    const int fs = 2 * cs;
+    int i0[B], i1[B];
+    float t[B];
+    for (int x = 0; x < fs; ++x) {
+      const float cx = std::clamp((static_cast<float>(x) - 0.5f) * 0.5f, 0.0f, static_cast<float>(cs - 1));
+      i0[x] = static_cast<int>(cx);
+      i1[x] = std::min(i0[x] + 1, cs - 1);
+      t[x] = cx - static_cast<float>(i0[x]);
+    }
+    const float* up = c[l + 1];
+    float h[B / 2 > 0 ? B / 2 : 1][B * 3];
+    for (int j = 0; j < cs; ++j)
+      for (int x = 0; x < fs; ++x)
+        for (int k = 0; k < 3; ++k)
+          h[j][x * 3 + k] = (1 - t[x]) * up[(j * cs + i0[x]) * 3 + k] + t[x] * up[(j * cs + i1[x]) * 3 + k];
+    for (int y = 0; y < fs; ++y) {
+      const float ty = t[y];
+      const float* h0 = h[i0[y]];
+      const float* h1 = h[i1[y]];
+      for (int x = 0; x < fs; ++x) {
+        const int fi = y * fs + x;
+        if (has[l][fi]) continue;
+        for (int k = 0; k < 3; ++k) c[l][fi * 3 + k] = (1 - ty) * h0[x * 3 + k] + ty * h1[x * 3 + k];
       }
-      if (n < cw * ch) {
-        for (int y = 0; y < ch; ++y) {
-          std::memcpy(&bm[static_cast<size_t>(y) * cw], &fg[static_cast<size_t>(by + y) * w + bx], cw);
-          std::memcpy(&bc[static_cast<size_t>(y) * cw * 3], &rgb[(static_cast<size_t>(by + y) * w + bx) * 3], cw * 3);
-        }
-        PushPullFill(cw, ch, bm.data(), bc.data());
-        for (int y = 0; y < ch; ++y)
-          std::memcpy(&rgb[(static_cast<size_t>(by + y) * w + bx) * 3], &bc[static_cast<size_t>(y) * cw * 3], cw * 3);
-      }
-      uint32_t s[3] = {0, 0, 0};
-      for (int y = 0; y < ch; ++y)
-        for (int x = 0; x < cw; ++x)
-          for (int k = 0; k < 3; ++k) s[k] += rgb[(static_cast<size_t>(by + y) * w + bx + x) * 3 + k];
-      for (int k = 0; k < 3; ++k) prev[k] = static_cast<uint8_t>((s[k] + cw * ch / 2) / (cw * ch));
     }
   }
+  for (int y = 0; y < B; ++y)
+    for (int x = 0; x < B; ++x) {
+      const int i = y * B + x;
+      if (fg[i]) continue;
+      for (int k = 0; k < 3; ++k)
+        rgb[y * stride + x * 3 + k] = static_cast<uint8_t>(std::clamp(c[0][i * 3 + k] + 0.5f, 0.0f, 255.0f));
+    }
 }
 
 // libjpeg reports errors through a callback that must not return: jump back.
@@ -280,23 +293,91 @@ void QuantTable(ColorEncodeOptions::Quant quant, bool chroma, int quality, unsig
   }
 }
 
-// Baseline JPEG of the `w` × `h` RGB8 pixels: accurate DCT, Huffman tables
-// optimized for this image, quantization and subsampling from `o`.
-Status CompressJpeg(const uint8_t* rgb, int w, int h, const ColorEncodeOptions& o, std::vector<uint8_t>* out) {
-  jpeg_compress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = JpegErrorExit;
-  err.mgr.emit_message = JpegSilence;
-  unsigned char* buf = nullptr;
-  unsigned long size = 0;
-  if (setjmp(err.jump)) {
-    jpeg_destroy_compress(&cinfo);
-    std::free(buf);
-    return Internal(std::string("libjpeg: ") + err.message);
+// A libjpeg destination that appends the compressed bytes to a vector.
+struct VectorDestination {
+  jpeg_destination_mgr mgr;
+  std::vector<uint8_t>* out;
+  size_t start;
+};
+void DestInit(j_compress_ptr cinfo) {
+  auto* d = reinterpret_cast<VectorDestination*>(cinfo->dest);
+  d->out->resize(d->start + 16384);
+  d->mgr.next_output_byte = d->out->data() + d->start;
+  d->mgr.free_in_buffer = d->out->size() - d->start;
+}
+boolean DestGrow(j_compress_ptr cinfo) {
+  auto* d = reinterpret_cast<VectorDestination*>(cinfo->dest);
+  const size_t used = d->out->size();  // the whole buffer is full when libjpeg asks
+  bool grown = true;
+  try {
+    d->out->resize(used * 2);
+  } catch (const std::bad_alloc&) {
+    grown = false;
   }
-  jpeg_create_compress(&cinfo);
-  jpeg_mem_dest(&cinfo, &buf, &size);
+  if (!grown) {  // error_exit jumps: not from inside the handler
+    cinfo->err->msg_code = JERR_OUT_OF_MEMORY;
+    (*cinfo->err->error_exit)(reinterpret_cast<j_common_ptr>(cinfo));
+  }
+  d->mgr.next_output_byte = d->out->data() + used;
+  d->mgr.free_in_buffer = d->out->size() - used;
+  return TRUE;
+}
+void DestTerm(j_compress_ptr cinfo) {
+  auto* d = reinterpret_cast<VectorDestination*>(cinfo->dest);
+  d->out->resize(d->out->size() - d->mgr.free_in_buffer);
+}
+
+// One libjpeg compressor per thread, reused across images (creating one per
+// image costs its allocations every time).
+struct JpegCompressor {
+  jpeg_compress_struct cinfo{};
+  JpegError err{};
+  bool created = false;
+  // The Huffman tables in `cinfo` are an image's optimized ones: libjpeg-turbo's
+  // jpeg_set_defaults keeps tables that exist, so the standard tables need a
+  // fresh compressor.
+  bool optimized_tables = false;
+  JpegCompressor() = default;
+  JpegCompressor(const JpegCompressor&) = delete;
+  JpegCompressor& operator=(const JpegCompressor&) = delete;
+  ~JpegCompressor() {
+    if (created) jpeg_destroy_compress(&cinfo);
+  }
+};
+
+// Baseline JPEG of `w` × `h` RGB8 pixels (rows `stride` bytes apart),
+// quantization, subsampling, DCT and Huffman optimization from `o`, appended
+// to `out` behind a u32 length (a blob32).
+Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const ColorEncodeOptions& o,
+                    std::vector<uint8_t>* out) {
+  thread_local JpegCompressor jc;
+  jpeg_compress_struct& cinfo = jc.cinfo;
+  ByteWriter bw(out);
+  const size_t at = bw.ReserveU32();
+  VectorDestination dest{{}, out, out->size()};
+  dest.mgr.init_destination = DestInit;
+  dest.mgr.empty_output_buffer = DestGrow;
+  dest.mgr.term_destination = DestTerm;
+  if (setjmp(jc.err.jump)) {
+    // Start from a fresh compressor next time: the failed one may be mid-image.
+    jpeg_destroy_compress(&cinfo);
+    jc.created = false;
+    out->resize(at);
+    return Internal(std::string("libjpeg: ") + jc.err.message);
+  }
+  if (jc.created && jc.optimized_tables && !o.optimize_huffman) {
+    jpeg_destroy_compress(&cinfo);
+    jc.created = false;
+  }
+  if (!jc.created) {
+    jc.optimized_tables = false;
+    cinfo.err = jpeg_std_error(&jc.err.mgr);
+    jc.err.mgr.error_exit = JpegErrorExit;
+    jc.err.mgr.emit_message = JpegSilence;
+    jpeg_create_compress(&cinfo);
+    jc.created = true;
+  }
+  cinfo.dest = &dest.mgr;
   cinfo.image_width = static_cast<JDIMENSION>(w);
   cinfo.image_height = static_cast<JDIMENSION>(h);
   cinfo.input_components = 3;
@@ -304,6 +385,7 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, const ColorEncodeOptions& 
   jpeg_set_defaults(&cinfo);
   cinfo.dct_method = o.accurate_dct ? JDCT_ISLOW : JDCT_IFAST;
   cinfo.optimize_coding = o.optimize_huffman ? TRUE : FALSE;
+  jc.optimized_tables = jc.optimized_tables || o.optimize_huffman;
   unsigned int table[64];
   QuantTable(o.quant, false, o.jpeg_quality, table);
   jpeg_add_quant_table(&cinfo, 0, table, 100, TRUE);
@@ -316,35 +398,67 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, const ColorEncodeOptions& 
   cinfo.comp_info[0].h_samp_factor = cinfo.comp_info[0].v_samp_factor = luma_sampling;
   for (int c = 1; c < 3; ++c) cinfo.comp_info[c].h_samp_factor = cinfo.comp_info[c].v_samp_factor = 1;
   jpeg_start_compress(&cinfo, TRUE);
+  JSAMPROW rows[16];
   while (cinfo.next_scanline < cinfo.image_height) {
-    JSAMPROW row = const_cast<JSAMPROW>(rgb + static_cast<size_t>(cinfo.next_scanline) * w * 3);
-    jpeg_write_scanlines(&cinfo, &row, 1);
+    const JDIMENSION n = std::min<JDIMENSION>(16, cinfo.image_height - cinfo.next_scanline);
+    for (JDIMENSION i = 0; i < n; ++i) rows[i] = const_cast<JSAMPROW>(rgb + (cinfo.next_scanline + i) * stride);
+    jpeg_write_scanlines(&cinfo, rows, n);
   }
   jpeg_finish_compress(&cinfo);
-  jpeg_destroy_compress(&cinfo);
-  out->assign(buf, buf + size);
-  std::free(buf);
+  cinfo.dest = nullptr;
+  bw.PatchU32(at, static_cast<uint32_t>(out->size() - at - 4));
   return OkStatus();
+}
+
+// The C1 block grid of a `bw` × `bh` box: blocks of one JPEG MCU (`bx` × `by`
+// pixels), `cols` × `rows` of them, and per block its slot in the JPEG image
+// (-1: not coded). Box layout: every block is coded in place. Packed layout
+// (flag kColorFlagPackedBlocks): only the blocks holding foreground, in
+// raster order, `cols` per JPEG row — background-only blocks cost no pixels.
+struct BlockGrid {
+  int bx = 8, by = 8, cols = 0, rows = 0;
+  std::vector<int32_t> slot;
+  int coded = 0;  // blocks with a slot
+  int jpeg_width(bool packed, int bw) const { return packed ? cols * bx : bw; }
+  int jpeg_height(bool packed, int bh) const { return packed ? (coded + cols - 1) / cols * by : bh; }
+  // Top-left pixel of block (c, r)'s slot in the JPEG image.
+  int slot_x(int32_t s) const { return s % cols * bx; }
+  int slot_y(int32_t s) const { return s / cols * by; }
+};
+
+// Marks the blocks that the transitions `t` of box row `y` touch with foreground.
+void MarkRow(const std::vector<uint32_t>& t, uint32_t bw, int y, BlockGrid* g) {
+  int32_t* row = &g->slot[static_cast<size_t>(y / g->by) * g->cols];
+  for (size_t i = 0; i < t.size(); i += 2) {
+    const uint32_t stop = i + 1 < t.size() ? t[i + 1] : bw;
+    for (uint32_t c = t[i] / g->bx, last = (stop - 1) / g->bx; c <= last; ++c) row[c] = 1;
+  }
+}
+
+// Assigns slots: every block (box layout) or the marked ones in raster order.
+void AssignSlots(bool packed, BlockGrid* g) {
+  g->coded = 0;
+  for (int32_t& s : g->slot) s = (!packed || s > 0) ? g->coded++ : -1;
 }
 
 Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& o,
                 std::vector<uint8_t>* out) {
   const int W = image.width(), H = image.height();
+  thread_local std::vector<uint8_t> ones;
+  if (mask.empty()) ones.assign(static_cast<size_t>(W), 255);
+  auto mask_row = [&](int y) { return mask.empty() ? ones.data() : mask.data() + static_cast<size_t>(y) * W; };
   int x0 = W, y0 = H, x1 = -1, y1 = -1;
-  uint64_t sum[3] = {0, 0, 0}, count = 0;
   for (int y = 0; y < H; ++y) {
-    for (int x = 0; x < W; ++x) {
-      if (!IsFg(mask, x, y)) continue;
-      x0 = std::min(x0, x);
-      x1 = std::max(x1, x);
-      y0 = std::min(y0, y);
-      y1 = std::max(y1, y);
-      for (int c = 0; c < 3; ++c) sum[c] += image.at(x, y, c);
-      ++count;
-    }
+    const uint8_t* m = mask_row(y);
+    const int first = FirstSet(m, W);
+    if (first < 0) continue;
+    x0 = std::min(x0, first);
+    x1 = std::max(x1, LastSet(m, W));
+    y0 = std::min(y0, y);
+    y1 = y;
   }
   ByteWriter w(out);
-  if (count == 0) {
+  if (x1 < 0) {
     for (int i = 0; i < 4; ++i) w.U16(0);
     w.U32(0);
     w.U32(0);
@@ -356,21 +470,22 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   w.U16(static_cast<uint16_t>(bw));
   w.U16(static_cast<uint16_t>(bh));
 
+  BlockGrid g;
+  g.bx = g.by = o.chroma_420 ? 16 : 8;
+  g.cols = (bw + g.bx - 1) / g.bx;
+  g.rows = (bh + g.by - 1) / g.by;
+  g.slot.assign(static_cast<size_t>(g.cols) * g.rows, 0);
+
   // Mask: per row of the box, the x positions where foreground starts or
   // ends ("transitions"), coded against the row above when it has as many
   // (silhouettes move by a pixel or two from row to row).
-  std::vector<uint8_t> rle;
-  rle.reserve(static_cast<size_t>(bh) * 8);
-  std::vector<uint32_t> prev, cur;
-  for (int y = y0; y <= y1; ++y) {
-    cur.clear();
-    bool fg = false;
-    for (int x = x0; x <= x1; ++x) {
-      if (IsFg(mask, x, y) != fg) {
-        cur.push_back(static_cast<uint32_t>(x - x0));
-        fg = !fg;
-      }
-    }
+  thread_local std::vector<uint8_t> rle;
+  rle.clear();
+  thread_local std::vector<uint32_t> prev, cur;
+  prev.clear();
+  for (int y = 0; y < bh; ++y) {
+    RowTransitions(mask_row(y0 + y) + x0, bw, &cur);
+    MarkRow(cur, static_cast<uint32_t>(bw), y, &g);
     size_t delta_bytes = SIZE_MAX, explicit_bytes = VarintBytes(static_cast<uint32_t>(cur.size() + 1));
     for (size_t i = 0; i < cur.size(); ++i) explicit_bytes += VarintBytes(cur[i] - (i ? cur[i - 1] + 1 : 0));
     if (cur.size() == prev.size()) {
@@ -389,37 +504,122 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   const size_t at = w.ReserveU32();
   size_t start = out->size();
   out->resize(start + ZSTD_compressBound(rle.size()));
-  const size_t z = ZSTD_compress(out->data() + start, out->size() - start, rle.data(), rle.size(), 9);
+  // One zstd context per thread: a fresh one per image costs its tables' allocation and page faults.
+  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> zc(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!zc) return Internal("zstd: cannot create a compression context");
+  const size_t z = ZSTD_compressCCtx(zc.get(), out->data() + start, out->size() - start, rle.data(), rle.size(),
+                                     o.mask_zstd_level);
   if (ZSTD_isError(z)) return Internal(std::string("zstd: ") + ZSTD_getErrorName(z));
   out->resize(start + z);
   w.PatchU32(at, static_cast<uint32_t>(z));
 
-  // Box pixels. Background inside the box must cost JPEG as few bits as
-  // possible and must not ring into the foreground: see FillBackground.
-  std::vector<uint8_t> box(static_cast<size_t>(bw) * bh * 3);
-  std::vector<uint8_t> box_mask(static_cast<size_t>(bw) * bh);
-  for (int y = 0; y < bh; ++y) {
-    for (int x = 0; x < bw; ++x) {
-      const size_t i = static_cast<size_t>(y) * bw + x;
-      box_mask[i] = IsFg(mask, x0 + x, y0 + y) ? 1 : 0;
-      if (box_mask[i]) std::memcpy(&box[i * 3], &image.at(x0 + x, y0 + y), 3);
+  // The JPEG image: every coded block's pixels at its slot. Background pixels
+  // must cost JPEG as few bits as possible and must not ring into the
+  // foreground: a block with background gets a push-pull fill (or the mean
+  // foreground colour, kMean); a block without foreground (box layout) and
+  // the padding after the last packed block one flat colour, the mean of the
+  // coded block before it, so its DC difference costs almost nothing and it
+  // has no AC at all.
+  thread_local std::vector<int32_t> occupied;
+  occupied = g.slot;  // 1: the block holds foreground
+  AssignSlots(o.pack_blocks, &g);
+  const int jw = g.jpeg_width(o.pack_blocks, bw), jh = g.jpeg_height(o.pack_blocks, bh);
+  // The canvas holds whole blocks: the box's grid, or the packed slots.
+  const int cw = g.cols * g.bx, ch = o.pack_blocks ? jh : g.rows * g.by;
+  const size_t stride = static_cast<size_t>(cw) * 3;
+  const int32_t slots = (ch / g.by) * g.cols;
+  thread_local std::vector<uint8_t> canvas, block_mask;
+  canvas.resize(stride * ch);
+  block_mask.resize(static_cast<size_t>(g.bx) * g.by);
+  uint8_t mean_fill[3] = {128, 128, 128};
+  if (o.fill == ColorEncodeOptions::Fill::kMean) {
+    uint64_t sum[3] = {0, 0, 0}, count = 0;
+    for (int y = y0; y <= y1; ++y) {
+      const uint8_t* m = mask_row(y);
+      const uint8_t* p = &image.at(0, y);
+      for (int x = x0; x <= x1; ++x) {
+        if (!m[x]) continue;
+        for (int k = 0; k < 3; ++k) sum[k] += p[x * 3 + k];
+        ++count;
+      }
+    }
+    for (int k = 0; k < 3; ++k) mean_fill[k] = static_cast<uint8_t>(sum[k] / count);
+  }
+  thread_local std::vector<uint8_t> slot_has;  // slot holds foreground (else flat)
+  slot_has.assign(static_cast<size_t>(slots), 0);
+  for (int r = 0; r < g.rows; ++r) {
+    for (int c = 0; c < g.cols; ++c) {
+      const size_t bi = static_cast<size_t>(r) * g.cols + c;
+      const int32_t s = g.slot[bi];
+      if (s < 0 || !occupied[bi]) continue;  // flat, below
+      slot_has[s] = 1;
+      uint8_t* dst = &canvas[static_cast<size_t>(g.slot_y(s)) * stride + static_cast<size_t>(g.slot_x(s)) * 3];
+      const int px = x0 + c * g.bx, py = y0 + r * g.by;
+      const int run = std::min(g.bx, x1 + 1 - px);  // pixels of the block row inside the box
+      bool full = run == g.bx;
+      for (int y = 0; y < g.by; ++y) {
+        uint8_t* bm = &block_mask[static_cast<size_t>(y) * g.bx];
+        if (py + y > y1) {
+          std::memset(bm, 0, g.bx);
+          full = false;
+          continue;
+        }
+        const uint8_t* m = mask_row(py + y) + px;
+        std::memcpy(dst + y * stride, &image.at(px, py + y), static_cast<size_t>(run) * 3);
+        std::memcpy(bm, m, run);
+        std::memset(bm + run, 0, g.bx - run);
+        full = full && FirstClear(m, run) < 0;
+      }
+      if (full) continue;
+      if (o.fill == ColorEncodeOptions::Fill::kMean) {
+        for (int y = 0; y < g.by; ++y)
+          for (int x = 0; x < g.bx; ++x)
+            if (!block_mask[y * g.bx + x]) std::memcpy(dst + y * stride + x * 3, mean_fill, 3);
+      } else if (g.bx == 8) {
+        PushPullBlock<8>(block_mask.data(), dst, stride);
+      } else {
+        PushPullBlock<16>(block_mask.data(), dst, stride);
+      }
     }
   }
-  if (o.fill == ColorEncodeOptions::Fill::kMean) {
-    const uint8_t fill[3] = {static_cast<uint8_t>(sum[0] / count), static_cast<uint8_t>(sum[1] / count),
-                             static_cast<uint8_t>(sum[2] / count)};
-    for (size_t i = 0; i < box_mask.size(); ++i)
-      if (!box_mask[i]) std::memcpy(&box[i * 3], fill, 3);
-  } else {
-    BlockwiseFill(bw, bh, o.chroma_420 ? 16 : 8, box_mask.data(), box.data());
+  // Flat slots: the blocks without foreground and the padding slots, in the
+  // mean colour of the last slot before them with foreground (leading ones:
+  // the first such slot's).
+  auto slot_mean = [&](int32_t s) {
+    const uint8_t* p = &canvas[static_cast<size_t>(g.slot_y(s)) * stride + static_cast<size_t>(g.slot_x(s)) * 3];
+    uint32_t sum[3] = {0, 0, 0};
+    for (int y = 0; y < g.by; ++y)
+      for (int x = 0; x < g.bx; ++x)
+        for (int k = 0; k < 3; ++k) sum[k] += p[y * stride + x * 3 + k];
+    const uint32_t n = static_cast<uint32_t>(g.bx * g.by);
+    std::array<uint8_t, 3> m;
+    for (int k = 0; k < 3; ++k) m[k] = static_cast<uint8_t>((sum[k] + n / 2) / n);
+    return m;
+  };
+  int32_t source = -1;  // the slot whose mean `fill` is
+  std::array<uint8_t, 3> fill{128, 128, 128};
+  for (int32_t s = 0; s < slots; ++s) {
+    if (slot_has[s]) continue;
+    int32_t want = s - 1;
+    while (want >= 0 && !slot_has[want]) --want;
+    if (want < 0) {
+      want = s + 1;
+      while (want < slots && !slot_has[want]) ++want;
+    }
+    if (want != source && want < slots) {
+      fill = slot_mean(want);
+      source = want;
+    }
+    const int sx = g.slot_x(s), sy = g.slot_y(s);
+    for (int y = 0; y < g.by; ++y) {
+      uint8_t* d = &canvas[static_cast<size_t>(sy + y) * stride + static_cast<size_t>(sx) * 3];
+      for (int x = 0; x < g.bx; ++x) std::memcpy(d + x * 3, fill.data(), 3);
+    }
   }
-  std::vector<uint8_t> jpeg;
-  HOLO_RETURN_IF_ERROR(CompressJpeg(box.data(), bw, bh, o, &jpeg));
-  w.Blob32(jpeg);
-  return OkStatus();
+  return CompressJpeg(canvas.data(), jw, jh, stride, o, out);
 }
 
-Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, ImageRgb8* image, ImageGray8* mask) {
+Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* image, ImageGray8* mask) {
   uint16_t x0 = 0, y0 = 0, bw = 0, bh = 0;
   HOLO_RETURN_IF_ERROR(r.U16("c1.box_x", &x0));
   HOLO_RETURN_IF_ERROR(r.U16("c1.box_y", &y0));
@@ -448,12 +648,16 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, ImageRgb8* image, ImageGr
       declared < bh) {
     return DataLoss("c1.mask: zstd frame size is missing or impossible for the box");
   }
-  std::vector<uint8_t> rle(declared);
-  const size_t got = ZSTD_decompress(rle.data(), rle.size(), zmask.data(), zmask.size());
+  thread_local std::vector<uint8_t> rle;
+  rle.resize(declared);
+  thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> zd(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  if (!zd) return Internal("zstd: cannot create a decompression context");
+  const size_t got = ZSTD_decompressDCtx(zd.get(), rle.data(), rle.size(), zmask.data(), zmask.size());
   if (ZSTD_isError(got) || got != declared) return DataLoss("c1.mask: zstd data is corrupt");
   const uint8_t* p = rle.data();
   const uint8_t* end = p + rle.size();
-  std::vector<uint32_t> prev, cur;
+  thread_local std::vector<uint32_t> prev, cur;
+  prev.clear();
   for (int y = 0; y < bh; ++y) {
     uint32_t head = 0;
     if (!GetVarint(p, end, &head)) return DataLoss("c1.mask: row " + Str(y) + " ends early");
@@ -490,27 +694,63 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, ImageRgb8* image, ImageGr
   }
   if (p != end) return DataLoss("c1.mask: trailing run lengths");
 
+  // The JPEG's MCU is the block of the grid (packed layout: of the slots).
   int jw = 0, jh = 0, sub = 0, cs = 0;
   if (jpeg.size() > 0xFFFFFFFFu ||
-      tjDecompressHeader3(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), &jw, &jh, &sub, &cs) != 0) {
+      tjDecompressHeader3(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), &jw, &jh, &sub, &cs) != 0 ||
+      sub < 0 || sub >= TJ_NUMSAMP) {
     return DataLoss("c1.jpeg: not a JPEG image");
   }
-  if (jw != bw || jh != bh) {
-    return DataLoss("c1.jpeg: JPEG is " + Str(static_cast<uint32_t>(jw)) + "x" + Str(static_cast<uint32_t>(jh)) +
-                    ", box is " + Str(bw) + "x" + Str(bh));
+  BlockGrid g;
+  g.bx = tjMCUWidth[sub];
+  g.by = tjMCUHeight[sub];
+  g.cols = (bw + g.bx - 1) / g.bx;
+  g.rows = (bh + g.by - 1) / g.by;
+  g.slot.assign(static_cast<size_t>(g.cols) * g.rows, 0);
+  if (packed) {
+    for (int y = 0; y < bh; ++y) {
+      RowTransitions(&mask->at(x0, y0 + y), bw, &cur);
+      MarkRow(cur, bw, y, &g);
+    }
   }
-  std::vector<uint8_t> box(static_cast<size_t>(bw) * bh * 3);
-  if (tjDecompress2(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), box.data(), bw, 0, bh,
+  AssignSlots(packed, &g);
+  if (packed && g.coded == 0) return DataLoss("c1.mask: a packed box must hold foreground");
+  const int want_w = g.jpeg_width(packed, bw), want_h = g.jpeg_height(packed, bh);
+  if (jw != want_w || jh != want_h) {
+    return DataLoss("c1.jpeg: JPEG is " + Str(static_cast<uint32_t>(jw)) + "x" + Str(static_cast<uint32_t>(jh)) +
+                    (packed ? ", the packed blocks need " : ", box is ") + Str(static_cast<uint32_t>(want_w)) +
+                    "x" + Str(static_cast<uint32_t>(want_h)));
+  }
+  thread_local std::vector<uint8_t> pixels;
+  const size_t stride = static_cast<size_t>(jw) * 3;
+  pixels.resize(stride * static_cast<size_t>(jh));
+  if (tjDecompress2(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), pixels.data(), jw, 0, jh,
                     TJPF_RGB, TJFLAG_ACCURATEDCT) != 0) {
     // Warnings (e.g. a truncated but partly decodable JPEG) are errors here: no guessing on the wire.
     return DataLoss(std::string("c1.jpeg: ") + tjGetErrorStr2(Decompressor()));
   }
+  // Foreground runs of each box row, split at block edges, from their slots.
   for (int y = 0; y < bh; ++y) {
     const uint8_t* m = &mask->at(x0, y0 + y);
     uint8_t* d = &image->at(x0, y0 + y);
-    const uint8_t* s = &box[static_cast<size_t>(y) * bw * 3];
-    for (int x = 0; x < bw; ++x) {
-      if (m[x]) std::memcpy(d + x * 3, s + x * 3, 3);
+    const int32_t* slots = &g.slot[static_cast<size_t>(y / g.by) * g.cols];
+    const int in_block_y = y % g.by;
+    int x = 0;
+    while (x < bw) {
+      const int s = FirstSet(m + x, bw - x);
+      if (s < 0) break;
+      x += s;
+      const int e = FirstClear(m + x, bw - x);
+      const int stop = e < 0 ? bw : x + e;
+      while (x < stop) {
+        const int c = x / g.bx;
+        const int n = std::min(stop, (c + 1) * g.bx) - x;
+        const int32_t slot = slots[c];
+        const size_t sx = packed ? static_cast<size_t>(g.slot_x(slot) + x % g.bx) : static_cast<size_t>(x);
+        const size_t sy = packed ? static_cast<size_t>(g.slot_y(slot) + in_block_y) : static_cast<size_t>(y);
+        std::memcpy(d + x * 3, &pixels[sy * stride + sx * 3], static_cast<size_t>(n) * 3);
+        x += n;
+      }
     }
   }
   return OkStatus();
@@ -524,6 +764,9 @@ Status ColorEncodeOptions::Check() const {
   }
   if (jpeg_quality < 1 || jpeg_quality > 100) {
     return InvalidArgument("jpeg_quality must be in [1, 100], got " + std::to_string(jpeg_quality));
+  }
+  if (mask_zstd_level < 1 || mask_zstd_level > 19) {
+    return InvalidArgument("mask_zstd_level must be in [1, 19], got " + std::to_string(mask_zstd_level));
   }
   return OkStatus();
 }
@@ -541,7 +784,7 @@ Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEn
   if (!size_ok.ok()) return InvalidArgument(size_ok.message());
   ByteWriter w(out);
   w.U8(static_cast<uint8_t>(options.codec));
-  w.U8(0);
+  w.U8(options.codec == ColorCodec::kC1 && options.pack_blocks ? kColorFlagPackedBlocks : 0);
   w.U16(static_cast<uint16_t>(image.width()));
   w.U16(static_cast<uint16_t>(image.height()));
   if (options.codec == ColorCodec::kC0) return EncodeC0(image, mask, out);
@@ -556,12 +799,15 @@ Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* 
   HOLO_RETURN_IF_ERROR(r.U8("color.flags", &flags));
   HOLO_RETURN_IF_ERROR(r.U16("color.width", &w));
   HOLO_RETURN_IF_ERROR(r.U16("color.height", &h));
-  if (flags != 0) return DataLoss("color.flags: unknown flag bits set");
+  if (flags & ~kColorFlagPackedBlocks) return DataLoss("color.flags: unknown flag bits set");
+  if ((flags & kColorFlagPackedBlocks) && codec != static_cast<uint8_t>(ColorCodec::kC1)) {
+    return DataLoss("color.flags: packed blocks (bit 0) is a C1 flag, the codec is " + Str(codec));
+  }
   HOLO_RETURN_IF_ERROR(CheckSize("color.width", w, h, limits));
   Status s;
   switch (codec) {
     case static_cast<uint8_t>(ColorCodec::kC0): s = DecodeC0(r, w, h, image, mask); break;
-    case static_cast<uint8_t>(ColorCodec::kC1): s = DecodeC1(r, w, h, image, mask); break;
+    case static_cast<uint8_t>(ColorCodec::kC1): s = DecodeC1(r, w, h, (flags & kColorFlagPackedBlocks) != 0, image, mask); break;
     case static_cast<uint8_t>(ColorCodec::kH264):
       s = UnsupportedVersion("color.codec: H.264 (codec 3) is reserved and not implemented in this build");
       break;

@@ -6,7 +6,9 @@
 //        flat quantization tables, optimized Huffman tables, background
 //        filled per JPEG block so that no block holds an artificial edge;
 //        decoded with libturbojpeg), plus the mask inside the box as row
-//        transitions coded against the row above, through zstd.
+//        transitions coded against the row above, through zstd. By default
+//        only the box's JPEG blocks that hold foreground are coded, packed
+//        side by side (flag bit 0; the decoder finds them from the mask).
 //   H264 (id 3) is reserved; this build refuses it with UnsupportedVersion.
 #pragma once
 
@@ -49,6 +51,14 @@ struct ColorEncodeOptions {
   Quant quant = Quant::kFlat;
   // C1: Huffman tables optimized per image (a second pass; ~5% fewer bytes).
   bool optimize_huffman = true;
+  // C1: code only the JPEG blocks of the box that hold foreground, packed in
+  // raster order into a JPEG as wide as the box (true), or the whole box
+  // (false). With 4:4:4 every 8×8 block is coded independently, so the
+  // foreground's pixels come out the same either way at fewer pixels to
+  // code: ~1/2 of the box on the studio.
+  bool pack_blocks = true;
+  // C1: zstd level of the mask rows (1..19).
+  int mask_zstd_level = 9;
   Status Check() const;
 };
 
@@ -58,11 +68,15 @@ struct ColorEncodeOptions {
 Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& options,
                    std::vector<uint8_t>* out);
 
+// The colour blob's flag bit 0 (C1 only): the JPEG holds the packed blocks.
+inline constexpr uint8_t kColorFlagPackedBlocks = 1;
+
 // Decodes a colour blob into `image` (background pixels are 0) and `mask`
 // (255 = foreground). Safe on untrusted input: DataLoss naming the field;
-// UnsupportedVersion for the reserved H.264 codec. Allocates at most
-// width × height × 4 bytes with width, height ≤ limits.max_image_dim and
-// width × height ≤ limits.max_image_pixels.
+// UnsupportedVersion for the reserved H.264 codec. Allocates the image and
+// mask (width × height × 4 bytes, width, height ≤ limits.max_image_dim and
+// width × height ≤ limits.max_image_pixels) plus, for C1, the decoded JPEG:
+// at most (box width + 31) × (box height + 15) × 3 bytes, kept per thread.
 Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits = {});
 
 }  // namespace holo::protocol

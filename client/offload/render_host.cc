@@ -407,6 +407,12 @@ struct RenderHost::Impl {
           failed = true;
           break;
         }
+        if (eye == eyes - 1) {
+          // Counted before the last eye goes out, so that a client that has
+          // the frame never sees a count without it.
+          std::lock_guard<std::mutex> lock(s.mu);
+          s.stats.frames_sent++;
+        }
         st = s.link->Send(*wire, o.stereo ? static_cast<uint32_t>(eye + 1) : 0u, net::WallUs());
         if (!st.ok()) {
           CloseSession(s, st.message(), false);
@@ -417,7 +423,6 @@ struct RenderHost::Impl {
       std::lock_guard<std::mutex> lock(s.mu);
       s.stats.render_ms = Ewma(s.stats.render_ms, render_ms);
       s.stats.encode_ms = Ewma(s.stats.encode_ms, encode_ms);
-      s.stats.frames_sent++;
       s.stats.bytes_sent = s.link->bytes_sent();
     }
   }

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <thread>
 
 #include "protocol/color_codec.h"
 #include "protocol/test_meshes.h"
@@ -138,13 +139,14 @@ TEST(ColorCodec, C1AwkwardMasksAndAllOptions) {
     masks.push_back(m);
   }
   for (size_t k = 0; k < masks.size(); ++k) {
-    for (int variant = 0; variant < 6; ++variant) {
+    for (int variant = 0; variant < 12; ++variant) {
       ColorEncodeOptions o;
+      o.pack_blocks = variant < 6;
       o.chroma_420 = variant & 1;
       o.fill = variant & 2 ? ColorEncodeOptions::Fill::kMean : ColorEncodeOptions::Fill::kPushPull;
       o.quant = variant & 4 ? ColorEncodeOptions::Quant::kStandard : ColorEncodeOptions::Quant::kFlat;
-      o.accurate_dct = variant != 3;
-      o.optimize_huffman = variant != 5;
+      o.accurate_dct = variant % 6 != 3;
+      o.optimize_huffman = variant % 6 != 5;
       std::vector<uint8_t> blob;
       ASSERT_TRUE(EncodeColor(im, masks[k], o, &blob).ok());
       ImageRgb8 out;
@@ -186,6 +188,110 @@ TEST(ColorCodec, C1DefaultsKeepSaturatedStripes) {
   ASSERT_TRUE(DecodeColor(a, &out_a, &m).ok());
   ASSERT_TRUE(DecodeColor(b, &out_b, &m).ok());
   EXPECT_GT(Psnr(im, out_b, mask), Psnr(im, out_a, mask) + 3.0);
+}
+
+// An encoder thread reuses its libjpeg compressor: a blob must not depend on
+// what the thread encoded before (regression: after an image with optimized
+// Huffman tables, libjpeg-turbo kept them for the next image with standard
+// tables, whose symbols they lack — a corrupt JPEG).
+TEST(ColorCodec, C1BlobDoesNotDependOnEarlierImages) {
+  ImageRgb8 im;
+  ImageGray8 mask;
+  test::MaskedImage(70, 41, &im, &mask);
+  std::vector<ColorEncodeOptions> variants;
+  for (int v = 0; v < 8; ++v) {
+    ColorEncodeOptions o;
+    o.optimize_huffman = v & 1;
+    o.chroma_420 = v & 2;
+    o.pack_blocks = v & 4;
+    o.jpeg_quality = 50 + 5 * v;
+    variants.push_back(o);
+  }
+  for (const ColorEncodeOptions& o : variants) {
+    std::vector<uint8_t> fresh, after;
+    std::thread([&] { ASSERT_TRUE(EncodeColor(im, mask, o, &fresh).ok()); }).join();
+    ASSERT_TRUE(EncodeColor(im, mask, o, &after).ok());  // after every variant before it
+    EXPECT_EQ(fresh, after);
+    ImageRgb8 out;
+    ImageGray8 out_mask;
+    EXPECT_TRUE(DecodeColor(after, &out, &out_mask).ok());
+  }
+}
+
+// Packed blocks (the default) code only the JPEG blocks that hold
+// foreground: on a mask of two figures far apart the blob is smaller than
+// the whole box's, the mask is exact, the colour as close, and the background
+// stays 0.
+TEST(ColorCodec, C1PackedBlocksCodeOnlyTheForegroundBlocks) {
+  const int w = 200, h = 120;
+  ImageRgb8 im;
+  ImageGray8 unused;
+  test::MaskedImage(w, h, &im, &unused);
+  ImageGray8 mask(w, h, 0);
+  for (int y = 10; y < 110; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int dl = (x - 30) * (x - 30) / 4 + (y - 60) * (y - 60) / 9, dr = (x - 170) * (x - 170) + (y - 50) * (y - 50);
+      if (dl < 400 || dr < 500) mask.at(x, y) = 255;
+    }
+  ColorEncodeOptions packed, box;
+  box.pack_blocks = false;
+  std::vector<uint8_t> pb, bb;
+  ASSERT_TRUE(EncodeColor(im, mask, packed, &pb).ok());
+  ASSERT_TRUE(EncodeColor(im, mask, box, &bb).ok());
+  EXPECT_EQ(pb[1], kColorFlagPackedBlocks);
+  EXPECT_EQ(bb[1], 0);
+  EXPECT_LT(pb.size(), bb.size());
+  ImageRgb8 po, bo;
+  ImageGray8 pm, bm;
+  ASSERT_TRUE(DecodeColor(pb, &po, &pm).ok());
+  ASSERT_TRUE(DecodeColor(bb, &bo, &bm).ok());
+  EXPECT_TRUE(pm == mask);
+  EXPECT_TRUE(bm == mask);
+  const double pp = Psnr(im, po, mask), bp = Psnr(im, bo, mask);
+  EXPECT_GT(pp, 33.0);
+  EXPECT_NEAR(pp, bp, 0.3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!mask.at(x, y)) {
+        EXPECT_EQ(po.at(x, y, 0) | po.at(x, y, 1) | po.at(x, y, 2), 0) << x << "," << y;
+      }
+    }
+}
+
+// The packed flag is C1's only flag; a blob whose JPEG does not have the
+// size its layout needs is refused before any pixel is decoded.
+TEST(ColorCodec, C1LayoutFlagIsChecked) {
+  ImageRgb8 im;
+  ImageGray8 mask;
+  test::MaskedImage(64, 48, &im, &mask);
+  ImageRgb8 out;
+  ImageGray8 out_mask;
+  std::vector<uint8_t> box;
+  ColorEncodeOptions o;
+  o.pack_blocks = false;
+  ASSERT_TRUE(EncodeColor(im, mask, o, &box).ok());
+  std::vector<uint8_t> flipped = box;
+  flipped[1] = kColorFlagPackedBlocks;  // claims packed blocks, holds the box
+  Status s = DecodeColor(flipped, &out, &out_mask);
+  EXPECT_EQ(s.code(), StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("c1.jpeg"), std::string::npos) << s.ToString();
+  std::vector<uint8_t> packed;
+  ASSERT_TRUE(EncodeColor(im, mask, {}, &packed).ok());
+  flipped = packed;
+  flipped[1] = 0;  // claims the box, holds packed blocks
+  s = DecodeColor(flipped, &out, &out_mask);
+  EXPECT_EQ(s.code(), StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("c1.jpeg"), std::string::npos) << s.ToString();
+  flipped[1] = 2;  // an unknown flag
+  EXPECT_NE(DecodeColor(flipped, &out, &out_mask).message().find("color.flags"), std::string::npos);
+  o.codec = ColorCodec::kC0;
+  std::vector<uint8_t> c0;
+  ASSERT_TRUE(EncodeColor(im, mask, o, &c0).ok());
+  EXPECT_EQ(c0[1], 0);
+  c0[1] = kColorFlagPackedBlocks;
+  s = DecodeColor(c0, &out, &out_mask);
+  EXPECT_EQ(s.code(), StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("color.flags"), std::string::npos) << s.ToString();
 }
 
 // Hand-made C1 blobs whose mask rows are malformed: each must be refused

@@ -137,6 +137,13 @@ inline std::vector<std::pair<std::string, std::vector<uint8_t>>> SampleCodecInpu
     HOLO_CHECK(EncodeColor(im, mask, o, &b).ok());
     out.emplace_back(c == ColorCodec::kC0 ? "seed-color-c0" : "seed-color-c1", FuzzInput(FuzzTarget::kColor, b));
   }
+  {
+    ColorEncodeOptions o;  // C1 with the whole box in the JPEG (packed blocks are the default)
+    o.pack_blocks = false;
+    std::vector<uint8_t> b;
+    HOLO_CHECK(EncodeColor(im, mask, o, &b).ok());
+    out.emplace_back("seed-color-c1-box", FuzzInput(FuzzTarget::kColor, b));
+  }
   return out;
 }
 
