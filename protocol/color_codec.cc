@@ -345,11 +345,82 @@ struct JpegCompressor {
   }
 };
 
+// Huffman code lengths for the symbol frequencies `freq` (0 = absent) as
+// JPEG Annex K.2 builds them: a Huffman tree with one reserved extra symbol
+// (so that no code is all ones), lengths limited to 16 bits (K.3), the symbols
+// listed by code length. Writes `bits` (bits[l] = codes of length l, l 1..16)
+// and `values`.
+void GenerateHuffman(const std::array<uint32_t, 256>& counts, uint8_t* bits, uint8_t* values) {
+  constexpr int kMaxLen = 64;
+  uint64_t freq[257];
+  for (int i = 0; i < 256; ++i) freq[i] = counts[i];
+  freq[256] = 1;
+  int codesize[257] = {};
+  int others[257];
+  std::fill(std::begin(others), std::end(others), -1);
+  for (;;) {
+    int c1 = -1, c2 = -1;
+    uint64_t v = UINT64_MAX;
+    for (int i = 0; i <= 256; ++i)
+      if (freq[i] && freq[i] <= v) v = freq[i], c1 = i;
+    v = UINT64_MAX;
+    for (int i = 0; i <= 256; ++i)
+      if (freq[i] && freq[i] <= v && i != c1) v = freq[i], c2 = i;
+    if (c2 < 0) break;
+    freq[c1] += freq[c2];
+    freq[c2] = 0;
+    for (++codesize[c1]; others[c1] >= 0; ++codesize[c1]) c1 = others[c1];
+    others[c1] = c2;
+    for (++codesize[c2]; others[c2] >= 0; ++codesize[c2]) c2 = others[c2];
+  }
+  int count[kMaxLen + 1] = {};
+  for (int i = 0; i <= 256; ++i)
+    if (codesize[i]) count[std::min(codesize[i], kMaxLen)]++;
+  for (int i = kMaxLen; i > 16; --i) {
+    while (count[i] > 0) {
+      int j = i - 2;
+      while (count[j] == 0) --j;
+      count[i] -= 2;
+      count[i - 1]++;
+      count[j + 1] += 2;
+      count[j]--;
+    }
+  }
+  int longest = 16;
+  while (count[longest] == 0) --longest;
+  count[longest]--;  // the reserved symbol's code
+  bits[0] = 0;
+  for (int l = 1; l <= 16; ++l) bits[l] = static_cast<uint8_t>(count[l]);
+  int p = 0;
+  for (int l = 1; l <= kMaxLen; ++l)
+    for (int s = 0; s < 256; ++s)
+      if (codesize[s] == l) values[p++] = static_cast<uint8_t>(s);
+}
+
+// A JPEG Huffman table (`bits` as in DHT, then the symbols) that codes every
+// symbol a baseline 8-bit JPEG can hold — DC: sizes 0..11; AC: EOB, ZRL and
+// every run 0..15 with size 1..10 — with the lengths of `t` (an optimized
+// table that may lack symbols) for the symbols it has and long codes for the
+// others: so that an image whose statistics differ a little still codes.
+void CompleteTable(bool dc, const JHUFF_TBL& t, uint8_t* bits, uint8_t* values) {
+  std::array<uint32_t, 256> counts{};
+  for (int s = 0; s < 256; ++s) {
+    const bool possible = dc ? s <= 11 : (s == 0x00 || s == 0xF0 || ((s & 15) >= 1 && (s & 15) <= 10));
+    if (possible) counts[s] = 1;
+  }
+  int p = 0;
+  for (int l = 1; l <= 16; ++l)
+    for (int k = 0; k < t.bits[l] && p < 256; ++k, ++p) counts[t.huffval[p]] = 1u << (18 - l);
+  GenerateHuffman(counts, bits, values);
+}
+
 // Baseline JPEG of `w` × `h` RGB8 pixels (rows `stride` bytes apart),
 // quantization, subsampling, DCT and Huffman optimization from `o`, appended
 // to `out` behind a u32 length (a blob32).
 Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const ColorEncodeOptions& o,
-                    std::vector<uint8_t>* out) {
+                    HuffmanTables* tables, std::vector<uint8_t>* out) {
+  const bool use_tables = tables != nullptr && tables->valid && o.optimize_huffman;
+  const bool optimize = o.optimize_huffman && !use_tables;
   thread_local JpegCompressor jc;
   jpeg_compress_struct& cinfo = jc.cinfo;
   ByteWriter bw(out);
@@ -365,7 +436,7 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const Color
     out->resize(at);
     return Internal(std::string("libjpeg: ") + jc.err.message);
   }
-  if (jc.created && jc.optimized_tables && !o.optimize_huffman) {
+  if (jc.created && jc.optimized_tables && !o.optimize_huffman) {  // back to the standard tables
     jpeg_destroy_compress(&cinfo);
     jc.created = false;
   }
@@ -384,8 +455,18 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const Color
   cinfo.in_color_space = JCS_RGB;
   jpeg_set_defaults(&cinfo);
   cinfo.dct_method = o.accurate_dct ? JDCT_ISLOW : JDCT_IFAST;
-  cinfo.optimize_coding = o.optimize_huffman ? TRUE : FALSE;
+  cinfo.optimize_coding = optimize ? TRUE : FALSE;
   jc.optimized_tables = jc.optimized_tables || o.optimize_huffman;
+  if (use_tables) {
+    // Luma DC, luma AC, chroma DC, chroma AC: the tables jpeg_set_defaults assigned.
+    JHUFF_TBL* t[4] = {cinfo.dc_huff_tbl_ptrs[0], cinfo.ac_huff_tbl_ptrs[0], cinfo.dc_huff_tbl_ptrs[1],
+                       cinfo.ac_huff_tbl_ptrs[1]};
+    for (int i = 0; i < 4; ++i) {
+      std::memcpy(t[i]->bits, tables->bits[i].data(), 17);
+      std::memcpy(t[i]->huffval, tables->values[i].data(), 256);
+      t[i]->sent_table = FALSE;
+    }
+  }
   unsigned int table[64];
   QuantTable(o.quant, false, o.jpeg_quality, table);
   jpeg_add_quant_table(&cinfo, 0, table, 100, TRUE);
@@ -406,6 +487,12 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const Color
   }
   jpeg_finish_compress(&cinfo);
   cinfo.dest = nullptr;
+  if (tables != nullptr && optimize) {
+    const JHUFF_TBL* t[4] = {cinfo.dc_huff_tbl_ptrs[0], cinfo.ac_huff_tbl_ptrs[0], cinfo.dc_huff_tbl_ptrs[1],
+                             cinfo.ac_huff_tbl_ptrs[1]};
+    for (int i = 0; i < 4; ++i) CompleteTable(i % 2 == 0, *t[i], tables->bits[i].data(), tables->values[i].data());
+    tables->valid = true;
+  }
   bw.PatchU32(at, static_cast<uint32_t>(out->size() - at - 4));
   return OkStatus();
 }
@@ -441,7 +528,7 @@ void AssignSlots(bool packed, BlockGrid* g) {
   for (int32_t& s : g->slot) s = (!packed || s > 0) ? g->coded++ : -1;
 }
 
-Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& o,
+Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& o, HuffmanTables* tables,
                 std::vector<uint8_t>* out) {
   const int W = image.width(), H = image.height();
   thread_local std::vector<uint8_t> ones;
@@ -616,7 +703,7 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
       for (int x = 0; x < g.bx; ++x) std::memcpy(d + x * 3, fill.data(), 3);
     }
   }
-  return CompressJpeg(canvas.data(), jw, jh, stride, o, out);
+  return CompressJpeg(canvas.data(), jw, jh, stride, o, tables, out);
 }
 
 Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* image, ImageGray8* mask) {
@@ -765,14 +852,19 @@ Status ColorEncodeOptions::Check() const {
   if (jpeg_quality < 1 || jpeg_quality > 100) {
     return InvalidArgument("jpeg_quality must be in [1, 100], got " + std::to_string(jpeg_quality));
   }
+  if (huffman_refresh < 1) {
+    return InvalidArgument("huffman_refresh must be >= 1, got " + std::to_string(huffman_refresh));
+  }
   if (mask_zstd_level < 1 || mask_zstd_level > 19) {
     return InvalidArgument("mask_zstd_level must be in [1, 19], got " + std::to_string(mask_zstd_level));
   }
   return OkStatus();
 }
 
-Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& options,
-                   std::vector<uint8_t>* out) {
+namespace {
+
+Status Encode(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& options,
+              HuffmanTables* tables, std::vector<uint8_t>* out) {
   HOLO_RETURN_IF_ERROR(options.Check());
   const Limits limits;
   if (image.empty()) return InvalidArgument("image is empty");
@@ -788,7 +880,32 @@ Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEn
   w.U16(static_cast<uint16_t>(image.width()));
   w.U16(static_cast<uint16_t>(image.height()));
   if (options.codec == ColorCodec::kC0) return EncodeC0(image, mask, out);
-  return EncodeC1(image, mask, options, out);
+  return EncodeC1(image, mask, options, tables, out);
+}
+
+}  // namespace
+
+Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& options,
+                   std::vector<uint8_t>* out) {
+  return Encode(image, mask, options, nullptr, out);
+}
+
+ColorEncoder::ColorEncoder(ColorEncodeOptions options) : options_(options) {}
+
+Status ColorEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std::vector<uint8_t>* out) {
+  if (since_refresh_ >= options_.huffman_refresh) tables_.valid = false;
+  const bool refresh = !tables_.valid;
+  const Status s = holo::protocol::Encode(image, mask, options_, &tables_, out);
+  if (!s.ok()) {
+    tables_.valid = false;
+    return s;
+  }
+  if (refresh && tables_.valid) {
+    since_refresh_ = 0;
+    ++optimized_images_;
+  }
+  ++since_refresh_;
+  return OkStatus();
 }
 
 Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits) {

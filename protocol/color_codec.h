@@ -12,6 +12,7 @@
 //   H264 (id 3) is reserved; this build refuses it with UnsupportedVersion.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -59,7 +60,21 @@ struct ColorEncodeOptions {
   bool pack_blocks = true;
   // C1: zstd level of the mask rows (1..19).
   int mask_zstd_level = 9;
+  // C1 through a ColorEncoder with optimize_huffman: the Huffman tables are
+  // optimized on one image in `huffman_refresh` and reused (completed with
+  // every symbol, so any image codes) for the others. The optimization pass is
+  // ~40 % of C1's encode time; reused tables cost ~1 % more bytes.
+  int huffman_refresh = 30;
   Status Check() const;
+};
+
+// Huffman tables kept by a ColorEncoder between images (an implementation
+// detail of ColorEncoder): luma DC, luma AC, chroma DC, chroma AC, each as
+// JPEG's DHT lists them (bits[1..16], then the symbols).
+struct HuffmanTables {
+  bool valid = false;
+  std::array<std::array<uint8_t, 17>, 4> bits{};
+  std::array<std::array<uint8_t, 256>, 4> values{};
 };
 
 // Encodes `image` with foreground `mask` (same size, 0 = background; empty =
@@ -67,6 +82,28 @@ struct ColorEncodeOptions {
 // mismatched sizes or an image larger than the protocol limits.
 Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& options,
                    std::vector<uint8_t>* out);
+
+// The encoder of one stream of images (one pod's, frame after frame): like
+// EncodeColor, but with optimize_huffman the C1 Huffman tables are optimized
+// on the first image and then on one image in options.huffman_refresh, and
+// reused in between. Every blob is still a complete JPEG (its tables in its
+// header): decoders keep no state, and a receiver can start at any blob.
+// Not thread-safe: one encoder per stream.
+class ColorEncoder {
+ public:
+  explicit ColorEncoder(ColorEncodeOptions options = {});
+  // As EncodeColor(image, mask, options(), out).
+  Status Encode(const ImageRgb8& image, const ImageGray8& mask, std::vector<uint8_t>* out);
+  const ColorEncodeOptions& options() const { return options_; }
+  // Images whose Huffman tables were optimized (the others reused them).
+  int64_t optimized_images() const { return optimized_images_; }
+
+ private:
+  ColorEncodeOptions options_;
+  HuffmanTables tables_;
+  int since_refresh_ = 0;
+  int64_t optimized_images_ = 0;
+};
 
 // The colour blob's flag bit 0 (C1 only): the JPEG holds the packed blocks.
 inline constexpr uint8_t kColorFlagPackedBlocks = 1;

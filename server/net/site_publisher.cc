@@ -35,7 +35,8 @@ Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, cons
       protocol::PodImage pi;
       pi.pod_id = p.pod_id;
       pi.data.clear();
-      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(*p.image, *p.mask, options_.color_options, &pi.data));
+      auto enc = color_encoders_.try_emplace(p.pod_id, options_.color_options).first;
+      HOLO_RETURN_IF_ERROR(enc->second.Encode(*p.image, *p.mask, &pi.data));
       t->color_bytes += pi.data.size();
       color.images.push_back(std::move(pi));
     }

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <vector>
 
 #include "common/image.h"
@@ -50,6 +51,8 @@ class SitePublisher {
   Server* server_;
   SitePublisherOptions options_;
   std::vector<uint8_t> geometry_;
+  // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
+  std::map<uint16_t, protocol::ColorEncoder> color_encoders_;
 };
 
 }  // namespace holo::net

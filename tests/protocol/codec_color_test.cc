@@ -218,6 +218,58 @@ TEST(ColorCodec, C1BlobDoesNotDependOnEarlierImages) {
   }
 }
 
+// A stream encoder optimizes the Huffman tables on one image in
+// huffman_refresh and reuses them in between: every blob decodes on its own,
+// to the same pixels as the stateless encoder's (the tables change only the
+// entropy coding), at a size between the per-image optimized and the standard
+// tables'. An image unlike the one the tables came from (noise: symbols that
+// image never had) still codes.
+TEST(ColorCodec, C1StreamEncoderReusesHuffmanTables) {
+  ColorEncodeOptions o;
+  o.huffman_refresh = 4;
+  ColorEncoder enc(o), twin(o);
+  ColorEncodeOptions standard = o;
+  standard.optimize_huffman = false;
+  size_t reused_bytes = 0, optimized_bytes = 0, standard_bytes = 0;
+  for (int frame = 0; frame < 10; ++frame) {
+    ImageRgb8 im;
+    ImageGray8 mask;
+    test::MaskedImage(96 + frame, 72, &im, &mask, 1 + frame);
+    if (frame == 6) {  // saturated noise after tables from smooth images
+      std::mt19937 rng(9);
+      for (uint8_t& v : im.storage()) v = static_cast<uint8_t>(rng() & 0xFF);
+    }
+    std::vector<uint8_t> blob, again, stateless, plain;
+    ASSERT_TRUE(enc.Encode(im, mask, &blob).ok());
+    ASSERT_TRUE(twin.Encode(im, mask, &again).ok());
+    EXPECT_EQ(blob, again) << "frame " << frame;  // deterministic per stream
+    ASSERT_TRUE(EncodeColor(im, mask, o, &stateless).ok());
+    ASSERT_TRUE(EncodeColor(im, mask, standard, &plain).ok());
+    ImageRgb8 a, b;
+    ImageGray8 ma, mb;
+    const Status s = DecodeColor(blob, &a, &ma);
+    ASSERT_TRUE(s.ok()) << "frame " << frame << ": " << s.ToString();
+    ASSERT_TRUE(DecodeColor(stateless, &b, &mb).ok());
+    EXPECT_TRUE(ma == mask);
+    EXPECT_TRUE(a == b) << "frame " << frame;
+    if (frame % 4 == 0) {
+      EXPECT_EQ(blob, stateless) << "frame " << frame << " optimizes its own tables";
+    }
+    if (frame != 6) {
+      reused_bytes += blob.size();
+      optimized_bytes += stateless.size();
+      standard_bytes += plain.size();
+    }
+  }
+  EXPECT_EQ(enc.optimized_images(), 3);  // frames 0, 4, 8
+  EXPECT_GE(reused_bytes, optimized_bytes);
+  EXPECT_LT(reused_bytes, standard_bytes);
+  o.huffman_refresh = 0;
+  ImageRgb8 im(8, 8);
+  std::vector<uint8_t> blob;
+  EXPECT_EQ(ColorEncoder(o).Encode(im, {}, &blob).code(), StatusCode::kInvalidArgument);
+}
+
 // Packed blocks (the default) code only the JPEG blocks that hold
 // foreground: on a mask of two figures far apart the blob is smaller than
 // the whole box's, the mask is exact, the colour as close, and the background
