@@ -53,7 +53,7 @@ struct TemporalFusionOptions {
   DeformationGraphOptions graph;
   TrackerOptions tracker;
   // Colour features for the tracker's sparse term (matched only when
-  // tracker.use_sparse is on).
+  // tracker.SparseOn(rig): by resolution unless tracker.use_sparse is set).
   FeatureMatchOptions features;
   // false: plain per-frame fusion (the baseline), same code path otherwise.
   bool temporal = true;
@@ -67,6 +67,12 @@ struct TemporalFusionOptions {
   // parameters each) the tracker fits the sensor noise (docs/temporal.md).
   // 0 = off.
   float min_points_per_node = 7.0f;
+  // Normals of the tracked model points: the gradient of the reference TSDF
+  // box-filtered over (2r+1)³ voxels with central differences r voxels apart,
+  // instead of the mesh vertex normal (one-voxel differences of a volume that
+  // is a single frame's fusion in the first frames, so noisy). The data term
+  // is point-to-plane along this normal. 0 = the mesh normals.
+  int track_normal_radius_voxels = 2;
   // Start each node at the displacement of the nearest node of the last
   // tracked frame (constant-velocity prediction).
   bool predict_motion = true;
@@ -118,6 +124,10 @@ class TemporalFusion {
   // The graph of the last tracked frame (nodes, parameters), for tests.
   const DeformationGraph& graph() const { return graph_; }
   const TsdfVolume& reference_volume() const { return *reference_; }
+  // The model points and normals tracked in the last frame (on the
+  // reference surface, before the warp), for tests.
+  const std::vector<Eigen::Vector3f>& tracked_points() const { return points_; }
+  const std::vector<Eigen::Vector3f>& tracked_normals() const { return normals_; }
 
   struct Impl;
 
@@ -125,6 +135,9 @@ class TemporalFusion {
   explicit TemporalFusion(TemporalFusionOptions options);
   Status FusePerFrame(const Rig& rig, const RgbdFrameSet& frames, TsdfVolume* volume, Mesh* out,
                       TemporalFrameStats* stats);
+  // Replaces normals_ of points_ by box-filtered reference TSDF gradients
+  // (track_normal_radius_voxels).
+  void SmoothTrackNormals();
   void WarpReference(const Rig& rig, const RgbdFrameSet& frames, const TrackResult& track, TemporalFrameStats* stats);
 
   TemporalFusionOptions options_;
