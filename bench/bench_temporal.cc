@@ -51,6 +51,7 @@ struct Extra {
   int iterations = -1;
   int rigid_iterations = -1;
   int normal_radius = -1;
+  double min_track_weight = -1;
   double fail_residual_mm = -1;
   int pcg = -1;
   int data_window = -2;
@@ -88,6 +89,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
     else if (extra[i] == "--rigid-iterations") a.rigid_iterations = std::atoi(value().c_str());
     else if (extra[i] == "--normal-radius") a.normal_radius = std::atoi(value().c_str());
+    else if (extra[i] == "--min-track-weight") a.min_track_weight = std::atof(value().c_str());
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
@@ -105,6 +107,7 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
                    "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
                    "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
                    "--rigid-iterations N, --normal-radius R (tracked normals from the TSDF, voxels; 0 = mesh), "
+                   "--min-track-weight W, "
                    "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --sparse 0|1, --sparse-weight W, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
                    "--drop-pod K (-1 = none), --drop-from F\n",
                    extra[i].c_str());
@@ -485,6 +488,7 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
   if (extra.rigid_iterations >= 0) base.tracker.rigid_iterations = extra.rigid_iterations;
   if (extra.normal_radius >= 0) base.track_normal_radius_voxels = extra.normal_radius;
+  if (extra.min_track_weight >= 0) base.min_track_weight = static_cast<float>(extra.min_track_weight);
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 
   std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);

@@ -38,6 +38,8 @@ Status TemporalFusionOptions::Check() const {
     return InvalidArgument("track_points must be in [16, 1e7], got " + std::to_string(track_points));
   if (!(lost_node_fraction > 0 && lost_node_fraction <= 1))
     return InvalidArgument("lost_node_fraction must be in (0, 1], got " + std::to_string(lost_node_fraction));
+  if (!(min_track_weight >= 0 && min_track_weight <= 1e6f))
+    return InvalidArgument("min_track_weight must be in [0, 1e6], got " + std::to_string(min_track_weight));
   if (!(min_points_per_node >= 0 && min_points_per_node <= 1000))
     return InvalidArgument("min_points_per_node must be in [0, 1000], got " + std::to_string(min_points_per_node));
   if (track_normal_radius_voxels < 0 || track_normal_radius_voxels > 8)
@@ -516,6 +518,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   auto t0 = std::chrono::steady_clock::now();
   const size_t nv = reference_mesh_.positions.size();
   const bool has_normals = reference_mesh_.normals.size() == nv;
+  const float vs = options_.tsdf.voxel_size;
   auto sample = [&](size_t count) {
     points_.clear();
     normals_.clear();
@@ -524,7 +527,13 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       const Vector3f n = has_normals ? reference_mesh_.normals[i] : Vector3f::Zero();
       const float len = n.norm();
       if (!(len > 1e-6f)) continue;
-      points_.push_back(reference_mesh_.positions[i]);
+      const Vector3f& p = reference_mesh_.positions[i];
+      if (options_.min_track_weight > 0) {
+        float t, w;
+        reference_->VoxelAt(std::lround(p.x() / vs), std::lround(p.y() / vs), std::lround(p.z() / vs), &t, &w);
+        if (w < options_.min_track_weight) continue;
+      }
+      points_.push_back(p);
       normals_.push_back(n / len);
     }
   };

@@ -67,6 +67,12 @@ struct TemporalFusionOptions {
   // parameters each) the tracker fits the sensor noise (docs/temporal.md).
   // 0 = off.
   float min_points_per_node = 7.0f;
+  // Model points are taken only where the reference voxel's weight is at
+  // least this (one pod's observation = 1), e.g. 2: not surface that a
+  // single pod saw once (flying pixels, double surfaces of the first
+  // per-frame fusion; S8-VGA flicker ratio 0.512 → 0.507, docs/temporal.md).
+  // 0 = all.
+  float min_track_weight = 2.0f;
   // Normals of the tracked model points: the gradient of the reference TSDF
   // box-filtered over (2r+1)³ voxels with central differences r voxels apart,
   // instead of the mesh vertex normal (one-voxel differences of a volume that
