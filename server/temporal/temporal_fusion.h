@@ -57,8 +57,11 @@ struct TemporalFusionOptions {
   FeatureMatchOptions features;
   // false: plain per-frame fusion (the baseline), same code path otherwise.
   bool temporal = true;
-  // Cap of a carried voxel weight (one pod's observation = 1).
-  float max_weight = 30.0f;
+  // Cap of a carried voxel weight (one pod's observation = 1): a voxel seen
+  // by ≈ 3 pods averages over ≈ 20 frames. 60 since the fourth pass (was 30:
+  // 60 is better on S8-QVGA and S8-VGA in flicker, Chamfer and the dropped
+  // pod's kept surface, docs/temporal.md).
+  float max_weight = 60.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
   // At least this many model points per graph node (more points are taken
