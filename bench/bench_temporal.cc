@@ -6,7 +6,7 @@
 //   options: --solver gn|ceres, --spacing-cm S (node spacing), --max-weight W,
 //            --track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W,
 //            --iterations N (non-rigid GN steps), --fail-residual-mm R, --no-predict, --still (repeat frame 0), --pcg N (PCG iteration cap), --snap-mm S (still-node snap, 0 = off), --eval-every N (Chamfer every N-th frame),
-//            --sparse 0|1 (colour-feature term), --sparse-weight W, --parallel-pcg 0|1,
+//            --sparse 0|1 (colour-feature term; default by resolution: on at VGA), --sparse-weight W, --parallel-pcg 0|1,
 //            --drop-pod K (pod whose data is removed; -1 = no dropped-pod run),
 //            --drop-from F (first frame without it)
 //
@@ -19,6 +19,7 @@
 // cost and errors do not enter the figures. Times: wall clock per frame
 // (medians) and cpu_ms (CPU time of all threads per frame, medians).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -48,6 +49,9 @@ struct Extra {
   double points_per_node = -1;
   double reg_weight = -1, rot_weight = -1, hull_weight = -1;
   int iterations = -1;
+  int rigid_iterations = -1;
+  int normal_radius = -1;
+  double min_track_weight = -1;
   double fail_residual_mm = -1;
   int pcg = -1;
   int data_window = -2;
@@ -83,6 +87,9 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
     else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
     else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
     else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
+    else if (extra[i] == "--rigid-iterations") a.rigid_iterations = std::atoi(value().c_str());
+    else if (extra[i] == "--normal-radius") a.normal_radius = std::atoi(value().c_str());
+    else if (extra[i] == "--min-track-weight") a.min_track_weight = std::atof(value().c_str());
     else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
     else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
     else if (extra[i] == "--no-predict") a.predict = false;
@@ -99,6 +106,8 @@ Extra ParseExtra(const std::vector<std::string>& extra) {
       std::fprintf(stderr,
                    "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
                    "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
+                   "--rigid-iterations N, --normal-radius R (tracked normals from the TSDF, voxels; 0 = mesh), "
+                   "--min-track-weight W, "
                    "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --sparse 0|1, --sparse-weight W, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
                    "--drop-pod K (-1 = none), --drop-from F\n",
                    extra[i].c_str());
@@ -159,13 +168,37 @@ double FractionWithin(const Mesh& recon, const std::vector<Eigen::Vector3f>& pts
 }
 
 // HOLO_TEMPORAL_DIAG=1: flicker per connected component of the truth mesh
-// (figures, props), per mode, on stderr.
+// (figures' parts, props), per mode, on stderr; for the temporal mode also,
+// per component, the graph nodes near it and how many of them failed (and
+// why), and the frames where it flickered most.
 struct Diag {
   std::vector<metrics::SurfaceSample> samples;
   std::vector<int> comp;  // per sample
+  std::vector<size_t> comp_size;
+  std::vector<Eigen::Vector3f> comp_centroid;  // frame 0
   int num_comp = 0;
   std::vector<std::vector<float>> prev;                 // per mode
-  std::vector<std::vector<double>> sum, cnt;            // per mode, per component
+  std::vector<Eigen::Vector3f> prev_pos;                // sample positions, last frame
+  std::vector<std::vector<double>> sum, cnt, valid, abs_d;  // per mode, per component
+  // Per mode, per component: the flicker sum / count over sample pairs that
+  // no pod sees (truth depth) in either frame of the pair.
+  std::vector<std::vector<double>> hid_sum, hid_cnt;
+  std::vector<uint8_t> visible, prev_visible;  // per sample, this / last frame
+  // Truth vertex positions of the last frame, for the tracking error: per
+  // node, its displacement against the true motion of the nearest truth
+  // vertex (along that vertex's normal and in all).
+  std::vector<Eigen::Vector3f> prev_truth, cur_truth;
+  std::vector<std::string> track_err;
+  std::vector<int> vertex_comp;
+  std::vector<double> comp_err_sum, comp_err_cnt;  // along-normal node error per component (frames >= 10)
+  std::vector<double> speed_sum;                        // per component, mm per frame
+  std::vector<double> frames_seen;
+  // Temporal mode, per component: nodes within 3 cm of its samples (warped),
+  // failed ones by reason, summed over frames.
+  std::vector<double> near_nodes, near_failed, near_res, near_viol, near_stretch, near_affine, near_low_support;
+  // Per component, per frame: flicker of each mode (NaN if none).
+  std::vector<std::vector<std::array<double, 2>>> timeline;
+  std::vector<std::string> frame_notes;
   void Init(const Mesh& truth) {
     std::vector<int> parent(truth.positions.size());
     for (size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<int>(i);
@@ -189,32 +222,220 @@ struct Diag {
       comp.push_back(it->second);
     }
     num_comp = static_cast<int>(ids.size());
+    vertex_comp.assign(truth.positions.size(), -1);
+    for (size_t v = 0; v < truth.positions.size(); ++v) {
+      auto it = ids.find(find(static_cast<int>(v)));
+      if (it != ids.end()) vertex_comp[v] = it->second;
+    }
+    comp_err_sum.assign(ids.size(), 0);
+    comp_err_cnt.assign(ids.size(), 0);
+    const size_t nc = static_cast<size_t>(num_comp);
+    comp_size.assign(nc, 0);
+    for (int x : comp) ++comp_size[static_cast<size_t>(x)];
+    comp_centroid.assign(nc, Eigen::Vector3f::Zero());
+    for (size_t i = 0; i < samples.size(); ++i)
+      comp_centroid[static_cast<size_t>(comp[i])] += metrics::SamplePosition(truth, samples[i]);
+    for (size_t c = 0; c < nc; ++c) comp_centroid[c] /= static_cast<float>(std::max<size_t>(1, comp_size[c]));
     prev.assign(2, {});
-    sum.assign(2, std::vector<double>(static_cast<size_t>(num_comp), 0));
-    cnt = sum;
+    sum.assign(2, std::vector<double>(nc, 0));
+    cnt = valid = abs_d = hid_sum = hid_cnt = sum;
+    speed_sum.assign(nc, 0);
+    frames_seen.assign(2, 0);
+    near_nodes.assign(nc, 0);
+    near_failed = near_res = near_viol = near_stretch = near_affine = near_low_support = near_nodes;
+    timeline.assign(nc, {});
   }
-  void Add(int mode, const Mesh& recon, const Mesh& truth) {
+  void Add(int mode, const Mesh& recon, const Mesh& truth, const TemporalFusion* fusion, const TemporalFrameStats* st) {
+    const size_t md = static_cast<size_t>(mode);
+    const size_t nc = static_cast<size_t>(num_comp);
     metrics::FlickerOptions fo;
     fo.num_threads = 2;
     auto d = metrics::ComputeNormalOffsets(recon, truth, samples, fo);
     if (!d.ok()) return;
-    if (!prev[static_cast<size_t>(mode)].empty())
-      for (size_t i = 0; i < samples.size(); ++i) {
-        const float a = prev[static_cast<size_t>(mode)][i], b = (*d)[i];
-        if (std::isnan(a) || std::isnan(b)) continue;
-        sum[static_cast<size_t>(mode)][static_cast<size_t>(comp[i])] += std::abs(b - a) * 1000;
-        cnt[static_cast<size_t>(mode)][static_cast<size_t>(comp[i])] += 1;
+    const std::vector<Eigen::Vector3f> pos = metrics::SamplePositions(truth, samples);
+    frames_seen[md] += 1;
+    std::vector<double> fs(nc, 0), fc(nc, 0);
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const size_t c = static_cast<size_t>(comp[i]);
+      if (!std::isnan((*d)[i])) {
+        valid[md][c] += 1;
+        abs_d[md][c] += std::abs((*d)[i]) * 1000;
       }
-    prev[static_cast<size_t>(mode)] = *d;
-  }
-  void Print() const {
-    for (int c = 0; c < num_comp; ++c) {
-      size_t n = 0;
-      for (int x : comp) n += x == c;
-      std::fprintf(stderr, "diag component %d: %zu samples, flicker per_frame %.2f temporal %.2f mm\n", c, n,
-                   sum[0][static_cast<size_t>(c)] / std::max(1.0, cnt[0][static_cast<size_t>(c)]),
-                   sum[1][static_cast<size_t>(c)] / std::max(1.0, cnt[1][static_cast<size_t>(c)]));
+      if (mode == 0 && !prev_pos.empty()) speed_sum[c] += (pos[i] - prev_pos[i]).norm() * 1000;
     }
+    if (!prev[md].empty())
+      for (size_t i = 0; i < samples.size(); ++i) {
+        const float a = prev[md][i], b = (*d)[i];
+        if (std::isnan(a) || std::isnan(b)) continue;
+        const size_t c = static_cast<size_t>(comp[i]);
+        sum[md][c] += std::abs(b - a) * 1000;
+        cnt[md][c] += 1;
+        if (!visible.empty() && !prev_visible.empty() && !visible[i] && !prev_visible[i]) {
+          hid_sum[md][c] += std::abs(b - a) * 1000;
+          hid_cnt[md][c] += 1;
+        }
+        fs[c] += std::abs(b - a) * 1000;
+        fc[c] += 1;
+      }
+    for (size_t c = 0; c < nc; ++c) {
+      if (timeline[c].size() < static_cast<size_t>(frames_seen[md]))
+        timeline[c].resize(static_cast<size_t>(frames_seen[md]), {NAN, NAN});
+      timeline[c][static_cast<size_t>(frames_seen[md]) - 1][md] = fc[c] > 0 ? fs[c] / fc[c] : NAN;
+    }
+    prev[md] = *d;
+    if (mode == 0) prev_pos = pos;
+    if (mode == 1 && fusion != nullptr && st != nullptr) {
+      char note[256];
+      std::snprintf(note, sizeof(note), "tracked %d lost %d region_reset %d (%zu blocks) failed %d/%d (res %d viol %d stretch %d affine %d)",
+                    st->tracked, st->lost, st->region_reset, st->reset_blocks, st->failed_nodes, st->nodes,
+                    st->track.failed_residual, st->track.failed_violation, st->track.failed_stretch,
+                    st->track.failed_affine);
+      frame_notes.push_back(note);
+      if (!st->tracked || st->track.nodes.size() != fusion->graph().num_nodes()) return;
+      const DeformationGraph& g = fusion->graph();
+      const TrackerOptions& to = fusion->options().tracker;
+      const float r2 = 0.03f * 0.03f;
+      for (size_t k = 0; k < g.num_nodes(); ++k) {
+        const Eigen::Vector3f w = g.position(static_cast<int>(k)) + g.translation(static_cast<int>(k));
+        std::vector<uint8_t> hit(nc, 0);
+        for (size_t i = 0; i < pos.size(); ++i)
+          if ((pos[i] - w).squaredNorm() < r2) hit[static_cast<size_t>(comp[i])] = 1;
+        const NodeReport& nr = st->track.nodes[k];
+        const float lo = 1.0f - to.fail_affine_scale;
+        for (size_t c = 0; c < nc; ++c) {
+          if (!hit[c]) continue;
+          near_nodes[c] += 1;
+          near_low_support[c] += nr.observed < to.min_support;
+          if (!nr.failed) continue;
+          near_failed[c] += 1;
+          near_res[c] += nr.residual_m > to.fail_residual_m;
+          near_viol[c] += nr.observed >= to.min_support && nr.violations > to.fail_violation_fraction * nr.observed;
+          near_stretch[c] += nr.stretch_m > to.fail_stretch_factor * g.options().node_spacing_m;
+          near_affine[c] += nr.scale_min < lo || nr.scale_max > 1.0f / lo;
+        }
+      }
+    }
+  }
+  // Which samples some pod sees at this frame (noise-free depth within 15 mm,
+  // front-facing); call before Add() of the frame's modes.
+  void SetVisibility(const Rig& rig, const StudioGroundTruth& gt) {
+    prev_visible = visible;
+    const Mesh& m = gt.foreground_mesh;
+    visible.assign(samples.size(), 0);
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const Eigen::Vector3f p = metrics::SamplePosition(m, samples[i]);
+      const auto& t = m.triangles[samples[i].triangle];
+      const Eigen::Vector3f n = (m.positions[t[1]] - m.positions[t[0]]).cross(m.positions[t[2]] - m.positions[t[0]]);
+      for (size_t k = 0; k < rig.pods.size() && !visible[i]; ++k) {
+        const CameraModel cam = rig.pods[k].DepthCamera();
+        if (n.dot(cam.Center() - p) <= 0) continue;
+        const Eigen::Vector3f pc = cam.world_from_camera.inverse() * p;
+        Eigen::Vector2f px;
+        if (!cam.ProjectCamera(pc, &px)) continue;
+        const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+        if (u < 0 || v < 0 || u >= gt.depth[k].width() || v >= gt.depth[k].height()) continue;
+        const float z = gt.depth[k].at(u, v) * 0.001f;
+        if (z > 0 && std::abs(z - pc.z()) <= 0.015f) visible[i] = 1;
+      }
+    }
+  }
+  void TrackError(const Mesh& truth, const TemporalFusion* fusion, const TemporalFrameStats& st) {
+    if (!st.tracked || prev_truth.size() != truth.positions.size()) return;
+    const DeformationGraph& g = fusion->graph();
+    std::vector<float> en, ea;
+    for (size_t k = 0; k < g.num_nodes(); ++k) {
+      const Eigen::Vector3f& p = g.position(static_cast<int>(k));
+      float best = 0.02f * 0.02f;
+      int bi = -1;
+      for (size_t v = 0; v < prev_truth.size(); ++v) {
+        const float d = (prev_truth[v] - p).squaredNorm();
+        if (d < best) {
+          best = d;
+          bi = static_cast<int>(v);
+        }
+      }
+      if (bi < 0) continue;
+      const size_t b = static_cast<size_t>(bi);
+      const Eigen::Vector3f err = g.translation(static_cast<int>(k)) - (truth.positions[b] - prev_truth[b]);
+      ea.push_back(err.norm() * 1000);
+      if (truth.normals.size() == truth.positions.size()) {
+        en.push_back(std::abs(err.dot(truth.normals[b])) * 1000);
+        if (track_err.size() >= 9 && vertex_comp[b] >= 0) {
+          comp_err_sum[static_cast<size_t>(vertex_comp[b])] += en.back();
+          comp_err_cnt[static_cast<size_t>(vertex_comp[b])] += 1;
+        }
+      }
+    }
+    auto med = [](std::vector<float> v) {
+      if (v.empty()) return NAN;
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      return v[v.size() / 2];
+    };
+    auto mean = [](const std::vector<float>& v) {
+      double a = 0;
+      for (float x : v) a += x;
+      return v.empty() ? NAN : a / static_cast<double>(v.size());
+    };
+    char buf[200];
+    std::snprintf(buf, sizeof(buf), "nodes %zu matched %zu, error median %.2f mean %.2f mm, along normal median %.2f mean %.2f mm",
+                  g.num_nodes(), ea.size(), med(ea), mean(ea), med(en), mean(en));
+    track_err.push_back(buf);
+  }
+  void Print(const metrics::FlickerAccumulator& per_frame, const metrics::FlickerAccumulator& temporal) const {
+    {
+      double hs[2] = {0, 0}, hc[2] = {0, 0}, as[2] = {0, 0}, ac[2] = {0, 0};
+      for (size_t md = 0; md < 2; ++md)
+        for (size_t c = 0; c < static_cast<size_t>(num_comp); ++c) {
+          hs[md] += hid_sum[md][c];
+          hc[md] += hid_cnt[md][c];
+          as[md] += sum[md][c];
+          ac[md] += cnt[md][c];
+        }
+      std::fprintf(stderr,
+                   "diag samples seen by no pod: %.1f %% of valid pairs (per_frame) / %.1f %% (temporal); their flicker "
+                   "%.2f / %.2f mm; seen samples %.2f / %.2f mm\n",
+                   100 * hc[0] / std::max(1.0, ac[0]), 100 * hc[1] / std::max(1.0, ac[1]), hs[0] / std::max(1.0, hc[0]),
+                   hs[1] / std::max(1.0, hc[1]), (as[0] - hs[0]) / std::max(1.0, ac[0] - hc[0]),
+                   (as[1] - hs[1]) / std::max(1.0, ac[1] - hc[1]));
+      for (size_t c = 0; c < static_cast<size_t>(num_comp); ++c)
+        std::fprintf(stderr, "diag component %zu hidden: %.0f %% of pairs, flicker %.2f / %.2f mm; seen %.2f / %.2f mm\n", c,
+                     100 * hid_cnt[0][c] / std::max(1.0, cnt[0][c]), hid_sum[0][c] / std::max(1.0, hid_cnt[0][c]),
+                     hid_sum[1][c] / std::max(1.0, hid_cnt[1][c]),
+                     (sum[0][c] - hid_sum[0][c]) / std::max(1.0, cnt[0][c] - hid_cnt[0][c]),
+                     (sum[1][c] - hid_sum[1][c]) / std::max(1.0, cnt[1][c] - hid_cnt[1][c]));
+    }
+    std::fprintf(stderr, "diag flicker per frame pair (per_frame/temporal mm):");
+    for (size_t i = 0; i < per_frame.pairs().size() && i < temporal.pairs().size(); ++i)
+      std::fprintf(stderr, " f%zu %.2f/%.2f", i + 1, per_frame.pairs()[i].flicker_mm, temporal.pairs()[i].flicker_mm);
+    std::fprintf(stderr, "\n");
+    const double nf = std::max(1.0, frames_seen[1] - 1);
+    for (int ci = 0; ci < num_comp; ++ci) {
+      const size_t c = static_cast<size_t>(ci);
+      std::fprintf(stderr,
+                   "diag component %d: %zu samples at (%.2f %.2f %.2f), flicker per_frame %.2f temporal %.2f mm; valid/frame %.0f / %.0f; "
+                   "mean |d| %.2f / %.2f mm; truth speed %.1f mm/frame; temporal nodes near/frame %.1f failed %.2f "
+                   "(res %.2f viol %.2f stretch %.2f affine %.2f) unsupported %.2f\n",
+                   ci, comp_size[c], comp_centroid[c].x(), comp_centroid[c].y(), comp_centroid[c].z(), sum[0][c] / std::max(1.0, cnt[0][c]), sum[1][c] / std::max(1.0, cnt[1][c]),
+                   valid[0][c] / std::max(1.0, frames_seen[0]), valid[1][c] / std::max(1.0, frames_seen[1]),
+                   abs_d[0][c] / std::max(1.0, valid[0][c]), abs_d[1][c] / std::max(1.0, valid[1][c]),
+                   speed_sum[c] / std::max(1.0, frames_seen[0] - 1) / static_cast<double>(comp_size[c]), near_nodes[c] / nf,
+                   near_failed[c] / nf, near_res[c] / nf, near_viol[c] / nf, near_stretch[c] / nf, near_affine[c] / nf,
+                   near_low_support[c] / nf);
+    }
+    // Timelines of the small components (< 500 samples).
+    for (int ci = 0; ci < num_comp; ++ci) {
+      const size_t c = static_cast<size_t>(ci);
+      if (comp_size[c] >= 500) continue;
+      std::fprintf(stderr, "diag timeline component %d (per_frame/temporal mm):", ci);
+      for (size_t f = 1; f < timeline[c].size(); ++f)
+        std::fprintf(stderr, " f%zu %.1f/%.1f", f, timeline[c][f][0], timeline[c][f][1]);
+      std::fprintf(stderr, "\n");
+    }
+    for (size_t f = 0; f < frame_notes.size(); ++f) std::fprintf(stderr, "diag frame %zu: %s\n", f, frame_notes[f].c_str());
+    for (size_t c = 0; c < comp_err_sum.size(); ++c)
+      std::fprintf(stderr, "diag component %zu: node error along normal (frames 10+) mean %.2f mm over %.0f node-frames\n", c,
+                   comp_err_sum[c] / std::max(1.0, comp_err_cnt[c]), comp_err_cnt[c]);
+    for (size_t f = 0; f < track_err.size(); ++f) std::fprintf(stderr, "diag track error frame %zu: %s\n", f + 1, track_err[f].c_str());
   }
 };
 
@@ -258,13 +479,16 @@ int RunTemporal(const BenchArgs& args) {
   if (extra.rot_weight >= 0) base.tracker.rotation_weight = static_cast<float>(extra.rot_weight);
   if (extra.hull_weight >= 0) base.tracker.hull_weight = static_cast<float>(extra.hull_weight);
   base.predict_motion = extra.predict;
-  if (extra.sparse >= 0) base.tracker.use_sparse = extra.sparse != 0;
+  if (extra.sparse >= 0) base.tracker.use_sparse = extra.sparse != 0 ? 1 : 0;
   if (extra.sparse_weight >= 0) base.tracker.sparse_weight = static_cast<float>(extra.sparse_weight);
   if (extra.parallel_pcg >= 0) base.tracker.parallel_pcg = extra.parallel_pcg != 0;
   if (extra.pcg > 0) base.tracker.pcg_max_iterations = extra.pcg;
   if (extra.data_window >= -1) base.tracker.data_window_px = extra.data_window;
   if (extra.snap_mm >= 0) base.snap_still_m = static_cast<float>(extra.snap_mm / 1000);
   if (extra.iterations >= 0) base.tracker.iterations = extra.iterations;
+  if (extra.rigid_iterations >= 0) base.tracker.rigid_iterations = extra.rigid_iterations;
+  if (extra.normal_radius >= 0) base.track_normal_radius_voxels = extra.normal_radius;
+  if (extra.min_track_weight >= 0) base.min_track_weight = static_cast<float>(extra.min_track_weight);
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 
   std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);
@@ -292,6 +516,11 @@ int RunTemporal(const BenchArgs& args) {
     for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
     const bool eval = f % extra.eval_every == extra.eval_every - 1;
     if (diag_on && f == 0) diag.Init(gt.foreground_mesh);
+    if (diag_on) {
+      diag.SetVisibility(rig, gt);
+      diag.prev_truth = diag.cur_truth;
+      diag.cur_truth = gt.foreground_mesh.positions;
+    }
     std::vector<Eigen::Vector3f> exclusive;
     if (extra.drop_pod >= 0 && f >= extra.drop_from) {
       dropped = set;
@@ -322,7 +551,8 @@ int RunTemporal(const BenchArgs& args) {
           run.total_ms.push_back(st.total_ms);
           run.cpu_ms.push_back(cpu);
         }
-        if (diag_on) diag.Add(static_cast<int>(r), run.mesh, gt.foreground_mesh);
+        if (diag_on) diag.Add(static_cast<int>(r), run.mesh, gt.foreground_mesh, run.fusion.get(), &st);
+        if (diag_on && r == 1) diag.TrackError(gt.foreground_mesh, run.fusion.get(), st);
         if (eval && !run.mesh.empty()) {
           auto d = metrics::ComputeMeshDistance(run.mesh, gt.foreground_mesh, mdo);
           if (d.ok()) {
@@ -383,7 +613,7 @@ int RunTemporal(const BenchArgs& args) {
     }
   }
   if (!args.json) std::fprintf(stderr, "\n");
-  if (diag_on) diag.Print();
+  if (diag_on) diag.Print(runs[0].flicker, runs[1].flicker);
 
   const std::string w = args.workload;
   std::map<std::string, std::string> q;

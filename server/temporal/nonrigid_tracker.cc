@@ -41,6 +41,7 @@ Status TrackerOptions::Check() const {
   HOLO_RETURN_IF_ERROR(nonneg(rotation_weight, "rotation_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(regularization_weight, "regularization_weight"));
   HOLO_RETURN_IF_ERROR(nonneg(sparse_weight, "sparse_weight"));
+  if (use_sparse < -1 || use_sparse > 1) return InvalidArgument("use_sparse must be -1, 0 or 1, got " + std::to_string(use_sparse));
   if (!(sparse_huber_m > 0)) return InvalidArgument("sparse_huber_m must be > 0");
   if (!(sparse_reject_m > 0)) return InvalidArgument("sparse_reject_m must be > 0");
   if (data_window_px < -1 || data_window_px > 16) return InvalidArgument("data_window_px must be in [-1, 16]");
@@ -55,6 +56,13 @@ Status TrackerOptions::Check() const {
   if (ceres_iterations < 1 || ceres_iterations > 100) return InvalidArgument("ceres_iterations must be in [1, 100]");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256]");
   return OkStatus();
+}
+
+bool TrackerOptions::SparseOn(const Rig& rig) const {
+  if (use_sparse >= 0) return use_sparse == 1;
+  int width = 0;
+  for (const PodCalibration& p : rig.pods) width = std::max(width, p.depth.width);
+  return width >= 640;
 }
 
 namespace {
@@ -530,7 +538,7 @@ Status NonrigidTracker::Track(const Rig& rig, const RgbdFrameSet& frames, const 
   // their targets are the current frame's ends.
   m.n_model = model_points.size();
   m.sparse_to.clear();
-  const bool sparse = o.use_sparse && o.sparse_weight > 0 && features != nullptr && !features->empty();
+  const bool sparse = o.SparseOn(rig) && o.sparse_weight > 0 && features != nullptr && !features->empty();
   if (sparse) {
     m.all_points = model_points;
     m.all_normals = model_normals;

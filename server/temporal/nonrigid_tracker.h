@@ -67,8 +67,13 @@ struct TrackerOptions {
   float rotation_weight = 0.02f;
   bool use_regularization = true;
   float regularization_weight = 10.0f;
-  // Sparse colour-feature correspondences (only when Track gets features).
-  bool use_sparse = false;
+  // Sparse colour-feature correspondences (only when Track gets features):
+  // 1 on, 0 off, -1 by resolution: on when the widest pod's depth image is
+  // at least 640 pixels wide (S8-VGA on, S8-QVGA off). Measured
+  // (docs/temporal.md): at VGA they lower flicker (ratio 0.617 → 0.532) and
+  // Chamfer; at QVGA they help less (0.456 → 0.423) for ≈ +10 CPU-ms per
+  // frame on the tight QVGA frame budget.
+  int use_sparse = -1;
   float sparse_weight = 1.0f;
   float sparse_huber_m = 0.02f;
   // A pair whose warped point is farther than this from its target at the
@@ -122,6 +127,8 @@ struct TrackerOptions {
   bool parallel_pcg = true;
   int threads = 2;  // 0 = hardware concurrency
   Status Check() const;
+  // Whether the sparse term is on for `rig` (use_sparse, by resolution if -1).
+  bool SparseOn(const Rig& rig) const;
 };
 
 struct NodeReport {

@@ -38,8 +38,13 @@ Status TemporalFusionOptions::Check() const {
     return InvalidArgument("track_points must be in [16, 1e7], got " + std::to_string(track_points));
   if (!(lost_node_fraction > 0 && lost_node_fraction <= 1))
     return InvalidArgument("lost_node_fraction must be in (0, 1], got " + std::to_string(lost_node_fraction));
+  if (!(min_track_weight >= 0 && min_track_weight <= 1e6f))
+    return InvalidArgument("min_track_weight must be in [0, 1e6], got " + std::to_string(min_track_weight));
   if (!(min_points_per_node >= 0 && min_points_per_node <= 1000))
     return InvalidArgument("min_points_per_node must be in [0, 1000], got " + std::to_string(min_points_per_node));
+  if (track_normal_radius_voxels < 0 || track_normal_radius_voxels > 8)
+    return InvalidArgument("track_normal_radius_voxels must be in [0, 8], got " +
+                           std::to_string(track_normal_radius_voxels));
   if (!(snap_still_m >= 0 && snap_still_m < 1))
     return InvalidArgument("snap_still_m must be in [0, 1), got " + std::to_string(snap_still_m));
   if (!(lost_min_associated >= 0 && lost_min_associated <= 1))
@@ -93,7 +98,6 @@ StatusOr<std::unique_ptr<TemporalFusion>> TemporalFusion::Create(TemporalFusionO
   f->reference_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->live_ = std::make_unique<TsdfVolume>(options.tsdf);
   f->tracker_ = std::make_unique<NonrigidTracker>(options.tracker);
-  if (options.temporal && options.tracker.use_sparse) f->matcher_ = std::make_unique<FeatureMatcher>(options.features);
   f->impl_ = std::make_unique<Impl>(options.tsdf.threads);
   return f;
 }
@@ -418,6 +422,65 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
   stats->carried_blocks = carried.load();
 }
 
+void TemporalFusion::SmoothTrackNormals() {
+  const int r = options_.track_normal_radius_voxels;
+  const int side = 2 * r + 1;
+  const float vs = options_.tsdf.voxel_size;
+  const VoxelBlockMap& blocks = reference_->blocks();
+  impl_->pool.ParallelFor(static_cast<int>((points_.size() + 255) / 256), [&](int c) {
+    // The (2r+1)³ voxels around a point, copied once (a block lookup per
+    // block touched instead of one per voxel read).
+    std::vector<float> t(static_cast<size_t>(side) * side * side), w(t.size());
+    const size_t i0 = static_cast<size_t>(c) * 256, i1 = std::min(points_.size(), i0 + 256);
+    for (size_t i = i0; i < i1; ++i) {
+      const Vector3f q = points_[i] / vs;
+      const int64_t x0 = std::lround(q.x()) - r, y0 = std::lround(q.y()) - r, z0 = std::lround(q.z()) - r;
+      std::fill(w.begin(), w.end(), 0.0f);
+      for (int bz = FloorDiv8(z0); bz <= FloorDiv8(z0 + side - 1); ++bz)
+        for (int by = FloorDiv8(y0); by <= FloorDiv8(y0 + side - 1); ++by)
+          for (int bx = FloorDiv8(x0); bx <= FloorDiv8(x0 + side - 1); ++bx) {
+            if (!BlockCoordInRange(bx, by, bz)) continue;
+            const int32_t bi = blocks.Find(BlockCoord{bx, by, bz});
+            if (bi == VoxelBlockMap::kNotFound) continue;
+            const VoxelBlock& blk = blocks.block(bi);
+            const int64_t xa = std::max<int64_t>(x0, 8 * int64_t{bx}), xb = std::min<int64_t>(x0 + side, 8 * int64_t{bx} + 8);
+            const int64_t ya = std::max<int64_t>(y0, 8 * int64_t{by}), yb = std::min<int64_t>(y0 + side, 8 * int64_t{by} + 8);
+            const int64_t za = std::max<int64_t>(z0, 8 * int64_t{bz}), zb = std::min<int64_t>(z0 + side, 8 * int64_t{bz} + 8);
+            for (int64_t z = za; z < zb; ++z)
+              for (int64_t y = ya; y < yb; ++y)
+                for (int64_t x = xa; x < xb; ++x) {
+                  const int li = static_cast<int>((x - 8 * int64_t{bx}) + 8 * (y - 8 * int64_t{by}) + 64 * (z - 8 * int64_t{bz}));
+                  const size_t gi = static_cast<size_t>(((z - z0) * side + (y - y0)) * side + (x - x0));
+                  t[gi] = blk.tsdf[li];
+                  w[gi] = blk.weight[li];
+                }
+          }
+      // Central differences between the patch's opposite faces (r voxels
+      // either side of the centre), summed over each face: a box-filtered
+      // gradient. Every face voxel must be observed.
+      const size_t sy = static_cast<size_t>(side), sz = sy * sy, last = static_cast<size_t>(side - 1);
+      Vector3f g = Vector3f::Zero();
+      bool ok = true;
+      auto diff = [&](size_t hi, size_t lo) {
+        ok = ok && w[hi] > 0 && w[lo] > 0;
+        return t[hi] - t[lo];
+      };
+      for (size_t u = 0; u < sy; ++u)
+        for (size_t v = 0; v < sy; ++v) g.x() += diff(last + sy * u + sz * v, sy * u + sz * v);
+      for (size_t u = 0; u < sy; ++u)
+        for (size_t v = 0; v < sy; ++v) g.y() += diff(v + sy * last + sz * u, v + sz * u);
+      for (size_t u = 0; u < sy; ++u)
+        for (size_t v = 0; v < sy; ++v) g.z() += diff(u + sy * v + sz * last, u + sy * v);
+      if (!ok) continue;  // keep the mesh normal
+      const float len = g.norm();
+      if (!(len > 1e-6f)) continue;
+      const Vector3f n = g / len;
+      // A thin part or a nearby surface can flip the box-filtered gradient.
+      if (n.dot(normals_[i]) > 0.5f) normals_[i] = n;
+    }
+  });
+}
+
 Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh* out, TemporalFrameStats* stats) {
   const auto t_start = std::chrono::steady_clock::now();
   *stats = TemporalFrameStats();
@@ -427,7 +490,9 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   // Colour features of this frame, matched to the previous frame's. They
   // are used only if the previous frame was fused (its observation is then
   // what the reference shows).
-  const bool use_features = matcher_ != nullptr;  // temporal mode with the sparse term on
+  // Temporal mode with the sparse term on (by resolution: the rig decides).
+  const bool use_features = options_.temporal && options_.tracker.SparseOn(rig);
+  if (use_features && matcher_ == nullptr) matcher_ = std::make_unique<FeatureMatcher>(options_.features);
   pairs_.clear();
   if (use_features) {
     const auto tf = std::chrono::steady_clock::now();
@@ -453,6 +518,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
   auto t0 = std::chrono::steady_clock::now();
   const size_t nv = reference_mesh_.positions.size();
   const bool has_normals = reference_mesh_.normals.size() == nv;
+  const float vs = options_.tsdf.voxel_size;
   auto sample = [&](size_t count) {
     points_.clear();
     normals_.clear();
@@ -461,7 +527,13 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       const Vector3f n = has_normals ? reference_mesh_.normals[i] : Vector3f::Zero();
       const float len = n.norm();
       if (!(len > 1e-6f)) continue;
-      points_.push_back(reference_mesh_.positions[i]);
+      const Vector3f& p = reference_mesh_.positions[i];
+      if (options_.min_track_weight > 0) {
+        float t, w;
+        reference_->VoxelAt(std::lround(p.x() / vs), std::lround(p.y() / vs), std::lround(p.z() / vs), &t, &w);
+        if (w < options_.min_track_weight) continue;
+      }
+      points_.push_back(p);
       normals_.push_back(n / len);
     }
   };
@@ -474,6 +546,7 @@ Status TemporalFusion::Process(const Rig& rig, const RgbdFrameSet& frames, Mesh*
       HOLO_RETURN_IF_ERROR(graph_.Build(points_, options_.graph));
     }
   }
+  if (options_.track_normal_radius_voxels > 0) SmoothTrackNormals();
   if (options_.predict_motion && !prev_node_pos_.empty()) {
     const float max_d = 2.0f * options_.graph.node_spacing_m;
     for (size_t k = 0; k < graph_.num_nodes(); ++k) {

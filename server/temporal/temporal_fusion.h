@@ -53,12 +53,15 @@ struct TemporalFusionOptions {
   DeformationGraphOptions graph;
   TrackerOptions tracker;
   // Colour features for the tracker's sparse term (matched only when
-  // tracker.use_sparse is on).
+  // tracker.SparseOn(rig): by resolution unless tracker.use_sparse is set).
   FeatureMatchOptions features;
   // false: plain per-frame fusion (the baseline), same code path otherwise.
   bool temporal = true;
-  // Cap of a carried voxel weight (one pod's observation = 1).
-  float max_weight = 30.0f;
+  // Cap of a carried voxel weight (one pod's observation = 1): a voxel seen
+  // by ≈ 3 pods averages over ≈ 20 frames. 60 since the fourth pass (was 30:
+  // 60 is better on S8-QVGA and S8-VGA in flicker, Chamfer and the dropped
+  // pod's kept surface, docs/temporal.md).
+  float max_weight = 60.0f;
   // Model points tracked per frame (vertices of the reference mesh, evenly strided).
   int track_points = 3000;
   // At least this many model points per graph node (more points are taken
@@ -67,6 +70,18 @@ struct TemporalFusionOptions {
   // parameters each) the tracker fits the sensor noise (docs/temporal.md).
   // 0 = off.
   float min_points_per_node = 7.0f;
+  // Model points are taken only where the reference voxel's weight is at
+  // least this (one pod's observation = 1), e.g. 2: not surface that a
+  // single pod saw once (flying pixels, double surfaces of the first
+  // per-frame fusion; S8-VGA flicker ratio 0.512 → 0.507, docs/temporal.md).
+  // 0 = all.
+  float min_track_weight = 2.0f;
+  // Normals of the tracked model points: the gradient of the reference TSDF
+  // box-filtered over (2r+1)³ voxels with central differences r voxels apart,
+  // instead of the mesh vertex normal (one-voxel differences of a volume that
+  // is a single frame's fusion in the first frames, so noisy). The data term
+  // is point-to-plane along this normal. 0 = the mesh normals.
+  int track_normal_radius_voxels = 2;
   // Start each node at the displacement of the nearest node of the last
   // tracked frame (constant-velocity prediction).
   bool predict_motion = true;
@@ -118,6 +133,10 @@ class TemporalFusion {
   // The graph of the last tracked frame (nodes, parameters), for tests.
   const DeformationGraph& graph() const { return graph_; }
   const TsdfVolume& reference_volume() const { return *reference_; }
+  // The model points and normals tracked in the last frame (on the
+  // reference surface, before the warp), for tests.
+  const std::vector<Eigen::Vector3f>& tracked_points() const { return points_; }
+  const std::vector<Eigen::Vector3f>& tracked_normals() const { return normals_; }
 
   struct Impl;
 
@@ -125,6 +144,9 @@ class TemporalFusion {
   explicit TemporalFusion(TemporalFusionOptions options);
   Status FusePerFrame(const Rig& rig, const RgbdFrameSet& frames, TsdfVolume* volume, Mesh* out,
                       TemporalFrameStats* stats);
+  // Replaces normals_ of points_ by box-filtered reference TSDF gradients
+  // (track_normal_radius_voxels).
+  void SmoothTrackNormals();
   void WarpReference(const Rig& rig, const RgbdFrameSet& frames, const TrackResult& track, TemporalFrameStats* stats);
 
   TemporalFusionOptions options_;

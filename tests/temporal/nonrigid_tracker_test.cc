@@ -234,6 +234,24 @@ TEST(TrackerOptionsTest, BadOptionsRejected) {
   EXPECT_EQ(*ParseTrackerSolver("ceres"), TrackerSolver::kCeres);
 }
 
+// The sparse colour-feature term is on by resolution unless set: on for the
+// VGA rig, off for the QVGA one.
+TEST(TrackerOptionsTest, SparseTermByResolution) {
+  auto qvga = GetWorkload("S8-QVGA");
+  auto vga = GetWorkload("S8-VGA");
+  ASSERT_TRUE(qvga.ok() && vga.ok());
+  TrackerOptions o;
+  EXPECT_EQ(o.use_sparse, -1);
+  EXPECT_FALSE(o.SparseOn(qvga->rig));
+  EXPECT_TRUE(o.SparseOn(vga->rig));
+  o.use_sparse = 1;
+  EXPECT_TRUE(o.SparseOn(qvga->rig));
+  o.use_sparse = 0;
+  EXPECT_FALSE(o.SparseOn(vga->rig));
+  o.use_sparse = 2;
+  EXPECT_FALSE(o.Check().ok());
+}
+
 TEST(TrackerTest2, MismatchedInputsAreErrors) {
   auto w = GetWorkload("S8-QVGA");
   ASSERT_TRUE(w.ok());
