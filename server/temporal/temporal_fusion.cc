@@ -24,6 +24,32 @@ double MsSince(std::chrono::steady_clock::time_point t0) {
 
 int FloorDiv8(int64_t v) { return static_cast<int>(v >= 0 ? v / 8 : -((-v + 7) / 8)); }
 
+// Calls `visit(gi, block, li)` for every voxel of the dense box of `nx` × `ny`
+// × `nz` voxels at (`x0`, `y0`, `z0`) (voxel coordinates) that lies in an
+// allocated block of `blocks`: `gi` is the voxel's row-major index in the
+// box, `li` its index in `block`. One block lookup per block touched.
+template <typename Visit>
+void ForEachStoredVoxel(const VoxelBlockMap& blocks, int64_t x0, int64_t y0, int64_t z0, int64_t nx, int64_t ny,
+                        int64_t nz, Visit&& visit) {
+  for (int bz = FloorDiv8(z0); bz <= FloorDiv8(z0 + nz - 1); ++bz)
+    for (int by = FloorDiv8(y0); by <= FloorDiv8(y0 + ny - 1); ++by)
+      for (int bx = FloorDiv8(x0); bx <= FloorDiv8(x0 + nx - 1); ++bx) {
+        if (!BlockCoordInRange(bx, by, bz)) continue;
+        const int32_t bi = blocks.Find(BlockCoord{bx, by, bz});
+        if (bi == VoxelBlockMap::kNotFound) continue;
+        const VoxelBlock& blk = blocks.block(bi);
+        const int64_t xa = std::max<int64_t>(x0, 8 * int64_t{bx}), xb = std::min<int64_t>(x0 + nx, 8 * int64_t{bx} + 8);
+        const int64_t ya = std::max<int64_t>(y0, 8 * int64_t{by}), yb = std::min<int64_t>(y0 + ny, 8 * int64_t{by} + 8);
+        const int64_t za = std::max<int64_t>(z0, 8 * int64_t{bz}), zb = std::min<int64_t>(z0 + nz, 8 * int64_t{bz} + 8);
+        for (int64_t z = za; z < zb; ++z)
+          for (int64_t y = ya; y < yb; ++y)
+            for (int64_t x = xa; x < xb; ++x) {
+              const int li = static_cast<int>((x - 8 * int64_t{bx}) + 8 * (y - 8 * int64_t{by}) + 64 * (z - 8 * int64_t{bz}));
+              visit(static_cast<size_t>(((z - z0) * ny + (y - y0)) * nx + (x - x0)), blk, li);
+            }
+      }
+}
+
 }  // namespace
 
 Status TemporalFusionOptions::Check() const {
@@ -350,25 +376,11 @@ void TemporalFusion::WarpReference(const Rig& rig, const RgbdFrameSet& /*frames*
     g.tsdf.assign(nvox, 1.0f);
     g.weight.assign(nvox, 0.0f);
     g.rgb.resize(nvox);
-    for (int bz = FloorDiv8(gz0); bz <= FloorDiv8(gz0 + nz - 1); ++bz)
-      for (int by = FloorDiv8(gy0); by <= FloorDiv8(gy0 + ny - 1); ++by)
-        for (int bx = FloorDiv8(gx0); bx <= FloorDiv8(gx0 + nx - 1); ++bx) {
-          const int32_t si = src.Find(BlockCoord{bx, by, bz});
-          if (si == VoxelBlockMap::kNotFound) continue;
-          const VoxelBlock& sb = src.block(si);
-          const int64_t x0 = std::max<int64_t>(gx0, 8 * int64_t{bx}), x1 = std::min<int64_t>(gx0 + nx, 8 * int64_t{bx} + 8);
-          const int64_t y0 = std::max<int64_t>(gy0, 8 * int64_t{by}), y1 = std::min<int64_t>(gy0 + ny, 8 * int64_t{by} + 8);
-          const int64_t z0 = std::max<int64_t>(gz0, 8 * int64_t{bz}), z1 = std::min<int64_t>(gz0 + nz, 8 * int64_t{bz} + 8);
-          for (int64_t z = z0; z < z1; ++z)
-            for (int64_t y = y0; y < y1; ++y)
-              for (int64_t x = x0; x < x1; ++x) {
-                const int li = static_cast<int>((x - 8 * int64_t{bx}) + 8 * (y - 8 * int64_t{by}) + 64 * (z - 8 * int64_t{bz}));
-                const size_t gi = static_cast<size_t>(((z - gz0) * ny + (y - gy0)) * nx + (x - gx0));
-                g.tsdf[gi] = sb.tsdf[li];
-                g.weight[gi] = sb.weight[li];
-                g.rgb[gi] = {sb.r[li], sb.g[li], sb.b[li]};
-              }
-        }
+    ForEachStoredVoxel(src, gx0, gy0, gz0, nx, ny, nz, [&g](size_t gi, const VoxelBlock& sb, int li) {
+      g.tsdf[gi] = sb.tsdf[li];
+      g.weight[gi] = sb.weight[li];
+      g.rgb[gi] = {sb.r[li], sb.g[li], sb.b[li]};
+    });
     const Vector3f step_x = di.minv.col(0), step_y = di.minv.col(1), step_z = di.minv.col(2);
     const Vector3f origin = di.minv * (Vector3f(bc.x, bc.y, bc.z) * (kBlockSide * vs)) / vs + di.cinv / vs -
                             Vector3f(static_cast<float>(gx0), static_cast<float>(gy0), static_cast<float>(gz0));
@@ -436,25 +448,10 @@ void TemporalFusion::SmoothTrackNormals() {
       const Vector3f q = points_[i] / vs;
       const int64_t x0 = std::lround(q.x()) - r, y0 = std::lround(q.y()) - r, z0 = std::lround(q.z()) - r;
       std::fill(w.begin(), w.end(), 0.0f);
-      for (int bz = FloorDiv8(z0); bz <= FloorDiv8(z0 + side - 1); ++bz)
-        for (int by = FloorDiv8(y0); by <= FloorDiv8(y0 + side - 1); ++by)
-          for (int bx = FloorDiv8(x0); bx <= FloorDiv8(x0 + side - 1); ++bx) {
-            if (!BlockCoordInRange(bx, by, bz)) continue;
-            const int32_t bi = blocks.Find(BlockCoord{bx, by, bz});
-            if (bi == VoxelBlockMap::kNotFound) continue;
-            const VoxelBlock& blk = blocks.block(bi);
-            const int64_t xa = std::max<int64_t>(x0, 8 * int64_t{bx}), xb = std::min<int64_t>(x0 + side, 8 * int64_t{bx} + 8);
-            const int64_t ya = std::max<int64_t>(y0, 8 * int64_t{by}), yb = std::min<int64_t>(y0 + side, 8 * int64_t{by} + 8);
-            const int64_t za = std::max<int64_t>(z0, 8 * int64_t{bz}), zb = std::min<int64_t>(z0 + side, 8 * int64_t{bz} + 8);
-            for (int64_t z = za; z < zb; ++z)
-              for (int64_t y = ya; y < yb; ++y)
-                for (int64_t x = xa; x < xb; ++x) {
-                  const int li = static_cast<int>((x - 8 * int64_t{bx}) + 8 * (y - 8 * int64_t{by}) + 64 * (z - 8 * int64_t{bz}));
-                  const size_t gi = static_cast<size_t>(((z - z0) * side + (y - y0)) * side + (x - x0));
-                  t[gi] = blk.tsdf[li];
-                  w[gi] = blk.weight[li];
-                }
-          }
+      ForEachStoredVoxel(blocks, x0, y0, z0, side, side, side, [&t, &w](size_t gi, const VoxelBlock& blk, int li) {
+        t[gi] = blk.tsdf[li];
+        w[gi] = blk.weight[li];
+      });
       // Central differences between the patch's opposite faces (r voxels
       // either side of the centre), summed over each face: a box-filtered
       // gradient. Every face voxel must be observed.
