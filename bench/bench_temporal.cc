@@ -130,6 +130,21 @@ struct Run {
   Mesh mesh;
 };
 
+// Whether pod `k` sees point `p` (noise-free depth within 15 mm); with a
+// non-zero `normal`, only if the surface faces the pod.
+bool PodSees(const Rig& rig, const StudioGroundTruth& gt, size_t k, const Eigen::Vector3f& p,
+             const Eigen::Vector3f& normal) {
+  const CameraModel cam = rig.pods[k].DepthCamera();
+  if (!normal.isZero() && normal.dot(cam.Center() - p) <= 0) return false;
+  const Eigen::Vector3f pc = cam.world_from_camera.inverse() * p;
+  Eigen::Vector2f px;
+  if (!cam.ProjectCamera(pc, &px)) return false;
+  const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+  if (u < 0 || v < 0 || u >= gt.depth[k].width() || v >= gt.depth[k].height()) return false;
+  const float z = gt.depth[k].at(u, v) * 0.001f;
+  return z > 0 && std::abs(z - pc.z()) <= 0.015f;
+}
+
 // Truth vertices that pod `pod` alone sees (noise-free depth within 15 mm,
 // front-facing), per the ground-truth depth of every pod.
 std::vector<Eigen::Vector3f> ExclusiveVertices(const Rig& rig, const StudioGroundTruth& gt, int pod) {
@@ -139,16 +154,9 @@ std::vector<Eigen::Vector3f> ExclusiveVertices(const Rig& rig, const StudioGroun
     const Eigen::Vector3f& p = m.positions[i];
     int seen_by = 0;
     bool seen_by_pod = false;
+    const Eigen::Vector3f n = m.normals.empty() ? Eigen::Vector3f::Zero() : m.normals[i];
     for (size_t k = 0; k < rig.pods.size(); ++k) {
-      const CameraModel cam = rig.pods[k].DepthCamera();
-      if (!m.normals.empty() && m.normals[i].dot(cam.Center() - p) <= 0) continue;
-      const Eigen::Vector3f pc = cam.world_from_camera.inverse() * p;
-      Eigen::Vector2f px;
-      if (!cam.ProjectCamera(pc, &px)) continue;
-      const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
-      if (u < 0 || v < 0 || u >= gt.depth[k].width() || v >= gt.depth[k].height()) continue;
-      const float z = gt.depth[k].at(u, v) * 0.001f;
-      if (z <= 0 || std::abs(z - pc.z()) > 0.015f) continue;
+      if (!PodSees(rig, gt, k, p, n)) continue;
       ++seen_by;
       if (static_cast<int>(k) == pod) seen_by_pod = true;
     }
@@ -326,17 +334,8 @@ struct Diag {
       const Eigen::Vector3f p = metrics::SamplePosition(m, samples[i]);
       const auto& t = m.triangles[samples[i].triangle];
       const Eigen::Vector3f n = (m.positions[t[1]] - m.positions[t[0]]).cross(m.positions[t[2]] - m.positions[t[0]]);
-      for (size_t k = 0; k < rig.pods.size() && !visible[i]; ++k) {
-        const CameraModel cam = rig.pods[k].DepthCamera();
-        if (n.dot(cam.Center() - p) <= 0) continue;
-        const Eigen::Vector3f pc = cam.world_from_camera.inverse() * p;
-        Eigen::Vector2f px;
-        if (!cam.ProjectCamera(pc, &px)) continue;
-        const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
-        if (u < 0 || v < 0 || u >= gt.depth[k].width() || v >= gt.depth[k].height()) continue;
-        const float z = gt.depth[k].at(u, v) * 0.001f;
-        if (z > 0 && std::abs(z - pc.z()) <= 0.015f) visible[i] = 1;
-      }
+      if (n.isZero()) continue;  // a degenerate triangle faces no pod
+      for (size_t k = 0; k < rig.pods.size() && !visible[i]; ++k) visible[i] = PodSees(rig, gt, k, p, n) ? 1 : 0;
     }
   }
   void TrackError(const Mesh& truth, const TemporalFusion* fusion, const TemporalFrameStats& st) {
