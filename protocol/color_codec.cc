@@ -622,10 +622,25 @@ void AssignSlots(bool packed, BlockGrid* g) {
   for (int32_t& s : g->slot) s = (!packed || s > 0) ? g->coded++ : -1;
 }
 
+// Per-thread working buffers of the C1 encoder and decoder, kept between
+// images (fresh pages per image cost more than the work at VGA). Reached
+// through one reference per call: each thread_local access from a shared
+// library may be a __tls_get_addr call.
+struct C1Scratch {
+  std::vector<uint8_t> ones, rle, canvas, block_mask, slot_has, pixels;
+  std::vector<uint32_t> prev, cur;
+  std::vector<int32_t> occupied;
+};
+C1Scratch& Scratch() {
+  thread_local C1Scratch s;
+  return s;
+}
+
 Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& o, HuffmanTables* tables,
                 std::vector<uint8_t>* out) {
   const int W = image.width(), H = image.height();
-  thread_local std::vector<uint8_t> ones;
+  C1Scratch& sc = Scratch();
+  std::vector<uint8_t>& ones = sc.ones;
   if (mask.empty()) ones.assign(static_cast<size_t>(W), 255);
   auto mask_row = [&](int y) { return mask.empty() ? ones.data() : mask.data() + static_cast<size_t>(y) * W; };
   int x0 = W, y0 = H, x1 = -1, y1 = -1;
@@ -660,9 +675,10 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   // Mask: per row of the box, the x positions where foreground starts or
   // ends ("transitions"), coded against the row above when it has as many
   // (silhouettes move by a pixel or two from row to row).
-  thread_local std::vector<uint8_t> rle;
+  std::vector<uint8_t>& rle = sc.rle;
   rle.clear();
-  thread_local std::vector<uint32_t> prev, cur;
+  std::vector<uint32_t>& prev = sc.prev;
+  std::vector<uint32_t>& cur = sc.cur;
   prev.clear();
   for (int y = 0; y < bh; ++y) {
     RowTransitions(mask_row(y0 + y) + x0, bw, &cur);
@@ -701,7 +717,7 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   // the padding after the last packed block one flat colour, the mean of the
   // coded block before it, so its DC difference costs almost nothing and it
   // has no AC at all.
-  thread_local std::vector<int32_t> occupied;
+  std::vector<int32_t>& occupied = sc.occupied;
   occupied = g.slot;  // 1: the block holds foreground
   AssignSlots(o.pack_blocks, &g);
   const int jw = g.jpeg_width(o.pack_blocks, bw), jh = g.jpeg_height(o.pack_blocks, bh);
@@ -709,7 +725,8 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   const int cw = g.cols * g.bx, ch = o.pack_blocks ? jh : g.rows * g.by;
   const size_t stride = static_cast<size_t>(cw) * 3;
   const int32_t slots = (ch / g.by) * g.cols;
-  thread_local std::vector<uint8_t> canvas, block_mask;
+  std::vector<uint8_t>& canvas = sc.canvas;
+  std::vector<uint8_t>& block_mask = sc.block_mask;
   canvas.resize(stride * ch);
   block_mask.resize(static_cast<size_t>(g.bx) * g.by);
   uint8_t mean_fill[3] = {128, 128, 128};
@@ -726,7 +743,7 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
     }
     for (int k = 0; k < 3; ++k) mean_fill[k] = static_cast<uint8_t>(sum[k] / count);
   }
-  thread_local std::vector<uint8_t> slot_has;  // slot holds foreground (else flat)
+  std::vector<uint8_t>& slot_has = sc.slot_has;  // slot holds foreground (else flat)
   slot_has.assign(static_cast<size_t>(slots), 0);
   for (int r = 0; r < g.rows; ++r) {
     for (int c = 0; c < g.cols; ++c) {
@@ -839,9 +856,30 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
     return DataLoss("c1.box: box " + Str(x0) + "," + Str(y0) + " " + Str(bw) + "x" + Str(bh) + " leaves the " +
                     Str(W) + "x" + Str(H) + " image");
   }
-  image->Resize(static_cast<int>(W), static_cast<int>(H));
-  mask->Resize(static_cast<int>(W), static_cast<int>(H));
-  if (empty_box) return OkStatus();
+  // Reused outputs (a receiver's per-pod images) are zeroed row by row right
+  // before each row is written, while its cache lines are at hand: one pass
+  // over the image instead of a clear of all of it and a second pass over the box.
+  const bool fresh = image->width() != static_cast<int>(W) || image->height() != static_cast<int>(H) ||
+                     mask->width() != static_cast<int>(W) || mask->height() != static_cast<int>(H);
+  if (fresh) {
+    image->Resize(static_cast<int>(W), static_cast<int>(H));
+    mask->Resize(static_cast<int>(W), static_cast<int>(H));
+  }
+  if (empty_box) {
+    if (!fresh) {
+      image->Fill(0);
+      mask->Fill(0);
+    }
+    return OkStatus();
+  }
+  if (!fresh) {
+    for (uint32_t y = 0; y < H; ++y) {
+      if (y == y0) y += bh;
+      if (y >= H) break;
+      std::memset(image->row(static_cast<int>(y)), 0, size_t{W} * 3);
+      std::memset(mask->row(static_cast<int>(y)), 0, W);
+    }
+  }
 
   // The JPEG's MCU is the block of the grid (packed layout: of the slots).
   int jw = 0, jh = 0, sub = 0, cs = 0;
@@ -863,7 +901,8 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
       declared < bh) {
     return DataLoss("c1.mask: zstd frame size is missing or impossible for the box");
   }
-  thread_local std::vector<uint8_t> rle;
+  C1Scratch& sc = Scratch();
+  std::vector<uint8_t>& rle = sc.rle;
   rle.resize(declared);
   thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> zd(ZSTD_createDCtx(), ZSTD_freeDCtx);
   if (!zd) return Internal("zstd: cannot create a decompression context");
@@ -871,7 +910,8 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   if (ZSTD_isError(got) || got != declared) return DataLoss("c1.mask: zstd data is corrupt");
   const uint8_t* p = rle.data();
   const uint8_t* end = p + rle.size();
-  thread_local std::vector<uint32_t> prev, cur;
+  std::vector<uint32_t>& prev = sc.prev;
+  std::vector<uint32_t>& cur = sc.cur;
   prev.clear();
   for (int y = 0; y < bh; ++y) {
     uint32_t head = 0;
@@ -900,6 +940,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
         return DataLoss("c1.mask: transitions of row " + Str(y) + " out of order or outside the box");
       }
     }
+    if (!fresh) std::memset(mask->row(y0 + y), 0, W);
     uint8_t* row = &mask->at(x0, y0 + y);
     for (size_t i = 0; i < cur.size(); i += 2) {
       const uint32_t stop = i + 1 < cur.size() ? cur[i + 1] : bw;
@@ -918,7 +959,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
                     (packed ? ", the packed blocks need " : ", box is ") + Str(static_cast<uint32_t>(want_w)) +
                     "x" + Str(static_cast<uint32_t>(want_h)));
   }
-  thread_local std::vector<uint8_t> pixels;
+  std::vector<uint8_t>& pixels = sc.pixels;
   const size_t stride = static_cast<size_t>(jw) * 3;
   pixels.resize(stride * static_cast<size_t>(jh));
   if (tjDecompress2(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), pixels.data(), jw, 0, jh,
@@ -931,6 +972,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   // inside), nothing where none is, pixel by pixel at its edges.
   for (int y = 0; y < bh; ++y) {
     const uint8_t* m = &mask->at(x0, y0 + y);
+    if (!fresh) std::memset(image->row(y0 + y), 0, size_t{W} * 3);
     uint8_t* d = &image->at(x0, y0 + y);
     const int32_t* slots = &g.slot[static_cast<size_t>(y / g.by) * g.cols];
     const int in_block_y = y % g.by;

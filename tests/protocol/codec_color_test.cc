@@ -68,6 +68,46 @@ TEST(ColorCodec, C1KeepsTheMaskExactAndTheColorClose) {
   }
 }
 
+// A receiver decodes each pod's stream into the same images frame after
+// frame: whatever they held before (another box, garbage, a failed decode),
+// the result is the same as a decode into fresh images.
+TEST(ColorCodec, DecodeIntoReusedImagesMatchesFreshImages) {
+  ImageRgb8 im;
+  ImageGray8 mask;
+  test::MaskedImage(160, 120, &im, &mask);
+  ImageGray8 moved(160, 120), small(160, 120), empty(160, 120);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      moved.at(x, y) = x >= 37 && y >= 21 ? mask.at(x - 37, y - 21) : 0;
+      small.at(x, y) = (x - 20) * (x - 20) + (y - 15) * (y - 15) < 49 ? 255 : 0;
+    }
+  ColorEncodeOptions o;
+  std::vector<std::vector<uint8_t>> blobs;
+  for (const ImageGray8* m : {&mask, &moved, &small, &empty, &mask}) {
+    blobs.emplace_back();
+    ASSERT_TRUE(EncodeColor(im, *m, o, &blobs.back()).ok());
+  }
+  ImageRgb8 out(160, 120, 77);
+  ImageGray8 out_mask(160, 120, 9);
+  for (size_t i = 0; i < blobs.size(); ++i) {
+    ImageRgb8 fresh;
+    ImageGray8 fresh_mask;
+    ASSERT_TRUE(DecodeColor(blobs[i], &fresh, &fresh_mask).ok());
+    ASSERT_TRUE(DecodeColor(blobs[i], &out, &out_mask).ok()) << i;
+    EXPECT_TRUE(out == fresh) << "blob " << i;
+    EXPECT_TRUE(out_mask == fresh_mask) << "blob " << i;
+    // A truncated blob fails; the next good one is still decoded exactly.
+    std::vector<uint8_t> cut(blobs[i].begin(), blobs[i].begin() + static_cast<long>(blobs[i].size() * 2 / 3));
+    EXPECT_FALSE(DecodeColor(cut, &out, &out_mask).ok()) << i;
+  }
+  ImageRgb8 fresh;
+  ImageGray8 fresh_mask;
+  ASSERT_TRUE(DecodeColor(blobs[1], &fresh, &fresh_mask).ok());
+  ASSERT_TRUE(DecodeColor(blobs[1], &out, &out_mask).ok());
+  EXPECT_TRUE(out == fresh);
+  EXPECT_TRUE(out_mask == fresh_mask);
+}
+
 TEST(ColorCodec, EmptyAndFullMasks) {
   ImageRgb8 im;
   ImageGray8 mask;
