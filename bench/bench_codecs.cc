@@ -562,12 +562,11 @@ int RunCodecs(const BenchArgs& args) {
     o.mask_zstd_level = IntFlag(args, "--mask-zstd-level", o.mask_zstd_level);
     o.huffman_refresh = IntFlag(args, "--huffman-refresh", o.huffman_refresh);
     Figures fig;
-    // As a sender and a receiver would: one blob buffer and one output image
-    // per pod, reused from frame to frame.
+    // As a sender and a receiver would: per pod one encoder, one blob buffer
+    // and one decoder (which keeps its images), reused from frame to frame.
     const size_t npods = inputs.empty() ? 0 : inputs[0].pods.size();
     std::vector<std::vector<uint8_t>> blobs(npods);
-    std::vector<ImageRgb8> outs(npods);
-    std::vector<ImageGray8> masks(npods);
+    std::vector<protocol::ColorDecoder> decoders(npods);
     std::vector<protocol::ColorEncoder> encoders(npods, protocol::ColorEncoder(o));
     for (int rep = 0; rep < args.repeats; ++rep) {
       for (const FrameInput& in : inputs) {
@@ -575,15 +574,13 @@ int RunCodecs(const BenchArgs& args) {
         for (size_t p = 0; p < in.pods.size() && p < npods; ++p) {
           const PodImageInput& pod = in.pods[p];
           std::vector<uint8_t>& blob = blobs[p];
-          ImageRgb8& out = outs[p];
-          ImageGray8& mask = masks[p];
           blob.clear();
           const double c0 = ThreadCpuMs();
           const double t0 = NowMs();
           const Status es = encoders[p].Encode(pod.color, pod.mask, &blob);
           const double t1 = NowMs();
           const double c1 = ThreadCpuMs();
-          const Status ds = protocol::DecodeColor(blob, &out, &mask);
+          const Status ds = decoders[p].Decode(blob);
           const double t2 = NowMs();
           const double c2 = ThreadCpuMs();
           enc_cpu += c1 - c0;
@@ -596,7 +593,7 @@ int RunCodecs(const BenchArgs& args) {
           bytes += static_cast<double>(blob.size());
           enc += t1 - t0;
           dec += t2 - t1;
-          if (rep == 0) psnr += ForegroundPsnr(pod, out) / static_cast<double>(in.pods.size());
+          if (rep == 0) psnr += ForegroundPsnr(pod, decoders[p].image()) / static_cast<double>(in.pods.size());
         }
         fig.bytes.push_back(bytes);
         fig.enc.push_back(enc);

@@ -838,7 +838,11 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   return CompressJpeg(canvas.data(), jw, jh, stride, o, tables, out);
 }
 
-Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* image, ImageGray8* mask) {
+// `known`: when not null and the outputs already have the blob's size, the
+// box the previous decode into them wrote (outside it they are zero).
+// `written`: the box this decode wrote.
+Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* image, ImageGray8* mask,
+                const ColorBox* known, ColorBox* written) {
   uint16_t x0 = 0, y0 = 0, bw = 0, bh = 0;
   HOLO_RETURN_IF_ERROR(r.U16("c1.box_x", &x0));
   HOLO_RETURN_IF_ERROR(r.U16("c1.box_y", &y0));
@@ -858,28 +862,33 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   }
   // Reused outputs (a receiver's per-pod images) are zeroed row by row right
   // before each row is written, while its cache lines are at hand: one pass
-  // over the image instead of a clear of all of it and a second pass over the box.
+  // instead of a clear of everything and a second pass over the box. With a
+  // `known` box only what it covers is cleared besides the new box.
   const bool fresh = image->width() != static_cast<int>(W) || image->height() != static_cast<int>(H) ||
                      mask->width() != static_cast<int>(W) || mask->height() != static_cast<int>(H);
   if (fresh) {
     image->Resize(static_cast<int>(W), static_cast<int>(H));
     mask->Resize(static_cast<int>(W), static_cast<int>(H));
   }
-  if (empty_box) {
-    if (!fresh) {
-      image->Fill(0);
-      mask->Fill(0);
+  const ColorBox dirty = fresh ? ColorBox{} : known ? *known : ColorBox{0, 0, W, H};
+  // The span [first, second) of row `y` to zero before the box's part of it
+  // is written: that part and the dirty box's.
+  auto zero_span = [&](uint32_t y) {
+    uint32_t a = x0, b = uint32_t{x0} + bw;
+    if (y >= dirty.y0 && y < dirty.y0 + dirty.h && dirty.w > 0) {
+      a = b > a ? std::min(a, dirty.x0) : dirty.x0;
+      b = std::max(b, dirty.x0 + dirty.w);
     }
-    return OkStatus();
+    return std::pair<uint32_t, uint32_t>(a, b);
+  };
+  const uint32_t box_y1 = empty_box ? 0 : uint32_t{y0} + bh;
+  for (uint32_t y = dirty.y0; y < dirty.y0 + dirty.h; ++y) {
+    if (!empty_box && y >= y0 && y < box_y1) continue;  // zeroed as it is written
+    std::memset(image->row(static_cast<int>(y)) + size_t{dirty.x0} * 3, 0, size_t{dirty.w} * 3);
+    std::memset(mask->row(static_cast<int>(y)) + dirty.x0, 0, dirty.w);
   }
-  if (!fresh) {
-    for (uint32_t y = 0; y < H; ++y) {
-      if (y == y0) y += bh;
-      if (y >= H) break;
-      std::memset(image->row(static_cast<int>(y)), 0, size_t{W} * 3);
-      std::memset(mask->row(static_cast<int>(y)), 0, W);
-    }
-  }
+  *written = empty_box ? ColorBox{} : ColorBox{x0, y0, bw, bh};
+  if (empty_box) return OkStatus();
 
   // The JPEG's MCU is the block of the grid (packed layout: of the slots).
   int jw = 0, jh = 0, sub = 0, cs = 0;
@@ -940,7 +949,10 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
         return DataLoss("c1.mask: transitions of row " + Str(y) + " out of order or outside the box");
       }
     }
-    if (!fresh) std::memset(mask->row(y0 + y), 0, W);
+    if (!fresh) {
+      const auto [a, b] = zero_span(uint32_t{y0} + y);
+      std::memset(mask->row(y0 + y) + a, 0, b - a);
+    }
     uint8_t* row = &mask->at(x0, y0 + y);
     for (size_t i = 0; i < cur.size(); i += 2) {
       const uint32_t stop = i + 1 < cur.size() ? cur[i + 1] : bw;
@@ -972,7 +984,10 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   // inside), nothing where none is, pixel by pixel at its edges.
   for (int y = 0; y < bh; ++y) {
     const uint8_t* m = &mask->at(x0, y0 + y);
-    if (!fresh) std::memset(image->row(y0 + y), 0, size_t{W} * 3);
+    if (!fresh) {
+      const auto [a, b] = zero_span(uint32_t{y0} + y);
+      std::memset(image->row(y0 + y) + size_t{a} * 3, 0, size_t{b - a} * 3);
+    }
     uint8_t* d = &image->at(x0, y0 + y);
     const int32_t* slots = &g.slot[static_cast<size_t>(y / g.by) * g.cols];
     const int in_block_y = y % g.by;
@@ -1068,7 +1083,12 @@ Status ColorEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std:
   return OkStatus();
 }
 
-Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits) {
+namespace {
+
+// DecodeColor, and for a ColorDecoder with `box` (in: what the previous decode
+// into these images wrote; out: what this one wrote).
+Status DecodeColorInto(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits,
+                       ColorBox* box) {
   ByteReader r(blob);
   uint8_t codec = 0, flags = 0;
   uint16_t w = 0, h = 0;
@@ -1082,9 +1102,15 @@ Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* 
   }
   HOLO_RETURN_IF_ERROR(CheckSize("color.width", w, h, limits));
   Status s;
+  ColorBox written;
   switch (codec) {
-    case static_cast<uint8_t>(ColorCodec::kC0): s = DecodeC0(r, w, h, image, mask); break;
-    case static_cast<uint8_t>(ColorCodec::kC1): s = DecodeC1(r, w, h, (flags & kColorFlagPackedBlocks) != 0, image, mask); break;
+    case static_cast<uint8_t>(ColorCodec::kC0):
+      s = DecodeC0(r, w, h, image, mask);
+      written = ColorBox{0, 0, w, h};
+      break;
+    case static_cast<uint8_t>(ColorCodec::kC1):
+      s = DecodeC1(r, w, h, (flags & kColorFlagPackedBlocks) != 0, image, mask, box, &written);
+      break;
     case static_cast<uint8_t>(ColorCodec::kH264):
       s = UnsupportedVersion("color.codec: H.264 (codec 3) is reserved and not implemented in this build");
       break;
@@ -1093,8 +1119,20 @@ Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* 
   if (!s.ok()) {
     *image = ImageRgb8();
     *mask = ImageGray8();
+    written = ColorBox{};
   }
+  if (box != nullptr) *box = written;
   return s;
+}
+
+}  // namespace
+
+Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits) {
+  return DecodeColorInto(blob, image, mask, limits, nullptr);
+}
+
+Status ColorDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits) {
+  return DecodeColorInto(blob, &image_, &mask_, limits, &box_);
 }
 
 }  // namespace holo::protocol

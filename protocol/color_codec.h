@@ -118,4 +118,30 @@ inline constexpr uint8_t kColorFlagPackedBlocks = 1;
 // at most (box width + 31) × (box height + 15) × 3 bytes, kept per thread.
 Status DecodeColor(std::span<const uint8_t> blob, ImageRgb8* image, ImageGray8* mask, const Limits& limits = {});
 
+// The part of a decoded image that may hold foreground: outside it, the image
+// and the mask are 0. Empty (w = h = 0) when there is no foreground.
+struct ColorBox {
+  uint32_t x0 = 0, y0 = 0, w = 0, h = 0;
+};
+
+// Decodes one stream's colour blobs (one pod's) into images it keeps from
+// blob to blob, as a receiver with one buffer per pod would: the same result
+// as DecodeColor into fresh images, but after the first blob only the
+// previous and the new foreground box are cleared and written, not the whole
+// image (at VGA the foreground box is about a third of it). After an error
+// the images are empty. Not thread-safe: one decoder per stream.
+class ColorDecoder {
+ public:
+  Status Decode(std::span<const uint8_t> blob, const Limits& limits = {});
+  const ImageRgb8& image() const { return image_; }
+  const ImageGray8& mask() const { return mask_; }
+  // What the last successful decode wrote (C0: the whole image).
+  const ColorBox& box() const { return box_; }
+
+ private:
+  ImageRgb8 image_;
+  ImageGray8 mask_;
+  ColorBox box_;
+};
+
 }  // namespace holo::protocol

@@ -56,10 +56,16 @@ int FuzzDecoders(const uint8_t* data, size_t size) {
     case FuzzTarget::kColor: {
       ImageRgb8 image;
       ImageGray8 mask;
-      if (DecodeColor(body, &image, &mask, limits).ok()) {
+      const bool ok = DecodeColor(body, &image, &mask, limits).ok();
+      if (ok) {
         HOLO_CHECK(image.width() == mask.width() && image.height() == mask.height());
         ++decoded;
       }
+      // A stream decoder that decoded the input before (and so clears only
+      // the box it wrote) gives the same images as the fresh decode.
+      thread_local ColorDecoder stream;
+      HOLO_CHECK(stream.Decode(body, limits).ok() == ok);
+      if (ok) HOLO_CHECK_MSG(stream.image() == image && stream.mask() == mask, "stream decode differs from a fresh one");
       break;
     }
   }

@@ -108,6 +108,56 @@ TEST(ColorCodec, DecodeIntoReusedImagesMatchesFreshImages) {
   EXPECT_TRUE(out_mask == fresh_mask);
 }
 
+// A stream decoder clears only the boxes it wrote: over boxes that move,
+// shrink, vanish, a C0 image and a failed blob, each result equals a decode
+// into fresh images.
+TEST(ColorCodec, StreamDecoderMatchesFreshDecodes) {
+  ImageRgb8 im;
+  ImageGray8 mask;
+  test::MaskedImage(160, 120, &im, &mask);
+  ImageGray8 moved(160, 120), small(160, 120), empty(160, 120), corner(160, 120);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      moved.at(x, y) = x >= 37 && y >= 21 ? mask.at(x - 37, y - 21) : 0;
+      small.at(x, y) = (x - 20) * (x - 20) + (y - 15) * (y - 15) < 49 ? 255 : 0;
+      corner.at(x, y) = (x > 150 || y > 110) ? 255 : 0;
+    }
+  ColorEncodeOptions c1, c0;
+  c0.codec = ColorCodec::kC0;
+  std::vector<std::vector<uint8_t>> blobs;
+  auto add = [&](const ImageGray8& m, const ColorEncodeOptions& o) {
+    blobs.emplace_back();
+    ASSERT_TRUE(EncodeColor(im, m, o, &blobs.back()).ok());
+  };
+  add(mask, c1);
+  add(moved, c1);
+  add(small, c1);
+  add(corner, c1);
+  add(empty, c1);
+  add(moved, c1);
+  add(mask, c0);
+  add(small, c1);
+  blobs.push_back(std::vector<uint8_t>(blobs[0].begin(), blobs[0].begin() + 40));  // truncated: an error
+  add(mask, c1);
+  ColorDecoder decoder;
+  for (size_t i = 0; i < blobs.size(); ++i) {
+    ImageRgb8 fresh;
+    ImageGray8 fresh_mask;
+    const bool ok = DecodeColor(blobs[i], &fresh, &fresh_mask).ok();
+    EXPECT_EQ(decoder.Decode(blobs[i]).ok(), ok) << "blob " << i;
+    EXPECT_TRUE(decoder.image() == fresh) << "blob " << i;
+    EXPECT_TRUE(decoder.mask() == fresh_mask) << "blob " << i;
+  }
+  // The box bounds the foreground.
+  ASSERT_TRUE(decoder.Decode(blobs[2]).ok());
+  EXPECT_EQ(decoder.box().x0, 14u);
+  EXPECT_EQ(decoder.box().y0, 9u);
+  EXPECT_EQ(decoder.box().w, 13u);
+  EXPECT_EQ(decoder.box().h, 13u);
+  ASSERT_TRUE(decoder.Decode(blobs[4]).ok());
+  EXPECT_EQ(decoder.box().w, 0u);
+}
+
 TEST(ColorCodec, EmptyAndFullMasks) {
   ImageRgb8 im;
   ImageGray8 mask;
