@@ -591,6 +591,85 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const Color
   return OkStatus();
 }
 
+// One libjpeg decompressor per thread, kept between images. Warnings (a
+// truncated or corrupt but partly decodable JPEG) count as errors: no
+// guessing on the wire.
+struct JpegDecompressor {
+  jpeg_decompress_struct cinfo{};
+  JpegError err{};
+  bool created = false;
+  bool warned = false;
+  JpegDecompressor() = default;
+  JpegDecompressor(const JpegDecompressor&) = delete;
+  JpegDecompressor& operator=(const JpegDecompressor&) = delete;
+  ~JpegDecompressor() {
+    if (created) jpeg_destroy_decompress(&cinfo);
+  }
+};
+void JpegWarning(j_common_ptr cinfo, int level) {
+  if (level >= 0) return;  // trace messages
+  auto* d = static_cast<JpegDecompressor*>(cinfo->client_data);
+  if (!d->warned) (*cinfo->err->format_message)(cinfo, d->err.message);
+  d->warned = true;
+}
+
+// Decodes a `w` × `h` RGB JPEG whose MCU is `mcu_w` × `mcu_h` one MCU row at
+// a time: `on_rows(pixels, stride, k)` gets MCU row k (its rows `stride`
+// bytes apart, the last row possibly short) in one of two buffers that
+// alternate, so row k − 1 is still readable. The rows stay in cache for the
+// caller to scatter instead of a whole decoded image going through memory.
+template <typename OnRows>
+Status DecompressJpegRows(std::span<const uint8_t> jpeg, int w, int h, int mcu_w, int mcu_h,
+                          std::vector<uint8_t>* ring, OnRows&& on_rows) {
+  thread_local JpegDecompressor jd;
+  jpeg_decompress_struct& cinfo = jd.cinfo;
+  if (setjmp(jd.err.jump)) {
+    // Start from a fresh decompressor next time: the failed one may be mid-image.
+    jpeg_destroy_decompress(&cinfo);
+    jd.created = false;
+    return DataLoss(std::string("c1.jpeg: ") + jd.err.message);
+  }
+  if (!jd.created) {
+    cinfo.err = jpeg_std_error(&jd.err.mgr);
+    jd.err.mgr.error_exit = JpegErrorExit;
+    jd.err.mgr.emit_message = JpegWarning;
+    jpeg_create_decompress(&cinfo);
+    cinfo.client_data = &jd;
+    jd.created = true;
+  }
+  jd.warned = false;
+  jpeg_mem_src(&cinfo, jpeg.data(), static_cast<unsigned long>(jpeg.size()));
+  jpeg_read_header(&cinfo, TRUE);
+  if (jd.warned || cinfo.num_components != 3 || static_cast<int>(cinfo.image_width) != w ||
+      static_cast<int>(cinfo.image_height) != h || cinfo.max_h_samp_factor * DCTSIZE != mcu_w ||
+      cinfo.max_v_samp_factor * DCTSIZE != mcu_h) {
+    jpeg_abort_decompress(&cinfo);
+    return DataLoss("c1.jpeg: the JPEG's header does not match its parsed size and sampling");
+  }
+  cinfo.out_color_space = JCS_RGB;
+  cinfo.dct_method = JDCT_ISLOW;
+  jpeg_start_decompress(&cinfo);
+  const size_t stride = static_cast<size_t>(w) * 3;
+  ring->resize(2 * stride * static_cast<size_t>(mcu_h));
+  JSAMPROW rows[2][16];
+  for (int b = 0; b < 2; ++b)
+    for (int i = 0; i < mcu_h; ++i) rows[b][i] = ring->data() + (static_cast<size_t>(b) * mcu_h + i) * stride;
+  for (int k = 0; cinfo.output_scanline < cinfo.output_height && !jd.warned; ++k) {
+    const JDIMENSION start = cinfo.output_scanline;
+    const JDIMENSION stop = std::min<JDIMENSION>(start + static_cast<JDIMENSION>(mcu_h), cinfo.output_height);
+    while (cinfo.output_scanline < stop && !jd.warned)
+      jpeg_read_scanlines(&cinfo, rows[k % 2] + (cinfo.output_scanline - start), stop - cinfo.output_scanline);
+    if (!jd.warned) on_rows(rows[k % 2][0], stride, k);
+  }
+  if (jd.warned) {
+    jpeg_abort_decompress(&cinfo);
+    return DataLoss(std::string("c1.jpeg: ") + jd.err.message);
+  }
+  jpeg_finish_decompress(&cinfo);
+  if (jd.warned) return DataLoss(std::string("c1.jpeg: ") + jd.err.message);
+  return OkStatus();
+}
+
 // The C1 block grid of a `bw` × `bh` box: blocks of one JPEG MCU (`bx` × `by`
 // pixels), `cols` × `rows` of them, and per block its slot in the JPEG image
 // (-1: not coded). Box layout: every block is coded in place. Packed layout
@@ -629,7 +708,7 @@ void AssignSlots(bool packed, BlockGrid* g) {
 struct C1Scratch {
   std::vector<uint8_t> ones, rle, canvas, block_mask, slot_has, pixels;
   std::vector<uint32_t> prev, cur;
-  std::vector<int32_t> occupied;
+  std::vector<int32_t> occupied, last_mcu_row;
 };
 C1Scratch& Scratch() {
   thread_local C1Scratch s;
@@ -971,49 +1050,65 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
                     (packed ? ", the packed blocks need " : ", box is ") + Str(static_cast<uint32_t>(want_w)) +
                     "x" + Str(static_cast<uint32_t>(want_h)));
   }
-  std::vector<uint8_t>& pixels = sc.pixels;
-  const size_t stride = static_cast<size_t>(jw) * 3;
-  pixels.resize(stride * static_cast<size_t>(jh));
-  if (tjDecompress2(Decompressor(), jpeg.data(), static_cast<unsigned long>(jpeg.size()), pixels.data(), jw, 0, jh,
-                    TJPF_RGB, TJFLAG_ACCURATEDCT) != 0) {
-    // Warnings (e.g. a truncated but partly decodable JPEG) are errors here: no guessing on the wire.
-    return DataLoss(std::string("c1.jpeg: ") + tjGetErrorStr2(Decompressor()));
-  }
-  // Each box row's blocks from their slots, eight pixels at a time: a fixed
-  // 24-byte copy where all eight are foreground (most of a silhouette's
-  // inside), nothing where none is, pixel by pixel at its edges.
-  for (int y = 0; y < bh; ++y) {
-    const uint8_t* m = &mask->at(x0, y0 + y);
-    if (!fresh) {
-      const auto [a, b] = zero_span(uint32_t{y0} + y);
-      std::memset(image->row(y0 + y) + size_t{a} * 3, 0, size_t{b - a} * 3);
-    }
-    uint8_t* d = &image->at(x0, y0 + y);
-    const int32_t* slots = &g.slot[static_cast<size_t>(y / g.by) * g.cols];
-    const int in_block_y = y % g.by;
+  // Each box block row is written once the MCU rows holding its slots are
+  // decoded (a block row's slots are consecutive: in at most two MCU rows).
+  // Block rows without slots (packed: no foreground) are only zeroed.
+  std::vector<int32_t>& last_mcu_row = sc.last_mcu_row;
+  last_mcu_row.assign(static_cast<size_t>(g.rows), -1);
+  for (int r = 0; r < g.rows; ++r)
     for (int c = 0; c < g.cols; ++c) {
-      const int32_t slot = slots[c];
-      if (slot < 0) continue;  // packed: the block has no foreground
-      const int bx0 = c * g.bx;
-      const size_t sx = packed ? static_cast<size_t>(g.slot_x(slot)) : static_cast<size_t>(bx0);
-      const size_t sy = packed ? static_cast<size_t>(g.slot_y(slot) + in_block_y) : static_cast<size_t>(y);
-      const uint8_t* src = &pixels[sy * stride + sx * 3];
-      const int n = std::min(g.bx, bw - bx0);
-      for (int i = 0; i < n; i += 8) {
-        const int x = bx0 + i;
-        if (i + 8 <= n) {
-          uint64_t v;
-          std::memcpy(&v, m + x, 8);
-          if (v == ~uint64_t{0}) {
-            std::memcpy(d + x * 3, src + i * 3, 24);
-            continue;
+      const int32_t slot = g.slot[static_cast<size_t>(r) * g.cols + c];
+      if (slot >= 0) last_mcu_row[r] = std::max(last_mcu_row[r], slot / g.cols);
+    }
+  int next_row = 0;  // the next block row to write
+  const uint8_t* mcu_rows[2] = {nullptr, nullptr};
+  size_t stride = 0;
+  // Writes box block row `r` from the decoded MCU rows, eight pixels at a
+  // time: a fixed 24-byte copy where all eight are foreground (most of a
+  // silhouette's inside), nothing where none is, pixel by pixel at its edges.
+  auto write_block_row = [&](int r) {
+    for (int y = r * g.by; y < std::min<int>(bh, (r + 1) * g.by); ++y) {
+      const uint8_t* m = &mask->at(x0, y0 + y);
+      if (!fresh) {
+        const auto [a, b] = zero_span(uint32_t{y0} + y);
+        std::memset(image->row(y0 + y) + size_t{a} * 3, 0, size_t{b - a} * 3);
+      }
+      uint8_t* d = &image->at(x0, y0 + y);
+      const int32_t* slots = &g.slot[static_cast<size_t>(r) * g.cols];
+      const size_t in_block_y = static_cast<size_t>(y - r * g.by);
+      for (int c = 0; c < g.cols; ++c) {
+        const int32_t slot = slots[c];
+        if (slot < 0) continue;  // packed: the block has no foreground
+        const int bx0 = c * g.bx;
+        const uint8_t* src = mcu_rows[(slot / g.cols) % 2] + in_block_y * stride + static_cast<size_t>(g.slot_x(slot)) * 3;
+        const int n = std::min(g.bx, bw - bx0);
+        for (int i = 0; i < n; i += 8) {
+          const int x = bx0 + i;
+          if (i + 8 <= n) {
+            uint64_t v;
+            std::memcpy(&v, m + x, 8);
+            if (v == ~uint64_t{0}) {
+              std::memcpy(d + x * 3, src + i * 3, 24);
+              continue;
+            }
+            if (v == 0) continue;
           }
-          if (v == 0) continue;
+          for (int j = i; j < std::min(n, i + 8); ++j)
+            if (m[bx0 + j]) std::memcpy(d + (bx0 + j) * 3, src + j * 3, 3);
         }
-        for (int j = i; j < std::min(n, i + 8); ++j)
-          if (m[bx0 + j]) std::memcpy(d + (bx0 + j) * 3, src + j * 3, 3);
       }
     }
+  };
+  HOLO_RETURN_IF_ERROR(DecompressJpegRows(jpeg, jw, jh, g.bx, g.by, &sc.pixels,
+                                          [&](const uint8_t* rows, size_t row_stride, int k) {
+                                            mcu_rows[k % 2] = rows;
+                                            stride = row_stride;
+                                            while (next_row < g.rows && last_mcu_row[next_row] <= k)
+                                              write_block_row(next_row++);
+                                          }));
+  while (next_row < g.rows) {
+    if (last_mcu_row[next_row] >= 0) return DataLoss("c1.jpeg: fewer MCU rows than the blocks need");
+    write_block_row(next_row++);
   }
   return OkStatus();
 }
