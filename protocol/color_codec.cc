@@ -511,7 +511,11 @@ void CompleteTable(bool dc, const JHUFF_TBL& t, uint8_t* bits, uint8_t* values) 
 // Baseline JPEG of `w` × `h` RGB8 pixels (rows `stride` bytes apart),
 // quantization, subsampling, DCT and Huffman optimization from `o`, appended
 // to `out` behind a u32 length (a blob32).
-Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const ColorEncodeOptions& o,
+// Compresses a `w` × `h` RGB image given one MCU row (`mcu_h` pixel rows) at
+// a time: `mcu_row(k)` returns row k's first pixel row, the others `stride`
+// bytes apart (its buffer may be reused for the next row).
+template <typename McuRow>
+Status CompressJpeg(int w, int h, int mcu_h, size_t stride, McuRow&& mcu_row, const ColorEncodeOptions& o,
                     HuffmanTables* tables, std::vector<uint8_t>* out) {
   const bool use_tables = tables != nullptr && tables->valid && o.optimize_huffman;
   const bool optimize = o.optimize_huffman && !use_tables;
@@ -574,10 +578,13 @@ Status CompressJpeg(const uint8_t* rgb, int w, int h, size_t stride, const Color
   for (int c = 1; c < 3; ++c) cinfo.comp_info[c].h_samp_factor = cinfo.comp_info[c].v_samp_factor = 1;
   jpeg_start_compress(&cinfo, TRUE);
   JSAMPROW rows[16];
-  while (cinfo.next_scanline < cinfo.image_height) {
-    const JDIMENSION n = std::min<JDIMENSION>(16, cinfo.image_height - cinfo.next_scanline);
-    for (JDIMENSION i = 0; i < n; ++i) rows[i] = const_cast<JSAMPROW>(rgb + (cinfo.next_scanline + i) * stride);
-    jpeg_write_scanlines(&cinfo, rows, n);
+  for (int k = 0; cinfo.next_scanline < cinfo.image_height; ++k) {
+    const uint8_t* first = mcu_row(k);
+    const JDIMENSION start = cinfo.next_scanline;
+    const JDIMENSION stop = std::min<JDIMENSION>(start + static_cast<JDIMENSION>(mcu_h), cinfo.image_height);
+    for (JDIMENSION i = 0; i < stop - start; ++i) rows[i] = const_cast<JSAMPROW>(first + i * stride);
+    while (cinfo.next_scanline < stop)
+      jpeg_write_scanlines(&cinfo, rows + (cinfo.next_scanline - start), stop - cinfo.next_scanline);
   }
   jpeg_finish_compress(&cinfo);
   cinfo.dest = nullptr;
@@ -706,9 +713,9 @@ void AssignSlots(bool packed, BlockGrid* g) {
 // through one reference per call: each thread_local access from a shared
 // library may be a __tls_get_addr call.
 struct C1Scratch {
-  std::vector<uint8_t> ones, rle, canvas, block_mask, slot_has, pixels;
+  std::vector<uint8_t> ones, rle, canvas, block_mask, pixels;
   std::vector<uint32_t> prev, cur;
-  std::vector<int32_t> occupied, last_mcu_row;
+  std::vector<int32_t> occupied, block_of_slot, last_mcu_row;
 };
 C1Scratch& Scratch() {
   thread_local C1Scratch s;
@@ -800,13 +807,14 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   occupied = g.slot;  // 1: the block holds foreground
   AssignSlots(o.pack_blocks, &g);
   const int jw = g.jpeg_width(o.pack_blocks, bw), jh = g.jpeg_height(o.pack_blocks, bh);
-  // The canvas holds whole blocks: the box's grid, or the packed slots.
-  const int cw = g.cols * g.bx, ch = o.pack_blocks ? jh : g.rows * g.by;
-  const size_t stride = static_cast<size_t>(cw) * 3;
+  // The JPEG's rows are made one MCU row (one row of slots) at a time, just
+  // before libjpeg reads them: the row buffer stays in cache.
+  const int ch = o.pack_blocks ? jh : g.rows * g.by;
+  const size_t stride = static_cast<size_t>(g.cols) * g.bx * 3;
   const int32_t slots = (ch / g.by) * g.cols;
   std::vector<uint8_t>& canvas = sc.canvas;
   std::vector<uint8_t>& block_mask = sc.block_mask;
-  canvas.resize(stride * ch);
+  canvas.resize(stride * g.by);
   block_mask.resize(static_cast<size_t>(g.bx) * g.by);
   uint8_t mean_fill[3] = {128, 128, 128};
   if (o.fill == ColorEncodeOptions::Fill::kMean) {
@@ -822,99 +830,99 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
     }
     for (int k = 0; k < 3; ++k) mean_fill[k] = static_cast<uint8_t>(sum[k] / count);
   }
-  std::vector<uint8_t>& slot_has = sc.slot_has;  // slot holds foreground (else flat)
-  slot_has.assign(static_cast<size_t>(slots), 0);
-  for (int r = 0; r < g.rows; ++r) {
-    for (int c = 0; c < g.cols; ++c) {
-      const size_t bi = static_cast<size_t>(r) * g.cols + c;
-      const int32_t s = g.slot[bi];
-      if (s < 0 || !occupied[bi]) continue;  // flat, below
-      slot_has[s] = 1;
-      uint8_t* dst = &canvas[static_cast<size_t>(g.slot_y(s)) * stride + static_cast<size_t>(g.slot_x(s)) * 3];
-      const int px = x0 + c * g.bx, py = y0 + r * g.by;
-      const int run = std::min(g.bx, x1 + 1 - px);  // pixels of the block row inside the box
-      if (g.bx == 8 && run == 8 && py + 7 <= y1) {
-        // The common case, an 8 × 8 block inside the box: fixed-size copies
-        // (inlined moves, not a library call per row) and a word test per row.
-        constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
-        uint64_t zeros = 0;  // high bit set in the bytes of background pixels
-        for (int y = 0; y < 8; ++y) {
-          std::memcpy(dst + y * stride, &image.at(px, py + y), 24);
-          uint64_t v;
-          std::memcpy(&v, mask_row(py + y) + px, 8);
-          std::memcpy(&block_mask[static_cast<size_t>(y) * 8], &v, 8);
-          zeros |= (v - kOnes) & ~v & kHighs;
-        }
-        if (zeros == 0) continue;
-        if (o.fill == ColorEncodeOptions::Fill::kMean) {
-          for (int i = 0; i < 64; ++i)
-            if (!block_mask[i]) std::memcpy(dst + (i / 8) * stride + (i % 8) * 3, mean_fill, 3);
-        } else {
-          PushPull8(block_mask.data(), dst, stride);
-        }
+  // Per slot the block it holds (-1: a flat slot, no foreground).
+  std::vector<int32_t>& block_of_slot = sc.block_of_slot;
+  block_of_slot.assign(static_cast<size_t>(slots), -1);
+  for (size_t bi = 0; bi < g.slot.size(); ++bi)
+    if (g.slot[bi] >= 0 && occupied[bi]) block_of_slot[static_cast<size_t>(g.slot[bi])] = static_cast<int32_t>(bi);
+  // Block `bi`'s pixels into `dst` (rows `stride` apart), its background filled.
+  auto make_block = [&](int32_t bi, uint8_t* dst) {
+    const int r = bi / g.cols, c = bi % g.cols;
+    const int px = x0 + c * g.bx, py = y0 + r * g.by;
+    const int run = std::min(g.bx, x1 + 1 - px);  // pixels of the block row inside the box
+    if (g.bx == 8 && run == 8 && py + 7 <= y1) {
+      // The common case, an 8 × 8 block inside the box: fixed-size copies
+      // (inlined moves, not a library call per row) and a word test per row.
+      constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
+      uint64_t zeros = 0;  // high bit set in the bytes of background pixels
+      for (int y = 0; y < 8; ++y) {
+        std::memcpy(dst + y * stride, &image.at(px, py + y), 24);
+        uint64_t v;
+        std::memcpy(&v, mask_row(py + y) + px, 8);
+        std::memcpy(&block_mask[static_cast<size_t>(y) * 8], &v, 8);
+        zeros |= (v - kOnes) & ~v & kHighs;
+      }
+      if (zeros == 0) return;
+      if (o.fill == ColorEncodeOptions::Fill::kMean) {
+        for (int i = 0; i < 64; ++i)
+          if (!block_mask[i]) std::memcpy(dst + (i / 8) * stride + (i % 8) * 3, mean_fill, 3);
+      } else {
+        PushPull8(block_mask.data(), dst, stride);
+      }
+      return;
+    }
+    bool full = run == g.bx;
+    for (int y = 0; y < g.by; ++y) {
+      uint8_t* bm = &block_mask[static_cast<size_t>(y) * g.bx];
+      if (py + y > y1) {
+        std::memset(bm, 0, g.bx);
+        full = false;
         continue;
       }
-      bool full = run == g.bx;
-      for (int y = 0; y < g.by; ++y) {
-        uint8_t* bm = &block_mask[static_cast<size_t>(y) * g.bx];
-        if (py + y > y1) {
-          std::memset(bm, 0, g.bx);
-          full = false;
-          continue;
-        }
-        const uint8_t* m = mask_row(py + y) + px;
-        std::memcpy(dst + y * stride, &image.at(px, py + y), static_cast<size_t>(run) * 3);
-        std::memcpy(bm, m, run);
-        std::memset(bm + run, 0, g.bx - run);
-        full = full && FirstClear(m, run) < 0;
-      }
-      if (full) continue;
-      if (o.fill == ColorEncodeOptions::Fill::kMean) {
-        for (int y = 0; y < g.by; ++y)
-          for (int x = 0; x < g.bx; ++x)
-            if (!block_mask[y * g.bx + x]) std::memcpy(dst + y * stride + x * 3, mean_fill, 3);
-      } else if (g.bx == 8) {
-        PushPull8(block_mask.data(), dst, stride);
-      } else {
-        PushPullBlock<16>(block_mask.data(), dst, stride);
-      }
+      const uint8_t* m = mask_row(py + y) + px;
+      std::memcpy(dst + y * stride, &image.at(px, py + y), static_cast<size_t>(run) * 3);
+      std::memcpy(bm, m, run);
+      std::memset(bm + run, 0, g.bx - run);
+      full = full && FirstClear(m, run) < 0;
     }
-  }
-  // Flat slots: the blocks without foreground and the padding slots, in the
-  // mean colour of the last slot before them with foreground (leading ones:
-  // the first such slot's).
-  auto slot_mean = [&](int32_t s) {
-    const uint8_t* p = &canvas[static_cast<size_t>(g.slot_y(s)) * stride + static_cast<size_t>(g.slot_x(s)) * 3];
+    if (full) return;
+    if (o.fill == ColorEncodeOptions::Fill::kMean) {
+      for (int y = 0; y < g.by; ++y)
+        for (int x = 0; x < g.bx; ++x)
+          if (!block_mask[y * g.bx + x]) std::memcpy(dst + y * stride + x * 3, mean_fill, 3);
+    } else if (g.bx == 8) {
+      PushPull8(block_mask.data(), dst, stride);
+    } else {
+      PushPullBlock<16>(block_mask.data(), dst, stride);
+    }
+  };
+  auto block_mean = [&](const uint8_t* p, size_t row_stride) {
     uint32_t sum[3] = {0, 0, 0};
     for (int y = 0; y < g.by; ++y)
       for (int x = 0; x < g.bx; ++x)
-        for (int k = 0; k < 3; ++k) sum[k] += p[y * stride + x * 3 + k];
+        for (int k = 0; k < 3; ++k) sum[k] += p[y * row_stride + x * 3 + k];
     const uint32_t n = static_cast<uint32_t>(g.bx * g.by);
     std::array<uint8_t, 3> m;
     for (int k = 0; k < 3; ++k) m[k] = static_cast<uint8_t>((sum[k] + n / 2) / n);
     return m;
   };
-  int32_t source = -1;  // the slot whose mean `fill` is
+  // Flat slots (blocks without foreground, the padding slots) take the mean
+  // colour of the last slot before them with foreground; leading ones the
+  // first such slot's.
   std::array<uint8_t, 3> fill{128, 128, 128};
-  for (int32_t s = 0; s < slots; ++s) {
-    if (slot_has[s]) continue;
-    int32_t want = s - 1;
-    while (want >= 0 && !slot_has[want]) --want;
-    if (want < 0) {
-      want = s + 1;
-      while (want < slots && !slot_has[want]) ++want;
-    }
-    if (want != source && want < slots) {
-      fill = slot_mean(want);
-      source = want;
-    }
-    const int sx = g.slot_x(s), sy = g.slot_y(s);
-    for (int y = 0; y < g.by; ++y) {
-      uint8_t* d = &canvas[static_cast<size_t>(sy + y) * stride + static_cast<size_t>(sx) * 3];
-      for (int x = 0; x < g.bx; ++x) std::memcpy(d + x * 3, fill.data(), 3);
+  if (slots > 0 && block_of_slot[0] < 0) {
+    int32_t first = 0;
+    while (first < slots && block_of_slot[first] < 0) ++first;
+    if (first < slots) {  // made once more when its row comes
+      make_block(block_of_slot[first], canvas.data());
+      fill = block_mean(canvas.data(), stride);
     }
   }
-  return CompressJpeg(canvas.data(), jw, jh, stride, o, tables, out);
+  auto mcu_row = [&](int k) -> const uint8_t* {
+    for (int32_t s = k * g.cols; s < (k + 1) * g.cols && s < slots; ++s) {
+      uint8_t* dst = canvas.data() + static_cast<size_t>(s - k * g.cols) * g.bx * 3;
+      const int32_t bi = block_of_slot[s];
+      if (bi >= 0) {
+        make_block(bi, dst);
+        if (s + 1 < slots && block_of_slot[s + 1] < 0) fill = block_mean(dst, stride);
+        continue;
+      }
+      for (int y = 0; y < g.by; ++y)
+        for (int x = 0; x < g.bx; ++x) std::memcpy(dst + y * stride + x * 3, fill.data(), 3);
+    }
+    return canvas.data();
+  };
+  return CompressJpeg(jw, jh, g.by, stride, mcu_row, o, tables, out);
 }
 
 // `known`: when not null and the outputs already have the blob's size, the
