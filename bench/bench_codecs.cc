@@ -35,6 +35,7 @@
 #include <vector>
 
 #include <Eigen/Geometry>
+#include <turbojpeg.h>
 
 #include "bench.h"
 #include "common/image.h"
@@ -401,7 +402,7 @@ int RunCodecs(const BenchArgs& args) {
     EmitFigure("codecs", workload, metric, v, unit, q);
   };
 
-  std::map<std::string, double> bytes_of;
+  std::map<std::string, double> bytes_of, codec_cpu_of;
   // ---- geometry
   struct GeomRun {
     std::string name;
@@ -619,9 +620,90 @@ int RunCodecs(const BenchArgs& args) {
     emit(name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
     emit(name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
     emit(name, "codec_cpu_ms", Median(fig.enc_cpu) + Median(fig.dec_cpu), "ms", extra);
+    codec_cpu_of[name] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
     // The mean includes the frames whose Huffman tables were optimized (one in huffman_refresh per pod).
     emit(name, "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
     emit(name, "color_psnr_db", Median(fig.a), "dB", extra);
+  }
+
+  // ---- peer for C1's time: plain TurboJPEG (4:4:4, standard tables, accurate
+  // DCT) of each pod's foreground bounding box as it is, encoded and decoded
+  // into buffers kept between frames — the least work a JPEG-of-the-box
+  // codec does. Its time prices the same machine's JPEG speed in this run.
+  if (wanted("C1") || wanted("jpeg-box")) {
+    const int quality = IntFlag(args, "--peer-jpeg-quality", 90);
+    tjhandle enc_h = tjInitCompress(), dec_h = tjInitDecompress();
+    if (enc_h == nullptr || dec_h == nullptr) {
+      std::fprintf(stderr, "codecs: TurboJPEG handles: %s\n", tjGetErrorStr2(nullptr));
+      return 1;
+    }
+    Figures fig;
+    std::vector<unsigned char> jpeg, pixels;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      for (const FrameInput& in : inputs) {
+        double bytes = 0, enc_cpu = 0, dec_cpu = 0, psnr_sum = 0;
+        for (const PodImageInput& pod : in.pods) {
+          const int W = pod.color.width(), H = pod.color.height();
+          int x0 = W, y0 = H, x1 = -1, y1 = -1;
+          for (int y = 0; y < H; ++y)
+            for (int x = 0; x < W; ++x)
+              if (pod.mask.empty() || pod.mask.at(x, y)) {
+                x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+              }
+          if (x1 < 0) continue;
+          const int bw = x1 - x0 + 1, bh = y1 - y0 + 1;
+          jpeg.resize(tjBufSize(bw, bh, TJSAMP_444));
+          pixels.resize(static_cast<size_t>(bw) * bh * 3);
+          unsigned char* dst = jpeg.data();
+          unsigned long size = jpeg.size();
+          const double c0 = ThreadCpuMs();
+          const int e = tjCompress2(enc_h, &pod.color.at(x0, y0), bw, W * 3, bh, TJPF_RGB, &dst, &size, TJSAMP_444,
+                                    quality, TJFLAG_ACCURATEDCT | TJFLAG_NOREALLOC);
+          const double c1 = ThreadCpuMs();
+          const int d = e != 0 ? -1
+                               : tjDecompress2(dec_h, jpeg.data(), size, pixels.data(), bw, bw * 3, bh, TJPF_RGB,
+                                               TJFLAG_ACCURATEDCT);
+          const double c2 = ThreadCpuMs();
+          if (e != 0 || d != 0) {
+            std::fprintf(stderr, "codecs: jpeg-box peer failed: %s\n", tjGetErrorStr2(e != 0 ? enc_h : dec_h));
+            return 1;
+          }
+          bytes += static_cast<double>(size);
+          enc_cpu += c1 - c0;
+          dec_cpu += c2 - c1;
+          if (rep == 0) {
+            double se = 0;
+            size_t n = 0;
+            for (int y = 0; y < bh; ++y)
+              for (int x = 0; x < bw; ++x) {
+                if (!pod.mask.empty() && !pod.mask.at(x0 + x, y0 + y)) continue;
+                for (int c = 0; c < 3; ++c) {
+                  const double diff = static_cast<double>(pod.color.at(x0 + x, y0 + y, c)) - pixels[(static_cast<size_t>(y) * bw + x) * 3 + c];
+                  se += diff * diff;
+                }
+                n += 3;
+              }
+            psnr_sum += se == 0 ? 99.0 : std::min(99.0, 10 * std::log10(255.0 * 255.0 / (se / n)));
+          }
+        }
+        fig.bytes.push_back(bytes);
+        fig.enc_cpu.push_back(enc_cpu);
+        fig.dec_cpu.push_back(dec_cpu);
+        if (rep == 0) fig.a.push_back(psnr_sum / static_cast<double>(std::max<size_t>(1, in.pods.size())));
+      }
+    }
+    tjDestroy(enc_h);
+    tjDestroy(dec_h);
+    const std::map<std::string, std::string> extra{{"peer", "turbojpeg"}, {"jpeg_quality", std::to_string(quality)},
+                                                   {"chroma", "444"}};
+    const double peer_ms = Median(fig.enc_cpu) + Median(fig.dec_cpu);
+    emit("jpeg-box", "bytes_per_frame", Median(fig.bytes), "B", extra);
+    emit("jpeg-box", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit("jpeg-box", "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit("jpeg-box", "codec_cpu_ms", peer_ms, "ms", extra);
+    emit("jpeg-box", "color_psnr_db", Median(fig.a), "dB", extra);
+    if (codec_cpu_of.count("C1") && peer_ms > 0)
+      emit("C1", "codec_cpu_ratio_vs_jpeg_box", codec_cpu_of["C1"] / peer_ms, "1", {{"peer", "turbojpeg"}});
   }
   emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
   emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
