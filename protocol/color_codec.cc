@@ -258,8 +258,8 @@ void PushPullBlock(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     }
 }
 
+// Eight 16-bit lanes (GCC and Clang vector extension; SSE2 on x86-64).
 using U16x8 = uint16_t __attribute__((vector_size(16)));
-using I16x8 = int16_t __attribute__((vector_size(16)));
 // Mean of `n` (0–4) values summing to `sum`, rounded (0 when n = 0).
 inline int32_t MeanOf(int32_t sum, int n) {
   static constexpr int32_t kRecip[5] = {0, 65536, 32768, 21846, 16384};
@@ -318,16 +318,17 @@ void PushPull8(const uint8_t* fg, uint8_t* rgb, size_t stride) {
   // Level 0: every pixel's bilinear value from level 1, eight at a time
   // (16-bit lanes: 4080 × 16 fits), then written where the pixel is a hole.
   const U16x8 w0 = {4, 3, 1, 3, 1, 3, 1, 4}, w1 = {0, 1, 3, 1, 3, 1, 3, 0};
-  const I16x8 i0 = {0, 0, 0, 1, 1, 2, 2, 3}, i1 = {0, 1, 1, 2, 2, 3, 3, 3};
   static constexpr int kJ0[8] = {0, 0, 0, 1, 1, 2, 2, 3}, kJ1[8] = {0, 1, 1, 2, 2, 3, 3, 3};
   static constexpr uint16_t kV0[8] = {4, 3, 1, 3, 1, 3, 1, 4}, kV1[8] = {0, 1, 3, 1, 3, 1, 3, 0};
   uint8_t out[3][64];
   for (int k = 0; k < 3; ++k) {
     U16x8 h[4];
     for (int j = 0; j < 4; ++j) {
-      const U16x8 row = {static_cast<uint16_t>(v1[k][j * 4]), static_cast<uint16_t>(v1[k][j * 4 + 1]),
-                         static_cast<uint16_t>(v1[k][j * 4 + 2]), static_cast<uint16_t>(v1[k][j * 4 + 3]), 0, 0, 0, 0};
-      h[j] = __builtin_shuffle(row, i0) * w0 + __builtin_shuffle(row, i1) * w1;
+      // The left and right level-1 neighbours of each of the 8 pixels.
+      const uint16_t a = static_cast<uint16_t>(v1[k][j * 4]), b = static_cast<uint16_t>(v1[k][j * 4 + 1]),
+                     c = static_cast<uint16_t>(v1[k][j * 4 + 2]), d = static_cast<uint16_t>(v1[k][j * 4 + 3]);
+      const U16x8 left = {a, a, a, b, b, c, c, d}, right = {a, b, b, c, c, d, d, d};
+      h[j] = left * w0 + right * w1;
     }
     for (int y = 0; y < 8; ++y) {
       const U16x8 v = (h[kJ0[y]] * kV0[y] + h[kJ1[y]] * kV1[y] + 128) >> 8;
