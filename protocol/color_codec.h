@@ -89,7 +89,8 @@ Status EncodeColor(const ImageRgb8& image, const ImageGray8& mask, const ColorEn
 // EncodeColor, but with optimize_huffman the C1 Huffman tables are optimized
 // on the first image and then on one image in options.huffman_refresh, and
 // reused in between. Every blob is still a complete JPEG (its tables in its
-// header): decoders keep no state, and a receiver can start at any blob.
+// header): decoding needs nothing from earlier blobs (a ColorDecoder keeps
+// only its images), and a receiver can start at any blob.
 // Not thread-safe: one encoder per stream.
 class ColorEncoder {
  public:
