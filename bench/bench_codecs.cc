@@ -1,8 +1,9 @@
 // holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
 //                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444|--chroma420] [--chroma-shift=S]
 //                       [--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
-//                       [--mask-zstd-level=L] [--huffman-refresh=N] [--hash]
-// (--hash prints a hash of every geometry blob of the first repeat to stderr.)
+//                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
+// (--hash prints a hash of every geometry blob of the first repeat to stderr;
+// --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
 //
 // Times are medians over frames × repeats, wall (`encode_ms`) and thread CPU
 // (`encode_cpu_ms`, robust to other load on a shared machine). G1 runs as
