@@ -317,9 +317,13 @@ void PushPull8(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     }
   // Level 0: every pixel's bilinear value from level 1, eight at a time
   // (16-bit lanes: 4080 × 16 fits), then written where the pixel is a hole.
-  const U16x8 w0 = {4, 3, 1, 3, 1, 3, 1, 4}, w1 = {0, 1, 3, 1, 3, 1, 3, 0};
+  // Fine cell i's coarse neighbours kJ0[i], kJ1[i] and their weights (quarters),
+  // the same along x (as lanes) and along y.
   static constexpr int kJ0[8] = {0, 0, 0, 1, 1, 2, 2, 3}, kJ1[8] = {0, 1, 1, 2, 2, 3, 3, 3};
   static constexpr uint16_t kV0[8] = {4, 3, 1, 3, 1, 3, 1, 4}, kV1[8] = {0, 1, 3, 1, 3, 1, 3, 0};
+  U16x8 w0, w1;
+  std::memcpy(&w0, kV0, sizeof w0);
+  std::memcpy(&w1, kV1, sizeof w1);
   uint8_t out[3][64];
   for (int k = 0; k < 3; ++k) {
     U16x8 h[4];
