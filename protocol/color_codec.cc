@@ -720,6 +720,7 @@ void AssignSlots(bool packed, BlockGrid* g) {
 struct C1Scratch {
   std::vector<uint8_t> ones, rle, canvas, block_mask, pixels;
   std::vector<uint32_t> prev, cur;
+  std::vector<uint32_t> transitions, row_at;  // decoder: every box row's transitions
   std::vector<int32_t> occupied, block_of_slot, last_mcu_row;
 };
 C1Scratch& Scratch() {
@@ -1014,6 +1015,11 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   std::vector<uint32_t>& prev = sc.prev;
   std::vector<uint32_t>& cur = sc.cur;
   prev.clear();
+  // Kept for the pixels: row y's transitions are transitions[row_at[y], row_at[y + 1]).
+  std::vector<uint32_t>& transitions = sc.transitions;
+  std::vector<uint32_t>& row_at = sc.row_at;
+  transitions.clear();
+  row_at.assign(static_cast<size_t>(bh) + 1, 0);
   for (int y = 0; y < bh; ++y) {
     uint32_t head = 0;
     if (!GetVarint(p, end, &head)) return DataLoss("c1.mask: row " + Str(y) + " ends early");
@@ -1051,6 +1057,8 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
       std::memset(row + cur[i], 255, stop - cur[i]);
     }
     if (packed) MarkRow(cur, bw, y, &g);
+    transitions.insert(transitions.end(), cur.begin(), cur.end());
+    row_at[static_cast<size_t>(y) + 1] = static_cast<uint32_t>(transitions.size());
     prev.swap(cur);
   }
   if (p != end) return DataLoss("c1.mask: trailing run lengths");
@@ -1076,38 +1084,37 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   int next_row = 0;  // the next block row to write
   const uint8_t* mcu_rows[2] = {nullptr, nullptr};
   size_t stride = 0;
-  // Writes box block row `r` from the decoded MCU rows, eight pixels at a
-  // time: a fixed 24-byte copy where all eight are foreground (most of a
-  // silhouette's inside), nothing where none is, pixel by pixel at its edges.
+  // Writes box block row `r` from the decoded MCU rows: per pixel row, its
+  // foreground runs (the mask's transitions), each cut at the block edges
+  // and copied from the blocks' slots — a fixed-size copy for a whole block
+  // row (most of a silhouette's inside). Every block a run touches has a
+  // slot (packed: MarkRow marked it).
   auto write_block_row = [&](int r) {
+    const int32_t* slots = &g.slot[static_cast<size_t>(r) * g.cols];
     for (int y = r * g.by; y < std::min<int>(bh, (r + 1) * g.by); ++y) {
-      const uint8_t* m = &mask->at(x0, y0 + y);
       if (!fresh) {
         const auto [a, b] = zero_span(uint32_t{y0} + y);
         std::memset(image->row(y0 + y) + size_t{a} * 3, 0, size_t{b - a} * 3);
       }
       uint8_t* d = &image->at(x0, y0 + y);
-      const int32_t* slots = &g.slot[static_cast<size_t>(r) * g.cols];
-      const size_t in_block_y = static_cast<size_t>(y - r * g.by);
-      for (int c = 0; c < g.cols; ++c) {
-        const int32_t slot = slots[c];
-        if (slot < 0) continue;  // packed: the block has no foreground
-        const int bx0 = c * g.bx;
-        const uint8_t* src = mcu_rows[(slot / g.cols) % 2] + in_block_y * stride + static_cast<size_t>(g.slot_x(slot)) * 3;
-        const int n = std::min(g.bx, bw - bx0);
-        for (int i = 0; i < n; i += 8) {
-          const int x = bx0 + i;
-          if (i + 8 <= n) {
-            uint64_t v;
-            std::memcpy(&v, m + x, 8);
-            if (v == ~uint64_t{0}) {
-              std::memcpy(d + x * 3, src + i * 3, 24);
-              continue;
-            }
-            if (v == 0) continue;
+      const size_t in_block_y = static_cast<size_t>(y - r * g.by) * stride;
+      const uint32_t* t = transitions.data() + row_at[static_cast<size_t>(y)];
+      const uint32_t nt = row_at[static_cast<size_t>(y) + 1] - row_at[static_cast<size_t>(y)];
+      for (uint32_t i = 0; i < nt; i += 2) {
+        const uint32_t start = t[i], stop = i + 1 < nt ? t[i + 1] : bw;
+        for (uint32_t x = start; x < stop;) {
+          const uint32_t c = x / static_cast<uint32_t>(g.bx), bx0 = c * static_cast<uint32_t>(g.bx);
+          const uint32_t end = std::min(stop, bx0 + static_cast<uint32_t>(g.bx));
+          const int32_t slot = slots[c];
+          if (slot >= 0) {
+            const uint8_t* src = mcu_rows[(slot / g.cols) % 2] + in_block_y +
+                                 (static_cast<size_t>(g.slot_x(slot)) + (x - bx0)) * 3;
+            if (end - x == static_cast<uint32_t>(g.bx) && g.bx == 8)
+              std::memcpy(d + size_t{x} * 3, src, 24);
+            else
+              std::memcpy(d + size_t{x} * 3, src, size_t{end - x} * 3);
           }
-          for (int j = i; j < std::min(n, i + 8); ++j)
-            if (m[bx0 + j]) std::memcpy(d + (bx0 + j) * 3, src + j * 3, 3);
+          x = end;
         }
       }
     }
