@@ -1,6 +1,6 @@
 // holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
 //                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444|--chroma420] [--chroma-shift=S]
-//                       [--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
+//                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
 // (--hash prints a hash of every geometry blob of the first repeat to stderr;
 // --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
@@ -557,6 +557,8 @@ int RunCodecs(const BenchArgs& args) {
     if (HasFlag(args, "--chroma444")) o.chroma_420 = false;
     if (HasFlag(args, "--chroma420")) o.chroma_420 = true;
     if (HasFlag(args, "--fill-mean")) o.fill = protocol::ColorEncodeOptions::Fill::kMean;
+    if (HasFlag(args, "--fill-pad")) o.fill = protocol::ColorEncodeOptions::Fill::kPad;
+    if (HasFlag(args, "--fill-push-pull")) o.fill = protocol::ColorEncodeOptions::Fill::kPushPull;
     if (HasFlag(args, "--fast-dct")) o.accurate_dct = false;
     if (HasFlag(args, "--quant-standard")) o.quant = protocol::ColorEncodeOptions::Quant::kStandard;
     if (HasFlag(args, "--no-optimize-huffman")) o.optimize_huffman = false;
@@ -612,6 +614,9 @@ int RunCodecs(const BenchArgs& args) {
       extra["jpeg_quality"] = std::to_string(o.jpeg_quality);
       extra["chroma"] = o.chroma_420 ? "420" : "444";
       extra["layout"] = o.pack_blocks ? "packed" : "box";
+      extra["fill"] = o.fill == protocol::ColorEncodeOptions::Fill::kPad        ? "pad"
+                      : o.fill == protocol::ColorEncodeOptions::Fill::kPushPull ? "push-pull"
+                                                                                : "mean";
       extra["huffman_refresh"] = std::to_string(o.huffman_refresh);
     }
     emit(name, "bytes_per_frame", bytes, "B", extra);

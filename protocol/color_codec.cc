@@ -126,10 +126,15 @@ Status DecodeC0(ByteReader& r, uint32_t w, uint32_t h, ImageRgb8* image, ImageGr
 
 // ------------------------------------------------------------------ C1
 
-// Byte scans of mask rows, eight bytes at a time (masks are mostly long runs).
+// Byte scans of mask rows, 32 then eight bytes at a time (masks are mostly long runs).
 // Little-endian loads: the lowest address is the lowest byte.
 int FirstSet(const uint8_t* p, int n) {
   int i = 0;
+  for (; i + 32 <= n; i += 32) {  // long background runs: 32 bytes per test
+    uint64_t v[4];
+    std::memcpy(v, p + i, 32);
+    if (v[0] | v[1] | v[2] | v[3]) break;
+  }
   for (; i + 8 <= n; i += 8) {
     uint64_t v;
     std::memcpy(&v, p + i, 8);
@@ -141,12 +146,18 @@ int FirstSet(const uint8_t* p, int n) {
 }
 int FirstClear(const uint8_t* p, int n) {
   constexpr uint64_t kOnes = 0x0101010101010101ull, kHighs = 0x8080808080808080ull;
+  auto zeros = [](uint64_t v) { return (v - kOnes) & ~v & kHighs; };
   int i = 0;
+  for (; i + 32 <= n; i += 32) {  // long foreground runs: 32 bytes per test
+    uint64_t v[4];
+    std::memcpy(v, p + i, 32);
+    if (zeros(v[0]) | zeros(v[1]) | zeros(v[2]) | zeros(v[3])) break;
+  }
   for (; i + 8 <= n; i += 8) {
     uint64_t v;
     std::memcpy(&v, p + i, 8);
     // The lowest flagged byte is the first zero byte (flags above it may be false).
-    const uint64_t z = (v - kOnes) & ~v & kHighs;
+    const uint64_t z = zeros(v);
     if (z) return i + (std::countr_zero(z) >> 3);
   }
   for (; i < n; ++i)
@@ -155,6 +166,11 @@ int FirstClear(const uint8_t* p, int n) {
 }
 int LastSet(const uint8_t* p, int n) {
   int i = n;
+  for (; i >= 32; i -= 32) {
+    uint64_t v[4];
+    std::memcpy(v, p + i - 32, 32);
+    if (v[0] | v[1] | v[2] | v[3]) break;
+  }
   for (; i >= 8; i -= 8) {
     uint64_t v;
     std::memcpy(&v, p + i - 8, 8);
@@ -354,6 +370,66 @@ void PushPull8(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     p[0] = out[0][i];
     p[1] = out[1][i];
     p[2] = out[2][i];
+  }
+}
+
+// 8 mask bytes (non-zero = foreground) to 8 bits, bit x = byte x.
+inline uint32_t RowBits8(const uint8_t* p) {
+  uint64_t v;
+  std::memcpy(&v, p, 8);
+  constexpr uint64_t kLow7 = 0x7F7F7F7F7F7F7F7Full;
+  const uint64_t set = ((v & kLow7) + kLow7) | v;  // bit 7 of each non-zero byte (exact)
+  return static_cast<uint32_t>((((set >> 7) & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56);
+}
+
+// Fills the background pixels (`fg[i] == 0`) of one `B` × `B` block (8 or
+// 16) by repetitive padding, as MPEG-4 pads arbitrarily shaped objects:
+// along each row, a background pixel takes the nearest foreground pixel of
+// the row on each side (their mean when it lies between two); then each row
+// without foreground takes the nearest filled row above and below (their
+// mean between two). Half the time of PushPull8 for +1.4 % colour bytes at
+// +0.03 dB on the studio (docs/codecs.md). The block has at least one
+// foreground pixel.
+template <int B>
+void PadBlock(const uint8_t* fg, uint8_t* rgb, size_t stride) {
+  static_assert(B == 8 || B == 16);
+  constexpr uint32_t kFull = (1u << B) - 1;
+  uint32_t bits[B];
+  for (int y = 0; y < B; ++y) {
+    bits[y] = RowBits8(fg + y * B);
+    if constexpr (B == 16) bits[y] |= RowBits8(fg + y * B + 8) << 8;
+  }
+  for (int y = 0; y < B; ++y) {
+    const uint32_t b = bits[y];
+    if (b == 0 || b == kFull) continue;
+    uint8_t* r = rgb + y * stride;
+    int left[B], right[B];
+    for (int x = 0, last = -1; x < B; ++x) left[x] = last = (b >> x & 1) ? x : last;
+    for (int x = B - 1, next = -1; x >= 0; --x) right[x] = next = (b >> x & 1) ? x : next;
+    for (int x = 0; x < B; ++x) {
+      if (b >> x & 1) continue;
+      const int l = left[x], n = right[x];
+      if (l < 0 || n < 0) {
+        std::memcpy(r + x * 3, r + (l < 0 ? n : l) * 3, 3);
+      } else {
+        for (int k = 0; k < 3; ++k) r[x * 3 + k] = static_cast<uint8_t>((r[l * 3 + k] + r[n * 3 + k] + 1) >> 1);
+      }
+    }
+  }
+  int above[B], below[B];
+  for (int y = 0, last = -1; y < B; ++y) above[y] = last = bits[y] ? y : last;
+  for (int y = B - 1, next = -1; y >= 0; --y) below[y] = next = bits[y] ? y : next;
+  for (int y = 0; y < B; ++y) {
+    if (bits[y]) continue;
+    uint8_t* r = rgb + y * stride;
+    const int a = above[y], n = below[y];
+    if (a < 0 || n < 0) {
+      std::memcpy(r, rgb + (a < 0 ? n : a) * stride, B * 3);
+    } else {
+      const uint8_t* pa = rgb + a * stride;
+      const uint8_t* pn = rgb + n * stride;
+      for (int i = 0; i < B * 3; ++i) r[i] = static_cast<uint8_t>((pa[i] + pn[i] + 1) >> 1);
+    }
   }
 }
 
@@ -862,6 +938,8 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
       if (o.fill == ColorEncodeOptions::Fill::kMean) {
         for (int i = 0; i < 64; ++i)
           if (!block_mask[i]) std::memcpy(dst + (i / 8) * stride + (i % 8) * 3, mean_fill, 3);
+      } else if (o.fill == ColorEncodeOptions::Fill::kPad) {
+        PadBlock<8>(block_mask.data(), dst, stride);
       } else {
         PushPull8(block_mask.data(), dst, stride);
       }
@@ -886,6 +964,11 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
       for (int y = 0; y < g.by; ++y)
         for (int x = 0; x < g.bx; ++x)
           if (!block_mask[y * g.bx + x]) std::memcpy(dst + y * stride + x * 3, mean_fill, 3);
+    } else if (o.fill == ColorEncodeOptions::Fill::kPad) {
+      if (g.bx == 8)
+        PadBlock<8>(block_mask.data(), dst, stride);
+      else
+        PadBlock<16>(block_mask.data(), dst, stride);
     } else if (g.bx == 8) {
       PushPull8(block_mask.data(), dst, stride);
     } else {
