@@ -274,6 +274,15 @@ void PushPullBlock(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     }
 }
 
+// 8 mask bytes (non-zero = foreground) to 8 bits, bit x = byte x.
+inline uint32_t RowBits8(const uint8_t* p) {
+  uint64_t v;
+  std::memcpy(&v, p, 8);
+  constexpr uint64_t kLow7 = 0x7F7F7F7F7F7F7F7Full;
+  const uint64_t set = ((v & kLow7) + kLow7) | v;  // bit 7 of each non-zero byte (exact)
+  return static_cast<uint32_t>((((set >> 7) & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56);
+}
+
 // Eight 16-bit lanes (GCC and Clang vector extension; SSE2 on x86-64).
 using U16x8 = uint16_t __attribute__((vector_size(16)));
 // Mean of `n` (0–4) values summing to `sum`, rounded (0 when n = 0).
@@ -356,13 +365,7 @@ void PushPull8(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     }
   }
   uint64_t holes = 0;  // bit y * 8 + x: pixel (x, y) is background
-  for (int y = 0; y < 8; ++y) {
-    uint64_t v;
-    std::memcpy(&v, fg + y * 8, 8);
-    constexpr uint64_t kLow7 = 0x7F7F7F7F7F7F7F7Full;
-    const uint64_t zero = ~(((v & kLow7) + kLow7) | v | kLow7);  // bit 7 of each zero byte, exact
-    holes |= (((zero >> 7) * 0x0102040810204080ull) >> 56) << (y * 8);
-  }
+  for (int y = 0; y < 8; ++y) holes |= uint64_t{~RowBits8(fg + y * 8) & 0xFFu} << (y * 8);
   while (holes) {
     const int i = std::countr_zero(holes);
     holes &= holes - 1;
@@ -371,15 +374,6 @@ void PushPull8(const uint8_t* fg, uint8_t* rgb, size_t stride) {
     p[1] = out[1][i];
     p[2] = out[2][i];
   }
-}
-
-// 8 mask bytes (non-zero = foreground) to 8 bits, bit x = byte x.
-inline uint32_t RowBits8(const uint8_t* p) {
-  uint64_t v;
-  std::memcpy(&v, p, 8);
-  constexpr uint64_t kLow7 = 0x7F7F7F7F7F7F7F7Full;
-  const uint64_t set = ((v & kLow7) + kLow7) | v;  // bit 7 of each non-zero byte (exact)
-  return static_cast<uint32_t>((((set >> 7) & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56);
 }
 
 // Fills the background pixels (`fg[i] == 0`) of one `B` × `B` block (8 or
@@ -775,7 +769,7 @@ struct BlockGrid {
 };
 
 // Marks the blocks that the transitions `t` of box row `y` touch with foreground.
-void MarkRow(const std::vector<uint32_t>& t, uint32_t bw, int y, BlockGrid* g) {
+void MarkRow(std::span<const uint32_t> t, uint32_t bw, int y, BlockGrid* g) {
   int32_t* row = &g->slot[static_cast<size_t>(y / g->by) * g->cols];
   for (size_t i = 0; i < t.size(); i += 2) {
     const uint32_t stop = i + 1 < t.size() ? t[i + 1] : bw;
@@ -917,6 +911,27 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
   block_of_slot.assign(static_cast<size_t>(slots), -1);
   for (size_t bi = 0; bi < g.slot.size(); ++bi)
     if (g.slot[bi] >= 0 && occupied[bi]) block_of_slot[static_cast<size_t>(g.slot[bi])] = static_cast<int32_t>(bi);
+  // Fills the background of the block at `dst` (its mask in block_mask).
+  auto fill_background = [&](uint8_t* dst) {
+    switch (o.fill) {
+      case ColorEncodeOptions::Fill::kMean:
+        for (int i = 0; i < g.bx * g.by; ++i)
+          if (!block_mask[i]) std::memcpy(dst + (i / g.bx) * stride + (i % g.bx) * 3, mean_fill, 3);
+        break;
+      case ColorEncodeOptions::Fill::kPad:
+        if (g.bx == 8)
+          PadBlock<8>(block_mask.data(), dst, stride);
+        else
+          PadBlock<16>(block_mask.data(), dst, stride);
+        break;
+      case ColorEncodeOptions::Fill::kPushPull:
+        if (g.bx == 8)
+          PushPull8(block_mask.data(), dst, stride);
+        else
+          PushPullBlock<16>(block_mask.data(), dst, stride);
+        break;
+    }
+  };
   // Block `bi`'s pixels into `dst` (rows `stride` apart), its background filled.
   auto make_block = [&](int32_t bi, uint8_t* dst) {
     const int r = bi / g.cols, c = bi % g.cols;
@@ -934,15 +949,7 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
         std::memcpy(&block_mask[static_cast<size_t>(y) * 8], &v, 8);
         zeros |= (v - kOnes) & ~v & kHighs;
       }
-      if (zeros == 0) return;
-      if (o.fill == ColorEncodeOptions::Fill::kMean) {
-        for (int i = 0; i < 64; ++i)
-          if (!block_mask[i]) std::memcpy(dst + (i / 8) * stride + (i % 8) * 3, mean_fill, 3);
-      } else if (o.fill == ColorEncodeOptions::Fill::kPad) {
-        PadBlock<8>(block_mask.data(), dst, stride);
-      } else {
-        PushPull8(block_mask.data(), dst, stride);
-      }
+      if (zeros != 0) fill_background(dst);
       return;
     }
     bool full = run == g.bx;
@@ -959,21 +966,7 @@ Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncod
       std::memset(bm + run, 0, g.bx - run);
       full = full && FirstClear(m, run) < 0;
     }
-    if (full) return;
-    if (o.fill == ColorEncodeOptions::Fill::kMean) {
-      for (int y = 0; y < g.by; ++y)
-        for (int x = 0; x < g.bx; ++x)
-          if (!block_mask[y * g.bx + x]) std::memcpy(dst + y * stride + x * 3, mean_fill, 3);
-    } else if (o.fill == ColorEncodeOptions::Fill::kPad) {
-      if (g.bx == 8)
-        PadBlock<8>(block_mask.data(), dst, stride);
-      else
-        PadBlock<16>(block_mask.data(), dst, stride);
-    } else if (g.bx == 8) {
-      PushPull8(block_mask.data(), dst, stride);
-    } else {
-      PushPullBlock<16>(block_mask.data(), dst, stride);
-    }
+    if (!full) fill_background(dst);
   };
   auto block_mean = [&](const uint8_t* p, size_t row_stride) {
     uint32_t sum[3] = {0, 0, 0};
@@ -1095,10 +1088,8 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   if (ZSTD_isError(got) || got != declared) return DataLoss("c1.mask: zstd data is corrupt");
   const uint8_t* p = rle.data();
   const uint8_t* end = p + rle.size();
-  std::vector<uint32_t>& prev = sc.prev;
-  std::vector<uint32_t>& cur = sc.cur;
-  prev.clear();
-  // Kept for the pixels: row y's transitions are transitions[row_at[y], row_at[y + 1]).
+  // Every row's transitions, kept for the pixels: row y's are
+  // transitions[row_at[y], row_at[y + 1]).
   std::vector<uint32_t>& transitions = sc.transitions;
   std::vector<uint32_t>& row_at = sc.row_at;
   transitions.clear();
@@ -1106,12 +1097,13 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
   for (int y = 0; y < bh; ++y) {
     uint32_t head = 0;
     if (!GetVarint(p, end, &head)) return DataLoss("c1.mask: row " + Str(y) + " ends early");
-    cur.clear();
+    const size_t first = transitions.size();
     if (head == 0) {  // as many transitions as the row above, each a signed delta to it
-      for (uint32_t t : prev) {
+      for (size_t k = y > 0 ? row_at[static_cast<size_t>(y) - 1] : 0; k < first; ++k) {
         uint32_t z = 0;
         if (!GetVarint(p, end, &z)) return DataLoss("c1.mask: row " + Str(y) + " ends early");
-        cur.push_back(t + static_cast<uint32_t>(UnZigZag32(z)));  // wraps; range-checked below
+        const uint32_t t = transitions[k] + static_cast<uint32_t>(UnZigZag32(z));  // wraps; range-checked below
+        transitions.push_back(t);
       }
     } else {
       if (head - 1 > bw) return DataLoss("c1.mask: row " + Str(y) + " has more transitions than pixels");
@@ -1120,10 +1112,11 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
         uint32_t gap = 0;
         if (!GetVarint(p, end, &gap)) return DataLoss("c1.mask: row " + Str(y) + " ends early");
         if (gap >= bw) return DataLoss("c1.mask: transition outside row " + Str(y));
-        cur.push_back(next + gap);
+        transitions.push_back(next + gap);
         next = next + gap + 1;
       }
     }
+    const std::span<const uint32_t> cur(transitions.data() + first, transitions.size() - first);
     // Validate the whole row before filling: a fill needs its run's end too.
     for (size_t i = 0; i < cur.size(); ++i) {
       if (cur[i] >= bw || (i > 0 && cur[i] <= cur[i - 1])) {
@@ -1140,9 +1133,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
       std::memset(row + cur[i], 255, stop - cur[i]);
     }
     if (packed) MarkRow(cur, bw, y, &g);
-    transitions.insert(transitions.end(), cur.begin(), cur.end());
     row_at[static_cast<size_t>(y) + 1] = static_cast<uint32_t>(transitions.size());
-    prev.swap(cur);
   }
   if (p != end) return DataLoss("c1.mask: trailing run lengths");
 
