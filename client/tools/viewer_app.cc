@@ -512,16 +512,25 @@ class Viewer {
     if (last_index_ >= 0 && f.frame_index > last_index_) stats_.drops += f.frame_index - last_index_ - 1;
     last_index_ = f.frame_index;
     ++frames_new_;
-    NoteLoop(loop_ms);
+    // Network mode: the fps shown is new site frames displayed per second
+    // (redraws of the frame already shown for a moving head do not count).
+    new_frame_us_.push_back(WallNowUs());
+    if (new_frame_us_.size() > 16) new_frame_us_.erase(new_frame_us_.begin());
+    if (first_new_us_ == 0) first_new_us_ = new_frame_us_.back();
+    last_new_us_ = new_frame_us_.back();
+    const size_t n = new_frame_us_.size();
+    recent_fps_ = n > 1 ? 1e6 * static_cast<double>(n - 1) / static_cast<double>(new_frame_us_.back() - new_frame_us_.front()) : 0;
+    NoteLoop(loop_ms, /*update_fps=*/false);
   }
 
-  void NoteLoop(double loop_ms) {
+  void NoteLoop(double loop_ms, bool update_fps = true) {
     stats_.loop_ms.push_back(loop_ms);
+    ++stats_.frames;
+    if (!update_fps) return;
     const size_t n = std::min<size_t>(stats_.loop_ms.size(), 15);
     double sum = 0;
     for (size_t i = stats_.loop_ms.size() - n; i < stats_.loop_ms.size(); ++i) sum += stats_.loop_ms[i];
     recent_fps_ = sum > 0 ? 1000.0 * n / sum : 0;
-    ++stats_.frames;
   }
 
   void UpdateBitrate() {
@@ -833,7 +842,16 @@ class Viewer {
                                : (trace_.empty() ? (interactive_ ? "interactive" : "orbit") : "trace:" + o_.pose_trace);
     double loop_sum = 0;
     for (double v : stats_.loop_ms) loop_sum += v;
-    j["fps"] = loop_sum > 0 ? 1000.0 * stats_.frames / loop_sum : 0.0;
+    // fps: new frames displayed per second (network: new site frames; the
+    // synthetic stand-in draws a new frame every loop). redraws_per_s: every
+    // render, including redraws of an old frame for a moving head.
+    j["redraws_per_s"] = loop_sum > 0 ? 1000.0 * stats_.frames / loop_sum : 0.0;
+    j["fps"] = j["redraws_per_s"];
+    if (net_mode_)
+      j["fps"] = frames_new_ > 1 && last_new_us_ > first_new_us_
+                     ? 1e6 * static_cast<double>(frames_new_ - 1) / static_cast<double>(last_new_us_ - first_new_us_)
+                     : 0.0;
+    j["fps_definition"] = "new frames displayed per second (not redraws of a frame already shown)";
     j["render_ms_median"] = Percentile(stats_.render_ms, 0.5);
     j["render_ms_p95"] = Percentile(stats_.render_ms, 0.95);
     j["upload_ms_median"] = Percentile(stats_.upload_ms, 0.5);
@@ -951,6 +969,8 @@ class Viewer {
   bool show_overlay_ = true;
   double mouse_x_ = 0, mouse_y_ = 0;
   double recent_fps_ = 0;
+  std::vector<int64_t> new_frame_us_;  // display times of the last new network frames
+  int64_t first_new_us_ = 0, last_new_us_ = 0;
   FrameStats stats_;
   std::vector<std::string> pngs_;
 };

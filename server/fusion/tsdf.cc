@@ -92,6 +92,92 @@ void TsdfVolume::Reset() {
   stats_ = {};
 }
 
+Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
+  if (coarse == nullptr || coarse == this) return InvalidArgument("DownsampleInto needs a second volume");
+  if (step < 1 || step > 8) return InvalidArgument("downsample step must be in [1, 8], got " + std::to_string(step));
+  const float want = options_.voxel_size * static_cast<float>(step);
+  if (std::abs(coarse->options_.voxel_size - want) > 1e-6f * want)
+    return InvalidArgument("coarse voxel_size must be " + std::to_string(want) + " m, got " +
+                           std::to_string(coarse->options_.voxel_size));
+  const float trunc_m = options_.truncation_voxels * options_.voxel_size;
+  const float coarse_trunc_m = coarse->options_.truncation_voxels * coarse->options_.voxel_size;
+  if (std::abs(trunc_m - coarse_trunc_m) > 1e-4f * trunc_m)
+    return InvalidArgument("coarse truncation must be " + std::to_string(trunc_m) + " m like the fine volume's, got " +
+                           std::to_string(coarse_trunc_m));
+  coarse->Reset();
+  VoxelBlockMap& out = coarse->blocks_;
+  auto floor_div = [](int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); };
+  // Per coarse block: weighted sums of tsdf and colour, the weight sum and the
+  // number of observed fine voxels, per coarse voxel.
+  struct Sums {
+    float tw[kBlockVoxels], w[kBlockVoxels], r[kBlockVoxels], g[kBlockVoxels], b[kBlockVoxels];
+    uint16_t n[kBlockVoxels];
+  };
+  std::vector<Sums>& sums = coarse->scratch_->downsample_sums_storage<Sums>();
+  BlockCoord last{};
+  int32_t last_index = VoxelBlockMap::kNotFound;
+  const size_t nb = blocks_.size();
+  for (size_t bi = 0; bi < nb; ++bi) {
+    const int32_t b = static_cast<int32_t>(bi);
+    const BlockCoord bc = blocks_.coord(b);
+    const VoxelBlock& fine = blocks_.block(b);
+    const int64_t base[3] = {int64_t{kBlockSide} * bc.x, int64_t{kBlockSide} * bc.y, int64_t{kBlockSide} * bc.z};
+    for (int k = 0; k < kBlockSide; ++k) {
+      const int64_t cz = floor_div(base[2] + k, step);
+      for (int j = 0; j < kBlockSide; ++j) {
+        const int64_t cy = floor_div(base[1] + j, step);
+        for (int i = 0; i < kBlockSide; ++i) {
+          const int fv = i + kBlockSide * (j + kBlockSide * k);
+          const float w = fine.weight[fv];
+          if (!(w > 0)) continue;
+          const int64_t cx = floor_div(base[0] + i, step);
+          const BlockCoord cb{static_cast<int32_t>(floor_div(cx, kBlockSide)), static_cast<int32_t>(floor_div(cy, kBlockSide)),
+                              static_cast<int32_t>(floor_div(cz, kBlockSide))};
+          if (last_index == VoxelBlockMap::kNotFound || !(cb == last)) {
+            bool created = false;
+            last_index = out.FindOrAllocate(cb, &created);
+            last = cb;
+            if (sums.size() <= static_cast<size_t>(last_index)) sums.resize(static_cast<size_t>(last_index) + 1);
+            if (created) std::memset(&sums[static_cast<size_t>(last_index)], 0, sizeof(Sums));
+          }
+          Sums& sm = sums[static_cast<size_t>(last_index)];
+          const int cv = static_cast<int>(cx - int64_t{kBlockSide} * cb.x) +
+                         kBlockSide * (static_cast<int>(cy - int64_t{kBlockSide} * cb.y) +
+                                       kBlockSide * static_cast<int>(cz - int64_t{kBlockSide} * cb.z));
+          sm.tw[cv] += fine.tsdf[fv] * w;
+          sm.w[cv] += w;
+          sm.r[cv] += fine.r[fv] * w;
+          sm.g[cv] += fine.g[fv] * w;
+          sm.b[cv] += fine.b[fv] * w;
+          ++sm.n[cv];
+        }
+      }
+    }
+  }
+  for (size_t ci = 0; ci < out.size(); ++ci) {
+    const int32_t c = static_cast<int32_t>(ci);
+    VoxelBlock& vb = out.block(c);
+    const Sums& sm = sums[ci];
+    bool has_neg = false, has_pos = false, has_band = false;
+    for (int v = 0; v < kBlockVoxels; ++v) {
+      if (sm.n[v] == 0) continue;  // stays unobserved (weight 0 from the allocation)
+      const float inv = 1.0f / sm.w[v];
+      const float t = sm.tw[v] * inv;
+      vb.tsdf[v] = t;
+      vb.weight[v] = sm.w[v] / static_cast<float>(sm.n[v]);  // mean weight of the observed fine voxels
+      vb.r[v] = static_cast<uint8_t>(sm.r[v] * inv + 0.5f);
+      vb.g[v] = static_cast<uint8_t>(sm.g[v] * inv + 0.5f);
+      vb.b[v] = static_cast<uint8_t>(sm.b[v] * inv + 0.5f);
+      has_neg |= t < 0;
+      has_pos |= t >= 0;
+      has_band |= t >= 0 && t < kTsdfBandLimit;
+    }
+    out.set_flags(c, static_cast<uint8_t>((has_neg ? kBlockHasNegative : 0) | (has_pos ? kBlockHasPositive : 0) |
+                                          (has_band ? kBlockHasPositiveInBand : 0)));
+  }
+  return OkStatus();
+}
+
 void TsdfVolume::VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* weight) const {
   *tsdf = 0;
   *weight = 0;

@@ -116,6 +116,21 @@ class TsdfVolume {
   // buffers. Cubes whose corners are not all observed (min_weight) are skipped.
   void ExtractMesh(Mesh* out) const;
 
+  // The same field on a grid `step` times coarser: coarse voxel c (reset
+  // first) holds the weighted mean TSDF value and colour of the fine voxels
+  // step·c … step·c + step − 1 on each axis (a box filter: noise averages
+  // out, and the mean of a linear field is its value at the box centre), and
+  // the mean weight of those observed; unobserved where none is. The box
+  // centre sits (step − 1)/2 fine voxels above coarse voxel c's own position,
+  // so a mesh extracted from `coarse` must be shifted by DownsampleOffset(step)
+  // to sit on the fine volume's surface. `coarse` must have voxel_size =
+  // step · voxel_size and the same truncation in metres (truncation_voxels /
+  // step); InvalidArgument otherwise. Used for the capture site's stream
+  // mesh (server/fusion/stream_mesh.h).
+  Status DownsampleInto(int step, TsdfVolume* coarse) const;
+  // World offset (metres, the same on every axis) of DownsampleInto's coarse grid.
+  float DownsampleOffset(int step) const { return 0.5f * static_cast<float>(step - 1) * options_.voxel_size; }
+
   size_t num_blocks() const { return blocks_.size(); }
   const TsdfStats& stats() const { return stats_; }
 

@@ -5,6 +5,7 @@
 #include <array>
 #include <utility>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -81,6 +82,14 @@ struct TsdfVolume::Scratch {
   std::vector<uint8_t> fresh;                       // per block: allocated this frame, voxels not yet written
   std::vector<std::pair<uint64_t, int32_t>> order;  // (Morton code, block) for sorting
   std::vector<size_t> thread_block_views, thread_skipped, thread_free, thread_subs;
+
+  // DownsampleInto's per-block accumulators (type known only there).
+  std::shared_ptr<void> downsample_sums;
+  template <typename T>
+  std::vector<T>& downsample_sums_storage() {
+    if (!downsample_sums) downsample_sums = std::make_shared<std::vector<T>>();
+    return *static_cast<std::vector<T>*>(downsample_sums.get());
+  }
 
   // Meshing.
   struct MeshVertex {

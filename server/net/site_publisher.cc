@@ -1,11 +1,18 @@
 #include "server/net/site_publisher.h"
 
+#include <time.h>
+
 #include <chrono>
 
 namespace holo::net {
 namespace {
 double MsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 }  // namespace
 
@@ -16,38 +23,61 @@ SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
 
 Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
                               const std::vector<PodColor>& pods, PublishTimings* t) {
+  HOLO_RETURN_IF_ERROR(Encode(frame_index, capture_wall_us, mesh, pods, &scratch_));
+  PublishEncoded(&scratch_);
+  *t = scratch_.timings;
+  return OkStatus();
+}
+
+Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
+                             const std::vector<PodColor>& pods, EncodedFrame* out) {
+  PublishTimings* t = &out->timings;
   *t = PublishTimings{};
+  out->frame_index = frame_index;
+  out->capture_wall_us = capture_wall_us;
   auto t0 = std::chrono::steady_clock::now();
+  double cpu0 = ThreadCpuMs();
   protocol::GeometryEncodeOptions g = options_.geometry;
   g.colors = g.colors && !mesh.colors.empty();
-  geometry_.clear();  // the encoder appends
-  HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(mesh, g, &geometry_).WithContext("frame " + std::to_string(frame_index)));
+  out->codec = g.codec;
+  out->geometry.clear();  // the encoder appends
+  HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
   t->geometry_ms = MsSince(t0);
-  t->geometry_bytes = geometry_.size();
-  protocol::ColorFrame color;
+  t->geometry_cpu_ms = ThreadCpuMs() - cpu0;
+  t->geometry_bytes = out->geometry.size();
+  protocol::ColorFrame& color = out->color;
   color.codec = options_.color_options.codec;
+  // Keep the pod images' buffers for reuse; only the count changes.
+  size_t used = 0;
   if (options_.color) {
     t0 = std::chrono::steady_clock::now();
+    cpu0 = ThreadCpuMs();
     for (const PodColor& p : pods) {
       if (p.image == nullptr || p.mask == nullptr || p.mask->width() != p.image->width() ||
           p.mask->height() != p.image->height() || p.image->width() == 0)
         continue;
-      protocol::PodImage pi;
+      if (color.images.size() <= used) color.images.emplace_back();
+      protocol::PodImage& pi = color.images[used++];
       pi.pod_id = p.pod_id;
       pi.data.clear();
       auto enc = color_encoders_.try_emplace(p.pod_id, options_.color_options).first;
       HOLO_RETURN_IF_ERROR(enc->second.Encode(*p.image, *p.mask, &pi.data));
       t->color_bytes += pi.data.size();
-      color.images.push_back(std::move(pi));
     }
     t->color_ms = MsSince(t0);
+    t->color_cpu_ms = ThreadCpuMs() - cpu0;
   }
-  t0 = std::chrono::steady_clock::now();
-  t->viewers = server_->num_viewers();
-  server_->PublishVideo(MakeVideoFrame(frame_index, capture_wall_us, g.codec, geometry_,
-                                       color.images.empty() ? nullptr : &color, server_->config().fragment_bytes));
-  t->publish_ms = MsSince(t0);
+  color.images.resize(used);
   return OkStatus();
+}
+
+void SitePublisher::PublishEncoded(EncodedFrame* frame) {
+  const auto t0 = std::chrono::steady_clock::now();
+  frame->timings.viewers = server_->num_viewers();
+  server_->PublishVideo(MakeVideoFrame(frame->frame_index, frame->capture_wall_us, frame->codec, frame->geometry,
+                                       frame->color.images.empty() ? nullptr : &frame->color,
+                                       server_->config().fragment_bytes));
+  frame->timings.publish_ms = MsSince(t0);
 }
 
 }  // namespace holo::net

@@ -26,6 +26,7 @@ struct SitePublisherOptions {
 struct PublishTimings {
   double geometry_ms = 0;   // geometry encode
   double color_ms = 0;      // colour encode, all pods
+  double geometry_cpu_ms = 0, color_cpu_ms = 0;  // the same, CPU time of the encoding thread
   double publish_ms = 0;    // wire buffer + enqueue to every viewer
   size_t geometry_bytes = 0;
   size_t color_bytes = 0;
@@ -39,18 +40,36 @@ struct PodColor {
   const ImageGray8* mask = nullptr;
 };
 
+// One frame encoded for the wire, before it is handed to the fan-out.
+struct EncodedFrame {
+  int64_t frame_index = 0;
+  int64_t capture_wall_us = 0;
+  protocol::GeometryCodec codec = protocol::GeometryCodec::kG1;
+  std::vector<uint8_t> geometry;
+  protocol::ColorFrame color;  // no images: no ColorFrame is sent
+  PublishTimings timings;      // encode part filled by Encode
+};
+
 class SitePublisher {
  public:
   SitePublisher(Server* server, SitePublisherOptions options);
   // `capture_wall_us`: when the frame was captured, on the wall clock (WallUs).
   // Pods whose mask is missing or of another size are left out of the ColorFrame.
+  // Publish = Encode + PublishEncoded.
   Status Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const std::vector<PodColor>& pods,
                  PublishTimings* timings);
+  // Encodes into `out` (its buffers reused). Not thread-safe: one thread
+  // encodes (the per-pod colour encoders keep state between frames).
+  Status Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const std::vector<PodColor>& pods,
+                EncodedFrame* out);
+  // Hands an encoded frame to every viewer's queue; fills publish_ms and
+  // viewers of `out->timings`. May run on another thread than Encode.
+  void PublishEncoded(EncodedFrame* frame);
 
  private:
   Server* server_;
   SitePublisherOptions options_;
-  std::vector<uint8_t> geometry_;
+  EncodedFrame scratch_;  // Publish's
   // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
   std::map<uint16_t, protocol::ColorEncoder> color_encoders_;
 };

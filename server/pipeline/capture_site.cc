@@ -33,6 +33,7 @@ Status CaptureSiteOptions::Check() const {
   HOLO_RETURN_IF_ERROR(cleanup.Check().WithContext("cleanup"));
   HOLO_RETURN_IF_ERROR(texture_options.Check().WithContext("texture"));
   HOLO_RETURN_IF_ERROR(pipeline.Check().WithContext("pipeline"));
+  if (stream_mesh) HOLO_RETURN_IF_ERROR(stream.Check().WithContext("stream mesh"));
   if (temporal) HOLO_RETURN_IF_ERROR(TemporalOptions().Check().WithContext("temporal"));
   return OkStatus();
 }
@@ -98,11 +99,17 @@ StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, 
     if (options.texture) tsdf.integrate_color = false;
     HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(tsdf));
   }
+  if (options.stream_mesh) {
+    TsdfOptions tsdf = options.temporal ? options.TemporalOptions().tsdf : options.tsdf;
+    if (options.texture && !options.temporal) tsdf.integrate_color = false;
+    HOLO_ASSIGN_OR_RETURN(site->stream_, StreamMesher::Create(tsdf, options.stream));
+  }
   if (options.texture) site->texturer_ = std::make_unique<Texturer>(site->rig_, options.texture_options);
   return site;
 }
 
-PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> sink) {
+PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> sink,
+                                       std::function<Status(FrameWork&)> encode) {
   PipelineStages st;
   // Ground-truth masks are rendered with the frame (same frame index).
   auto truth = std::make_shared<StudioGroundTruth>();
@@ -134,10 +141,12 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
     const bool cpu = options_.pipeline.serial;
     const double cpu0 = cpu ? ProcessCpuTimeMs() : 0;
     Stopwatch sw;
+    w.full_mesh.Clear();
     if (temporal_) {
       // Tracking, warping and fusing count as fuse; marching cubes + clean-up as mesh.
       TemporalFrameStats ts;
-      HOLO_RETURN_IF_ERROR(temporal_->Process(rig_, w.frames, &w.mesh, &ts));
+      Mesh* full = stream_ ? &w.full_mesh : &w.mesh;
+      HOLO_RETURN_IF_ERROR(temporal_->Process(rig_, w.frames, full, &ts));
       const double cpu_all = cpu ? ProcessCpuTimeMs() - cpu0 : 0;
       w.timings.fuse_ms = std::max(1e-6, ts.total_ms - ts.mesh_ms);
       w.timings.mesh_ms = std::max(1e-6, ts.mesh_ms);
@@ -147,6 +156,14 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
         w.timings.fuse_cpu_ms = std::max(1e-6, cpu_all * (1 - share));
         w.timings.mesh_cpu_ms = std::max(1e-6, cpu_all * share);
       }
+      if (stream_) {
+        const double cpu1 = cpu ? ProcessCpuTimeMs() : 0;
+        sw.Restart();
+        HOLO_RETURN_IF_ERROR(stream_->Make(temporal_->reference_volume(), &w.mesh));
+        w.timings.simplify_ms = std::max(1e-6, sw.ElapsedMs());
+        if (cpu) w.timings.simplify_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
+        if (!options_.full_mesh) w.full_mesh.Clear();
+      }
       return OkStatus();
     }
     volume_->Reset();
@@ -154,22 +171,47 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
     w.timings.fuse_ms = sw.ElapsedMs();
     const double cpu1 = cpu ? ProcessCpuTimeMs() : 0;
     sw.Restart();
-    volume_->ExtractMesh(&w.mesh);
-    HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.mesh));
-    w.timings.mesh_ms = std::max(1e-6, sw.ElapsedMs());
-    if (cpu) {
-      w.timings.fuse_cpu_ms = std::max(1e-6, cpu1 - cpu0);
-      w.timings.mesh_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
+    if (stream_) {
+      // The stream mesh (coarse marching cubes + clean-up) counts as mesh, its
+      // simplification to the budget as simplify.
+      StreamMeshStats ss;
+      HOLO_RETURN_IF_ERROR(stream_->Make(*volume_, &w.mesh, &ss));
+      w.timings.mesh_ms = std::max(1e-6, ss.downsample_ms + ss.extract_ms);
+      w.timings.simplify_ms = std::max(1e-6, ss.simplify_ms);
+      if (cpu) {
+        const double all = ProcessCpuTimeMs() - cpu1;
+        const double wall = ss.downsample_ms + ss.extract_ms + ss.simplify_ms;
+        const double share = wall > 0 ? ss.simplify_ms / wall : 0.0;
+        w.timings.mesh_cpu_ms = std::max(1e-6, all * (1 - share));
+        w.timings.simplify_cpu_ms = std::max(1e-6, all * share);
+      }
+      if (options_.full_mesh) {
+        volume_->ExtractMesh(&w.full_mesh);
+        HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.full_mesh));
+      }
+    } else {
+      volume_->ExtractMesh(&w.mesh);
+      HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.mesh));
+      w.timings.mesh_ms = std::max(1e-6, sw.ElapsedMs());
+      if (cpu) w.timings.mesh_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
     }
+    if (cpu) w.timings.fuse_cpu_ms = std::max(1e-6, cpu1 - cpu0);
     return OkStatus();
   };
-  if (texturer_) st.texture = [this](FrameWork& w) { return texturer_->Apply(w.frames, &w.mesh); };
+  if (texturer_)
+    st.texture = [this](FrameWork& w) {
+      HOLO_RETURN_IF_ERROR(texturer_->Apply(w.frames, &w.mesh));
+      if (!w.full_mesh.empty()) HOLO_RETURN_IF_ERROR(texturer_->Apply(w.frames, &w.full_mesh));
+      return OkStatus();
+    };
+  st.encode = std::move(encode);
   st.sink = std::move(sink);
   return st;
 }
 
-StatusOr<PipelineStats> CaptureSite::Run(std::function<Status(const FrameWork&)> sink) {
-  pipeline_ = std::make_unique<Pipeline>(MakeStages(std::move(sink)), options_.pipeline);
+StatusOr<PipelineStats> CaptureSite::Run(std::function<Status(const FrameWork&)> sink,
+                                         std::function<Status(FrameWork&)> encode) {
+  pipeline_ = std::make_unique<Pipeline>(MakeStages(std::move(sink), std::move(encode)), options_.pipeline);
   return pipeline_->Run();
 }
 

@@ -6,8 +6,12 @@
 //   fuse     TsdfVolume::Integrate of the masked depth (fresh volume per frame)
 //   mesh     marching cubes + CleanupMesh (fragments, optional decimation)
 //            — or, with `temporal`, both by TemporalFusion (server/temporal/:
-//            the previous volume tracked non-rigidly and fused over time)
+//            the previous volume tracked non-rigidly and fused over time);
+//            with `stream_mesh`, the compact stream mesh (StreamMesher:
+//            coarser marching cubes + simplification to a triangle budget)
+//            instead, and the full mesh only when `full_mesh` asks for it
 //   texture  Texturer (Holoportation per-vertex colours)
+//   encode   optional, the caller's (the session publisher's G1 + C1)
 #pragma once
 
 #include <functional>
@@ -18,6 +22,7 @@
 #include "common/status.h"
 #include "server/capture/frame_source.h"
 #include "server/fusion/mesh_cleanup.h"
+#include "server/fusion/stream_mesh.h"
 #include "server/fusion/tsdf.h"
 #include "server/pipeline/pipeline.h"
 #include "server/segment/color_calibration.h"
@@ -60,6 +65,12 @@ struct CaptureSiteOptions {
   // above; the rest (graph, tracker, weight cap, reset policy) is used as is.
   bool temporal = false;
   TemporalFusionOptions temporal_options;
+  // Publish the compact stream mesh (server/fusion/stream_mesh.h) as
+  // FrameWork::mesh. With `full_mesh` the full-resolution mesh is also made
+  // (FrameWork::full_mesh, textured too: export, recording of full quality).
+  bool stream_mesh = false;
+  StreamMeshOptions stream;
+  bool full_mesh = false;
   bool texture = true;
   TextureOptions texture_options;
   PipelineOptions pipeline;
@@ -80,7 +91,9 @@ class CaptureSite {
 
   // Runs the pipeline; `sink` sees every finished frame in order (its mesh
   // is textured, its frames carry the masks used).
-  StatusOr<PipelineStats> Run(std::function<Status(const FrameWork&)> sink);
+  // `encode` (optional) runs as its own stage between texture and sink.
+  StatusOr<PipelineStats> Run(std::function<Status(const FrameWork&)> sink,
+                              std::function<Status(FrameWork&)> encode = {});
   void Stop();
 
   const Rig& rig() const { return rig_; }
@@ -88,7 +101,7 @@ class CaptureSite {
 
  private:
   CaptureSite() = default;
-  PipelineStages MakeStages(std::function<Status(const FrameWork&)> sink);
+  PipelineStages MakeStages(std::function<Status(const FrameWork&)> sink, std::function<Status(FrameWork&)> encode);
 
   Rig rig_;
   CaptureSiteOptions options_;
@@ -98,6 +111,7 @@ class CaptureSite {
   std::unique_ptr<Segmenter> segmenter_;
   std::unique_ptr<TsdfVolume> volume_;
   std::unique_ptr<TemporalFusion> temporal_;
+  std::unique_ptr<StreamMesher> stream_;
   std::unique_ptr<Texturer> texturer_;
   std::unique_ptr<Pipeline> pipeline_;
 };

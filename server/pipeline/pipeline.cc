@@ -94,6 +94,8 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
     HOLO_RETURN_IF_ERROR(RunFuseMesh(stages_.fuse_mesh, work, /*cpu=*/true));
     HOLO_RETURN_IF_ERROR(Timed(stages_.texture, work, &work.timings.texture_ms, &work.timings.texture_cpu_ms));
     work.timings.ready_us = clock_.NowUs();
+    HOLO_RETURN_IF_ERROR(Timed(stages_.encode, work, &work.timings.encode_ms, &work.timings.encode_cpu_ms));
+    work.timings.encoded_us = clock_.NowUs();
     if (stages_.sink) HOLO_RETURN_IF_ERROR(stages_.sink(work));
     stats.per_frame.push_back(work.timings);
     ++stats.frames;
@@ -107,10 +109,10 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
 StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   using Queue = BoundedQueue<FrameWork*>;
   const size_t cap = static_cast<size_t>(options_.queue_capacity);
-  // Items: one inside each of the 5 threads plus a full queue on each of the 4 hops.
-  const size_t pool_size = 5 + 4 * cap;
+  // Items: one inside each of the 6 threads plus a full queue on each of the 5 hops.
+  const size_t pool_size = 6 + 5 * cap;
   std::vector<std::unique_ptr<FrameWork>> pool;
-  Queue free_items(pool_size), to_segment(cap), to_fuse(cap), to_texture(cap), to_sink(cap);
+  Queue free_items(pool_size), to_segment(cap), to_fuse(cap), to_texture(cap), to_encode(cap), to_sink(cap);
   for (size_t i = 0; i < pool_size; ++i) {
     pool.push_back(std::make_unique<FrameWork>());
     free_items.Push(pool.back().get());
@@ -123,7 +125,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
       std::lock_guard lock(mu);
       if (first_error.ok()) first_error = s;
     }
-    for (Queue* q : {&free_items, &to_segment, &to_fuse, &to_texture, &to_sink}) q->Close();
+    for (Queue* q : {&free_items, &to_segment, &to_fuse, &to_texture, &to_encode, &to_sink}) q->Close();
   };
 
   Stopwatch wall;
@@ -170,9 +172,14 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
     return Timed(stages_.segment, w, &w.timings.segment_ms);
   });
   std::thread fuse_thread = middle(to_fuse, to_texture, [&](FrameWork& w) { return RunFuseMesh(stages_.fuse_mesh, w); });
-  std::thread texture_thread = middle(to_texture, to_sink, [&](FrameWork& w) {
+  std::thread texture_thread = middle(to_texture, to_encode, [&](FrameWork& w) {
     Status s = Timed(stages_.texture, w, &w.timings.texture_ms);
     w.timings.ready_us = clock_.NowUs();
+    return s;
+  });
+  std::thread encode_thread = middle(to_encode, to_sink, [&](FrameWork& w) {
+    Status s = Timed(stages_.encode, w, &w.timings.encode_ms);
+    w.timings.encoded_us = clock_.NowUs();
     return s;
   });
   std::thread sink_thread([&] {
@@ -189,7 +196,8 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
       free_items.Push(*item);
     }
   });
-  for (std::thread* t : {&acquire_thread, &segment_thread, &fuse_thread, &texture_thread, &sink_thread}) t->join();
+  for (std::thread* t : {&acquire_thread, &segment_thread, &fuse_thread, &texture_thread, &encode_thread, &sink_thread})
+    t->join();
   if (!first_error.ok()) return first_error;
   stats.cpu_ms = ProcessCpuTimeMs() - cpu0;
   stats.wall_seconds = wall.ElapsedMs() * 1e-3;
@@ -217,12 +225,16 @@ StageTimings MedianTimings(const PipelineStats& stats) {
   m.segment_ms = med(&StageTimings::segment_ms);
   m.fuse_ms = med(&StageTimings::fuse_ms);
   m.mesh_ms = med(&StageTimings::mesh_ms);
+  m.simplify_ms = med(&StageTimings::simplify_ms);
   m.texture_ms = med(&StageTimings::texture_ms);
+  m.encode_ms = med(&StageTimings::encode_ms);
   m.acquire_cpu_ms = med(&StageTimings::acquire_cpu_ms);
   m.segment_cpu_ms = med(&StageTimings::segment_cpu_ms);
   m.fuse_cpu_ms = med(&StageTimings::fuse_cpu_ms);
   m.mesh_cpu_ms = med(&StageTimings::mesh_cpu_ms);
+  m.simplify_cpu_ms = med(&StageTimings::simplify_cpu_ms);
   m.texture_cpu_ms = med(&StageTimings::texture_cpu_ms);
+  m.encode_cpu_ms = med(&StageTimings::encode_cpu_ms);
   return m;
 }
 

@@ -1,5 +1,5 @@
 // The capture pipeline: stages that run concurrently on bounded queues
-// (acquire ‖ segment ‖ fuse+mesh ‖ texture ‖ sink), each timed.
+// (acquire ‖ segment ‖ fuse+mesh ‖ texture ‖ encode ‖ sink), each timed.
 //
 // Work items circulate: a fixed pool of FrameWork objects is created up
 // front; acquire takes a free one, every stage fills its part in place
@@ -31,7 +31,9 @@ struct StageTimings {
   double segment_ms = 0;
   double fuse_ms = 0;
   double mesh_ms = 0;
+  double simplify_ms = 0;  // part of the fuse+mesh stage: the stream mesh (set by the stage itself)
   double texture_ms = 0;
+  double encode_ms = 0;
   // Serial mode only (0 otherwise): CPU time of the whole process (all
   // threads, worker pools included) while each stage ran, ms. With one stage
   // at a time this is that stage's CPU cost, which other load on the machine
@@ -40,12 +42,17 @@ struct StageTimings {
   double segment_cpu_ms = 0;
   double fuse_cpu_ms = 0;
   double mesh_cpu_ms = 0;
+  double simplify_cpu_ms = 0;
   double texture_cpu_ms = 0;
-  // Clock time when acquire started and when the texture stage finished (µs
-  // on the pipeline's clock): latency = ready - acquired.
+  double encode_cpu_ms = 0;
+  // Clock time when acquire started, when the texture stage finished and when
+  // the encode stage finished (µs on the pipeline's clock; encoded_us =
+  // ready_us without an encode stage): latency = ready - acquired.
   int64_t acquired_us = 0;
   int64_t ready_us = 0;
+  int64_t encoded_us = 0;
   double latency_ms() const { return static_cast<double>(ready_us - acquired_us) * 1e-3; }
+  double encoded_latency_ms() const { return static_cast<double>(encoded_us - acquired_us) * 1e-3; }
 };
 
 // One frame's work item: owned by the pipeline, lent to each stage in turn.
@@ -53,6 +60,10 @@ struct FrameWork {
   int64_t sequence = 0;  // 0, 1, 2, ... in acquisition order
   RgbdFrameSet frames;   // pods' colour, depth, and (after segment) masks
   Mesh mesh;             // after fuse+mesh: geometry; after texture: colours
+  Mesh full_mesh;        // optional: the full-resolution mesh when `mesh` is a reduced stream mesh
+  // What the encode stage made for the sink (owned by the stage that set it;
+  // kept with the item, so its buffers are reused frame after frame).
+  std::shared_ptr<void> encoded;
   StageTimings timings;
   // Stage-private scratch a stage may keep with the item (e.g. the fused
   // mesh before clean-up); nothing outside that stage reads it.
@@ -70,6 +81,9 @@ struct PipelineStages {
   std::function<Status(FrameWork& work)> segment;
   std::function<Status(FrameWork& work)> fuse_mesh;
   std::function<Status(FrameWork& work)> texture;
+  // Compresses the frame for streaming (the capture site: G1 + C1 into the
+  // work item's scratch), on its own thread.
+  std::function<Status(FrameWork& work)> encode;
   // Receives finished frames in order. Runs on its own thread.
   std::function<Status(const FrameWork& work)> sink;
 };

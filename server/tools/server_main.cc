@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <memory>
 #include <string>
 #include <thread>
@@ -21,6 +22,7 @@
 #include "common/visualize.h"
 #include "common/clock.h"
 #include "server/capture/dataset.h"
+#include "server/capture/prerendered.h"
 #include "server/net/server_config.h"
 #include "server/net/session_server.h"
 #include "server/net/site_publisher.h"
@@ -82,6 +84,8 @@ int main(int argc, char** argv) {
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
   bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
+  int prerender = 0, stream_step = 2;
+  size_t stream_triangles = 20000;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
   app.add_option("-w,--workload", workload_name, "synthetic source: S8-QVGA or S8-VGA")->capture_default_str();
   app.add_option("--rig", rig_path, "synthetic source: render this rig instead of the workload's");
@@ -97,7 +101,21 @@ int main(int argc, char** argv) {
   app.add_option("--background-frames", background_frames, "empty-room frames to learn from")->capture_default_str();
   app.add_option("--queue", queue, "frames in flight per pipeline hop")->capture_default_str();
   app.add_option("--pace", pace, "pace acquisition like a live camera at this fps (0: as fast as possible)");
-  app.add_option("--export", export_dir, "write every frame's textured mesh to DIR/mesh_NNNNNN.ply");
+  app.add_option("--prerender", prerender,
+                 "synthetic source: render this many frame sets into memory first and loop them forward and back "
+                 "forever (-n counts on), so acquisition costs a copy as with cameras, not the studio's rendering "
+                 "(0: render while running)")
+      ->check(CLI::Range(0, 3000));
+  app.add_option("--stream-step", stream_step,
+                 "the published mesh: marching cubes over every N-th voxel of the fused volume (1: full resolution)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4));
+  app.add_option("--stream-triangles", stream_triangles,
+                 "the published mesh: simplify to at most this many triangles (0: no budget); --stream-step 1 "
+                 "--stream-triangles 0 publishes the full mesh")
+      ->capture_default_str();
+  app.add_option("--export", export_dir,
+                 "write every frame's full-resolution textured mesh to DIR/mesh_NNNNNN.ply");
   app.add_option("--snapshot", snapshot_path,
                  "write a PNG of the last frame's textured mesh from a viewpoint no pod has "
                  "(synthetic source: ground truth on the left, ours on the right)");
@@ -203,10 +221,15 @@ int main(int argc, char** argv) {
   options.pipeline.queue_capacity = queue;
   options.pipeline.pace_fps = pace;
   options.pipeline.max_frames = frames;
+  options.stream_mesh = stream_step > 1 || stream_triangles > 0;
+  options.stream.step = stream_step;
+  options.stream.max_triangles = stream_triangles;
+  options.full_mesh = !export_dir.empty();
 
   // Sources. The studio is both the frame source and (empty room) the background.
   std::unique_ptr<holo::SyntheticStudio> studio, empty_room;
   std::unique_ptr<holo::DatasetReader> dataset, background_dataset;
+  std::unique_ptr<holo::PrerenderedSource> prerendered;
   holo::FrameSource* source = nullptr;
   holo::FrameSource* background = nullptr;
   std::string source_name;
@@ -228,6 +251,15 @@ int main(int argc, char** argv) {
     if (!e.ok()) return Fail(e.status());
     empty_room = std::move(*e);
     source = studio.get();
+    if (prerender > 0) {
+      if (options.masks == holo::MaskSource::kTruth)
+        return Fail(holo::InvalidArgument("--prerender cannot be combined with --masks truth (the studio renders the masks)"));
+      if (!quiet) std::fprintf(stderr, "holoport-server: pre-rendering %d frame sets of %s...\n", prerender, workload->name.c_str());
+      auto pr = holo::PrerenderedSource::Render(*studio, prerender, /*loop=*/true, quiet);
+      if (!pr.ok()) return Fail(pr.status());
+      prerendered = std::move(*pr);
+      source = prerendered.get();
+    }
     background = empty_room.get();
     options.tsdf.voxel_size = voxel_mm > 0 ? static_cast<float>(voxel_mm * 1e-3) : workload->voxel_size_m;
     source_name = workload->name;
@@ -406,6 +438,22 @@ int main(int argc, char** argv) {
   int64_t done = 0;
   holo::Mesh last_mesh;
   int64_t last_frame = -1;
+  // Encode stage (own thread): G1 + C1 of the frame into the work item.
+  std::function<holo::Status(holo::FrameWork&)> encode;
+  if (publisher) {
+    encode = [&](holo::FrameWork& w) -> holo::Status {
+      if (!w.encoded) w.encoded = std::make_shared<holo::net::EncodedFrame>();
+      auto* e = static_cast<holo::net::EncodedFrame*>(w.encoded.get());
+      // Capture time on the wall clock: now minus the time since acquisition.
+      const int64_t capture_us = holo::net::WallUs() - (holo::RealClock::Instance().NowUs() - w.timings.acquired_us);
+      std::vector<holo::net::PodColor> pods;
+      for (const auto& f : w.frames.frames)
+        pods.push_back({static_cast<uint16_t>(f.pod_id), &f.color, &f.mask});
+      return publisher->Encode(w.frames.frame_index, capture_us, w.mesh, pods, e);
+    };
+  }
+  const double cpu_start = holo::ProcessCpuTimeMs();
+  double cpu_window = cpu_start;
   auto sink = [&](const holo::FrameWork& w) -> holo::Status {
     if (!snapshot_path.empty()) {
       last_mesh = w.mesh;
@@ -413,40 +461,53 @@ int main(int argc, char** argv) {
     }
     const auto& t = w.timings;
     holo::net::PublishTimings pt;
-    if (publisher) {
-      // Capture time on the wall clock: now minus the time since acquisition.
-      const int64_t capture_us = holo::net::WallUs() - (holo::RealClock::Instance().NowUs() - t.acquired_us);
-      std::vector<holo::net::PodColor> pods;
-      for (const auto& f : w.frames.frames)
-        pods.push_back({static_cast<uint16_t>(f.pod_id), &f.color, &f.mask});
-      HOLO_RETURN_IF_ERROR(publisher->Publish(w.frames.frame_index, capture_us, w.mesh, pods, &pt));
+    if (publisher && w.encoded) {
+      auto* e = static_cast<holo::net::EncodedFrame*>(w.encoded.get());
+      publisher->PublishEncoded(e);
+      pt = e->timings;
     }
     std::fprintf(stats_out,
-                 "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"acquire_ms\":%.3f,\"segment_ms\":%.3f,"
-                 "\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"texture_ms\":%.3f,\"latency_ms\":%.3f%s",
+                 "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"full_triangles\":%zu,\"acquire_ms\":%.3f,"
+                 "\"segment_ms\":%.3f,\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"simplify_ms\":%.3f,\"texture_ms\":%.3f,"
+                 "\"encode_ms\":%.3f,\"latency_ms\":%.3f,\"encoded_latency_ms\":%.3f%s",
                  static_cast<long long>(w.frames.frame_index), w.mesh.num_vertices(), w.mesh.num_triangles(),
-                 t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.texture_ms, t.latency_ms(), publisher ? "" : "}\n");
+                 w.full_mesh.num_triangles(), t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.simplify_ms,
+                 t.texture_ms, t.encode_ms, t.latency_ms(), t.encoded_latency_ms(), publisher || serial ? "" : "}\n");
+    if (serial)  // CPU of each stage (one at a time: the process's CPU while it ran)
+      std::fprintf(stats_out,
+                   ",\"acquire_cpu_ms\":%.3f,\"segment_cpu_ms\":%.3f,\"fuse_cpu_ms\":%.3f,\"mesh_cpu_ms\":%.3f,"
+                   "\"simplify_cpu_ms\":%.3f,\"texture_cpu_ms\":%.3f,\"encode_cpu_ms\":%.3f%s",
+                   t.acquire_cpu_ms, t.segment_cpu_ms, t.fuse_cpu_ms, t.mesh_cpu_ms, t.simplify_cpu_ms, t.texture_cpu_ms,
+                   t.encode_cpu_ms, publisher ? "" : "}\n");
     if (publisher)
       std::fprintf(stats_out,
-                   ",\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
+                   ",\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"encode_geometry_cpu_ms\":%.3f,"
+                   "\"encode_color_cpu_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
                    "\"color_bytes\":%zu,\"viewers\":%zu}\n",
-                   pt.geometry_ms, pt.color_ms, pt.publish_ms, pt.geometry_bytes, pt.color_bytes, pt.viewers);
+                   pt.geometry_ms, pt.color_ms, pt.geometry_cpu_ms, pt.color_cpu_ms, pt.publish_ms, pt.geometry_bytes,
+                   pt.color_bytes, pt.viewers);
     if (!export_dir.empty()) {
       char path[4096];
       FrameFileName(path, sizeof(path), export_dir, w.frames.frame_index);
-      HOLO_RETURN_IF_ERROR(holo::WritePly(path, w.mesh));
+      HOLO_RETURN_IF_ERROR(holo::WritePly(path, w.full_mesh.empty() ? w.mesh : w.full_mesh));
     }
     ++done;
-    if (done % 30 == 0) net_line(w.frames.frame_index);
-    if (!quiet && publisher && (done % 30 == 0))
-      std::fprintf(stderr, "  frame %lld: encode G1 %.1f ms (%zu B), C1 %.1f ms (%zu B), publish %.2f ms, %zu viewers\n",
-                   static_cast<long long>(done), pt.geometry_ms, pt.geometry_bytes, pt.color_ms, pt.color_bytes,
-                   pt.publish_ms, pt.viewers);
-    if (!quiet && (done % 30 == 0))
-      std::fprintf(stderr,
-                   "  frame %lld: %zu triangles; segment %.1f ms, fuse %.1f, mesh %.1f, texture %.1f; latency %.1f ms\n",
-                   static_cast<long long>(done), w.mesh.num_triangles(), t.segment_ms, t.fuse_ms, t.mesh_ms,
-                   t.texture_ms, t.latency_ms());
+    if (done % 30 == 0) {
+      net_line(w.frames.frame_index);
+      // Whole-process CPU per frame over the last 30 frames (all stages, encode and network).
+      const double now_cpu = holo::ProcessCpuTimeMs();
+      std::fprintf(stats_out, "{\"site\":true,\"frame\":%lld,\"cpu_ms_per_frame\":%.2f}\n",
+                   static_cast<long long>(w.frames.frame_index), (now_cpu - cpu_window) / 30.0);
+      std::fflush(stats_out);
+      if (!quiet)
+        std::fprintf(stderr,
+                     "  frame %lld: %zu triangles; segment %.1f ms, fuse %.1f, mesh %.1f, simplify %.1f, texture %.1f, "
+                     "encode %.1f (G1 %zu B, C1 %zu B); latency %.1f ms; %.1f CPU-ms per frame; %zu viewers\n",
+                     static_cast<long long>(done), w.mesh.num_triangles(), t.segment_ms, t.fuse_ms, t.mesh_ms,
+                     t.simplify_ms, t.texture_ms, t.encode_ms, pt.geometry_bytes, pt.color_bytes,
+                     t.encoded_latency_ms(), (now_cpu - cpu_window) / 30.0, pt.viewers);
+      cpu_window = now_cpu;
+    }
     return holo::OkStatus();
   };
   // Ctrl-C / SIGTERM: stop the pipeline (from a watcher thread; signal
@@ -456,7 +517,7 @@ int main(int argc, char** argv) {
     while (!run_done && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     if (g_stop) (*site)->Stop();
   });
-  auto stats = (*site)->Run(sink);
+  auto stats = (*site)->Run(sink, encode);
   run_done = true;
   watcher.join();
   if (server) net_line(-1);
@@ -471,7 +532,8 @@ int main(int argc, char** argv) {
     if (!s.ok()) return Fail(s);
     std::vector<const holo::ImageRgb8*> tiles;
     if (studio) {
-      studio->RenderView(last_frame, view.camera, &truth, nullptr, nullptr);
+      studio->RenderView(prerendered ? prerendered->ContentFrame(last_frame) : last_frame, view.camera, &truth,
+                         nullptr, nullptr);
       tiles.push_back(&truth);
     }
     tiles.push_back(&ours);
@@ -482,10 +544,13 @@ int main(int argc, char** argv) {
   const holo::StageTimings m = holo::MedianTimings(*stats);
   if (!quiet)
     std::fprintf(stderr,
-                 "holoport-server: %lld frames in %.2f s = %.1f fps; median ms: acquire %.1f, segment %.1f, fuse %.1f, "
-                 "mesh %.1f, texture %.1f; median latency %.1f ms (%s)%s%s\n",
-                 static_cast<long long>(stats->frames), stats->wall_seconds, stats->fps, m.acquire_ms, m.segment_ms,
-                 m.fuse_ms, m.mesh_ms, m.texture_ms, holo::MedianLatencyMs(*stats),
+                 "holoport-server: %lld frames in %.2f s = %.1f fps, %.1f CPU-ms per frame; median ms: acquire %.1f, "
+                 "segment %.1f, fuse %.1f, mesh %.1f, simplify %.1f, texture %.1f, encode %.1f; median latency %.1f ms "
+                 "(%s)%s%s\n",
+                 static_cast<long long>(stats->frames), stats->wall_seconds, stats->fps,
+                 stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0.0, m.acquire_ms,
+                 m.segment_ms, m.fuse_ms, m.mesh_ms, m.simplify_ms, m.texture_ms, m.encode_ms,
+                 holo::MedianLatencyMs(*stats),
                  pace > 0 ? "paced" : "unpaced: includes waiting in queues; use --pace for live latency",
                  export_dir.empty() ? "" : "; meshes in ", export_dir.c_str());
   return 0;

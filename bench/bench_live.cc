@@ -1,0 +1,695 @@
+// holoport-bench live: the product end to end on this machine.
+//
+//   holoport-bench live --workload S8-QVGA|S8-VGA [--content fused|temporal|truth] [--seconds S] [--json]
+//
+// A site (holoport-server, its own process) runs the real capture pipeline
+// on pre-rendered pod frames paced like cameras at 30 fps (the studio's
+// rendering is not the site's work): segmentation, fusion (per frame, or
+// temporal), the stream mesh, texturing, G1 + C1 encoding, the session
+// server. On loopback, in this process: one viewer that decodes *and
+// renders* (headless GL, projective texturing at --width × --height, a
+// slowly orbiting camera) and --decoders viewers that only decode, each
+// with its own io thread. Everything shares the machine's cores, as a
+// two-party call on one box would.
+//
+// Before the live run, a serial run of the same site (one stage at a time)
+// gives the CPU-ms of each stage. After it, frames kept by the rendering
+// viewer are scored against the studio's ground truth: Chamfer distance of
+// the decoded mesh, and PSNR/SSIM of the viewer's render from cameras no pod
+// has.
+//
+// Figures (JSON lines, every one with "content"): site_fps, site_cpu_ms per
+// stage (serial run) and total (live run: the site process's CPU per
+// published frame), viewer_fps per viewer kind (new frames decoded /
+// displayed per second, not redraws), latency_p50_ms / latency_p99_ms
+// from the pods' acquisition to decoded and to displayed ("at"), mbps per
+// viewer, triangles, chamfer_mm and novel_view_psnr_db / novel_view_ssim at
+// the viewer.
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "bench.h"
+#include "client/net/site_client.h"
+#include "client/render/gl_context.h"
+#include "client/render/renderer.h"
+#include "common/metrics/image_metrics.h"
+#include "common/metrics/mesh_distance.h"
+#include "common/pose.h"
+#include "server/capture/prerendered.h"
+#include "server/net/wire_message.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+#include "server/texture/novel_view.h"
+
+namespace holo::bench {
+namespace {
+
+constexpr char kPublisherToken[] = "live-bench-publisher";
+constexpr char kViewerToken[] = "live-bench-viewer";
+
+struct LiveOptions {
+  std::string content = "fused";  // fused | temporal | truth
+  double seconds = 20;
+  double warmup_s = 4;
+  int decoders = 4;
+  bool render = true;
+  int width = 960, height = 540;
+  int prerender = 60;
+  int serial_frames = 30;
+  int quality_frames = 6;
+  std::string site_binary;
+  std::string keep_dir;  // keep the site's logs here
+};
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t i = static_cast<size_t>(std::ceil(p / 100.0 * static_cast<double>(v.size()))) ;
+  return v[std::min(v.size() - 1, i == 0 ? 0 : i - 1)];
+}
+
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+// CPU time of process `pid` (all threads), ms; -1 if unreadable.
+double ProcessCpuMsOf(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(f, line)) return -1;
+  // Fields after the command name (which may hold spaces) start after ")".
+  const size_t close = line.rfind(')');
+  if (close == std::string::npos) return -1;
+  std::istringstream in(line.substr(close + 2));
+  std::string field;
+  std::vector<std::string> fields;
+  while (in >> field) fields.push_back(field);
+  // fields[0] is field 3 (state); utime and stime are fields 14 and 15.
+  if (fields.size() < 13) return -1;
+  const double ticks = std::stod(fields[11]) + std::stod(fields[12]);
+  return 1e3 * ticks / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+uint16_t FreeLoopbackPort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return 0;
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  socklen_t len = sizeof a;
+  uint16_t port = 0;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
+    port = ntohs(a.sin_port);
+  close(fd);
+  return port;
+}
+
+std::string SelfDir() {
+  char buf[4096];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
+  if (n <= 0) return ".";
+  std::string p(buf, static_cast<size_t>(n));
+  return p.substr(0, p.rfind('/'));
+}
+
+// A child process with stdout and stderr sent to files.
+struct Child {
+  pid_t pid = -1;
+  static StatusOr<Child> Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
+    std::vector<char*> cargv;
+    for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
+    cargv.push_back(nullptr);
+    const pid_t pid = fork();
+    if (pid < 0) return Unavailable("fork failed");
+    if (pid == 0) {
+      FILE* log = std::fopen(log_path.c_str(), "w");
+      if (log) {
+        dup2(fileno(log), 1);
+        dup2(fileno(log), 2);
+      }
+      execv(cargv[0], cargv.data());
+      std::fprintf(stderr, "exec %s failed\n", cargv[0]);
+      _exit(127);
+    }
+    Child c;
+    c.pid = pid;
+    return c;
+  }
+  bool Running() const {
+    if (pid <= 0) return false;
+    int status = 0;
+    return waitpid(pid, &status, WNOHANG) == 0;
+  }
+  // SIGTERM, then SIGKILL after `grace_s`; returns the exit status.
+  int Stop(double grace_s = 10) {
+    if (pid <= 0) return -1;
+    kill(pid, SIGTERM);
+    int status = 0;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace_s);
+    while (std::chrono::steady_clock::now() < until) {
+      if (waitpid(pid, &status, WNOHANG) == pid) {
+        pid = -1;
+        return status;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    kill(pid, SIGKILL);
+    waitpid(pid, &status, 0);
+    pid = -1;
+    return status;
+  }
+  // Waits for a normal exit (the serial run ends by itself).
+  int Wait() {
+    int status = 0;
+    if (pid > 0) waitpid(pid, &status, 0);
+    pid = -1;
+    return status;
+  }
+};
+
+std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
+  std::vector<nlohmann::json> out;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    auto j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_discarded() && j.is_object()) out.push_back(std::move(j));
+  }
+  return out;
+}
+
+std::vector<std::string> SiteArgs(const LiveOptions& o, const std::string& workload, uint16_t port,
+                                  const std::string& stats, bool serial) {
+  std::vector<std::string> a = {o.site_binary, "--source", "synthetic", "--workload", workload, "--listen",
+                                "127.0.0.1:" + std::to_string(port), "--publisher-token", kPublisherToken,
+                                "--viewer-token", kViewerToken, "--stats", stats, "--pace", "30"};
+  if (o.content == "truth") {
+    a.insert(a.end(), {"--truth-mesh", "--truth-loop", std::to_string(o.prerender), "-n", "-1"});
+    return a;
+  }
+  a.insert(a.end(), {"--prerender", std::to_string(serial ? o.serial_frames : o.prerender)});
+  if (o.content == "temporal") a.push_back("--temporal");
+  if (serial) {
+    a.insert(a.end(), {"--serial", "-n", std::to_string(o.serial_frames)});
+  } else {
+    a.insert(a.end(), {"-n", "-1"});
+  }
+  return a;
+}
+
+// What a viewer saw of one frame.
+struct FrameRecord {
+  int64_t frame_index = 0;
+  double latency_decoded_ms = 0;
+  double latency_displayed_ms = -1;
+  int64_t at_us = 0;  // when decoded (decoders) or displayed (renderer)
+};
+
+struct ViewerLog {
+  std::mutex mu;
+  std::vector<FrameRecord> frames;
+  uint64_t bytes_at_start = 0, bytes_at_end = 0;
+};
+
+struct KeptFrame {
+  int64_t frame_index = 0;
+  Mesh mesh;
+  std::vector<net::DecodedImage> images;
+};
+
+StatusOr<std::unique_ptr<net::SiteClient>> StartViewer(uint16_t port, const std::string& name,
+                                                       net::ClientCallbacks cb) {
+  net::ClientOptions o;
+  o.port = port;
+  o.token = kViewerToken;
+  o.name = name;
+  o.subscribe = net::kSubscribeGeometry | net::kSubscribeColor;
+  o.decode = true;
+  o.backoff_initial_s = 0.2;
+  o.backoff_max_s = 1.0;
+  o.connect_timeout_s = 60;
+  return net::SiteClient::Start(o, std::move(cb));
+}
+
+// The orbiting viewer camera at time t (a head that moves).
+CameraModel ViewerCamera(int width, int height, double t) {
+  const float a = static_cast<float>(0.6 + 0.25 * std::sin(0.5 * t));
+  CameraModel c;
+  c.intrinsics = Intrinsics::FromFov(width, height, 60.0);
+  c.world_from_camera = LookAt(Eigen::Vector3f(2.2f * std::cos(a), 2.2f * std::sin(a), 1.5f), Eigen::Vector3f(0, 0, 1.0f));
+  return c;
+}
+
+int Run(const BenchArgs& args) {
+  LiveOptions o;
+  {
+    CLI::App app{"holoport-bench live: the site, its session server and viewers on this machine, end to end"};
+    app.add_option("--content", o.content, "fused (per-frame fusion), temporal (fusion over time) or truth (the studio's meshes)")
+        ->check(CLI::IsMember({"fused", "temporal", "truth"}));
+    app.add_flag("--temporal", [&](int64_t) { o.content = "temporal"; }, "same as --content temporal");
+    app.add_option("--seconds", o.seconds, "measured window, s")->check(CLI::Range(3.0, 3600.0));
+    app.add_option("--warmup", o.warmup_s, "seconds after every viewer's first frame before measuring")->check(CLI::Range(0.0, 60.0));
+    app.add_option("--decoders", o.decoders, "viewers that only decode")->check(CLI::Range(0, 32));
+    app.add_option("--width", o.width, "rendering viewer's width")->check(CLI::Range(64, 4096));
+    app.add_option("--height", o.height, "rendering viewer's height")->check(CLI::Range(64, 4096));
+    app.add_flag("--no-render", [&](int64_t) { o.render = false; }, "no rendering viewer (and no novel-view figures)");
+    app.add_option("--prerender", o.prerender, "pod frame sets rendered before the run and looped")->check(CLI::Range(2, 600));
+    app.add_option("--serial-frames", o.serial_frames, "frames of the serial run that measures CPU per stage (0: skip)")
+        ->check(CLI::Range(0, 600));
+    app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
+    app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
+    std::vector<std::string> argv_s = {"live"};
+    argv_s.insert(argv_s.end(), args.extra.begin(), args.extra.end());
+    std::vector<const char*> argv;
+    for (const auto& s : argv_s) argv.push_back(s.c_str());
+    try {
+      app.parse(static_cast<int>(argv.size()), argv.data());
+    } catch (const CLI::CallForHelp&) {
+      std::printf("%s", app.help().c_str());
+      return 0;
+    } catch (const CLI::ParseError& e) {
+      std::fprintf(stderr, "live: %s\n", e.what());
+      return 2;
+    }
+  }
+  if (args.frames > 0) o.seconds = args.frames / 30.0;
+  if (o.site_binary.empty()) o.site_binary = SelfDir() + "/holoport-server";
+  if (access(o.site_binary.c_str(), X_OK) != 0) {
+    std::fprintf(stderr, "live: site program %s not found (build holoport-server or pass --site)\n", o.site_binary.c_str());
+    return 2;
+  }
+  auto workload = GetWorkload(args.workload);
+  if (!workload.ok()) {
+    std::fprintf(stderr, "live: %s\n", workload.status().ToString().c_str());
+    return 2;
+  }
+  const std::string& wl = workload->name;
+  const std::string content = o.content;
+  auto progress = [&](const std::string& s) {
+    if (!args.json) std::fprintf(stderr, "live: %s\n", s.c_str());
+  };
+  std::string dir = o.keep_dir;
+  if (dir.empty()) {
+    char tmpl[] = "/tmp/holoport-live-XXXXXX";
+    if (!mkdtemp(tmpl)) {
+      std::fprintf(stderr, "live: cannot make a temporary directory\n");
+      return 1;
+    }
+    dir = tmpl;
+  } else {
+    std::string cmd = "mkdir -p '" + dir + "'";
+    if (std::system(cmd.c_str()) != 0) return 1;
+  }
+  auto emit = [&](const std::string& metric, double value, const std::string& unit,
+                  std::map<std::string, std::string> q = {}) {
+    q["content"] = content;
+    EmitFigure("live", wl, metric, value, unit, q);
+  };
+
+  // 1. Serial run: CPU-ms per stage, one stage at a time.
+  if (o.serial_frames > 0 && content != "truth") {
+    progress("serial run of the site (" + std::to_string(o.serial_frames) + " frames) for CPU per stage");
+    const uint16_t port = FreeLoopbackPort();
+    const std::string stats = dir + "/serial_stats.jsonl";
+    auto child = Child::Spawn(SiteArgs(o, wl, port, stats, /*serial=*/true), dir + "/serial_site.log");
+    if (!child.ok()) {
+      std::fprintf(stderr, "live: %s\n", child.status().ToString().c_str());
+      return 1;
+    }
+    const int st = child->Wait();
+    if (!WIFEXITED(st) || WEXITSTATUS(st) != 0) {
+      std::fprintf(stderr, "live: the serial site run failed (see %s/serial_site.log)\n", dir.c_str());
+      return 1;
+    }
+    std::map<std::string, std::vector<double>> cpu;
+    for (const auto& j : ReadJsonLines(stats)) {
+      if (!j.contains("triangles") || !j.contains("segment_cpu_ms")) continue;
+      double total = 0;
+      for (const char* stage : {"acquire", "segment", "fuse", "mesh", "simplify", "texture", "encode_geometry",
+                                "encode_color"}) {
+        const std::string key = std::string(stage) + "_cpu_ms";
+        const double v = j.value(key, 0.0);
+        cpu[stage].push_back(v);
+        total += v;
+      }
+      cpu["total"].push_back(total);
+    }
+    if (cpu["total"].size() < 4) {
+      std::fprintf(stderr, "live: the serial site run gave %zu frames\n", cpu["total"].size());
+      return 1;
+    }
+    // The first frames warm caches and allocate: drop them.
+    for (auto& [stage, v] : cpu) {
+      v.erase(v.begin(), v.begin() + std::min<size_t>(3, v.size() / 4));
+      emit("site_cpu_ms", Median(v), "ms", {{"stage", stage}, {"run", "serial"}});
+    }
+  }
+
+  // 2. The live run.
+  const uint16_t port = FreeLoopbackPort();
+  const std::string stats_path = dir + "/site_stats.jsonl";
+  progress("starting the site (" + content + ", " + wl + ") on port " + std::to_string(port));
+  auto site = Child::Spawn(SiteArgs(o, wl, port, stats_path, /*serial=*/false), dir + "/site.log");
+  if (!site.ok()) {
+    std::fprintf(stderr, "live: %s\n", site.status().ToString().c_str());
+    return 1;
+  }
+  struct Guard {
+    Child* c;
+    ~Guard() {
+      if (c->pid > 0) c->Stop(5);
+    }
+  } guard{&*site};
+
+  std::atomic<bool> measuring{false}, stop{false};
+  std::vector<std::unique_ptr<ViewerLog>> logs;
+  std::vector<std::unique_ptr<net::SiteClient>> decoders;
+  for (int i = 0; i < o.decoders; ++i) {
+    logs.push_back(std::make_unique<ViewerLog>());
+    ViewerLog* log = logs.back().get();
+    net::ClientCallbacks cb;
+    cb.on_frame = [log, &measuring](const net::ReceivedFrame& f) {
+      if (!measuring || !f.has_mesh) return;
+      FrameRecord r;
+      r.frame_index = f.frame_index;
+      r.at_us = net::WallUs();
+      r.latency_decoded_ms = f.latency_ms + static_cast<double>(r.at_us - f.received_us) * 1e-3;
+      std::lock_guard<std::mutex> l(log->mu);
+      log->frames.push_back(r);
+    };
+    auto c = StartViewer(port, "decoder-" + std::to_string(i), std::move(cb));
+    if (!c.ok()) {
+      std::fprintf(stderr, "live: %s\n", c.status().ToString().c_str());
+      return 1;
+    }
+    decoders.push_back(std::move(*c));
+  }
+  ViewerLog render_log;
+  std::unique_ptr<net::SiteClient> render_client;
+  std::vector<KeptFrame> kept;
+  std::vector<double> render_ms, render_cpu_ms;
+  double render_thread_cpu_ms = 0;
+  Status render_status;
+  std::atomic<int64_t> render_frames_seen{0};
+  std::thread render_thread;
+  // The GL objects live on the render thread; quality scoring happens there too, after the run.
+  std::mutex kept_mu;
+  if (o.render) {
+    auto c = StartViewer(port, "renderer", {});
+    if (!c.ok()) {
+      std::fprintf(stderr, "live: %s\n", c.status().ToString().c_str());
+      return 1;
+    }
+    render_client = std::move(*c);
+    render_thread = std::thread([&] {
+      auto ctx = render::CreateHeadlessContext();
+      if (!ctx.ok()) {
+        render_status = ctx.status();
+        return;
+      }
+      auto renderer = render::Renderer::Create();
+      auto target = render::OffscreenTarget::Create(o.width, o.height);
+      if (!renderer.ok() || !target.ok()) {
+        render_status = !renderer.ok() ? renderer.status() : target.status();
+        return;
+      }
+      (*target)->Bind();
+      render::RenderSettings settings;
+      settings.mode = render::ColorMode::kProjective;
+      const auto t0 = std::chrono::steady_clock::now();
+      int64_t kept_every = 0;
+      net::ReceivedFrame rf;
+      while (!stop) {
+        if (!render_client->WaitFrame(&rf, 0.1)) continue;
+        net::ReceivedFrame newer;
+        while (render_client->LatestFrame(&newer)) rf = std::move(newer);
+        if (!rf.has_mesh || rf.mesh.positions.empty()) continue;
+        const double cpu0 = ThreadCpuMs();
+        const auto r0 = std::chrono::steady_clock::now();
+        auto rig = render_client->rig();
+        Status s = (*renderer)->SetRemoteMesh(rf.mesh);
+        if (s.ok() && rig && rf.has_color) {
+          std::vector<const ImageRgb8*> images(rig->pods.size(), nullptr);
+          bool all = true;
+          for (const auto& d : rf.images)
+            if (d.pod_id < images.size()) images[d.pod_id] = &d.image;
+          for (const auto* p : images) all = all && p != nullptr;
+          if (all) s = (*renderer)->SetPodImages(*rig, images);
+        }
+        if (!s.ok()) {
+          render_status = s;
+          return;
+        }
+        const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        const render::Viewport vp{0, 0, o.width, o.height};
+        s = (*renderer)->Render(ViewerCamera(o.width, o.height, t), settings, vp);
+        if (!s.ok()) {
+          render_status = s;
+          return;
+        }
+        render::FinishGl();
+        const int64_t shown = net::WallUs();
+        ++render_frames_seen;
+        if (!measuring) continue;
+        render_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - r0).count());
+        render_cpu_ms.push_back(ThreadCpuMs() - cpu0);
+        FrameRecord r;
+        r.frame_index = rf.frame_index;
+        r.at_us = shown;
+        r.latency_decoded_ms = rf.latency_ms;
+        r.latency_displayed_ms = rf.latency_ms + static_cast<double>(shown - rf.received_us) * 1e-3;
+        {
+          std::lock_guard<std::mutex> l(render_log.mu);
+          render_log.frames.push_back(r);
+        }
+        if (++kept_every % 20 == 0 && static_cast<int>(kept.size()) < o.quality_frames && rf.has_color) {
+          std::lock_guard<std::mutex> l(kept_mu);
+          kept.push_back({rf.frame_index, rf.mesh, rf.images});
+        }
+      }
+      render_thread_cpu_ms = ThreadCpuMs();
+    });
+  }
+
+  // Wait until every viewer has frames (the site pre-renders and learns its background first).
+  progress("waiting for the site's first frames");
+  const auto start_wait = std::chrono::steady_clock::now();
+  for (;;) {
+    bool all = true;
+    for (auto& d : decoders) all = all && d->stats().frames_received > 0;
+    if (render_client) all = all && render_frames_seen > 0;
+    if (all) break;
+    if (!site->Running()) {
+      std::fprintf(stderr, "live: the site exited early (see %s/site.log)\n", dir.c_str());
+      stop = true;
+      if (render_thread.joinable()) render_thread.join();
+      return 1;
+    }
+    if (!render_status.ok()) break;
+    if (std::chrono::steady_clock::now() - start_wait > std::chrono::seconds(180)) {
+      std::fprintf(stderr, "live: no frames after 180 s (see %s/site.log)\n", dir.c_str());
+      stop = true;
+      if (render_thread.joinable()) render_thread.join();
+      return 1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.warmup_s));
+  progress("measuring for " + std::to_string(o.seconds) + " s");
+  auto count_site_frames = [&] {
+    int64_t n = 0, last = -1;
+    for (const auto& j : ReadJsonLines(stats_path))
+      if (j.contains("triangles")) {
+        ++n;
+        last = j.value("frame", int64_t{-1});
+      }
+    return std::make_pair(n, last);
+  };
+  const auto [site_frames0, site_last0] = count_site_frames();
+  const double site_cpu0 = ProcessCpuMsOf(site->pid);
+  const double self_cpu0 = ProcessCpuMs();
+  std::vector<uint64_t> bytes0;
+  for (auto& d : decoders) bytes0.push_back(d->stats().bytes_received);
+  const uint64_t render_bytes0 = render_client ? render_client->stats().bytes_received : 0;
+  const auto w0 = std::chrono::steady_clock::now();
+  measuring = true;
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.seconds));
+  measuring = false;
+  const double window_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
+  const double site_cpu1 = ProcessCpuMsOf(site->pid);
+  const double self_cpu1 = ProcessCpuMs();
+  const auto [site_frames1, site_last1] = count_site_frames();
+  std::vector<uint64_t> bytes1;
+  for (auto& d : decoders) bytes1.push_back(d->stats().bytes_received);
+  const uint64_t render_bytes1 = render_client ? render_client->stats().bytes_received : 0;
+  (void)site_last0;
+  (void)site_last1;
+
+  // Site figures.
+  const double site_frames = static_cast<double>(site_frames1 - site_frames0);
+  emit("site_fps", site_frames / window_s, "1/s");
+  if (site_frames > 0) emit("site_cpu_ms", (site_cpu1 - site_cpu0) / site_frames, "ms", {{"stage", "total"}, {"run", "live"}});
+  std::vector<double> tris, latency_site, geometry_bytes, color_bytes;
+  for (const auto& j : ReadJsonLines(stats_path)) {
+    if (!j.contains("triangles")) continue;
+    tris.push_back(j.value("triangles", 0.0));
+    latency_site.push_back(j.value("encoded_latency_ms", j.value("latency_ms", 0.0)));
+    geometry_bytes.push_back(j.value("geometry_bytes", 0.0));
+    color_bytes.push_back(j.value("color_bytes", 0.0));
+  }
+  emit("triangles", Median(tris), "count");
+  emit("geometry_bytes", Median(geometry_bytes), "B");
+  emit("color_bytes", Median(color_bytes), "B");
+  if (content != "truth") emit("site_latency_ms", Median(latency_site), "ms", {{"at", "encoded"}});
+
+  // Viewer figures.
+  std::vector<double> dec_fps, dec_lat, mbps;
+  for (size_t i = 0; i < decoders.size(); ++i) {
+    std::lock_guard<std::mutex> l(logs[i]->mu);
+    dec_fps.push_back(static_cast<double>(logs[i]->frames.size()) / window_s);
+    for (const auto& r : logs[i]->frames) dec_lat.push_back(r.latency_decoded_ms);
+    mbps.push_back(static_cast<double>(bytes1[i] - bytes0[i]) * 8.0 / (window_s * 1e6));
+  }
+  if (!decoders.empty()) {
+    emit("viewer_fps", Median(dec_fps), "1/s", {{"viewer", "decode"}, {"of", std::to_string(decoders.size())}});
+    emit("viewer_fps_min", *std::min_element(dec_fps.begin(), dec_fps.end()), "1/s", {{"viewer", "decode"}});
+    emit("latency_p50_ms", Percentile(dec_lat, 50), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
+    emit("latency_p99_ms", Percentile(dec_lat, 99), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
+    emit("mbps", Median(mbps), "Mbit/s", {{"viewer", "decode"}});
+  }
+  stop = true;
+  if (render_thread.joinable()) render_thread.join();
+  if (!render_status.ok()) {
+    std::fprintf(stderr, "live: rendering viewer failed: %s\n", render_status.ToString().c_str());
+    return 1;
+  }
+  if (render_client) {
+    std::vector<double> lat_shown, lat_dec;
+    size_t n = 0;
+    {
+      std::lock_guard<std::mutex> l(render_log.mu);
+      n = render_log.frames.size();
+      for (const auto& r : render_log.frames) {
+        lat_shown.push_back(r.latency_displayed_ms);
+        lat_dec.push_back(r.latency_decoded_ms);
+      }
+    }
+    const std::string res = std::to_string(o.width) + "x" + std::to_string(o.height);
+    emit("viewer_fps", static_cast<double>(n) / window_s, "1/s", {{"viewer", "render"}, {"resolution", res}});
+    emit("latency_p50_ms", Percentile(lat_shown, 50), "ms", {{"at", "displayed"}, {"viewer", "render"}});
+    emit("latency_p99_ms", Percentile(lat_shown, 99), "ms", {{"at", "displayed"}, {"viewer", "render"}});
+    emit("latency_p50_ms", Percentile(lat_dec, 50), "ms", {{"at", "received"}, {"viewer", "render"}});
+    emit("render_ms", Median(render_ms), "ms", {{"viewer", "render"}, {"resolution", res}});
+    emit("render_cpu_ms", Median(render_cpu_ms), "ms", {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}});
+    emit("mbps", static_cast<double>(render_bytes1 - render_bytes0) * 8.0 / (window_s * 1e6), "Mbit/s",
+         {{"viewer", "render"}});
+  }
+  emit("viewers_cpu_ms_per_s", (self_cpu1 - self_cpu0) / window_s, "ms",
+       {{"note", "this process: all viewers' io, decoding and GL threads"}});
+  guard.c->Stop(10);
+
+  // 3. Quality at the viewer against the studio's ground truth.
+  if (!kept.empty()) {
+    progress("scoring " + std::to_string(kept.size()) + " decoded frames against the ground truth");
+    auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
+    if (!studio.ok()) {
+      std::fprintf(stderr, "live: %s\n", studio.status().ToString().c_str());
+      return 1;
+    }
+    auto content_frame = [&](int64_t k) {
+      return content == "truth" ? k % o.prerender : LoopContent(k, o.prerender);
+    };
+    std::vector<double> chamfer, psnr, ssim;
+    NovelViewOptions nv;
+    nv.intrinsics = Intrinsics::FromFov(o.width, o.height, 50.0);
+    const std::vector<NovelView> views = MakeNovelViews(nv);
+    Status q_status;
+    std::thread q([&] {
+      auto ctx = render::CreateHeadlessContext();
+      if (!ctx.ok()) {
+        q_status = ctx.status();
+        return;
+      }
+      auto renderer = render::Renderer::Create();
+      auto target = render::OffscreenTarget::Create(o.width, o.height);
+      if (!renderer.ok() || !target.ok()) {
+        q_status = !renderer.ok() ? renderer.status() : target.status();
+        return;
+      }
+      (*target)->Bind();
+      for (const KeptFrame& k : kept) {
+        const int64_t f = content_frame(k.frame_index);
+        const Mesh truth_mesh = (*studio)->ForegroundMesh(f);
+        auto d = metrics::ComputeMeshDistance(k.mesh, truth_mesh);
+        if (d.ok()) chamfer.push_back(d->chamfer_mm);
+        std::vector<const ImageRgb8*> images(workload->rig.pods.size(), nullptr);
+        for (const auto& im : k.images)
+          if (im.pod_id < images.size()) images[im.pod_id] = &im.image;
+        if (!(*renderer)->SetRemoteMesh(k.mesh).ok() || !(*renderer)->SetPodImages(workload->rig, images).ok()) continue;
+        render::RenderSettings settings;
+        settings.mode = render::ColorMode::kProjective;
+        settings.background = {0, 0, 0};
+        for (const NovelView& v : views) {
+          if (!(*renderer)->Render(v.camera, settings, {0, 0, o.width, o.height}).ok()) continue;
+          ImageRgb8 ours, truth;
+          ImageGray8 mask;
+          if (!(*target)->ReadRgb(&ours).ok()) continue;
+          (*studio)->RenderView(f, v.camera, &truth, nullptr, &mask);
+          auto p = metrics::ComputePsnr(ours, truth, &mask);
+          auto s = metrics::ComputeSsim(ours, truth, &mask);
+          if (p.ok()) psnr.push_back(*p);
+          if (s.ok()) ssim.push_back(*s);
+        }
+      }
+    });
+    q.join();
+    if (!q_status.ok()) {
+      std::fprintf(stderr, "live: scoring failed: %s\n", q_status.ToString().c_str());
+      return 1;
+    }
+    if (!chamfer.empty()) emit("chamfer_mm", Median(chamfer), "mm", {{"at", "viewer"}, {"frames", std::to_string(chamfer.size())}});
+    if (!psnr.empty()) {
+      emit("novel_view_psnr_db", Median(psnr), "dB", {{"at", "viewer"}, {"mode", "projective"}, {"views", std::to_string(psnr.size())}});
+      emit("novel_view_ssim", Median(ssim), "", {{"at", "viewer"}, {"mode", "projective"}});
+    }
+  }
+  if (o.keep_dir.empty()) {
+    std::string cmd = "rm -rf '" + dir + "'";
+    if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "live: could not remove %s\n", dir.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("live",
+                    "the product end to end: a site process on paced pod frames, its session server, a rendering "
+                    "viewer and decoding viewers on loopback; fps, CPU per stage, latency, Mbit/s, quality at the viewer",
+                    Run);
+
+}  // namespace holo::bench

@@ -1,0 +1,57 @@
+#include "server/capture/prerendered.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+
+#include "server/studio/studio.h"
+
+namespace holo {
+
+int64_t LoopContent(int64_t k, int64_t n) {
+  if (n <= 1 || k < 0) return 0;
+  const int64_t period = 2 * (n - 1);
+  const int64_t m = k % period;
+  return m < n ? m : period - m;
+}
+
+PrerenderedSource::PrerenderedSource(const Rig& rig, std::shared_ptr<const std::vector<RgbdFrameSet>> frames, bool loop)
+    : rig_(rig), frames_(std::move(frames)), loop_(loop) {}
+
+StatusOr<std::unique_ptr<PrerenderedSource>> PrerenderedSource::Render(SyntheticStudio& studio, int count, bool loop,
+                                                                       bool quiet) {
+  if (count < 1 || count > 3000) return InvalidArgument("prerendered frame count must be in [1, 3000], got " + std::to_string(count));
+  auto frames = std::make_shared<std::vector<RgbdFrameSet>>(static_cast<size_t>(count));
+  for (int k = 0; k < count; ++k) {
+    studio.RenderFrame(k, &(*frames)[static_cast<size_t>(k)], nullptr);
+    (*frames)[static_cast<size_t>(k)].frame_index = k;
+    if (!quiet && ((k + 1) % 10 == 0 || k + 1 == count)) std::fprintf(stderr, "  pre-rendered %d/%d frame sets\n", k + 1, count);
+  }
+  return std::make_unique<PrerenderedSource>(studio.rig(), std::move(frames), loop);
+}
+
+int64_t PrerenderedSource::ContentFrame(int64_t k) const {
+  const int64_t n = static_cast<int64_t>(frames_->size());
+  const int64_t i = loop_ ? LoopContent(k, n) : k;
+  return (*frames_)[static_cast<size_t>(std::clamp<int64_t>(i, 0, n - 1))].frame_index;
+}
+
+Status PrerenderedSource::Next(RgbdFrameSet* out) {
+  const int64_t n = static_cast<int64_t>(frames_->size());
+  if (n == 0 || (!loop_ && next_ >= n)) return OutOfRange("end of the prerendered frames");
+  const int64_t k = next_++;
+  const RgbdFrameSet& in = (*frames_)[static_cast<size_t>(loop_ ? LoopContent(k, n) : k)];
+  out->frame_index = loop_ ? k : in.frame_index;
+  out->frames.resize(in.frames.size());
+  // Assignment into a recycled item reuses its buffers once they have the size.
+  for (size_t p = 0; p < in.frames.size(); ++p) out->frames[p] = in.frames[p];
+  return OkStatus();
+}
+
+Status PrerenderedSource::Seek(int64_t index) {
+  if (index < 0 || (!loop_ && index > static_cast<int64_t>(frames_->size()))) return OutOfRange("seek past the end");
+  next_ = index;
+  return OkStatus();
+}
+
+}  // namespace holo

@@ -1,0 +1,73 @@
+// The stream mesh: what a capture site publishes every frame.
+//
+// The full-resolution marching-cubes mesh of a fused S8-QVGA frame has about
+// 140 k triangles (8 mm voxels); sending, decoding and rendering that at
+// 30 fps is what made the live call slow. Fine appearance does not need it:
+// the viewer projects the pods' colour images onto the surface, so the mesh
+// only has to carry the shape. The stream mesh is made in two steps:
+//
+//  1. Marching cubes over the same fused volume box-filtered onto a grid
+//     `step` times coarser (TsdfVolume::DownsampleInto): the depth noise
+//     that folds the full mesh into many small triangles averages out, the
+//     surface moves little (the mean of a linear field is its value at the
+//     box centre), and extraction costs a fraction of the full mesh's.
+//  2. Only if the result is still above the triangle budget: meshoptimizer's
+//     quadric simplifier (topology-preserving edge collapses) down to it.
+//     Simplifying the full mesh instead took ~100 ms per frame here
+//     (docs/fusion.md, "The stream mesh"); the coarse grid leaves it little
+//     to do.
+//
+// Small fragments are dropped after extraction, as for the full mesh.
+// The full-resolution mesh stays available from the volume (export, PLY).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+
+#include "common/mesh.h"
+#include "common/status.h"
+#include "server/fusion/tsdf.h"
+
+namespace holo {
+
+struct StreamMeshOptions {
+  // Sampling step of the fused volume for marching cubes (1 = every voxel).
+  int step = 2;
+  // Triangle budget; above it the mesh is simplified to it. 0 = no budget.
+  size_t max_triangles = 20000;
+  // Connected fragments with fewer triangles are dropped. 0 = keep all.
+  size_t min_component_triangles = 50;
+  Status Check() const;
+};
+
+struct StreamMeshStats {
+  size_t coarse_triangles = 0;  // after extraction and fragment removal
+  size_t triangles = 0;         // published
+  double downsample_ms = 0, extract_ms = 0, simplify_ms = 0;  // wall
+  float simplify_error = 0;     // meshoptimizer's relative error (0 when not simplified)
+};
+
+class StreamMesher {
+ public:
+  // `fine` gives voxel size, truncation and the other fusion options the
+  // coarse volume inherits.
+  static StatusOr<std::unique_ptr<StreamMesher>> Create(const TsdfOptions& fine, StreamMeshOptions options);
+  ~StreamMesher();
+
+  // The stream mesh of `volume` (fused with the TsdfOptions given to Create)
+  // into `out` (buffers reused): positions, MC normals, voxel colours if the
+  // volume has them. Not thread-safe.
+  Status Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* stats = nullptr);
+
+  const StreamMeshOptions& options() const { return options_; }
+
+ private:
+  StreamMesher() = default;
+  StreamMeshOptions options_;
+  std::unique_ptr<TsdfVolume> coarse_;
+  Mesh scratch_;
+  std::vector<unsigned int> indices_, simplified_;
+  std::vector<uint32_t> remap_;
+};
+
+}  // namespace holo
