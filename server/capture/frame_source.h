@@ -24,6 +24,13 @@ class FrameSource {
   virtual int64_t num_frames() const = 0;
   // Restarts at frame `index`; OutOfRange past the end.
   virtual Status Seek(int64_t index) = 0;
+  // Passes over the next `n` frame sets (a live site that fell behind skips
+  // the frames it could not take). The default reads and discards them.
+  virtual Status Skip(int64_t n) {
+    RgbdFrameSet discard;
+    for (int64_t i = 0; i < n; ++i) HOLO_RETURN_IF_ERROR(Next(&discard));
+    return OkStatus();
+  }
 };
 
 }  // namespace holo

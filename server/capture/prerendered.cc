@@ -48,6 +48,13 @@ Status PrerenderedSource::Next(RgbdFrameSet* out) {
   return OkStatus();
 }
 
+Status PrerenderedSource::Skip(int64_t n) {
+  if (n < 0) return InvalidArgument("cannot skip a negative number of frames");
+  if (!loop_ && next_ + n > static_cast<int64_t>(frames_->size())) return OutOfRange("skip past the end");
+  next_ += n;
+  return OkStatus();
+}
+
 Status PrerenderedSource::Seek(int64_t index) {
   if (index < 0 || (!loop_ && index > static_cast<int64_t>(frames_->size()))) return OutOfRange("seek past the end");
   next_ = index;

@@ -36,6 +36,7 @@ class PrerenderedSource final : public FrameSource {
   Status Next(RgbdFrameSet* out) override;
   int64_t num_frames() const override { return loop_ ? -1 : static_cast<int64_t>(frames_->size()); }
   Status Seek(int64_t index) override;
+  Status Skip(int64_t n) override;
 
   // The stored frame sets (frame_index = the studio's frame number).
   const std::vector<RgbdFrameSet>& frames() const { return *frames_; }

@@ -120,6 +120,9 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
       studio_->RenderFrame(w.sequence, &w.frames, truth.get());
       for (size_t p = 0; p < w.frames.frames.size(); ++p) w.frames.frames[p].mask = truth->mask[p];
     } else {
+      // Frames of slots the pipeline skipped (drop_late_frames) are passed over.
+      if (w.sequence > next_sequence_) HOLO_RETURN_IF_ERROR(source_->Skip(w.sequence - next_sequence_));
+      next_sequence_ = w.sequence + 1;
       HOLO_RETURN_IF_ERROR(source_->Next(&w.frames));
       if (w.frames.frames.size() != rig_.pods.size())
         return DataLoss("frame set " + std::to_string(w.frames.frame_index) + " has " +

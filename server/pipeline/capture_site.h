@@ -112,6 +112,7 @@ class CaptureSite {
   std::unique_ptr<TsdfVolume> volume_;
   std::unique_ptr<TemporalFusion> temporal_;
   std::unique_ptr<StreamMesher> stream_;
+  int64_t next_sequence_ = 0;  // acquire: the source's next frame set
   std::unique_ptr<Texturer> texturer_;
   std::unique_ptr<Pipeline> pipeline_;
 };

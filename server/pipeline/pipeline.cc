@@ -15,6 +15,8 @@ Status PipelineOptions::Check() const {
     return InvalidArgument("queue_capacity must be in [1, 64], got " + std::to_string(queue_capacity));
   if (pace_fps < 0 || pace_fps > 1000) return InvalidArgument("pace_fps must be in [0, 1000], got " + std::to_string(pace_fps));
   if (max_frames < -1) return InvalidArgument("max_frames must be >= -1, got " + std::to_string(max_frames));
+  if (max_in_flight < 0 || max_in_flight > 256)
+    return InvalidArgument("max_in_flight must be in [0, 256], got " + std::to_string(max_in_flight));
   return OkStatus();
 }
 
@@ -63,13 +65,28 @@ Status RunFuseMesh(const std::function<Status(FrameWork&)>& fn, FrameWork& work,
 }
 
 // Acquire with optional pacing. Returns OutOfRange at the end of the source.
-Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& clock, int64_t seq, int64_t start_us,
-               FrameWork& work, int64_t* late, bool cpu = false) {
+// With drop_late_frames, `*seq` may advance past slots that have gone by.
+Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& clock, int64_t* seq_io, int64_t start_us,
+               FrameWork& work, int64_t* late, int64_t* dropped, bool cpu = false) {
+  int64_t& seq = *seq_io;
   if (opt.pace_fps > 0) {
     const int64_t period_us = static_cast<int64_t>(1e6 / opt.pace_fps);
-    const int64_t slot = start_us + seq * period_us;
-    if (clock.NowUs() > slot + period_us) ++*late;
-    clock.SleepUntilUs(slot);
+    const int64_t now = clock.NowUs();
+    if (now > start_us + seq * period_us + period_us) {
+      ++*late;
+      if (opt.drop_late_frames) {
+        const int64_t current = (now - start_us) / period_us;  // the slot whose frame the camera has now
+        if (opt.max_frames >= 0) {
+          *dropped += std::max<int64_t>(0, std::min(current, opt.max_frames) - seq);
+          seq = std::min(current, opt.max_frames);
+        } else {
+          *dropped += current - seq;
+          seq = current;
+        }
+        if (opt.max_frames >= 0 && seq >= opt.max_frames) return OutOfRange("no frames left after dropping late ones");
+      }
+    }
+    clock.SleepUntilUs(start_us + seq * period_us);
   }
   work.sequence = seq;
   work.timings = StageTimings{};
@@ -87,7 +104,8 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
   const int64_t start_us = clock_.NowUs();
   for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
     if (stop_) break;
-    Status s = Acquire(stages_, options_, clock_, seq, start_us, work, &stats.late_frames, /*cpu=*/true);
+    Status s = Acquire(stages_, options_, clock_, &seq, start_us, work, &stats.late_frames, &stats.dropped_frames,
+                       /*cpu=*/true);
     if (s.code() == StatusCode::kOutOfRange) break;
     HOLO_RETURN_IF_ERROR(s);
     HOLO_RETURN_IF_ERROR(Timed(stages_.segment, work, &work.timings.segment_ms, &work.timings.segment_cpu_ms));
@@ -110,7 +128,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   using Queue = BoundedQueue<FrameWork*>;
   const size_t cap = static_cast<size_t>(options_.queue_capacity);
   // Items: one inside each of the 6 threads plus a full queue on each of the 5 hops.
-  const size_t pool_size = 6 + 5 * cap;
+  const size_t pool_size = options_.max_in_flight > 0 ? static_cast<size_t>(options_.max_in_flight) : 6 + 5 * cap;
   std::vector<std::unique_ptr<FrameWork>> pool;
   Queue free_items(pool_size), to_segment(cap), to_fuse(cap), to_texture(cap), to_encode(cap), to_sink(cap);
   for (size_t i = 0; i < pool_size; ++i) {
@@ -132,12 +150,12 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   const double cpu0 = ProcessCpuTimeMs();
   const int64_t start_us = clock_.NowUs();
   std::thread acquire_thread([&] {
-    int64_t late = 0;
+    int64_t late = 0, dropped = 0;
     for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
       if (stop_) break;
       auto item = free_items.Pop();
       if (!item) break;
-      Status s = Acquire(stages_, options_, clock_, seq, start_us, **item, &late);
+      Status s = Acquire(stages_, options_, clock_, &seq, start_us, **item, &late, &dropped);
       if (s.code() == StatusCode::kOutOfRange) break;
       if (!s.ok()) {
         // A bad input frame ends the stream: frames already acquired still go
@@ -151,6 +169,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
     {
       std::lock_guard lock(mu);
       stats.late_frames = late;
+      stats.dropped_frames = dropped;
     }
     to_segment.Close();
   });

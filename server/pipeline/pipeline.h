@@ -96,10 +96,19 @@ struct PipelineOptions {
   bool serial = false;
   // Stop after this many frames (-1: until the source ends).
   int64_t max_frames = -1;
-  // If > 0, acquire is paced to this rate (a live camera); frames are never
-  // dropped: a slow stage backs up to acquire, and the pacing reports
-  // `late_frames`.
+  // If > 0, acquire is paced to this rate (a live camera). A slow stage
+  // backs up to acquire, and the pacing reports `late_frames`.
   double pace_fps = 0;
+  // Paced mode: when acquisition falls a whole period or more behind its
+  // slot, skip to the current slot as a live camera would (the frames of
+  // the skipped slots are never taken; sequence numbers jump and
+  // `dropped_frames` counts them), so latency stays bounded when the site
+  // cannot keep up. Off: every frame is taken, however late.
+  bool drop_late_frames = false;
+  // Frames in the pipeline at once (acquired, not yet through the sink);
+  // 0 = as many as the queues hold. Fewer in flight = lower latency when a
+  // stage is the bottleneck (each frame waits behind fewer others).
+  int max_in_flight = 0;
   Status Check() const;
 };
 
@@ -108,6 +117,7 @@ struct PipelineStats {
   double wall_seconds = 0;
   double fps = 0;
   int64_t late_frames = 0;  // paced mode: frames acquired later than their slot
+  int64_t dropped_frames = 0;  // paced mode with drop_late_frames: camera slots skipped
   // CPU time of the whole process (all threads) during Run, ms: divided by
   // `frames`, the CPU cost of a frame with every stage and all overheads.
   double cpu_ms = 0;

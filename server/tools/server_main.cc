@@ -84,7 +84,8 @@ int main(int argc, char** argv) {
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
   bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
-  int prerender = 0, stream_step = 2;
+  int prerender = 0, stream_step = 2, max_in_flight = 6;
+  bool keep_late = false;
   size_t stream_triangles = 20000;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
   app.add_option("-w,--workload", workload_name, "synthetic source: S8-QVGA or S8-VGA")->capture_default_str();
@@ -101,6 +102,12 @@ int main(int argc, char** argv) {
   app.add_option("--background-frames", background_frames, "empty-room frames to learn from")->capture_default_str();
   app.add_option("--queue", queue, "frames in flight per pipeline hop")->capture_default_str();
   app.add_option("--pace", pace, "pace acquisition like a live camera at this fps (0: as fast as possible)");
+  app.add_flag("--keep-late", keep_late,
+               "with --pace: take every frame however late (latency grows when the site cannot keep up) instead "
+               "of skipping to the newest camera frame");
+  app.add_option("--max-in-flight", max_in_flight, "frames in the pipeline at once (0: as many as the queues hold)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 256));
   app.add_option("--prerender", prerender,
                  "synthetic source: render this many frame sets into memory first and loop them forward and back "
                  "forever (-n counts on), so acquisition costs a copy as with cameras, not the studio's rendering "
@@ -220,6 +227,11 @@ int main(int argc, char** argv) {
   options.pipeline.serial = serial;
   options.pipeline.queue_capacity = queue;
   options.pipeline.pace_fps = pace;
+  // A live site behaves like cameras: a frame the pipeline cannot take in
+  // time is skipped (counted), and few frames are in flight, so latency
+  // stays bounded when the machine cannot keep up.
+  options.pipeline.drop_late_frames = pace > 0 && !keep_late;
+  options.pipeline.max_in_flight = max_in_flight;
   options.pipeline.max_frames = frames;
   options.stream_mesh = stream_step > 1 || stream_triangles > 0;
   options.stream.step = stream_step;
@@ -544,11 +556,12 @@ int main(int argc, char** argv) {
   const holo::StageTimings m = holo::MedianTimings(*stats);
   if (!quiet)
     std::fprintf(stderr,
-                 "holoport-server: %lld frames in %.2f s = %.1f fps, %.1f CPU-ms per frame; median ms: acquire %.1f, "
+                 "holoport-server: %lld frames in %.2f s = %.1f fps (%lld camera frames skipped), %.1f CPU-ms per frame; "
+                 "median ms: acquire %.1f, "
                  "segment %.1f, fuse %.1f, mesh %.1f, simplify %.1f, texture %.1f, encode %.1f; median latency %.1f ms "
                  "(%s)%s%s\n",
                  static_cast<long long>(stats->frames), stats->wall_seconds, stats->fps,
-                 stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0.0, m.acquire_ms,
+                 static_cast<long long>(stats->dropped_frames), stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0.0, m.acquire_ms,
                  m.segment_ms, m.fuse_ms, m.mesh_ms, m.simplify_ms, m.texture_ms, m.encode_ms,
                  holo::MedianLatencyMs(*stats),
                  pace > 0 ? "paced" : "unpaced: includes waiting in queues; use --pace for live latency",

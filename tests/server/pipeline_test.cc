@@ -113,6 +113,80 @@ TEST(PipelineTest, PacedAcquireFollowsTheClock) {
   EXPECT_EQ(r->per_frame[30].acquired_us, 30 * 33333);
 }
 
+// A live site that cannot keep up skips camera frames instead of falling
+// further and further behind: a fuse stage that takes 2.5 periods makes the
+// serial pipeline take the frame of the slot current when it is ready again
+// (slots 0, 2, 5, 7, 10, …), and latency stays one frame's work.
+TEST(PipelineTest, DropLateFramesSkipsToTheCurrentSlot) {
+  SimulatedClock clock(0);
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  PipelineOptions o;
+  o.serial = true;
+  o.pace_fps = 100;  // 10 ms slots
+  o.drop_late_frames = true;
+  o.max_frames = 30;
+  PipelineStages st = FakeStages(1000, &out);
+  st.fuse_mesh = [&clock, inner = st.fuse_mesh](FrameWork& w) {
+    clock.AdvanceUs(25000);
+    return inner(w);
+  };
+  auto r = Pipeline(st, o, clock).Run();
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  ASSERT_GE(out.size(), 9u);
+  EXPECT_EQ(r->frames + r->dropped_frames, 30) << "every slot is either taken or counted as dropped";
+  EXPECT_GT(r->dropped_frames, 15);
+  for (size_t i = 0; i < r->per_frame.size(); ++i) {
+    EXPECT_LE(r->per_frame[i].latency_ms(), 25.0 + 1e-6) << "frame " << i;
+    if (i > 0) {
+      const int64_t gap = out[i].first - out[i - 1].first;
+      EXPECT_TRUE(gap == 2 || gap == 3) << "gap " << gap << " at frame " << i;
+    }
+  }
+
+  // Without dropping every frame is taken and the lag grows.
+  out.clear();
+  SimulatedClock clock2(0);
+  PipelineStages st2 = FakeStages(1000, &out);
+  st2.fuse_mesh = [&clock2, inner = st2.fuse_mesh](FrameWork& w) {
+    clock2.AdvanceUs(25000);
+    return inner(w);
+  };
+  o.drop_late_frames = false;
+  auto r2 = Pipeline(st2, o, clock2).Run();
+  ASSERT_TRUE(r2.ok());
+  EXPECT_EQ(r2->frames, 30);
+  EXPECT_EQ(r2->dropped_frames, 0);
+  EXPECT_GT(r2->late_frames, 20);
+}
+
+// The encode stage runs between texture and sink, in order, on its own
+// thread, and what it leaves in the work item reaches the sink.
+TEST(PipelineTest, EncodeStageFeedsTheSink) {
+  std::vector<std::pair<int64_t, uint32_t>> out;
+  for (bool serial : {true, false}) {
+    out.clear();
+    PipelineStages st = FakeStages(20, &out);
+    st.encode = [](FrameWork& w) -> Status {
+      if (!w.encoded) w.encoded = std::make_shared<int64_t>();
+      *static_cast<int64_t*>(w.encoded.get()) = 5000 + w.frames.frame_index;
+      return OkStatus();
+    };
+    std::vector<int64_t> encoded;
+    st.sink = [&encoded](const FrameWork& w) -> Status {
+      encoded.push_back(*static_cast<const int64_t*>(w.encoded.get()) - 5000);
+      EXPECT_GE(w.timings.encoded_us, w.timings.ready_us);
+      return OkStatus();
+    };
+    PipelineOptions o;
+    o.serial = serial;
+    o.max_in_flight = serial ? 0 : 3;
+    auto r = Pipeline(st, o).Run();
+    ASSERT_TRUE(r.ok());
+    ASSERT_EQ(encoded.size(), 20u);
+    for (size_t i = 0; i < encoded.size(); ++i) EXPECT_EQ(encoded[i], 1000 + static_cast<int64_t>(i));
+  }
+}
+
 TEST(PipelineTest, AcquireErrorDeliversEarlierFramesThenFails) {
   std::vector<std::pair<int64_t, uint32_t>> out;
   PipelineStages st = FakeStages(100, &out);
