@@ -80,6 +80,7 @@ struct LiveOptions {
   int quality_frames = 6;
   std::string site_binary;
   std::string keep_dir;  // keep the site's logs here
+  std::vector<std::string> site_args;  // passed on to holoport-server
 };
 
 double Percentile(std::vector<double> v, double p) {
@@ -208,6 +209,7 @@ std::vector<std::string> SiteArgs(const LiveOptions& o, const std::string& workl
   std::vector<std::string> a = {o.site_binary, "--source", "synthetic", "--workload", workload, "--listen",
                                 "127.0.0.1:" + std::to_string(port), "--publisher-token", kPublisherToken,
                                 "--viewer-token", kViewerToken, "--stats", stats, "--pace", "30"};
+  a.insert(a.end(), o.site_args.begin(), o.site_args.end());
   if (o.content == "truth") {
     a.insert(a.end(), {"--truth-mesh", "--truth-loop", std::to_string(o.prerender), "-n", "-1"});
     return a;
@@ -283,6 +285,8 @@ int Run(const BenchArgs& args) {
         ->check(CLI::Range(0, 600));
     app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
     app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
+    app.add_option("--site-arg", o.site_args,
+                   "an extra holoport-server argument (repeatable; e.g. --site-arg=--jpeg-quality --site-arg=70)");
     std::vector<std::string> argv_s = {"live"};
     argv_s.insert(argv_s.end(), args.extra.begin(), args.extra.end());
     std::vector<const char*> argv;

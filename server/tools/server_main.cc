@@ -142,7 +142,9 @@ int main(int argc, char** argv) {
   app.add_option("--start", replay.start_s, "--replay: start at this media time, seconds");
   app.add_option("--replay-seconds", replay.max_wall_s, "--replay: stop after this many seconds (0: at the end)");
   std::string listen_spec, net_config_path, publisher_token, viewer_token;
-  bool truth_mesh = false, no_color_stream = false;
+  bool truth_mesh = false, no_color_stream = false, mesh_colors = false;
+  double position_step_mm = 2.0;
+  int jpeg_quality = 55;
   int truth_loop = 0;
   app.add_option("--listen", listen_spec,
                  "stream to viewers: listen on HOST:PORT (default: off, no networking; overrides the "
@@ -161,6 +163,17 @@ int main(int argc, char** argv) {
                  "counting), so that the studio's rendering does not limit the rate (0: render live)")
       ->check(CLI::Range(0, 3000));
   app.add_flag("--no-color-stream", no_color_stream, "stream meshes only (no C1 pod images)");
+  app.add_option("--position-step-mm", position_step_mm,
+                 "G1 position quantisation of the streamed mesh, mm (error <= step * 0.87)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 100.0));
+  app.add_option("--jpeg-quality", jpeg_quality, "C1 JPEG quality of the streamed pod images, 1..100")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
+  app.add_flag("--mesh-colors", mesh_colors,
+               "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
+               "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
+               "colours would cost ~8 bits per triangle and the texture stage ~8 CPU-ms per frame)");
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -209,6 +222,8 @@ int main(int argc, char** argv) {
   }
   holo::net::SitePublisherOptions publish_options;
   publish_options.color = !no_color_stream;
+  publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
+  publish_options.color_options.jpeg_quality = jpeg_quality;
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
@@ -219,7 +234,13 @@ int main(int argc, char** argv) {
   options.masks = *masks;
   options.background_frames = background_frames;
   options.color_calibration = !no_color_calibration;
-  options.texture = !no_texture;
+  // Colour travels in the pods' images when they are streamed; per-vertex
+  // colours are made only when something uses them (export, --mesh-colors,
+  // a mesh-only stream, or no streaming at all).
+  const bool streaming = !listen_spec.empty() || !net_config_path.empty();
+  const bool vertex_colors = !streaming || no_color_stream || mesh_colors || !export_dir.empty();
+  options.texture = !no_texture && vertex_colors;
+  if (!vertex_colors) options.tsdf.integrate_color = false;
   options.tsdf.truncation_voxels = static_cast<float>(trunc_voxels);
   options.cleanup.target_triangles = decimate;
   options.cleanup.min_component_triangles = min_component;
