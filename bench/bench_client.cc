@@ -204,7 +204,8 @@ holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::Offs
 // masks) | projective texturing now | per-vertex colour; each panel cropped
 // to the true foreground's box (plus a margin) of that view.
 holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
-                             holo::SyntheticStudio* studio, int64_t frame, const std::string& prefix) {
+                             holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
+                             const std::string& prefix) {
   for (float az : {22.5f, 202.5f}) {
     const holo::CameraModel cam = OrbitCamera(target->width(), target->height(), az, 2.0f);
     holo::ImageRgb8 truth;
@@ -212,7 +213,7 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
     studio->RenderView(frame, cam, &truth, nullptr, &mask);
     std::vector<holo::ImageRgb8> panels = {truth};
     for (int k = 0; k < 3; ++k) {
-      holo::render::RenderSettings settings;
+      holo::render::RenderSettings settings = base;
       settings.background = {0, 0, 0};
       settings.mode = k == 2 ? holo::render::ColorMode::kVertexColor : holo::render::ColorMode::kProjective;
       if (k == 0) settings.projective = holo::render::ProjectiveOptions::Legacy();
@@ -340,6 +341,15 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
     if (legacy) q["renderer_options"] = "legacy";
     holo::render::RenderSettings base;
     if (legacy) base.projective = holo::render::ProjectiveOptions::Legacy();
+    if (OptionValue(options, "--cull", "1") == "0") {
+      base.cull_back_faces = false;
+      base.projective.cull_back_faces = false;
+      q["cull_back_faces"] = "false";
+    }
+    if (OptionValue(options, "--prepass", "") != "") {
+      base.depth_prepass = OptionValue(options, "--prepass", "") == "1";
+      q["depth_prepass"] = base.depth_prepass ? "true" : "false";
+    }
     if (!(*renderer)->SetRemoteMesh(c.mesh).ok()) return 1;
     if (holo::Status s = (*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()); !s.ok())
       return Fail(s);
@@ -366,7 +376,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
         EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr_union, "dB", qm);
       }
       if (!png_dir.empty()) {
-        if (holo::Status s = WriteSideBySide(renderer->get(), small->get(), studio->get(), studio_frame,
+        if (holo::Status s = WriteSideBySide(renderer->get(), small->get(), studio->get(), studio_frame, base,
                                              png_dir + "/viewer_" + c.mesh_name);
             !s.ok())
           return Fail(s);
@@ -430,7 +440,7 @@ struct Part {
 
 const std::vector<Part>& Parts() {
   static const std::vector<Part> parts = {
-      {"render", {"--resolutions", "--content", "--png-dir", "--legacy", "--frame", "--reduce"}, RunClientRenderPart},
+      {"render", {"--resolutions", "--content", "--png-dir", "--legacy", "--frame", "--reduce", "--cull", "--prepass"}, RunClientRenderPart},
   };
   return parts;
 }
