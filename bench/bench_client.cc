@@ -200,13 +200,13 @@ holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::Offs
 }
 
 // Side-by-side pictures for docs/viewer.md, one PNG per view: ground truth
-// | projective texturing as before issue 17 (ProjectiveOptions::Legacy, no
+// | projective texturing as before issue 17 (RenderSettings::Legacy: no
 // masks) | projective texturing now | per-vertex colour; each panel cropped
 // to the true foreground's box (plus a margin) of that view.
 holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
                              holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
                              const std::string& prefix) {
-  for (float az : {22.5f, 202.5f}) {
+  for (float az : {22.5f}) {
     const holo::CameraModel cam = OrbitCamera(target->width(), target->height(), az, 2.0f);
     holo::ImageRgb8 truth;
     holo::ImageGray8 mask;
@@ -216,7 +216,8 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
       holo::render::RenderSettings settings = base;
       settings.background = {0, 0, 0};
       settings.mode = k == 2 ? holo::render::ColorMode::kVertexColor : holo::render::ColorMode::kProjective;
-      if (k == 0) settings.projective = holo::render::ProjectiveOptions::Legacy();
+      if (k == 0) settings = holo::render::RenderSettings::Legacy();
+      settings.background = {0, 0, 0};
       target->Bind();
       HOLO_RETURN_IF_ERROR(renderer->Render(cam, settings, {0, 0, target->width(), target->height()}));
       panels.emplace_back();
@@ -340,7 +341,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
     if (lp_threads) q["lp_num_threads"] = lp_threads;
     if (legacy) q["renderer_options"] = "legacy";
     holo::render::RenderSettings base;
-    if (legacy) base.projective = holo::render::ProjectiveOptions::Legacy();
+    if (legacy) base = holo::render::RenderSettings::Legacy();
     if (OptionValue(options, "--cull", "1") == "0") {
       base.cull_back_faces = false;
       base.projective.cull_back_faces = false;
@@ -375,7 +376,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
         qm["region"] = "union";
         EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr_union, "dB", qm);
       }
-      if (!png_dir.empty()) {
+      if (!png_dir.empty() && c.mesh_name != "fused_full") {
         if (holo::Status s = WriteSideBySide(renderer->get(), small->get(), studio->get(), studio_frame, base,
                                              png_dir + "/viewer_" + c.mesh_name);
             !s.ok())

@@ -103,6 +103,7 @@ uniform sampler2DArray u_pod_depth;
 uniform float u_vis_tol;
 uniform float u_edge_weight;
 uniform bool u_distorted;
+uniform float u_min_confidence;
 vec2 Distort(vec2 x, vec4 d, float k3);  // kDistortGlsl, appended when the program is built
 
 void main() {
@@ -111,7 +112,7 @@ void main() {
     return;
   }
   vec3 acc = vec3(0.0);
-  float acc_w = 0.0;
+  float acc_w = 0.0, sum_w = 0.0;
   for (int i = 0; i < u_num_pods; ++i) {
     float w = v_w[i / 4][i % 4];
     if (w <= 1e-6) continue;
@@ -138,9 +139,15 @@ void main() {
     float k = zf < 0.0 ? u_edge_weight * w : w;
     acc += k * c.rgb;
     acc_w += k * c.a;
+    sum_w += k;
   }
   if (acc_w > 0.0) {
-    o_color = vec4(acc / acc_w, 1.0);
+    // Mean mask weight of the samples: where every pod saw this point only
+    // at its mask's edge (a silhouette rim that every pod's segmentation
+    // got wrong), the site's per-vertex colour (filled from the interior)
+    // is more trustworthy than any of them.
+    float confidence = acc_w / sum_w;
+    o_color = vec4(mix(v_color, acc / acc_w, smoothstep(0.0, u_min_confidence, confidence)), 1.0);
   } else {
     o_color = vec4(v_color, 1.0);
   }
@@ -245,6 +252,9 @@ Status ProjectiveOptions::Check() const {
   }
   if (!(mask_erode_px >= 0 && mask_erode_px <= 32)) return InvalidArgument("mask_erode_px must be in [0, 32]");
   if (!(mask_feather_px >= 0 && mask_feather_px <= 32)) return InvalidArgument("mask_feather_px must be in [0, 32]");
+  if (!(min_mask_confidence >= 0 && min_mask_confidence <= 1)) {
+    return InvalidArgument("min_mask_confidence must be in [0, 1]");
+  }
   if (!(edge_floor_weight > 0 && edge_floor_weight <= 1)) return InvalidArgument("edge_floor_weight must be in (0, 1]");
   return OkStatus();
 }
@@ -252,7 +262,16 @@ Status ProjectiveOptions::Check() const {
 ProjectiveOptions ProjectiveOptions::Legacy() {
   ProjectiveOptions o;
   o.use_masks = false;
+  o.cull_back_faces = true;
   return o;
+}
+
+RenderSettings RenderSettings::Legacy() {
+  RenderSettings s;
+  s.cull_back_faces = true;
+  s.depth_prepass = false;
+  s.projective = ProjectiveOptions::Legacy();
+  return s;
 }
 
 // ---------------------------------------------------------------- OffscreenTarget
@@ -868,6 +887,8 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     glUniform1f(Loc(draw_program_, "u_beta"), po.beta);
     glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
     glUniform1f(Loc(draw_program_, "u_edge_weight"), po.discontinuity_weight);
+    glUniform1f(Loc(draw_program_, "u_min_confidence"),
+                po.use_masks && !pod_masks_.empty() ? po.min_mask_confidence : 0.0f);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
     glActiveTexture(GL_TEXTURE1);

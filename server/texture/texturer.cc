@@ -394,16 +394,19 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
       // Near the mask's edge the sample (and its bilinear neighbours) may be
       // background: a segmentation edge is often a pixel or two off. Such a
       // view counts only where no other is clean (as near a discontinuity).
-      if (o.mask_edge_px > 0 && !near_edge) {
+      if (o.mask_edge_px > 0) {
         const int r = o.mask_edge_px;
         const int x0 = std::max(0, mx - r), x1 = std::min(frame.mask.width() - 1, mx + r);
         const int y0 = std::max(0, my - r), y1 = std::min(frame.mask.height() - 1, my + r);
-        if (x0 != mx - r || x1 != mx + r || y0 != my - r || y1 != my + r) near_edge = true;
-        for (int yy = y0; yy <= y1 && !near_edge; ++yy) {
+        bool mask_edge = x0 != mx - r || x1 != mx + r || y0 != my - r || y1 != my + r;
+        for (int yy = y0; yy <= y1 && !mask_edge; ++yy) {
           const uint8_t* row = &frame.mask.at(0, yy);
-          for (int xx = x0; xx <= x1; ++xx) near_edge |= row[xx] == 0;
+          for (int xx = x0; xx <= x1; ++xx) mask_edge |= row[xx] == 0;
         }
-        if (near_edge && !(o.discontinuity_test && o.discontinuity_fallback)) return;
+        // Never used, not even as a fallback: a vertex every view sees only
+        // at a mask edge (a silhouette rim) is better filled from its
+        // observed neighbours than painted with the room.
+        if (mask_edge) return;
       }
     }
     Sample& smp = samples.emplace_back();
