@@ -308,6 +308,43 @@ TEST_F(AppearanceTest, HiddenPointDoesNotTakeTheOccludingPodsColour) {
   EXPECT_LT(out.at(x, y, 2), 80);
 }
 
+TEST_F(AppearanceTest, BadMasksAndOptionsAreErrors) {
+  StudioFrame f = MakeStudioFrame(40);
+  std::vector<const ImageRgb8*> ip;
+  for (const auto& fr : f.frames.frames) ip.push_back(&fr.color);
+  std::vector<const ImageGray8*> mp;
+  for (const auto& m : f.gt.mask) mp.push_back(&m);
+  ASSERT_TRUE(renderer_->SetPodImages(f.rig, ip, mp).ok());
+  // One mask too few, a null mask, a mask of the wrong size.
+  std::vector<const ImageGray8*> few(mp.begin(), mp.end() - 1);
+  Status s = renderer_->SetPodImages(f.rig, ip, few);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << s.ToString();
+  std::vector<const ImageGray8*> null_mask = mp;
+  null_mask[3] = nullptr;
+  s = renderer_->SetPodImages(f.rig, ip, null_mask);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("pod 3 mask"), std::string::npos) << s.ToString();
+  ImageGray8 small(10, 10, 255);
+  std::vector<const ImageGray8*> wrong = mp;
+  wrong[1] = &small;
+  s = renderer_->SetPodImages(f.rig, ip, wrong);
+  EXPECT_NE(s.message().find("pod 1 mask is 10x10"), std::string::npos) << s.ToString();
+  ASSERT_TRUE(renderer_->SetRemoteMesh(f.gt.foreground_mesh).ok());
+  auto target = OffscreenTarget::Create(64, 48);
+  ASSERT_TRUE(target.ok());
+  (*target)->Bind();
+  for (int k = 0; k < 4; ++k) {
+    RenderSettings settings;
+    if (k == 0) settings.projective.mask_erode_px = -1;
+    if (k == 1) settings.projective.mask_feather_px = 100;
+    if (k == 2) settings.projective.edge_floor_weight = 0;
+    if (k == 3) settings.projective.min_mask_confidence = 2;
+    EXPECT_EQ(renderer_->Render(NovelCamera(64, 48, 0), settings, {0, 0, 64, 48}).code(),
+              StatusCode::kInvalidArgument)
+        << k;
+  }
+}
+
 // Stated thresholds for the live fused stream at the viewer: the real
 // capture site (segmentation with a learned background, TSDF fusion at 8 mm,
 // marching cubes, clean-up, texturer) on S8-QVGA frames 0..5, pod images
