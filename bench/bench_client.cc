@@ -28,6 +28,11 @@
 #include "common/pose.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
+#include "common/file_util.h"
+#include "common/image_io.h"
+#include "protocol/color_codec.h"
+#include "server/fusion/mesh_cleanup.h"
+#include "server/pipeline/capture_site.h"
 #include "server/texture/texturer.h"
 
 namespace {
@@ -44,44 +49,6 @@ std::string OptionValue(const std::vector<std::string>& options, const std::stri
   return fallback;
 }
 
-// Midpoint subdivision (every triangle into four, shared edge midpoints):
-// the same surface with 4^levels times the triangles, to time the renderer
-// at the density of a fused mesh.
-holo::Mesh Subdivide(const holo::Mesh& in, int levels) {
-  holo::Mesh m = in;
-  for (int l = 0; l < levels; ++l) {
-    holo::Mesh out;
-    out.positions = m.positions;
-    out.normals = m.normals;
-    out.colors = m.colors;
-    std::unordered_map<uint64_t, uint32_t> mid;
-    auto midpoint = [&](uint32_t a, uint32_t b) {
-      const uint64_t key = (static_cast<uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      const uint32_t idx = static_cast<uint32_t>(out.positions.size());
-      out.positions.push_back(0.5f * (m.positions[a] + m.positions[b]));
-      if (!m.normals.empty()) out.normals.push_back((m.normals[a] + m.normals[b]).normalized());
-      if (!m.colors.empty()) {
-        std::array<uint8_t, 3> c;
-        for (int k = 0; k < 3; ++k) c[k] = static_cast<uint8_t>((m.colors[a][k] + m.colors[b][k] + 1) / 2);
-        out.colors.push_back(c);
-      }
-      mid.emplace(key, idx);
-      return idx;
-    };
-    for (const auto& t : m.triangles) {
-      const uint32_t ab = midpoint(t[0], t[1]), bc = midpoint(t[1], t[2]), ca = midpoint(t[2], t[0]);
-      out.triangles.push_back({t[0], ab, ca});
-      out.triangles.push_back({ab, t[1], bc});
-      out.triangles.push_back({ca, bc, t[2]});
-      out.triangles.push_back({ab, bc, ca});
-    }
-    m = std::move(out);
-  }
-  return m;
-}
-
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
   const float a = azimuth_deg * static_cast<float>(M_PI) / 180.0f;
   holo::CameraModel c;
@@ -91,27 +58,236 @@ holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float ra
   return c;
 }
 
+// What a viewer receives for one frame: the mesh with the site's per-vertex
+// colours, and the pods' colour images with their masks.
+struct ViewerContent {
+  std::string content;  // "truth" | "fused"
+  std::string mesh_name;  // "truth", "fused_full", "fused_reduced"
+  holo::Mesh mesh;
+  std::vector<holo::ImageRgb8> images;
+  std::vector<holo::ImageGray8> masks;  // empty = none (whole images)
+  std::vector<const holo::ImageRgb8*> ImagePtrs() const {
+    std::vector<const holo::ImageRgb8*> v;
+    for (const auto& i : images) v.push_back(&i);
+    return v;
+  }
+  std::vector<const holo::ImageGray8*> MaskPtrs() const {
+    std::vector<const holo::ImageGray8*> v;
+    for (const auto& m : masks) v.push_back(&m);
+    return v;
+  }
+};
+
+// Ground truth as the viewer has measured it so far: the studio's exact
+// mesh coloured by the site's texturer, and the pods' whole colour images.
+holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStudio* studio, int64_t frame,
+                              ViewerContent* out) {
+  holo::RgbdFrameSet fs;
+  holo::StudioGroundTruth gt;
+  studio->RenderFrame(frame, &fs, &gt);
+  out->content = "truth";
+  out->mesh_name = "truth";
+  out->mesh = gt.foreground_mesh;
+  out->mesh.colors.clear();
+  holo::TextureOptions to;
+  to.threads = 2;
+  holo::Texturer texturer(workload.rig, to);
+  HOLO_RETURN_IF_ERROR(texturer.Apply(fs, &out->mesh));
+  for (auto& f : fs.frames) out->images.push_back(std::move(f.color));
+  return holo::OkStatus();
+}
+
+// The live fused stream: the real capture site (segmentation with a learned
+// background, TSDF fusion, marching cubes + clean-up, texturer) run
+// in-process on the studio's frames 0..`frame`; the frame's mesh and its
+// pods' colour images through the C1 colour codec with the site's masks,
+// exactly as a viewer decodes them (background pixels 0). Also, in `reduced`,
+// the mesh decimated to `reduced_triangles` (quadric decimation of
+// CleanupMesh) and re-textured by the site's texturer: the stream mesh size.
+holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles,
+                              const holo::TextureOptions& texture_options, ViewerContent* full,
+                              ViewerContent* reduced) {
+  holo::StudioOptions so = workload.studio;
+  HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
+  so.empty_room = true;
+  HOLO_ASSIGN_OR_RETURN(auto empty, holo::SyntheticStudio::Create(workload.rig, so));
+  holo::CaptureSiteOptions o;
+  o.masks = holo::MaskSource::kSegment;
+  o.tsdf.voxel_size = workload.voxel_size_m;
+  o.pipeline.serial = true;
+  o.pipeline.max_frames = frame + 1;
+  HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
+  holo::RgbdFrameSet kept;
+  bool got = false;
+  auto stats = site->Run([&](const holo::FrameWork& w) {
+    if (w.frames.frame_index == frame) {
+      full->mesh = w.mesh;
+      kept = w.frames;
+      got = true;
+    }
+    return holo::OkStatus();
+  });
+  HOLO_RETURN_IF_ERROR(stats.status());
+  if (!got) return holo::Internal("the capture site did not deliver frame " + std::to_string(frame));
+  full->content = "fused";
+  full->mesh_name = "fused_full";
+  for (const auto& f : kept.frames) {
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(holo::protocol::EncodeColor(f.color, f.mask, {}, &blob));
+    holo::ImageRgb8 img;
+    holo::ImageGray8 mask;
+    HOLO_RETURN_IF_ERROR(holo::protocol::DecodeColor(blob, &img, &mask));
+    full->images.push_back(std::move(img));
+    full->masks.push_back(std::move(mask));
+  }
+  *reduced = *full;
+  reduced->mesh_name = "fused_reduced";
+  holo::MeshCleanupOptions co;
+  co.min_component_triangles = 0;
+  co.target_triangles = reduced_triangles;
+  HOLO_RETURN_IF_ERROR(holo::CleanupMesh(co, &reduced->mesh));
+  // Both meshes coloured by the texturer with `texture_options` (the site's
+  // defaults unless a before/after comparison asks otherwise).
+  holo::TextureOptions to = texture_options;
+  to.threads = 2;
+  holo::Texturer texturer(workload.rig, to);
+  for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
+    m->colors.clear();
+    HOLO_RETURN_IF_ERROR(texturer.Apply(kept, m));
+  }
+  return holo::OkStatus();
+}
+
+// Novel-view quality of one content and mode: 4 views between the pods at
+// 640×480 (radius 2 m), PSNR and SSIM against the studio's ground-truth
+// render of the same frame, inside the true foreground ("region":"truth")
+// and inside the union of the true and the rendered foreground
+// ("region":"union": fringes and floaters count too).
+struct Quality {
+  double psnr = 0, ssim = 0, psnr_union = 0;
+};
+holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
+                            holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
+                            Quality* q) {
+  std::vector<double> psnr, ssim, psnr_union;
+  for (float az : {22.5f, 112.5f, 202.5f, 292.5f}) {
+    const holo::CameraModel cam = OrbitCamera(target->width(), target->height(), az, 2.0f);
+    holo::ImageRgb8 truth, ours;
+    holo::ImageGray8 mask;
+    studio->RenderView(frame, cam, &truth, nullptr, &mask);
+    target->Bind();
+    holo::render::RenderSettings settings = base;
+    settings.background = {0, 0, 0};
+    HOLO_RETURN_IF_ERROR(renderer->Render(cam, settings, {0, 0, target->width(), target->height()}));
+    HOLO_RETURN_IF_ERROR(target->ReadRgb(&ours));
+    HOLO_ASSIGN_OR_RETURN(double p, holo::metrics::ComputePsnr(ours, truth, &mask));
+    HOLO_ASSIGN_OR_RETURN(double s, holo::metrics::ComputeSsim(ours, truth, &mask));
+    holo::ImageGray8 uni = mask;
+    for (int y = 0; y < uni.height(); ++y)
+      for (int x = 0; x < uni.width(); ++x) {
+        if (ours.at(x, y, 0) | ours.at(x, y, 1) | ours.at(x, y, 2)) uni.at(x, y) = 255;
+        if (uni.at(x, y) == 0) truth.at(x, y, 0) = truth.at(x, y, 1) = truth.at(x, y, 2) = 0;
+      }
+    HOLO_ASSIGN_OR_RETURN(double pu, holo::metrics::ComputePsnr(ours, truth, &uni));
+    psnr.push_back(p);
+    ssim.push_back(s);
+    psnr_union.push_back(pu);
+  }
+  q->psnr = holo::bench::Mean(psnr);
+  q->ssim = holo::bench::Mean(ssim);
+  q->psnr_union = holo::bench::Mean(psnr_union);
+  return holo::OkStatus();
+}
+
+// Side-by-side pictures for docs/viewer.md, one PNG per view: ground truth
+// | projective texturing as before issue 17 (RenderSettings::Legacy: no
+// masks) | projective texturing now | per-vertex colour; each panel cropped
+// to the true foreground's box (plus a margin) of that view.
+holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
+                             holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
+                             const std::string& prefix) {
+  for (float az : {22.5f}) {
+    const holo::CameraModel cam = OrbitCamera(target->width(), target->height(), az, 2.0f);
+    holo::ImageRgb8 truth;
+    holo::ImageGray8 mask;
+    studio->RenderView(frame, cam, &truth, nullptr, &mask);
+    std::vector<holo::ImageRgb8> panels = {truth};
+    for (int k = 0; k < 3; ++k) {
+      holo::render::RenderSettings settings = base;
+      settings.background = {0, 0, 0};
+      settings.mode = k == 2 ? holo::render::ColorMode::kVertexColor : holo::render::ColorMode::kProjective;
+      if (k == 0) settings = holo::render::RenderSettings::Legacy();
+      settings.background = {0, 0, 0};
+      target->Bind();
+      HOLO_RETURN_IF_ERROR(renderer->Render(cam, settings, {0, 0, target->width(), target->height()}));
+      panels.emplace_back();
+      HOLO_RETURN_IF_ERROR(target->ReadRgb(&panels.back()));
+    }
+    // The truth's background black too, so that only the person differs.
+    for (int y = 0; y < truth.height(); ++y)
+      for (int x = 0; x < truth.width(); ++x)
+        if (mask.at(x, y) == 0) panels[0].at(x, y, 0) = panels[0].at(x, y, 1) = panels[0].at(x, y, 2) = 0;
+    int x0 = truth.width(), y0 = truth.height(), x1 = -1, y1 = -1;
+    for (int y = 0; y < truth.height(); ++y)
+      for (int x = 0; x < truth.width(); ++x)
+        if (mask.at(x, y)) {
+          x0 = std::min(x0, x);
+          x1 = std::max(x1, x);
+          y0 = std::min(y0, y);
+          y1 = std::max(y1, y);
+        }
+    if (x1 < 0) return holo::Internal("the person is not in view");
+    x0 = std::max(0, x0 - 8);
+    y0 = std::max(0, y0 - 8);
+    x1 = std::min(truth.width() - 1, x1 + 8);
+    y1 = std::min(truth.height() - 1, y1 + 8);
+    const int pw = x1 - x0 + 1, ph = y1 - y0 + 1;
+    holo::ImageRgb8 out(4 * pw + 3 * 4, ph);
+    std::fill(out.data(), out.data() + 3 * out.num_pixels(), uint8_t{255});
+    for (int k = 0; k < 4; ++k)
+      for (int y = 0; y < ph; ++y)
+        for (int x = 0; x < pw; ++x)
+          for (int ch = 0; ch < 3; ++ch) out.at(k * (pw + 4) + x, y, ch) = panels[k].at(x0 + x, y0 + y, ch);
+    HOLO_RETURN_IF_ERROR(
+        holo::WriteImageRgb8(prefix + "_az" + std::to_string(static_cast<int>(az)) + ".png", out));
+  }
+  return holo::OkStatus();
+}
+
+int Fail(const holo::Status& s) {
+  std::fprintf(stderr, "client: %s\n", s.ToString().c_str());
+  return 1;
+}
+
 int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<std::string>& options) {
-  const int width = std::atoi(OptionValue(options, "--width", "1280").c_str());
-  const int height = std::atoi(OptionValue(options, "--height", "720").c_str());
-  std::vector<int> levels;
+  std::vector<std::pair<int, int>> resolutions;
   {
-    std::stringstream ss(OptionValue(options, "--subdivide", "0,2"));
+    std::stringstream ss(OptionValue(options, "--resolutions", "960x540,1280x720"));
     std::string item;
-    while (std::getline(ss, item, ',')) levels.push_back(std::atoi(item.c_str()));
-  }
-  if (width < 16 || height < 16 || width > 8192 || height > 8192) {
-    std::fprintf(stderr, "client: --width/--height must be in 16..8192\n");
-    return 2;
-  }
-  for (int l : levels) {
-    if (l < 0 || l > 4) {
-      std::fprintf(stderr, "client: --subdivide levels must be in 0..4\n");
-      return 2;
+    while (std::getline(ss, item, ',')) {
+      int w = 0, h = 0;
+      if (std::sscanf(item.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 8192 || h > 8192) {
+        std::fprintf(stderr, "client: --resolutions wants WxH[,WxH...] with sides in 16..8192, got '%s'\n",
+                     item.c_str());
+        return 2;
+      }
+      resolutions.push_back({w, h});
     }
   }
-  const int frames = args.frames > 0 ? args.frames : 60;
-  const int64_t studio_frame = 40;
+  const std::string content_opt = OptionValue(options, "--content", "fused");
+  if (content_opt != "fused" && content_opt != "truth") {
+    std::fprintf(stderr, "client: --content must be fused or truth, got '%s'\n", content_opt.c_str());
+    return 2;
+  }
+  const std::string png_dir = OptionValue(options, "--png-dir", "");
+  const bool legacy = OptionValue(options, "--legacy", "0") == "1";
+  const int frames = args.frames > 0 ? args.frames : 30;
+  const int64_t studio_frame = std::atoi(OptionValue(options, "--frame", "40").c_str());
+  if (studio_frame < 1 || studio_frame > 10000) {
+    std::fprintf(stderr, "client: --frame must be in 1..10000\n");
+    return 2;
+  }
+  const size_t reduced_triangles = static_cast<size_t>(std::atoi(OptionValue(options, "--reduce", "20000").c_str()));
 
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
@@ -119,125 +295,139 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
     return 2;
   }
   holo::StudioOptions so = workload->studio;
-  so.color_variation = false;  // a server calibrates its pods
   so.threads = 2;
   auto studio = holo::SyntheticStudio::Create(workload->rig, so);
-  if (!studio.ok()) {
-    std::fprintf(stderr, "client: %s\n", studio.status().ToString().c_str());
-    return 1;
+  if (!studio.ok()) return Fail(studio.status());
+
+  std::vector<ViewerContent> contents;
+  if (content_opt == "truth") {
+    holo::StudioOptions tso = so;
+    tso.color_variation = false;  // a server calibrates its pods
+    auto tstudio = holo::SyntheticStudio::Create(workload->rig, tso);
+    if (!tstudio.ok()) return Fail(tstudio.status());
+    contents.emplace_back();
+    if (holo::Status s = MakeTruthContent(*workload, tstudio->get(), studio_frame, &contents.back()); !s.ok())
+      return Fail(s);
+  } else {
+    if (!args.json) std::fprintf(stderr, "client render: running the capture site to frame %lld...\n",
+                                 static_cast<long long>(studio_frame));
+    contents.resize(2);
+    holo::Stopwatch sw;
+    holo::TextureOptions to;
+    if (legacy) to.mask_edge_px = 0;
+    if (holo::Status s =
+            MakeFusedContent(*workload, studio_frame, reduced_triangles, to, &contents[0], &contents[1]);
+        !s.ok())
+      return Fail(s);
+    if (!args.json) std::fprintf(stderr, "client render: site done in %.1f s\n", sw.ElapsedMs() / 1000);
   }
-  holo::RgbdFrameSet frames_set;
-  holo::StudioGroundTruth gt;
-  (*studio)->RenderFrame(studio_frame, &frames_set, &gt);
-  // What the stream carries: the mesh with the server texturer's colours and the pods' images.
-  holo::Mesh mesh = gt.foreground_mesh;
-  mesh.colors.clear();
-  holo::TextureOptions to;
-  to.threads = 2;
-  holo::Texturer texturer(workload->rig, to);
-  if (holo::Status s = texturer.Apply(frames_set, &mesh); !s.ok()) {
-    std::fprintf(stderr, "client: %s\n", s.ToString().c_str());
-    return 1;
-  }
-  std::vector<const holo::ImageRgb8*> images;
-  for (const auto& f : frames_set.frames) images.push_back(&f.color);
 
   auto ctx = holo::render::CreateHeadlessContext();
-  if (!ctx.ok()) {
-    std::fprintf(stderr, "client: %s\n", ctx.status().ToString().c_str());
-    return 1;
-  }
+  if (!ctx.ok()) return Fail(ctx.status());
   auto renderer = holo::render::Renderer::Create();
-  auto target = holo::render::OffscreenTarget::Create(width, height);
-  if (!renderer.ok() || !target.ok()) {
-    std::fprintf(stderr, "client: %s\n",
-                 (!renderer.ok() ? renderer.status() : target.status()).ToString().c_str());
-    return 1;
-  }
+  if (!renderer.ok()) return Fail(renderer.status());
   const std::string gl_renderer = holo::render::CurrentGlRenderer();
   const char* lp_threads = std::getenv("LP_NUM_THREADS");
-  const std::string res = std::to_string(width) + "x" + std::to_string(height);
-  if (!args.json) std::fprintf(stderr, "client render: %s, %s, %d frames per mode\n", gl_renderer.c_str(), res.c_str(), frames);
-
-  // Novel-view PSNR of both modes against the truth (exact geometry, 4 views
-  // between the pods at 640×480, inside the true foreground).
-  {
-    auto small = holo::render::OffscreenTarget::Create(640, 480);
-    if (!small.ok()) return 1;
-    for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
-      if (!(*renderer)->SetRemoteMesh(mesh).ok() || !(*renderer)->SetPodImages(workload->rig, images).ok()) return 1;
-      std::vector<double> psnr;
-      for (float az : {22.5f, 112.5f, 202.5f, 292.5f}) {
-        const holo::CameraModel cam = OrbitCamera(640, 480, az, 2.0f);
-        holo::ImageRgb8 truth, ours;
-        holo::ImageGray8 mask;
-        (*studio)->RenderView(studio_frame, cam, &truth, nullptr, &mask);
-        (*small)->Bind();
-        holo::render::RenderSettings settings;
-        settings.mode = mode;
-        settings.background = {0, 0, 0};
-        if (holo::Status s = (*renderer)->Render(cam, settings, {0, 0, 640, 480}); !s.ok()) {
-          std::fprintf(stderr, "client: %s\n", s.ToString().c_str());
-          return 1;
-        }
-        if (!(*small)->ReadRgb(&ours).ok()) return 1;
-        auto p = holo::metrics::ComputePsnr(ours, truth, &mask);
-        if (!p.ok()) return 1;
-        psnr.push_back(*p);
-      }
-      EmitFigure("client", args.workload, "novel_view_psnr_db", holo::bench::Mean(psnr), "dB",
-                 {{"mode", holo::render::ColorModeName(mode)}, {"stage", "render"}, {"resolution", "640x480"},
-                  {"views", "4"}, {"frame", std::to_string(studio_frame)}});
-    }
+  if (!png_dir.empty()) {
+    if (holo::Status s = holo::MakeDirs(png_dir); !s.ok()) return Fail(s);
   }
 
-  for (int level : levels) {
-    const holo::Mesh m = Subdivide(mesh, level);
-    const std::string tris = std::to_string(m.num_triangles());
+  for (const ViewerContent& c : contents) {
+    const std::string tris = std::to_string(c.mesh.num_triangles());
+    std::map<std::string, std::string> q = {{"stage", "render"},   {"content", c.content},
+                                            {"mesh", c.mesh_name}, {"triangles", tris},
+                                            {"renderer", gl_renderer}, {"pods", std::to_string(c.images.size())},
+                                            {"frame", std::to_string(studio_frame)}};
+    if (lp_threads) q["lp_num_threads"] = lp_threads;
+    if (legacy) q["renderer_options"] = "legacy";
+    holo::render::RenderSettings base;
+    if (legacy) base = holo::render::RenderSettings::Legacy();
+    if (OptionValue(options, "--cull", "1") == "0") {
+      base.cull_back_faces = false;
+      base.projective.cull_back_faces = false;
+      q["cull_back_faces"] = "false";
+    }
+    if (OptionValue(options, "--prepass", "") != "") {
+      base.depth_prepass = OptionValue(options, "--prepass", "") == "1";
+      q["depth_prepass"] = base.depth_prepass ? "true" : "false";
+    }
+    if (!(*renderer)->SetRemoteMesh(c.mesh).ok()) return 1;
+    if (holo::Status s = (*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()); !s.ok())
+      return Fail(s);
+    // Quality from novel views.
+    {
+      auto small = holo::render::OffscreenTarget::Create(640, 480);
+      if (!small.ok()) return Fail(small.status());
+      for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
+        holo::render::RenderSettings settings = base;
+        settings.mode = mode;
+        Quality qual;
+        if (holo::Status s = MeasureQuality(renderer->get(), small->get(), studio->get(), studio_frame, settings,
+                                            &qual);
+            !s.ok())
+          return Fail(s);
+        auto qm = q;
+        qm["mode"] = holo::render::ColorModeName(mode);
+        qm["resolution"] = "640x480";
+        qm["views"] = "4";
+        qm["region"] = "truth";
+        EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr, "dB", qm);
+        EmitFigure("client", args.workload, "novel_view_ssim", qual.ssim, "", qm);
+        qm["region"] = "union";
+        EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr_union, "dB", qm);
+      }
+      if (!png_dir.empty() && c.mesh_name != "fused_full") {
+        if (holo::Status s = WriteSideBySide(renderer->get(), small->get(), studio->get(), studio_frame, base,
+                                             png_dir + "/viewer_" + c.mesh_name);
+            !s.ok())
+          return Fail(s);
+      }
+    }
     // Per-stream-frame costs: upload of mesh + pod images, pod visibility maps.
     std::vector<double> upload_ms, vis_ms, vis_cpu;
-    for (int r = 0; r < 7; ++r) {
+    for (int r = 0; r < 5; ++r) {
       holo::Stopwatch sw;
-      if (!(*renderer)->SetRemoteMesh(m).ok() || !(*renderer)->SetPodImages(workload->rig, images).ok()) return 1;
+      if (!(*renderer)->SetRemoteMesh(c.mesh).ok() ||
+          !(*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()).ok())
+        return 1;
       holo::render::FinishGl();
       upload_ms.push_back(sw.ElapsedMs());
       sw.Restart();
       const double cpu0 = ProcessCpuMs();
-      if (!(*renderer)->UpdateVisibility().ok()) return 1;
+      if (!(*renderer)->UpdateVisibility(base.projective).ok()) return 1;
       holo::render::FinishGl();
       vis_ms.push_back(sw.ElapsedMs());
       vis_cpu.push_back(ProcessCpuMs() - cpu0);
     }
-    std::map<std::string, std::string> q = {{"stage", "render"}, {"triangles", tris}, {"resolution", res},
-                                            {"renderer", gl_renderer}, {"pods", std::to_string(images.size())}};
-    if (lp_threads) q["lp_num_threads"] = lp_threads;
     EmitFigure("client", args.workload, "upload_ms", Median(upload_ms), "ms", q);
     EmitFigure("client", args.workload, "visibility_ms", Median(vis_ms), "ms", q);
     EmitFigure("client", args.workload, "visibility_cpu_ms", Median(vis_cpu), "ms", q);
-    for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
-      holo::render::RenderSettings settings;
-      settings.mode = mode;
-      (*target)->Bind();
-      std::vector<double> ms, cpu;
-      for (int i = -5; i < frames; ++i) {  // 5 warm-up frames
-        const holo::CameraModel cam = OrbitCamera(width, height, 3.0f * static_cast<float>(i), 2.5f);
-        const double cpu0 = ProcessCpuMs();
-        holo::Stopwatch sw;
-        if (holo::Status s = (*renderer)->Render(cam, settings, {0, 0, width, height}); !s.ok()) {
-          std::fprintf(stderr, "client: %s\n", s.ToString().c_str());
-          return 1;
+    for (const auto& [width, height] : resolutions) {
+      auto target = holo::render::OffscreenTarget::Create(width, height);
+      if (!target.ok()) return Fail(target.status());
+      for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
+        holo::render::RenderSettings settings = base;
+        settings.mode = mode;
+        (*target)->Bind();
+        std::vector<double> ms, cpu;
+        for (int i = -5; i < frames; ++i) {  // 5 warm-up frames
+          const holo::CameraModel cam = OrbitCamera(width, height, 3.0f * static_cast<float>(i), 2.5f);
+          const double cpu0 = ProcessCpuMs();
+          holo::Stopwatch sw;
+          if (holo::Status s = (*renderer)->Render(cam, settings, {0, 0, width, height}); !s.ok()) return Fail(s);
+          holo::render::FinishGl();
+          if (i >= 0) {
+            ms.push_back(sw.ElapsedMs());
+            cpu.push_back(ProcessCpuMs() - cpu0);
+          }
         }
-        holo::render::FinishGl();
-        if (i >= 0) {
-          ms.push_back(sw.ElapsedMs());
-          cpu.push_back(ProcessCpuMs() - cpu0);
-        }
+        auto qm = q;
+        qm["mode"] = holo::render::ColorModeName(mode);
+        qm["frames"] = std::to_string(frames);
+        qm["resolution"] = std::to_string(width) + "x" + std::to_string(height);
+        EmitFigure("client", args.workload, "render_ms", Median(ms), "ms", qm);
+        EmitFigure("client", args.workload, "render_cpu_ms", Median(cpu), "ms", qm);
       }
-      auto qm = q;
-      qm["mode"] = holo::render::ColorModeName(mode);
-      qm["frames"] = std::to_string(frames);
-      EmitFigure("client", args.workload, "render_ms", Median(ms), "ms", qm);
-      EmitFigure("client", args.workload, "render_cpu_ms", Median(cpu), "ms", qm);
     }
   }
   return 0;
@@ -251,7 +441,7 @@ struct Part {
 
 const std::vector<Part>& Parts() {
   static const std::vector<Part> parts = {
-      {"render", {"--width", "--height", "--subdivide"}, RunClientRenderPart},
+      {"render", {"--resolutions", "--content", "--png-dir", "--legacy", "--frame", "--reduce", "--cull", "--prepass"}, RunClientRenderPart},
   };
   return parts;
 }

@@ -101,6 +101,9 @@ uniform vec2 u_array_size;
 uniform sampler2DArray u_pod_color;
 uniform sampler2DArray u_pod_depth;
 uniform float u_vis_tol;
+uniform float u_edge_weight;
+uniform bool u_distorted;
+uniform float u_min_confidence;
 vec2 Distort(vec2 x, vec4 d, float k3);  // kDistortGlsl, appended when the program is built
 
 void main() {
@@ -108,16 +111,21 @@ void main() {
     o_color = vec4(v_color, 1.0);
     return;
   }
-  vec3 clean = vec3(0.0), edge = vec3(0.0);
-  float clean_w = 0.0, edge_w = 0.0;
+  vec3 acc = vec3(0.0);
+  float acc_w = 0.0, sum_w = 0.0;
   for (int i = 0; i < u_num_pods; ++i) {
     float w = v_w[i / 4][i % 4];
     if (w <= 1e-6) continue;
+    // Without lens distortion the matrix holds the intrinsics too (pixel
+    // x·z, y·z, z); with it, camera coordinates.
     vec3 pod = (u_pod_cam_from_world[i] * vec4(v_remote, 1.0)).xyz;
     if (pod.z < 0.05) continue;
-    vec2 xn = Distort(pod.xy / pod.z, u_pod_dist[i], u_pod_k3[i]);
-    vec4 intr = u_pod_intr[i];
-    vec2 px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);
+    vec2 px = pod.xy / pod.z;
+    if (u_distorted) {
+      vec2 xn = Distort(px, u_pod_dist[i], u_pod_k3[i]);
+      vec4 intr = u_pod_intr[i];
+      px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);
+    }
     vec2 size = u_pod_size[i];
     if (px.x < -0.5 || px.y < -0.5 || px.x >= size.x - 0.5 || px.y >= size.y - 0.5) continue;
     // Flagged depth: camera z of the nearest surface, negative when that
@@ -125,19 +133,21 @@ void main() {
     float zf = texelFetch(u_pod_depth, ivec3(ivec2(floor(px + 0.5)), i), 0).r;
     float zmap = abs(zf);
     if (zmap <= 0.0 || pod.z > zmap + u_vis_tol) continue;
-    vec3 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(i))).rgb;
-    if (zf < 0.0) {
-      edge += w * c;
-      edge_w += w;
-    } else {
-      clean += w * c;
-      clean_w += w;
-    }
+    // Premultiplied by the texel's mask weight (alpha; 0 = background).
+    vec4 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(i)));
+    // Near a depth discontinuity: used only when nothing clean is there.
+    float k = zf < 0.0 ? u_edge_weight * w : w;
+    acc += k * c.rgb;
+    acc_w += k * c.a;
+    sum_w += k;
   }
-  if (clean_w > 0.0) {
-    o_color = vec4(clean / clean_w, 1.0);
-  } else if (edge_w > 0.0) {
-    o_color = vec4(edge / edge_w, 1.0);
+  if (acc_w > 0.0) {
+    // Mean mask weight of the samples: where every pod saw this point only
+    // at its mask's edge (a silhouette rim that every pod's segmentation
+    // got wrong), the site's per-vertex colour (filled from the interior)
+    // is more trustworthy than any of them.
+    float confidence = acc_w / sum_w;
+    o_color = vec4(mix(v_color, acc / acc_w, smoothstep(0.0, u_min_confidence, confidence)), 1.0);
   } else {
     o_color = vec4(v_color, 1.0);
   }
@@ -237,7 +247,31 @@ Status ProjectiveOptions::Check() const {
   if (!(discontinuity_radius_m >= 0 && discontinuity_radius_m < 1)) {
     return InvalidArgument("discontinuity_radius_m must be in [0, 1)");
   }
+  if (!(discontinuity_weight > 0 && discontinuity_weight <= 1)) {
+    return InvalidArgument("discontinuity_weight must be in (0, 1]");
+  }
+  if (!(mask_erode_px >= 0 && mask_erode_px <= 32)) return InvalidArgument("mask_erode_px must be in [0, 32]");
+  if (!(mask_feather_px >= 0 && mask_feather_px <= 32)) return InvalidArgument("mask_feather_px must be in [0, 32]");
+  if (!(min_mask_confidence >= 0 && min_mask_confidence <= 1)) {
+    return InvalidArgument("min_mask_confidence must be in [0, 1]");
+  }
+  if (!(edge_floor_weight > 0 && edge_floor_weight <= 1)) return InvalidArgument("edge_floor_weight must be in (0, 1]");
   return OkStatus();
+}
+
+ProjectiveOptions ProjectiveOptions::Legacy() {
+  ProjectiveOptions o;
+  o.use_masks = false;
+  o.cull_back_faces = true;
+  return o;
+}
+
+RenderSettings RenderSettings::Legacy() {
+  RenderSettings s;
+  s.cull_back_faces = true;
+  s.depth_prepass = false;
+  s.projective = ProjectiveOptions::Legacy();
+  return s;
 }
 
 // ---------------------------------------------------------------- OffscreenTarget
@@ -429,6 +463,11 @@ Status Renderer::SetRemoteMesh(const Mesh& mesh) {
 Status Renderer::SetLocalMesh(const Mesh& mesh) { return Upload(mesh, &local_); }
 
 Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images) {
+  return SetPodImages(rig, images, {});
+}
+
+Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images,
+                              const std::vector<const ImageGray8*>& masks) {
   const int n = static_cast<int>(rig.pods.size());
   if (n == 0 || n > kMaxPods) {
     return InvalidArgument("projective texturing supports 1.." + std::to_string(kMaxPods) + " pods, rig has " +
@@ -448,6 +487,14 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
                                         : std::string("missing")) +
                              ", its colour camera is " + std::to_string(c.width) + "x" + std::to_string(c.height));
     }
+    if (!masks.empty() && (masks.size() != images.size() || masks[i] == nullptr ||
+                           masks[i]->width() != c.width || masks[i]->height() != c.height)) {
+      return InvalidArgument("pod " + std::to_string(i) + " mask is " +
+                             (masks.size() == images.size() && masks[i]
+                                  ? std::to_string(masks[i]->width()) + "x" + std::to_string(masks[i]->height())
+                                  : std::string("missing")) +
+                             ", its image is " + std::to_string(c.width) + "x" + std::to_string(c.height));
+    }
     w = std::max(w, c.width);
     h = std::max(h, c.height);
   }
@@ -463,7 +510,7 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
   }
   if (n != num_pods_ || w != array_width_ || h != array_height_) {
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
-    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGB8, w, h, n, 0, GL_RGB, GL_UNSIGNED_BYTE, nullptr);
+    glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA8, w, h, n, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
@@ -480,13 +527,11 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
     array_width_ = w;
     array_height_ = h;
   }
-  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-  for (int i = 0; i < n; ++i) {
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, images[i]->width(), images[i]->height(), 1, GL_RGB,
-                    GL_UNSIGNED_BYTE, images[i]->data());
-  }
-  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  pod_images_.resize(n);
+  for (int i = 0; i < n; ++i) pod_images_[i] = *images[i];
+  pod_masks_.resize(masks.size());
+  for (size_t i = 0; i < masks.size(); ++i) pod_masks_[i] = *masks[i];
+  textures_dirty_ = true;
   std::vector<CameraModel> cams;
   for (const auto& pod : rig.pods) cams.push_back(pod.ColorCamera());
   bool same_cams = cams.size() == pod_cameras_.size();
@@ -596,6 +641,87 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   return CheckGlError("pod visibility pass");
 }
 
+void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
+  const bool use_masks = options.use_masks && !pod_masks_.empty();
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  for (int i = 0; i < num_pods_; ++i) {
+    const ImageRgb8& img = pod_images_[i];
+    const int w = img.width(), h = img.height();
+    const size_t npx = static_cast<size_t>(w) * h;
+    rgba_scratch_.resize(npx * 4);
+    uint8_t* out = rgba_scratch_.data();
+    const uint8_t* in = img.data();
+    if (!use_masks) {
+      for (size_t k = 0; k < npx; ++k) {
+        out[4 * k + 0] = in[3 * k + 0];
+        out[4 * k + 1] = in[3 * k + 1];
+        out[4 * k + 2] = in[3 * k + 2];
+        out[4 * k + 3] = 255;
+      }
+    } else {
+      // Chessboard distance of every mask pixel to the nearest background
+      // pixel (or the image border), two passes, capped at 255.
+      const uint8_t* m = pod_masks_[i].data();
+      dist_scratch_.resize(npx);
+      uint8_t* d = dist_scratch_.data();
+      for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+          const size_t k = static_cast<size_t>(y) * w + x;
+          if (m[k] == 0) {
+            d[k] = 0;
+            continue;
+          }
+          int v = 1;  // the image border counts as background
+          if (x > 0 && y > 0) {
+            v = std::min({d[k - 1], d[k - w], d[k - w - 1], x + 1 < w ? d[k - w + 1] : uint8_t{0}}) + 1;
+          }
+          d[k] = static_cast<uint8_t>(std::min(v, 255));
+        }
+      }
+      for (int y = h - 1; y >= 0; --y) {
+        for (int x = w - 1; x >= 0; --x) {
+          const size_t k = static_cast<size_t>(y) * w + x;
+          if (d[k] == 0) continue;
+          int v = 1;
+          if (x + 1 < w && y + 1 < h) {
+            v = std::min({d[k + 1], d[k + w], d[k + w + 1], x > 0 ? d[k + w - 1] : uint8_t{0}}) + 1;
+          }
+          d[k] = static_cast<uint8_t>(std::min<int>(d[k], v));
+        }
+      }
+      // Weight per distance, premultiplied into the colour so that bilinear
+      // sampling never mixes in background texels.
+      uint8_t lut[256];
+      for (int k = 0; k < 256; ++k) {
+        float wgt = 0.0f;
+        if (k > 0) {
+          const float ramp = options.mask_feather_px > 0
+                                 ? (static_cast<float>(k) - options.mask_erode_px) / options.mask_feather_px
+                                 : (static_cast<float>(k) > options.mask_erode_px ? 1.0f : 0.0f);
+          wgt = std::clamp(ramp, options.edge_floor_weight, 1.0f);
+        }
+        lut[k] = static_cast<uint8_t>(std::lround(wgt * 255.0f));
+        if (k > 0 && lut[k] == 0) lut[k] = 1;
+      }
+      for (size_t k = 0; k < npx; ++k) {
+        const unsigned a = lut[d[k]];
+        out[4 * k + 0] = static_cast<uint8_t>((in[3 * k + 0] * a + 127) / 255);
+        out[4 * k + 1] = static_cast<uint8_t>((in[3 * k + 1] * a + 127) / 255);
+        out[4 * k + 2] = static_cast<uint8_t>((in[3 * k + 2] * a + 127) / 255);
+        out[4 * k + 3] = static_cast<uint8_t>(a);
+      }
+    }
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, w, h, 1, GL_RGBA, GL_UNSIGNED_BYTE, out);
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  tex_use_masks_ = options.use_masks;
+  tex_erode_ = options.mask_erode_px;
+  tex_feather_ = options.mask_feather_px;
+  tex_floor_ = options.edge_floor_weight;
+  textures_dirty_ = false;
+}
+
 void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
   const Intrinsics& in = cam.intrinsics;
   if (in.HasDistortion() || !(remote_min_.array() <= remote_max_.array()).all()) return;  // keep the whole image
@@ -655,6 +781,11 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
         settings.projective.discontinuity_radius_m != edge_radius_m_) {
       HOLO_RETURN_IF_ERROR(UpdateVisibility(settings.projective));
     }
+    const ProjectiveOptions& po = settings.projective;
+    if (textures_dirty_ || po.use_masks != tex_use_masks_ || po.mask_erode_px != tex_erode_ ||
+        po.mask_feather_px != tex_feather_ || po.edge_floor_weight != tex_floor_) {
+      UploadPodTextures(po);
+    }
   }
   const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
   if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
@@ -711,9 +842,19 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   if (projective) {
     const int n = num_pods_;
     std::vector<float> cam_from_world(16 * n), intr(4 * n), dist(4 * n), k3(n), size(2 * n), center(3 * n);
+    bool distorted = false;
+    for (int i = 0; i < n; ++i) distorted |= pod_cameras_[i].intrinsics.HasDistortion();
     for (int i = 0; i < n; ++i) {
       const CameraModel& c = pod_cameras_[i];
-      const Eigen::Matrix4f m = c.world_from_camera.inverse().matrix();
+      Eigen::Matrix4f m = c.world_from_camera.inverse().matrix();
+      if (!distorted) {
+        Eigen::Matrix4f k = Eigen::Matrix4f::Identity();
+        k(0, 0) = static_cast<float>(c.intrinsics.fx);
+        k(1, 1) = static_cast<float>(c.intrinsics.fy);
+        k(0, 2) = static_cast<float>(c.intrinsics.cx);
+        k(1, 2) = static_cast<float>(c.intrinsics.cy);
+        m = k * m;
+      }
       std::copy(m.data(), m.data() + 16, cam_from_world.data() + 16 * i);
       const Intrinsics& in = c.intrinsics;
       intr[4 * i + 0] = static_cast<float>(in.fx);
@@ -728,6 +869,7 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
       for (int k = 0; k < 3; ++k) center[3 * i + k] = ctr[k];
     }
     glUniform1i(Loc(draw_program_, "u_num_pods"), n);  // also read by the vertex shader
+    glUniform1i(Loc(draw_program_, "u_distorted"), distorted ? 1 : 0);
     glUniformMatrix4fv(Loc(draw_program_, "u_pod_cam_from_world"), n, GL_FALSE, cam_from_world.data());
     glUniform4fv(Loc(draw_program_, "u_pod_intr"), n, intr.data());
     glUniform4fv(Loc(draw_program_, "u_pod_dist"), n, dist.data());
@@ -744,6 +886,9 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     glUniform1f(Loc(draw_program_, "u_alpha"), po.alpha);
     glUniform1f(Loc(draw_program_, "u_beta"), po.beta);
     glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
+    glUniform1f(Loc(draw_program_, "u_edge_weight"), po.discontinuity_weight);
+    glUniform1f(Loc(draw_program_, "u_min_confidence"),
+                po.use_masks && !pod_masks_.empty() ? po.min_mask_confidence : 0.0f);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
     glActiveTexture(GL_TEXTURE1);

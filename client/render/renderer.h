@@ -48,9 +48,35 @@ struct ProjectiveOptions {
   // neighbour at the radius (or an empty neighbour), metres.
   float discontinuity_jump_m = 0.05f;
   float discontinuity_radius_m = 0.01f;
-  // Skip back faces when rendering the pods' depth maps (closed meshes).
-  bool cull_back_faces = true;
+  // Weight factor of a sample near such a discontinuity (Holoportation's
+  // dilated discontinuity map down-weights them): small, so that they count
+  // only where no clean sample exists.
+  float discontinuity_weight = 0.001f;
+  // Skip back faces when rendering the pods' depth maps. Off: a fused
+  // mesh is not reliably closed and consistently oriented (folds of the
+  // noisy surface), and a culled fold leaves a hole in a pod's depth map
+  // through which hidden surface takes that pod's colour.
+  bool cull_back_faces = false;
+  // Pods' foreground masks (SetPodImages with masks): a texel outside its
+  // pod's mask never contributes (a decoded C1 image is black there), and
+  // texels near the mask's edge are down-weighted, since a segmentation edge
+  // misaligned by a pixel or two paints background onto the person: the
+  // weight is 1 from `mask_erode_px + mask_feather_px` pixels inside the edge
+  // (chessboard distance; 1 = a mask pixel next to the background), falls
+  // linearly to 0 at `mask_erode_px`, and never below `edge_floor_weight`
+  // inside the mask (so a point only seen near an edge still takes colour).
+  bool use_masks = true;
+  float mask_erode_px = 2.0f;
+  float mask_feather_px = 2.0f;
+  float edge_floor_weight = 0.02f;
+  // Below this mean mask weight of a fragment's samples the colour fades to
+  // the mesh's per-vertex colour (0 = never).
+  float min_mask_confidence = 0.5f;
   Status Check() const;
+  // The renderer as it was before masks and edge weights (for before/after
+  // comparisons): masks ignored, back faces culled in the pods' depth maps.
+  // (RenderSettings::Legacy() gives the old view settings too.)
+  static ProjectiveOptions Legacy();
 };
 
 struct RenderSettings {
@@ -64,15 +90,21 @@ struct RenderSettings {
   bool show_local = true;
   ProjectiveOptions projective;
   // Skip the remote mesh's back faces (counter-clockwise = front, as
-  // holo::Mesh promises). Right for closed meshes (marching cubes, the
-  // studio); turn off for open ones whose inside may show.
-  bool cull_back_faces = true;
+  // holo::Mesh promises). Off by default: on the live fused stream culling
+  // opened most of the black speckles and holes a viewer saw (folds of the
+  // noisy fused surface face away from the viewer; behind them is
+  // background), +0.7 dB novel-view PSNR without it (docs/viewer.md). On
+  // for exactly closed meshes (the studio's truth), where it saves time.
+  bool cull_back_faces = false;
   // Projective mode: lay down depth first so each pixel is textured once.
-  // Pays off only with much overdraw and no culling (measured in
-  // docs/viewer.md).
-  bool depth_prepass = false;
+  // Pays off without culling (fused S8-QVGA, 20 k triangles, 960×540: 124
+  // → 90 CPU-ms per frame; docs/viewer.md).
+  bool depth_prepass = true;
   float near_m = 0.02f;
   float far_m = 100.0f;
+  // The settings as they were before issue 17 (back faces culled, no depth
+  // pre-pass, ProjectiveOptions::Legacy), for before/after comparisons.
+  static RenderSettings Legacy();
 };
 
 // Pixel rectangle of the bound framebuffer, origin bottom-left (GL convention).
@@ -115,6 +147,12 @@ class Renderer {
   // size of that pod's colour camera), for projective texturing. Up to
   // kMaxPods pods.
   Status SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images);
+  // The same with the pods' foreground masks (one per image, same size,
+  // nonzero = foreground; as the C1 colour codec decodes them), used by
+  // projective texturing when ProjectiveOptions::use_masks. An empty `masks`
+  // means none (every texel of the images is usable).
+  Status SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*>& images,
+                      const std::vector<const ImageGray8*>& masks);
   // Local-site geometry (local world coordinates) for compositing; an empty
   // mesh clears it.
   Status SetLocalMesh(const Mesh& mesh);
@@ -150,6 +188,9 @@ class Renderer {
   // Scissor box {x, y, w, h} of pod image pixels the remote mesh can cover;
   // left unchanged (whole image) when it cannot be bounded.
   void PodBox(const CameraModel& cam, int box[4]) const;
+  // Uploads the pods' images as premultiplied RGBA (alpha = the texel's mask
+  // weight, see ProjectiveOptions) for `options`.
+  void UploadPodTextures(const ProjectiveOptions& options);
 
   unsigned draw_program_ = 0, depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
   GpuMesh remote_, local_;
@@ -162,6 +203,15 @@ class Renderer {
   int num_pods_ = 0, array_width_ = 0, array_height_ = 0;
   std::vector<CameraModel> pod_cameras_;
   bool visibility_dirty_ = true;
+  // CPU copies of the last pod images and masks (masks empty = none), and
+  // the mask options the uploaded texture was built with.
+  std::vector<ImageRgb8> pod_images_;
+  std::vector<ImageGray8> pod_masks_;
+  std::vector<uint8_t> rgba_scratch_;
+  std::vector<uint8_t> dist_scratch_;
+  bool tex_use_masks_ = false;
+  float tex_erode_ = -1, tex_feather_ = -1, tex_floor_ = -1;
+  bool textures_dirty_ = true;
 };
 
 }  // namespace holo::render

@@ -74,6 +74,8 @@ Status TextureOptions::Check() const {
   if (!(vote_threshold > 0.0f)) return InvalidArgument("vote_threshold must be > 0, got " + Str(vote_threshold));
   if (fill_iterations < 0) return InvalidArgument("fill_iterations must be >= 0, got " + std::to_string(fill_iterations));
   if (threads < 0) return InvalidArgument("threads must be >= 0, got " + std::to_string(threads));
+  if (mask_edge_px < 0 || mask_edge_px > 16)
+    return InvalidArgument("mask_edge_px must be in [0, 16], got " + std::to_string(mask_edge_px));
   if (!(cluster_size_m >= 0.0f && cluster_size_m <= 1.0f))
     return InvalidArgument("cluster_size_m must be in [0, 1], got " + Str(cluster_size_m));
  if (cluster_transfer < 0 || cluster_transfer > 2)
@@ -389,6 +391,23 @@ void Texturer::ColorVertices(const RgbdFrameSet& frames, const Mesh& mesh, const
         if (!frame.mask.Contains(mx, my)) return;
       }
       if (frame.mask.at(mx, my) == 0) return;
+      // Near the mask's edge the sample (and its bilinear neighbours) may be
+      // background: a segmentation edge is often a pixel or two off. Such a
+      // view counts only where no other is clean (as near a discontinuity).
+      if (o.mask_edge_px > 0) {
+        const int r = o.mask_edge_px;
+        const int x0 = std::max(0, mx - r), x1 = std::min(frame.mask.width() - 1, mx + r);
+        const int y0 = std::max(0, my - r), y1 = std::min(frame.mask.height() - 1, my + r);
+        bool mask_edge = x0 != mx - r || x1 != mx + r || y0 != my - r || y1 != my + r;
+        for (int yy = y0; yy <= y1 && !mask_edge; ++yy) {
+          const uint8_t* row = &frame.mask.at(0, yy);
+          for (int xx = x0; xx <= x1; ++xx) mask_edge |= row[xx] == 0;
+        }
+        // Never used, not even as a fallback: a vertex every view sees only
+        // at a mask edge (a silhouette rim) is better filled from its
+        // observed neighbours than painted with the room.
+        if (mask_edge) return;
+      }
     }
     Sample& smp = samples.emplace_back();
     SampleBilinear(frame.color, uv.x(), uv.y(), smp.rgb);

@@ -78,6 +78,11 @@ struct TextureOptions {
   bool normal_weighting = true;
   // Use RgbdFrame::mask when present.
   bool use_masks = true;
+  // A view whose mask has background within this many pixels (chessboard)
+  // of the vertex's pixel is not used: segmentation edges are often a pixel
+  // or two off and paint the room onto the person. A vertex that only such
+  // views see is filled from its observed neighbours. 0 = off.
+  int mask_edge_px = 2;
   // Use the SSE2 paths (four pods per vector) where they apply: undistorted
   // colour cameras on an SSE2 build. Off: the scalar reference path. Both
   // give the same results (tested); this switch exists for that test.

@@ -502,6 +502,59 @@ TEST(TexturerTest, ForegroundMasksExcludeViews) {
   EXPECT_GT(ColorDistance(m.colors[centre], {90, 160, 220}), 50.0);
 }
 
+TEST(TexturerTest, ViewsNearAMaskEdgeCountOnlyWithoutACleanView) {
+  // A blue plane seen by two pods. Pod 1's segmentation cut a gap into the
+  // plane (mask 0 over columns [60, 70)), and the gap is 2 px too narrow: the
+  // 2 px on each side of it show the room (magenta) although the mask says
+  // foreground — a segmentation edge two pixels off. Vertices there must take
+  // pod 0's clean blue, not the room.
+  Rig rig;
+  rig.name = "two";
+  rig.pods.push_back(MakePod(0, {0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  rig.pods.push_back(MakePod(1, {-0.3f, 0.0f, 2.0f}, {0, 0, 0}, 160, 120, Vector3f::UnitY()));
+  Mesh plane = metrics::MakePlaneMesh({0, 0, 0}, 0.5f, 0.5f, 40, 40);
+  const Rgb blue = {90, 160, 220};
+  Paint(&plane, blue);
+  RgbdFrameSet frames = RenderPods(rig, plane);
+  ImageRgb8& im = frames.frames[1].color;
+  ImageGray8& mask = frames.frames[1].mask;
+  mask.Resize(160, 120, 255);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 58; x < 72; ++x) {
+      im.at(x, y, 0) = 255;
+      im.at(x, y, 1) = 0;
+      im.at(x, y, 2) = 255;
+      if (x >= 60 && x < 70) mask.at(x, y) = 0;
+    }
+  const CameraModel cam1 = rig.pods[1].ColorCamera();
+  auto worst = [&](const TextureOptions& o) {
+    Texturer t(rig, o);
+    Mesh m = plane;
+    m.colors.clear();
+    EXPECT_TRUE(t.Apply(frames, &m).ok());
+    double d = 0;
+    int band = 0;
+    for (size_t v = 0; v < m.num_vertices(); ++v) {
+      Eigen::Vector2f uv;
+      if (!cam1.ProjectWorld(m.positions[v], &uv)) continue;
+      const int x = static_cast<int>(std::lround(uv.x()));
+      if (!((x >= 58 && x < 60) || (x >= 70 && x < 72)) || std::abs(m.positions[v].y()) > 0.2f) continue;
+      d = std::max(d, ColorDistance(m.colors[v], blue));
+      ++band;
+    }
+    EXPECT_GT(band, 10);
+    return d;
+  };
+  TextureOptions o;
+  o.voting_levels = 0;  // plain weighted average: the room's share is visible
+  const double now = worst(o);
+  o.mask_edge_px = 0;  // the texturer before issue 17
+  const double old = worst(o);
+  std::printf("worst colour error in the band: %.1f now, %.1f with mask_edge_px = 0\n", now, old);
+  EXPECT_GT(old, 40.0);
+  EXPECT_LT(now, 8.0);
+}
+
 TEST(TexturerTest, ResultIndependentOfThreadCountAndRepeatable) {
   const GhostScene g = MakeGhostScene();
   std::vector<std::vector<Rgb>> results;
