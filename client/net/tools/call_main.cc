@@ -55,6 +55,13 @@ int main(int argc, char** argv) {
   std::string audio_in, audio_out;
   app.add_option("--audio-in", audio_in, "--config: own voice, a WAV file (looped; default: a 440 Hz tone)");
   app.add_option("--audio-out", audio_out, "--config: write the spatialized remote voices to this stereo WAV");
+  std::string aec = "off", hrtf_sofa;
+  app.add_option("--aec", aec, "--config: echo cancellation + noise suppression of the own voice (on with "
+                               "loudspeakers, off with headphones)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  app.add_option("--hrtf", hrtf_sofa, "--config: personal HRTF, a SOFA file (SimpleFreeFieldHRIR) for the "
+                                      "spatialized output (default: OpenAL Soft's built-in set)");
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
@@ -89,6 +96,8 @@ int main(int argc, char** argv) {
     po.name = name;
     po.audio_in = audio_in;
     po.audio_out = audio_out;
+    po.aec = aec == "on";
+    po.hrtf_sofa = hrtf_sofa;
     po.view_template = view;
     auto p = holo::net::Participant::Start(po, cb);
     if (!p.ok()) return Fail(p.status());
