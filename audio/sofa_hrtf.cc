@@ -3,11 +3,17 @@
 #include <mysofa.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <iterator>
 #include <numbers>
+#include <thread>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 namespace holo::audio {
 namespace {
@@ -60,7 +66,46 @@ struct HrtfDeleter {
 };
 using HrtfPtr = std::unique_ptr<MYSOFA_HRTF, HrtfDeleter>;
 
+// libmysofa's HDF5 reader can crash on malformed files (a truncated file
+// smashed its stack in our tests). The bytes are therefore first parsed in a
+// forked child; only if it survives are they parsed here. Called at start-up
+// (before audio threads run), so fork's limits on multi-threaded processes do
+// not bite. Returns OK if the child parsed without crashing.
+Status ProbeInChild(const std::string& path, const std::string& bytes) {
+  const pid_t pid = fork();
+  if (pid < 0) return Internal(path + ": fork failed for the SOFA parse probe");
+  if (pid == 0) {
+    int err = 0;
+    MYSOFA_HRTF* h = mysofa_load_data(bytes.data(), bytes.size(), &err);
+    if (h != nullptr) {
+      const bool ok = err == MYSOFA_OK && CheckSofaLayout(*h).ok() && mysofa_check(h) == MYSOFA_OK;
+      mysofa_free(h);
+      (void)ok;  // the parent parses again for the message; resampling a checked set is plain arithmetic
+    }
+    _exit(0);
+  }
+  int status = 0;
+  // A hostile file must not hang the caller either: 20 s, then the probe is killed.
+  for (int waited_ms = 0;; waited_ms += 10) {
+    const pid_t r = waitpid(pid, &status, WNOHANG);
+    if (r == pid) break;
+    if (r < 0) return Internal(path + ": waitpid failed for the SOFA parse probe");
+    if (waited_ms >= 20000) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      return InvalidArgument(path + ": the SOFA parser did not finish within 20 s (malformed file)");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  if (WIFSIGNALED(status)) {
+    return InvalidArgument(path + ": malformed SOFA/HDF5 file (the parser crashed on it, signal " +
+                           std::to_string(WTERMSIG(status)) + ")");
+  }
+  return OkStatus();
+}
+
 StatusOr<HrtfPtr> LoadChecked(const std::string& path, const std::string& bytes) {
+  HOLO_RETURN_IF_ERROR(ProbeInChild(path, bytes));
   int err = 0;
   HrtfPtr h(mysofa_load_data(bytes.data(), bytes.size(), &err));
   if (h == nullptr || err != MYSOFA_OK) return InvalidArgument(path + ": " + MysofaError(err));
