@@ -379,11 +379,13 @@ std::vector<float> ApplyEchoPath(const EchoPath& path, std::span<const float> pl
 }
 
 double ErleDb(std::span<const float> echo, std::span<const float> out, std::span<const float> near, size_t begin,
-              size_t end) {
+              size_t end, int near_lag) {
   end = std::min({end, echo.size(), out.size()});
   double e = 0, r = 0;
   for (size_t i = begin; i < end; ++i) {
-    const double res = out[i] - (near.empty() ? 0.0f : near[i]);
+    const int64_t k = static_cast<int64_t>(i) - near_lag;
+    const float nv = near.empty() || k < 0 || k >= static_cast<int64_t>(near.size()) ? 0.0f : near[static_cast<size_t>(k)];
+    const double res = out[i] - nv;
     e += static_cast<double>(echo[i]) * echo[i];
     r += res * res;
   }

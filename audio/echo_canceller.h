@@ -124,10 +124,12 @@ EchoPath MakeEchoPath(const EchoPathOptions& o);
 // Microphone pickup of `played` (interleaved stereo) through `path`.
 std::vector<float> ApplyEchoPath(const EchoPath& path, std::span<const float> played);
 
-// Echo return loss enhancement of a block sequence: 10·log10(Σ echo² / Σ (out − near)²)
-// over samples [`begin`, `end`); `near` may be empty (single talk).
+// Echo return loss enhancement: 10·log10(Σ echo[i]² / Σ (out[i] − near[i − `near_lag`])²)
+// over samples i in [`begin`, `end`); `near` may be empty (single talk). With a
+// near end (double talk) the residual also holds whatever the processing did
+// to the near-end speech, so the figure is a lower bound of the echo's ERLE.
 double ErleDb(std::span<const float> echo, std::span<const float> out, std::span<const float> near, size_t begin,
-              size_t end);
+              size_t end, int near_lag = 0);
 
 // SNR improvement of a noise suppressor, dB: SNR of `processed` minus SNR of
 // `noisy`, each estimated the same way from 20 ms frames after `skip` samples:

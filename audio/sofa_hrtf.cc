@@ -178,10 +178,16 @@ SofaHrtf::~SofaHrtf() {
 }
 
 StatusOr<std::unique_ptr<SofaHrtf>> SofaHrtf::Open(const std::string& path, int sample_rate) {
+  HOLO_ASSIGN_OR_RETURN(const std::string bytes, ReadBytes(path));
+  return OpenBytes(bytes, sample_rate, path);
+}
+
+StatusOr<std::unique_ptr<SofaHrtf>> SofaHrtf::OpenBytes(const std::string& bytes, int sample_rate,
+                                                        const std::string& path) {
   if (sample_rate < 8000 || sample_rate > 192000) {
     return InvalidArgument("SOFA output rate must be in 8000..192000, got " + std::to_string(sample_rate));
   }
-  HOLO_ASSIGN_OR_RETURN(const std::string bytes, ReadBytes(path));
+  if (bytes.size() > kMaxSofaFileBytes) return InvalidArgument(path + ": file too large");
   HOLO_ASSIGN_OR_RETURN(HrtfPtr checked, LoadChecked(path, bytes));
   float max_delay = 0;
   if (checked->DataDelay.values != nullptr) {
@@ -339,6 +345,15 @@ void HrtfConvolver::Process(std::span<const float> mono, const Eigen::Vector3f& 
     stereo_out[2 * i + 1] += yr[i];
   }
   history_.assign(buf_.end() - static_cast<std::ptrdiff_t>(L - 1), buf_.end());
+}
+
+int FuzzSofa(const uint8_t* data, size_t size) {
+  auto h = SofaHrtf::OpenBytes(std::string(reinterpret_cast<const char*>(data), size), 48000, "fuzz input");
+  if (!h.ok()) return 0;
+  std::vector<float> l, r;
+  (*h)->Filter({0.3f, -0.9f, 0.1f}, &l, &r);
+  HOLO_CHECK(static_cast<int>(l.size()) == (*h)->filter_length() && l.size() == r.size());
+  return 1;
 }
 
 }  // namespace holo::audio

@@ -40,6 +40,11 @@ class SofaHrtf {
   // missing; InvalidArgument with the reason if it is not a SOFA file libmysofa
   // can read or breaks a rule of CheckSofaLayout.
   static StatusOr<std::unique_ptr<SofaHrtf>> Open(const std::string& path, int sample_rate);
+  // Same for a file held in memory (`path` only names it in errors). The
+  // bytes are parsed first in a forked child, so a malformed file that
+  // crashes libmysofa's HDF5 reader is refused instead of crashing us.
+  static StatusOr<std::unique_ptr<SofaHrtf>> OpenBytes(const std::string& bytes, int sample_rate,
+                                                       const std::string& path = "SOFA data");
   ~SofaHrtf();
   SofaHrtf(const SofaHrtf&) = delete;
   SofaHrtf& operator=(const SofaHrtf&) = delete;
@@ -92,5 +97,9 @@ class HrtfConvolver {
   std::vector<float> history_;  // last filter_length − 1 input samples
   std::vector<float> buf_, y0_, y1_;
 };
+
+// libFuzzer-style entry point: arbitrary bytes as a SOFA file. Returns 1 if
+// accepted (then the filters it yields are checked), 0 if refused; never crashes.
+int FuzzSofa(const uint8_t* data, size_t size);
 
 }  // namespace holo::audio

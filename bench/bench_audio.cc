@@ -107,7 +107,7 @@ StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
   std::normal_distribution<float> noise(0.0f, 1e-4f);
   std::vector<float> near(n, 0.0f), mic_st(n), mic_dt(n);
   const size_t t5 = 5 * static_cast<size_t>(rate);
-  for (size_t i = 0; i < near_m.size() && t5 + i < n; ++i) near[t5 + i] = 0.5f * near_m[i];
+  for (size_t i = 0; i < near_m.size() && t5 + i < n; ++i) near[t5 + i] = 0.25f * near_m[i];
   for (size_t i = 0; i < n; ++i) {
     const float z = noise(rng);
     mic_st[i] = echo[i] + z;
@@ -120,12 +120,20 @@ StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
   const auto clean = Cancel(e, true, ns, silent, near, nullptr, nullptr);
   if (st.size() != n || dt.size() != n || clean.size() != n) return Internal("echo canceller failed");
   f.erle_st = ErleDb(echo, st, {}, 4 * static_cast<size_t>(rate), n);
-  // Double talk: echo power over the near-end talk vs what is left besides the near end.
-  f.erle_dt = ErleDb(echo, dt, near, t5, n);
+  // The suppressors delay their output by a few ms (overlap-add): compare at the best lag.
   const std::span<const float> ref = std::span<const float>(near).subspan(t5);
-  f.q_dt = FwSegSnrDb(ref, std::span<const float>(dt).subspan(t5), 0, rate);
-  f.q_clean = FwSegSnrDb(ref, std::span<const float>(clean).subspan(t5), 0, rate);
-  f.q_mix = FwSegSnrDb(ref, std::span<const float>(mic_dt).subspan(t5), 0, rate);
+  auto quality = [&](const std::vector<float>& y, int* lag_out) {
+    const std::span<const float> out = std::span<const float>(y).subspan(t5);
+    const int lag = BestLag(ref, out, 960);
+    if (lag_out) *lag_out = lag;
+    return FwSegSnrDb(ref, out, lag, rate);
+  };
+  int lag = 0;
+  f.q_dt = quality(dt, &lag);
+  f.q_clean = quality(clean, nullptr);
+  f.q_mix = quality(mic_dt, nullptr);
+  // Double talk: echo power over the near-end talk vs what is left besides the near end.
+  f.erle_dt = ErleDb(echo, dt, near, t5, n, lag);
   return f;
 }
 
@@ -141,7 +149,8 @@ int RunEchoAndHrtf() {
     EmitFigure("audio", room, "erle_db", f->erle_st, "dB",
                {{"engine", name}, {"talk", "single"}, {"ns", "on"}, {"delay_estimated_ms", Fmt(f->delay_ms)},
                 {"cpu_ms_per_10ms", Fmt3(f->cpu_ms_per_10ms)}});
-    EmitFigure("audio", room, "erle_db", f->erle_dt, "dB", {{"engine", name}, {"talk", "double"}, {"ns", "on"}});
+    EmitFigure("audio", room, "erle_db", f->erle_dt, "dB",
+               {{"engine", name}, {"talk", "double"}, {"ns", "on"}, {"note", "lower bound: near-end distortion counts as echo"}});
     EmitFigure("audio", room, "fwsnrseg_db", f->q_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"against", "clean near-end"},
                 {"no_echo_db", Fmt(f->q_clean)}, {"echo_uncancelled_db", Fmt(f->q_mix)}});
@@ -277,6 +286,37 @@ int RunAudio(const BenchArgs& args) {
                  {{"codec", name}, {"bitrate_kbps", codec == AudioCodec::kOpus ? "24" : "768"}});
     }
   }
+  // Opus bitrate vs quality and wire rate with today's AudioPose frame (the
+  // data for choosing a lean frame's Opus setting): espeak-ng speech.
+  {
+    auto es = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", kSampleRate);
+    if (!es.ok()) return 1;
+    for (int kbit : {12, 16, 20, 24, 32}) {
+      VoiceEncoderOptions o;
+      o.bitrate_bps = kbit * 1000;
+      auto enc = VoiceEncoder::Create(o);
+      auto dec = VoiceDecoder::Create(AudioCodec::kOpus);
+      if (!enc.ok() || !dec.ok()) return 1;
+      std::vector<float> out;
+      size_t opus_bytes = 0, wire_bytes = 0, frames_n = 0;
+      for (size_t i = 0; i + kFrameSamples <= es->size(); i += kFrameSamples) {
+        auto f = (*enc)->EncodeFrame(std::span<const float>(*es).subspan(i, kFrameSamples), static_cast<uint32_t>(i), 0, {});
+        if (!f.ok()) return 1;
+        opus_bytes += f->audio.size();
+        wire_bytes += SerializeVoiceFrame(*f).size() + 32;
+        ++frames_n;
+        auto pcm = (*dec)->Decode(f->audio);
+        if (!pcm.ok()) return 1;
+        out.insert(out.end(), pcm->begin(), pcm->end());
+      }
+      const int lag = BestLag(*es, out, 960);
+      const double secs = static_cast<double>(frames_n) * 0.02;
+      EmitFigure("audio", "espeak_speech", "fwsnrseg_db", FwSegSnrDb(*es, out, lag, kSampleRate), "dB",
+                 {{"codec", "opus"}, {"bitrate_kbps", std::to_string(kbit)},
+                  {"opus_kbps", Fmt(static_cast<double>(opus_bytes) * 8 / secs / 1000)},
+                  {"wire_kbps_v1_frame", Fmt(static_cast<double>(wire_bytes) * 8 / secs / 1000)}});
+    }
+  }
   for (AudioCodec codec : {AudioCodec::kOpus, AudioCodec::kPcm16}) {
     for (int jitter : {0, 20, 50}) {
       if (!args.json) std::fprintf(stderr, "audio: mouth-to-ear, %s, jitter %d ms\n", codec == AudioCodec::kOpus ? "opus" : "pcm", jitter);
@@ -303,8 +343,8 @@ int RunAudio(const BenchArgs& args) {
   }
   for (int az = -90; az <= 90; az += 30) {
     const Ears e = Measure(static_cast<float>(az), 180);
-    EmitFigure("audio", "white_noise_1m", "ild_db", e.ild_db, "dB", {{"azimuth_deg", std::to_string(az)}});
-    EmitFigure("audio", "white_noise_1m", "itd_ms", e.itd_ms, "ms", {{"azimuth_deg", std::to_string(az)}});
+    EmitFigure("audio", "white_noise_1m", "ild_db", e.ild_db, "dB", {{"azimuth_deg", std::to_string(az)}, {"hrtf", "openal-default"}});
+    EmitFigure("audio", "white_noise_1m", "itd_ms", e.itd_ms, "ms", {{"azimuth_deg", std::to_string(az)}, {"hrtf", "openal-default"}});
   }
   const Ears facing = Measure(30, 180), away = Measure(30, 0);
   EmitFigure("audio", "white_noise_1m", "directivity_db", facing.level_db - away.level_db, "dB",

@@ -124,6 +124,21 @@ TEST_F(SofaTest, RefusesTruncatedFiles) {
   }
 }
 
+// Flipped bits anywhere (header, attributes, data) are refused or accepted
+// with sane filters, never a crash or a hang (FuzzSofa).
+TEST_F(SofaTest, BitFlipsNeverCrash) {
+  const std::string bytes = ReadAll(kKemar);
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<size_t> pos(0, bytes.size() - 1);
+  // Fails by crashing, or through FuzzSofa's check on an accepted file's filters.
+  for (int i = 0; i < 12; ++i) {
+    std::string b = bytes;
+    const size_t at = i < 4 ? static_cast<size_t>(i) * 97 : pos(rng);  // the first flips hit the HDF5 superblock
+    b[at] = static_cast<char>(b[at] ^ (1 << (i % 8)));
+    (void)FuzzSofa(reinterpret_cast<const uint8_t*>(b.data()), b.size());
+  }
+}
+
 // The SOFA path of the spatializer reproduces the file's own interaural cues
 // within 10 % (ITD) and 10 % or 0.5 dB (ILD).
 TEST_F(SofaTest, SpatializerMatchesFileCues) {
