@@ -26,7 +26,7 @@ struct SpatializerOptions {
   // interpolated between measured directions, crossfaded when a direction
   // changes) instead of OpenAL Soft; `hrtf` is then ignored. Directivity acts
   // on the level only on this path (no high-frequency cut).
-  std::string sofa_path;
+  std::string sofa_path{};
   // Inverse-distance attenuation: gain = ref_distance_m / max(d, ref_distance_m).
   float ref_distance_m = 1.0f;
   // Cardioid directivity: gain = floor + (1 − floor) · (1 + cos θ) / 2, θ the
