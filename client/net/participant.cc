@@ -88,6 +88,7 @@ struct Participant::Impl {
   std::vector<double> network_ms, jb_ms;
   std::vector<float> output;  // interleaved stereo
   double sum_sq = 0;
+  size_t rendered = 0;  // interleaved samples rendered
 
   protocol::HeadPose Head(int64_t t_us) const {
     if (o.head) return o.head(t_us);
@@ -193,6 +194,7 @@ struct Participant::Impl {
         }
         std::lock_guard<std::mutex> l(mu);
         for (float v : block) sum_sq += static_cast<double>(v) * v;
+        rendered += block.size();
         if (!o.audio_out.empty()) output.insert(output.end(), block.begin(), block.end());
       }
       {
@@ -287,7 +289,7 @@ ParticipantStats Participant::stats() const {
   s.audio_delay_ms = s.remote_audio_frames > 0
                          ? s.audio_network_ms_median + s.jitter_buffer_ms_median + audio::kFrameUs / 1000.0
                          : 0;
-  const size_t n = impl_->output.size();
+  const size_t n = impl_->rendered;  // samples rendered (kept in `output` only with --audio-out)
   s.output_seconds = static_cast<double>(n / 2) / audio::kSampleRate;
   s.output_rms = n ? std::sqrt(impl_->sum_sq / static_cast<double>(n)) : 0;
   return s;
