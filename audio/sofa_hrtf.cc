@@ -101,6 +101,11 @@ Status ProbeInChild(const std::string& path, const std::string& bytes) {
     return InvalidArgument(path + ": malformed SOFA/HDF5 file (the parser crashed on it, signal " +
                            std::to_string(WTERMSIG(status)) + ")");
   }
+  // A sanitizer reports a memory error by exiting non-zero instead of a signal.
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    return InvalidArgument(path + ": malformed SOFA/HDF5 file (the parser failed on it, exit status " +
+                           std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")");
+  }
   return OkStatus();
 }
 
