@@ -7,7 +7,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <map>
+
+#include "audio/sofa_hrtf.h"
 
 namespace holo::audio {
 
@@ -48,11 +51,16 @@ struct Spatializer::Impl {
   LPALFILTERI filteri = nullptr;
   LPALFILTERF filterf = nullptr;
   protocol::HeadPose listener;
+  std::unique_ptr<SofaHrtf> sofa;  // set: the SOFA path (no OpenAL device)
   struct Speaker {
     ALuint source = 0;
     ALuint filter = 0;
     SpeakerPlacement placement;
     float gain = 1.0f;
+    // SOFA path: queued samples, direction in the head frame, convolver.
+    std::deque<float> queue;
+    Eigen::Vector3f head_dir = Eigen::Vector3f::UnitX();
+    std::unique_ptr<HrtfConvolver> conv;
   };
   std::map<int, Speaker> speakers;
   int next_id = 0;
@@ -90,6 +98,16 @@ Spatializer::~Spatializer() {
 
 StatusOr<std::unique_ptr<Spatializer>> Spatializer::Create(const SpatializerOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
+  if (!options.sofa_path.empty()) {
+    HOLO_ASSIGN_OR_RETURN(auto sofa, SofaHrtf::Open(options.sofa_path, options.sample_rate));
+    auto impl = std::make_unique<Impl>();
+    impl->options = options;
+    const std::string title = sofa->description();
+    impl->sofa = std::move(sofa);
+    std::unique_ptr<Spatializer> sp(new Spatializer(std::move(impl)));
+    sp->hrtf_status_ = "sofa: " + options.sofa_path + (title.empty() ? "" : " (" + title + ")");
+    return sp;
+  }
   if (alcIsExtensionPresent(nullptr, "ALC_SOFT_loopback") != ALC_TRUE) {
     return Unavailable("OpenAL has no ALC_SOFT_loopback extension (OpenAL Soft needed)");
   }
@@ -145,8 +163,15 @@ StatusOr<std::unique_ptr<Spatializer>> Spatializer::Create(const SpatializerOpti
 
 StatusOr<int> Spatializer::AddSpeaker() {
   Impl& m = *impl_;
-  m.MakeCurrent();
   Impl::Speaker s;
+  if (m.sofa) {
+    s.conv = std::make_unique<HrtfConvolver>(*m.sofa);
+    const int id = m.next_id++;
+    m.speakers[id] = std::move(s);
+    Reposition(id);
+    return id;
+  }
+  m.MakeCurrent();
   alGetError();
   alGenSources(1, &s.source);
   if (alGetError() != AL_NO_ERROR) return Internal("alGenSources failed");
@@ -156,7 +181,7 @@ StatusOr<int> Spatializer::AddSpeaker() {
     m.filteri(s.filter, AL_FILTER_TYPE, AL_FILTER_LOWPASS);
   }
   const int id = m.next_id++;
-  m.speakers[id] = s;
+  m.speakers[id] = std::move(s);
   Reposition(id);
   return id;
 }
@@ -176,10 +201,15 @@ Status Spatializer::SetSpeaker(int id, const SpeakerPlacement& placement) {
 
 void Spatializer::Reposition(int id) {
   Impl& m = *impl_;
-  m.MakeCurrent();
   Impl::Speaker& s = m.speakers.at(id);
   const Eigen::Isometry3f room_from_head = HeadToRoom(m.listener);
   const Eigen::Vector3f h = room_from_head.inverse() * s.placement.position;  // x fwd, y left, z up
+  if (m.sofa) {
+    if (h.norm() > 1e-6f) s.head_dir = h.normalized();
+    s.gain = DistanceGain(m.options, h.norm()) * DirectivityGain(m.options, s.placement, room_from_head.translation());
+    return;
+  }
+  m.MakeCurrent();
   // OpenAL: x right, y up, −z ahead.
   alSource3f(s.source, AL_POSITION, -h.y(), h.z(), -h.x());
   const float dist_gain = DistanceGain(m.options, h.norm());
@@ -204,6 +234,10 @@ Status Spatializer::Push(int id, std::span<const float> mono) {
   auto it = m.speakers.find(id);
   if (it == m.speakers.end()) return NotFound("no speaker " + std::to_string(id));
   if (mono.empty()) return OkStatus();
+  if (m.sofa) {
+    it->second.queue.insert(it->second.queue.end(), mono.begin(), mono.end());
+    return OkStatus();
+  }
   m.MakeCurrent();
   m.Unqueue(it->second.source);
   alGetError();
@@ -218,6 +252,19 @@ Status Spatializer::Push(int id, std::span<const float> mono) {
 
 std::vector<float> Spatializer::Render(int frames) {
   Impl& m = *impl_;
+  if (m.sofa) {
+    const size_t n = static_cast<size_t>(std::max(frames, 0));
+    std::vector<float> out(2 * n, 0.0f), x(n);
+    for (auto& [id, s] : m.speakers) {
+      // A source that runs dry plays silence, as an OpenAL source would.
+      const size_t have = std::min(n, s.queue.size());
+      std::copy(s.queue.begin(), s.queue.begin() + static_cast<std::ptrdiff_t>(have), x.begin());
+      std::fill(x.begin() + static_cast<std::ptrdiff_t>(have), x.end(), 0.0f);
+      s.queue.erase(s.queue.begin(), s.queue.begin() + static_cast<std::ptrdiff_t>(have));
+      if (n > 0) s.conv->Process(x, s.head_dir, s.gain, out);
+    }
+    return out;
+  }
   m.MakeCurrent();
   for (auto& [id, s] : m.speakers) {
     m.Unqueue(s.source);

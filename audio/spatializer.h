@@ -21,6 +21,12 @@ struct SpatializerOptions {
   int sample_rate = 48000;
   // Binaural rendering with OpenAL Soft's built-in HRTF (ALC_HRTF_SOFT).
   bool hrtf = true;
+  // A personal HRTF: a SOFA file (SimpleFreeFieldHRIR). When set, sources are
+  // rendered by convolution with its impulse responses (audio/sofa_hrtf.h:
+  // interpolated between measured directions, crossfaded when a direction
+  // changes) instead of OpenAL Soft; `hrtf` is then ignored. Directivity acts
+  // on the level only on this path (no high-frequency cut).
+  std::string sofa_path{};
   // Inverse-distance attenuation: gain = ref_distance_m / max(d, ref_distance_m).
   float ref_distance_m = 1.0f;
   // Cardioid directivity: gain = floor + (1 − floor) · (1 + cos θ) / 2, θ the
@@ -47,7 +53,7 @@ class Spatializer {
   Spatializer(const Spatializer&) = delete;
   Spatializer& operator=(const Spatializer&) = delete;
 
-  // "enabled: default-48000" or why not.
+  // "enabled: default-48000", "sofa: FILE (title)" or why not.
   const std::string& hrtf_status() const { return hrtf_status_; }
 
   // Adds a remote speaker, returns its id.

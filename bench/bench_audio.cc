@@ -7,6 +7,8 @@
 #include <random>
 
 #include "audio/capture.h"
+#include "audio/echo_canceller.h"
+#include "audio/sofa_hrtf.h"
 #include "audio/ear_measure.h"
 #include "audio/spatializer.h"
 #include "audio/speech_quality.h"
@@ -62,7 +64,157 @@ std::string Fmt3(double v) {
   return b;
 }
 
+// Echo cancellation on a simulated loudspeaker call: 10 s of read speech
+// played as stereo (the far end), through a synthetic room (37 ms
+// playout → capture delay, RT60 0.25 s), picked up with −80 dBFS sensor noise;
+// the near-end talker (espeak-ng speech) starts at 5 s.
+struct AecFigures {
+  double erle_st = 0, erle_dt = 0, q_dt = 0, q_clean = 0, q_mix = 0, delay_ms = -1, cpu_ms_per_10ms = 0;
+};
+
+std::vector<float> Cancel(AecEngine e, bool aec, bool ns, const std::vector<float>& far, const std::vector<float>& mic,
+                          double* delay_ms, double* cpu_ms) {
+  EchoCancellerOptions o;
+  o.engine = e;
+  o.echo_cancellation = aec;
+  o.noise_suppression = ns;
+  auto ec = EchoCanceller::Create(o);
+  if (!ec.ok()) return {};
+  std::vector<float> out;
+  const double cpu0 = ProcessCpuMs();
+  for (size_t i = 0; i + 960 <= mic.size(); i += 960) {
+    (*ec)->PushPlayed(std::span<const float>(far).subspan(2 * i, 1920));
+    const auto y = (*ec)->ProcessCapture(std::span<const float>(mic).subspan(i, 960));
+    out.insert(out.end(), y.begin(), y.end());
+  }
+  if (cpu_ms) *cpu_ms = (ProcessCpuMs() - cpu0) / (static_cast<double>(mic.size()) / 480.0);
+  if (delay_ms) *delay_ms = (*ec)->estimated_delay_ms();
+  return out;
+}
+
+StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
+  const int rate = kSampleRate;
+  HOLO_ASSIGN_OR_RETURN(auto far_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", rate));
+  HOLO_ASSIGN_OR_RETURN(auto near_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", rate));
+  const size_t n = 10 * static_cast<size_t>(rate);
+  std::vector<float> far(2 * n);
+  for (size_t i = 0; i < n; ++i) {
+    far[2 * i] = far_m[i % far_m.size()];
+    far[2 * i + 1] = i >= 15 ? 0.7f * far_m[(i - 15) % far_m.size()] : 0.0f;
+  }
+  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath({}), far);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0f, 1e-4f);
+  std::vector<float> near(n, 0.0f), mic_st(n), mic_dt(n);
+  const size_t t5 = 5 * static_cast<size_t>(rate);
+  for (size_t i = 0; i < near_m.size() && t5 + i < n; ++i) near[t5 + i] = 0.25f * near_m[i];
+  for (size_t i = 0; i < n; ++i) {
+    const float z = noise(rng);
+    mic_st[i] = echo[i] + z;
+    mic_dt[i] = echo[i] + near[i] + z;
+  }
+  AecFigures f;
+  const auto st = Cancel(e, true, ns, far, mic_st, &f.delay_ms, &f.cpu_ms_per_10ms);
+  const auto dt = Cancel(e, true, ns, far, mic_dt, nullptr, nullptr);
+  const std::vector<float> silent(far.size(), 0.0f);
+  const auto clean = Cancel(e, true, ns, silent, near, nullptr, nullptr);
+  if (st.size() != n || dt.size() != n || clean.size() != n) return Internal("echo canceller failed");
+  f.erle_st = ErleDb(echo, st, {}, 4 * static_cast<size_t>(rate), n);
+  // The suppressors delay their output by a few ms (overlap-add): compare at the best lag.
+  const std::span<const float> ref = std::span<const float>(near).subspan(t5);
+  auto quality = [&](const std::vector<float>& y, int* lag_out) {
+    const std::span<const float> out = std::span<const float>(y).subspan(t5);
+    const int lag = BestLag(ref, out, 960);
+    if (lag_out) *lag_out = lag;
+    return FwSegSnrDb(ref, out, lag, rate);
+  };
+  int lag = 0;
+  f.q_dt = quality(dt, &lag);
+  f.q_clean = quality(clean, nullptr);
+  f.q_mix = quality(mic_dt, nullptr);
+  // Double talk: echo power over the near-end talk vs what is left besides the near end.
+  f.erle_dt = ErleDb(echo, dt, near, t5, n, lag);
+  return f;
+}
+
+int RunEchoAndHrtf() {
+  for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex}) {
+    auto f = MeasureAec(e, true);
+    if (!f.ok()) {
+      std::fprintf(stderr, "%s\n", f.status().ToString().c_str());
+      return 1;
+    }
+    const std::string name = AecEngineName(e);
+    const std::string room = "speech_10s_room_rt60_0.25s_delay_37ms";
+    EmitFigure("audio", room, "erle_db", f->erle_st, "dB",
+               {{"engine", name}, {"talk", "single"}, {"ns", "on"}, {"delay_estimated_ms", Fmt(f->delay_ms)},
+                {"cpu_ms_per_10ms", Fmt3(f->cpu_ms_per_10ms)}});
+    EmitFigure("audio", room, "erle_db", f->erle_dt, "dB",
+               {{"engine", name}, {"talk", "double"}, {"ns", "on"}, {"note", "lower bound: near-end distortion counts as echo"}});
+    EmitFigure("audio", room, "fwsnrseg_db", f->q_dt, "dB",
+               {{"engine", name}, {"talk", "double"}, {"against", "clean near-end"},
+                {"no_echo_db", Fmt(f->q_clean)}, {"echo_uncancelled_db", Fmt(f->q_mix)}});
+  }
+  // Noise suppression: espeak-ng speech in white noise at 10 dB SNR, 1 s of noise first.
+  {
+    auto sp = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", kSampleRate);
+    if (!sp.ok()) return 1;
+    const size_t lead = kSampleRate;
+    std::vector<float> clean(lead + sp->size(), 0.0f);
+    double ps = 0;
+    for (size_t i = 0; i < sp->size(); ++i) {
+      clean[lead + i] = 0.5f * (*sp)[i];
+      ps += static_cast<double>(clean[lead + i]) * clean[lead + i];
+    }
+    ps /= static_cast<double>(sp->size());
+    std::mt19937 rng(9);
+    std::normal_distribution<float> noise(0.0f, static_cast<float>(std::sqrt(ps / 10.0)));
+    std::vector<float> noisy = clean;
+    for (float& v : noisy) v += noise(rng);
+    const std::vector<float> silent(2 * noisy.size(), 0.0f);
+    for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex}) {
+      const auto out = Cancel(e, false, true, silent, noisy, nullptr, nullptr);
+      EmitFigure("audio", "espeak_speech_white_noise_10db", "ns_snr_gain_db",
+                 NoiseSuppressionGainDb(clean, noisy, out, lead), "dB", {{"engine", AecEngineName(e)}});
+    }
+  }
+  // Personal HRTF: the MIT KEMAR SOFA file through the SOFA path of the
+  // spatializer (white noise, 1 m), against the cues of the file's own IRs.
+  const std::string sofa = "/usr/share/libmysofa/MIT_KEMAR_normal_pinna.sofa";
+  for (int az = -90; az <= 90; az += 30) {
+    SpatializerOptions o;
+    o.sofa_path = sofa;
+    auto sp = Spatializer::Create(o);
+    auto file = SofaFileCues(sofa, az);
+    if (!sp.ok() || !file.ok()) {
+      std::fprintf(stderr, "%s\n", (!sp.ok() ? sp.status() : file.status()).ToString().c_str());
+      return 1;
+    }
+    (*sp)->SetListener({0, 0, 1.6f, 0, 0, 0});
+    auto id = (*sp)->AddSpeaker();
+    const float a = -static_cast<float>(az) * std::numbers::pi_v<float> / 180.0f;
+    SpeakerPlacement s;
+    s.position = {std::cos(a), std::sin(a), 1.6f};
+    s.facing = {-std::cos(a), -std::sin(a), 0.0f};
+    if (!id.ok() || !(*sp)->SetSpeaker(*id, s).ok()) return 1;
+    std::mt19937 rng(1);
+    std::normal_distribution<float> noise(0.0f, 0.1f);
+    std::vector<float> x(24000);
+    for (float& v : x) v = noise(rng);
+    if (!(*sp)->Push(*id, x).ok()) return 1;
+    const auto y = (*sp)->Render(24000);
+    const EarMeasurement m = MeasureEars(y, 2400, 21600, kSampleRate, 72);
+    const std::string azs = std::to_string(az);
+    EmitFigure("audio", "white_noise_1m", "itd_ms", m.itd_ms, "ms",
+               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_itd_ms", Fmt3(file->itd_ms)}});
+    EmitFigure("audio", "white_noise_1m", "ild_db", m.ild_db, "dB",
+               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_ild_db", Fmt(file->ild_db)}});
+  }
+  return 0;
+}
+
 int RunAudio(const BenchArgs& args) {
+  if (const int rc = RunEchoAndHrtf(); rc != 0) return rc;
   const std::string w = "speech_48k";
   auto speech = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", kSampleRate);
   if (!speech.ok()) {
@@ -134,6 +286,37 @@ int RunAudio(const BenchArgs& args) {
                  {{"codec", name}, {"bitrate_kbps", codec == AudioCodec::kOpus ? "24" : "768"}});
     }
   }
+  // Opus bitrate vs quality and wire rate with today's AudioPose frame (the
+  // data for choosing a lean frame's Opus setting): espeak-ng speech.
+  {
+    auto es = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", kSampleRate);
+    if (!es.ok()) return 1;
+    for (int kbit : {12, 16, 20, 24, 32}) {
+      VoiceEncoderOptions o;
+      o.bitrate_bps = kbit * 1000;
+      auto enc = VoiceEncoder::Create(o);
+      auto dec = VoiceDecoder::Create(AudioCodec::kOpus);
+      if (!enc.ok() || !dec.ok()) return 1;
+      std::vector<float> out;
+      size_t opus_bytes = 0, wire_bytes = 0, frames_n = 0;
+      for (size_t i = 0; i + kFrameSamples <= es->size(); i += kFrameSamples) {
+        auto f = (*enc)->EncodeFrame(std::span<const float>(*es).subspan(i, kFrameSamples), static_cast<uint32_t>(i), 0, {});
+        if (!f.ok()) return 1;
+        opus_bytes += f->audio.size();
+        wire_bytes += SerializeVoiceFrame(*f).size() + 32;
+        ++frames_n;
+        auto pcm = (*dec)->Decode(f->audio);
+        if (!pcm.ok()) return 1;
+        out.insert(out.end(), pcm->begin(), pcm->end());
+      }
+      const int lag = BestLag(*es, out, 960);
+      const double secs = static_cast<double>(frames_n) * 0.02;
+      EmitFigure("audio", "espeak_speech", "fwsnrseg_db", FwSegSnrDb(*es, out, lag, kSampleRate), "dB",
+                 {{"codec", "opus"}, {"bitrate_kbps", std::to_string(kbit)},
+                  {"opus_kbps", Fmt(static_cast<double>(opus_bytes) * 8 / secs / 1000)},
+                  {"wire_kbps_v1_frame", Fmt(static_cast<double>(wire_bytes) * 8 / secs / 1000)}});
+    }
+  }
   for (AudioCodec codec : {AudioCodec::kOpus, AudioCodec::kPcm16}) {
     for (int jitter : {0, 20, 50}) {
       if (!args.json) std::fprintf(stderr, "audio: mouth-to-ear, %s, jitter %d ms\n", codec == AudioCodec::kOpus ? "opus" : "pcm", jitter);
@@ -160,8 +343,8 @@ int RunAudio(const BenchArgs& args) {
   }
   for (int az = -90; az <= 90; az += 30) {
     const Ears e = Measure(static_cast<float>(az), 180);
-    EmitFigure("audio", "white_noise_1m", "ild_db", e.ild_db, "dB", {{"azimuth_deg", std::to_string(az)}});
-    EmitFigure("audio", "white_noise_1m", "itd_ms", e.itd_ms, "ms", {{"azimuth_deg", std::to_string(az)}});
+    EmitFigure("audio", "white_noise_1m", "ild_db", e.ild_db, "dB", {{"azimuth_deg", std::to_string(az)}, {"hrtf", "openal-default"}});
+    EmitFigure("audio", "white_noise_1m", "itd_ms", e.itd_ms, "ms", {{"azimuth_deg", std::to_string(az)}, {"hrtf", "openal-default"}});
   }
   const Ears facing = Measure(30, 180), away = Measure(30, 0);
   EmitFigure("audio", "white_noise_1m", "directivity_db", facing.level_db - away.level_db, "dB",

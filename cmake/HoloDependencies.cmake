@@ -45,3 +45,9 @@ find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
 pkg_check_modules(EPOXY REQUIRED IMPORTED_TARGET epoxy)
 # Resampling of voice input to 48 kHz (audio/).
 pkg_check_modules(SOXR REQUIRED IMPORTED_TARGET soxr)
+# Capture-side echo cancellation and noise suppression (audio/echo_canceller):
+# speexdsp and WebRTC's audio processing module, compared in the audio bench.
+pkg_check_modules(SPEEXDSP REQUIRED IMPORTED_TARGET speexdsp)
+pkg_check_modules(WEBRTC_APM REQUIRED IMPORTED_TARGET webrtc-audio-processing)
+# Personal HRTFs from SOFA files (audio/sofa_hrtf).
+pkg_check_modules(MYSOFA REQUIRED IMPORTED_TARGET libmysofa)

@@ -324,6 +324,9 @@ int main(int argc, char** argv) {
   app.add_option("--loss", loss, "packet loss probability 0..1")->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--seed", seed, "network simulation seed")->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_flag("--no-hrtf", no_hrtf, "plain stereo panning instead of the HRTF");
+  std::string hrtf_sofa;
+  app.add_option("--hrtf", hrtf_sofa, "personal HRTF: a SOFA file (SimpleFreeFieldHRIR), e.g. "
+                                      "/usr/share/libmysofa/MIT_KEMAR_normal_pinna.sofa");
   app.add_option("--directivity-floor", floor, "cardioid gain floor behind the speaker, 0..1")->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--trace", trace_path, "write per-20 ms truth (time, azimuth, distance, gain, jitter buffer) as CSV");
   app.add_flag("--analyse,--analyze", analyse, "read the output WAV back and print ILD/ITD/level per window vs the true azimuth");
@@ -400,6 +403,7 @@ int main(int argc, char** argv) {
   o.network.loss = loss;
   o.network.seed = static_cast<uint64_t>(seed);
   o.spatializer.hrtf = !no_hrtf;
+  o.spatializer.sofa_path = hrtf_sofa;
   o.spatializer.directivity_floor = floor;
   o.link = link_name == "identity" ? RoomLink{} : FaceToFaceLink(static_cast<float>(gap_m));
   o.listener = HeadPose{0.0f, 0.0f, 1.6f, static_cast<float>(listener_yaw_deg) * kDeg, 0.0f, 0.0f};

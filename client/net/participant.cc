@@ -12,6 +12,7 @@
 
 #include "audio/jitter_buffer.h"
 #include "audio/room.h"
+#include "audio/echo_canceller.h"
 #include "audio/spatializer.h"
 #include "audio/voice_codec.h"
 #include "audio/wav.h"
@@ -74,6 +75,9 @@ struct Participant::Impl {
   std::unique_ptr<audio::VoiceEncoder> encoder;
   std::vector<float> voice;  // own voice, 48 kHz mono (WAV), empty: tone
   std::unique_ptr<audio::Spatializer> spatializer;
+  // The voice thread captures, the audio thread plays: the canceller is shared.
+  std::mutex aec_mu;
+  std::unique_ptr<audio::EchoCanceller> aec;
   std::thread voice_thread, audio_thread;
   std::atomic<bool> stop{false};
   bool stopped = false;
@@ -84,6 +88,7 @@ struct Participant::Impl {
   std::vector<double> network_ms, jb_ms;
   std::vector<float> output;  // interleaved stereo
   double sum_sq = 0;
+  size_t rendered = 0;  // interleaved samples rendered
 
   protocol::HeadPose Head(int64_t t_us) const {
     if (o.head) return o.head(t_us);
@@ -107,6 +112,12 @@ struct Participant::Impl {
           frame[i] = voice[pos];
           pos = (pos + 1) % voice.size();
         }
+      }
+      if (aec) {
+        std::lock_guard<std::mutex> l(aec_mu);
+        frame = aec->ProcessCapture(frame);
+        std::lock_guard<std::mutex> l2(mu);
+        stats.aec_delay_ms = aec->estimated_delay_ms();
       }
       auto a = encoder->EncodeFrame(frame, seq, next_us, Head(next_us));
       if (a.ok()) {
@@ -177,9 +188,14 @@ struct Participant::Impl {
       }
       if (render) {
         std::vector<float> block = spatializer->Render(audio::kFrameSamples);
+        if (aec) {
+          std::lock_guard<std::mutex> l(aec_mu);
+          aec->PushPlayed(block);
+        }
         std::lock_guard<std::mutex> l(mu);
         for (float v : block) sum_sq += static_cast<double>(v) * v;
-        output.insert(output.end(), block.begin(), block.end());
+        rendered += block.size();
+        if (!o.audio_out.empty()) output.insert(output.end(), block.begin(), block.end());
       }
       {
         std::lock_guard<std::mutex> l(mu);
@@ -218,11 +234,17 @@ StatusOr<std::unique_ptr<Participant>> Participant::Start(ParticipantOptions opt
     // Half a second of silence between repetitions.
     m.voice.resize(m.voice.size() + audio::kSampleRate / 2, 0.0f);
   }
-  if (!m.o.audio_out.empty()) {
+  // The echo canceller needs what was played: --aec renders even without --audio-out.
+  if (!m.o.audio_out.empty() || m.o.aec) {
     audio::SpatializerOptions so;
     so.hrtf = m.o.hrtf;
+    so.sofa_path = m.o.hrtf_sofa;
     HOLO_ASSIGN_OR_RETURN(m.spatializer, audio::Spatializer::Create(so));
     m.stats.hrtf_status = m.spatializer->hrtf_status();
+  }
+  if (m.o.aec) {
+    audio::EchoCancellerOptions eo;
+    HOLO_ASSIGN_OR_RETURN(m.aec, audio::EchoCanceller::Create(eo));
   }
 
   ClientOptions view = m.o.view_template;
@@ -267,7 +289,7 @@ ParticipantStats Participant::stats() const {
   s.audio_delay_ms = s.remote_audio_frames > 0
                          ? s.audio_network_ms_median + s.jitter_buffer_ms_median + audio::kFrameUs / 1000.0
                          : 0;
-  const size_t n = impl_->output.size();
+  const size_t n = impl_->rendered;  // samples rendered (kept in `output` only with --audio-out)
   s.output_seconds = static_cast<double>(n / 2) / audio::kSampleRate;
   s.output_rms = n ? std::sqrt(impl_->sum_sq / static_cast<double>(n)) : 0;
   return s;

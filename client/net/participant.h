@@ -44,6 +44,12 @@ struct ParticipantOptions {
   // Empty: remote audio is only counted.
   std::string audio_out;
   bool hrtf = true;
+  // Personal HRTF (SOFA file) for the spatialized output; empty: OpenAL Soft's set.
+  std::string hrtf_sofa;
+  // Echo cancellation + noise suppression of the own voice against what the
+  // spatializer played (loudspeakers: on; headphones: off). Noise suppression
+  // runs whenever this is on.
+  bool aec = false;
   HeadPoseFn head;  // default: SyntheticHead(t)
   ClientOptions view_template;  // decode, reconnect, backoff, … (host/port/token/role come from `call`)
 };
@@ -59,6 +65,7 @@ struct ParticipantStats {
   double output_seconds = 0;  // spatialized audio rendered
   double output_rms = 0;      // of the spatialized output
   std::string hrtf_status;
+  double aec_delay_ms = -1;  // estimated playout → capture delay (< 0: none yet / off)
   // Last remote voice position in the own room (metres) and its azimuth for
   // the own head, degrees (+ right).
   float remote_x = 0, remote_y = 0, remote_z = 0, remote_azimuth_deg = 0;

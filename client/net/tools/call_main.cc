@@ -55,7 +55,15 @@ int main(int argc, char** argv) {
   std::string audio_in, audio_out;
   app.add_option("--audio-in", audio_in, "--config: own voice, a WAV file (looped; default: a 440 Hz tone)");
   app.add_option("--audio-out", audio_out, "--config: write the spatialized remote voices to this stereo WAV");
+  std::string aec = "off", hrtf_sofa;
+  app.add_option("--aec", aec, "--config: echo cancellation + noise suppression of the own voice (on with "
+                               "loudspeakers, off with headphones)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  app.add_option("--hrtf", hrtf_sofa, "--config: personal HRTF, a SOFA file (SimpleFreeFieldHRIR) for the "
+                                      "spatialized output (default: OpenAL Soft's built-in set)");
   CLI11_PARSE(app, argc, argv);
+  const bool po_aec = aec == "on";
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   if (watch.empty() == config_path.empty()) return Fail(holo::InvalidArgument("give exactly one of --watch or --config"));
@@ -89,6 +97,8 @@ int main(int argc, char** argv) {
     po.name = name;
     po.audio_in = audio_in;
     po.audio_out = audio_out;
+    po.aec = po_aec;
+    po.hrtf_sofa = hrtf_sofa;
     po.view_template = view;
     auto p = holo::net::Participant::Start(po, cb);
     if (!p.ok()) return Fail(p.status());
@@ -140,6 +150,11 @@ int main(int argc, char** argv) {
     audio_heard = ps.remote_audio_frames;
     voice_sent = ps.voice_frames_sent;
     audio_delay = ps.audio_delay_ms;
+    if (!ps.hrtf_status.empty()) std::fprintf(stderr, "holoport-call: spatializer %s\n", ps.hrtf_status.c_str());
+    if (po_aec) {
+      std::fprintf(stderr, "holoport-call: echo canceller on, playout->capture delay %s\n",
+                   ps.aec_delay_ms < 0 ? "not estimated (no echo heard)" : (std::to_string(ps.aec_delay_ms) + " ms").c_str());
+    }
     if (!st.ok()) return Fail(st);
   }
   std::printf("{\"frames\":%lld,\"connects\":%llu,\"decode_errors\":%llu,\"mean_latency_ms\":%.3f,\"rtt_min_ms\":%.3f,"

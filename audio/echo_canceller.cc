@@ -1,0 +1,435 @@
+#include "audio/echo_canceller.h"
+
+#include <speex/speex_echo.h>
+#include <speex/speex_preprocess.h>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <random>
+#include <unsupported/Eigen/FFT>
+
+#include "webrtc/modules/audio_processing/include/audio_processing.h"
+
+namespace holo::audio {
+namespace {
+
+constexpr int kDecimation = 4;          // 48 kHz → 12 kHz for the delay estimator
+constexpr int kEstimateWindow = 16384;  // decimated samples (1.37 s)
+constexpr int kEstimateEvery = 3000;    // decimated samples (0.25 s)
+
+int16_t ToS16(float v) { return static_cast<int16_t>(std::lround(std::clamp(v, -1.0f, 1.0f) * 32767.0f)); }
+
+size_t NextPow2(size_t n) {
+  size_t p = 1;
+  while (p < n) p <<= 1;
+  return p;
+}
+
+}  // namespace
+
+const char* AecEngineName(AecEngine e) { return e == AecEngine::kSpeex ? "speex" : "webrtc"; }
+
+StatusOr<AecEngine> ParseAecEngine(const std::string& name) {
+  if (name == "speex") return AecEngine::kSpeex;
+  if (name == "webrtc") return AecEngine::kWebRtc;
+  return InvalidArgument("aec engine must be speex or webrtc, got '" + name + "'");
+}
+
+Status EchoCancellerOptions::Check() const {
+  if (sample_rate != 48000) return InvalidArgument("echo canceller sample_rate must be 48000, got " + std::to_string(sample_rate));
+  if (filter_ms < 10 || filter_ms > 1000) return InvalidArgument("filter_ms must be in 10..1000, got " + std::to_string(filter_ms));
+  if (max_delay_ms < 10 || max_delay_ms > 1000)
+    return InvalidArgument("max_delay_ms must be in 10..1000, got " + std::to_string(max_delay_ms));
+  if (suppression < 0 || suppression > 2) return InvalidArgument("suppression must be 0, 1 or 2, got " + std::to_string(suppression));
+  if (align_margin_ms < 0 || align_margin_ms > 100)
+    return InvalidArgument("align_margin_ms must be in 0..100, got " + std::to_string(align_margin_ms));
+  return OkStatus();
+}
+
+struct EchoCanceller::Engine {
+  virtual ~Engine() = default;
+  // `ref`: the aligned played block, interleaved stereo; `mic` → `out`, one 10 ms block.
+  virtual void Process(const float* ref, const float* mic, float* out) = 0;
+};
+
+namespace {
+
+class SpeexEngine : public EchoCanceller::Engine {
+ public:
+  SpeexEngine(const EchoCancellerOptions& o, int block)
+      : block_(block), aec_on_(o.echo_cancellation), mono_(o.mono_reference) {
+    if (aec_on_) {
+      echo_ = speex_echo_state_init_mc(block, o.filter_ms * o.sample_rate / 1000, 1, mono_ ? 1 : 2);
+      int rate = o.sample_rate;
+      speex_echo_ctl(echo_, SPEEX_ECHO_SET_SAMPLING_RATE, &rate);
+    }
+    pre_ = speex_preprocess_state_init(block, o.sample_rate);
+    int denoise = o.noise_suppression ? 1 : 0;
+    speex_preprocess_ctl(pre_, SPEEX_PREPROCESS_SET_DENOISE, &denoise);
+    int agc = 0;
+    speex_preprocess_ctl(pre_, SPEEX_PREPROCESS_SET_AGC, &agc);
+    if (aec_on_) {
+      speex_preprocess_ctl(pre_, SPEEX_PREPROCESS_SET_ECHO_STATE, echo_);
+      int sup = -20 - 10 * o.suppression, active = sup / 2;
+      speex_preprocess_ctl(pre_, SPEEX_PREPROCESS_SET_ECHO_SUPPRESS, &sup);
+      speex_preprocess_ctl(pre_, SPEEX_PREPROCESS_SET_ECHO_SUPPRESS_ACTIVE, &active);
+    }
+    mic_.resize(block);
+    ref_.resize(2 * block);
+    out_.resize(block);
+  }
+  ~SpeexEngine() override {
+    if (echo_) speex_echo_state_destroy(echo_);
+    if (pre_) speex_preprocess_state_destroy(pre_);
+  }
+  bool ok() const { return pre_ != nullptr && (!aec_on_ || echo_ != nullptr); }
+  void Process(const float* ref, const float* mic, float* out) override {
+    for (int i = 0; i < block_; ++i) mic_[i] = ToS16(mic[i]);
+    if (aec_on_) {
+      if (mono_) {
+        for (int i = 0; i < block_; ++i) ref_[i] = ToS16(0.5f * (ref[2 * i] + ref[2 * i + 1]));
+      } else {
+        for (int i = 0; i < 2 * block_; ++i) ref_[i] = ToS16(ref[i]);
+      }
+      speex_echo_cancellation(echo_, mic_.data(), ref_.data(), out_.data());
+    } else {
+      out_ = mic_;
+    }
+    speex_preprocess_run(pre_, out_.data());
+    for (int i = 0; i < block_; ++i) out[i] = static_cast<float>(out_[i]) / 32768.0f;
+  }
+
+ private:
+  int block_;
+  bool aec_on_, mono_;
+  SpeexEchoState* echo_ = nullptr;
+  SpeexPreprocessState* pre_ = nullptr;
+  std::vector<int16_t> mic_, ref_, out_;
+};
+
+class WebRtcEngine : public EchoCanceller::Engine {
+ public:
+  WebRtcEngine(const EchoCancellerOptions& o, int block)
+      : block_(block),
+        rate_(o.sample_rate),
+        delay_ms_(o.align_margin_ms),
+        aec_on_(o.echo_cancellation),
+        mono_(o.mono_reference) {
+    webrtc::Config config;
+    // Longer filter and conservative far-end read pointer: rooms ring for 100+ ms.
+    config.Set<webrtc::ExtendedFilter>(new webrtc::ExtendedFilter(true));
+    apm_.reset(webrtc::AudioProcessing::Create(config));
+    if (!apm_) return;
+    apm_->high_pass_filter()->Enable(true);
+    apm_->echo_cancellation()->Enable(o.echo_cancellation);
+    apm_->echo_cancellation()->set_suppression_level(
+        static_cast<webrtc::EchoCancellation::SuppressionLevel>(o.suppression));
+    apm_->noise_suppression()->set_level(webrtc::NoiseSuppression::kModerate);
+    apm_->noise_suppression()->Enable(o.noise_suppression);
+    left_.resize(block);
+    right_.resize(block);
+  }
+  bool ok() const { return apm_ != nullptr; }
+  void Process(const float* ref, const float* mic, float* out) override {
+    const webrtc::StreamConfig stereo(rate_, 2), mono(rate_, 1);
+    if (aec_on_) {
+      for (int i = 0; i < block_; ++i) {
+        if (mono_) {
+          left_[i] = 0.5f * (ref[2 * i] + ref[2 * i + 1]);
+        } else {
+          left_[i] = ref[2 * i];
+          right_[i] = ref[2 * i + 1];
+        }
+      }
+      const float* rsrc[2] = {left_.data(), right_.data()};
+      float* rdst[2] = {left_.data(), right_.data()};
+      apm_->ProcessReverseStream(rsrc, mono_ ? mono : stereo, mono_ ? mono : stereo, rdst);
+      // The reference is already aligned: what remains is the causality margin.
+      apm_->set_stream_delay_ms(delay_ms_);
+    }
+    std::copy(mic, mic + block_, out);
+    const float* src[1] = {out};
+    float* dst[1] = {out};
+    apm_->ProcessStream(src, mono, mono, dst);
+  }
+
+ private:
+  int block_, rate_, delay_ms_;
+  bool aec_on_, mono_;
+  std::unique_ptr<webrtc::AudioProcessing> apm_;
+  std::vector<float> left_, right_;
+};
+
+}  // namespace
+
+EchoCanceller::EchoCanceller(const EchoCancellerOptions& o) : options_(o), block_(o.sample_rate / 100) {}
+EchoCanceller::~EchoCanceller() = default;
+
+StatusOr<std::unique_ptr<EchoCanceller>> EchoCanceller::Create(const EchoCancellerOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  std::unique_ptr<EchoCanceller> ec(new EchoCanceller(options));
+  if (options.engine == AecEngine::kSpeex) {
+    auto e = std::make_unique<SpeexEngine>(options, ec->block_);
+    if (!e->ok()) return Internal("speexdsp: could not create the echo canceller / preprocessor");
+    ec->engine_ = std::move(e);
+  } else {
+    auto e = std::make_unique<WebRtcEngine>(options, ec->block_);
+    if (!e->ok()) return Internal("webrtc audio processing: AudioProcessing::Create failed");
+    ec->engine_ = std::move(e);
+  }
+  return ec;
+}
+
+void EchoCanceller::PushPlayed(std::span<const float> stereo) {
+  const size_t frames = stereo.size() / 2;
+  played_.insert(played_.end(), stereo.begin(), stereo.begin() + static_cast<std::ptrdiff_t>(2 * frames));
+  played_count_ += static_cast<int64_t>(frames);
+  // Keep the longest delay plus a second of history.
+  const int64_t keep = static_cast<int64_t>(options_.max_delay_ms + 1000) * options_.sample_rate / 1000;
+  while (played_count_ - played_base_ > keep) {
+    played_.pop_front();
+    played_.pop_front();
+    ++played_base_;
+  }
+  if (!options_.echo_cancellation) return;
+  for (size_t i = 0; i < frames; ++i) {
+    far_acc_.push_back(0.5f * (stereo[2 * i] + stereo[2 * i + 1]));
+    if (far_acc_.size() == kDecimation) {
+      float s = 0;
+      for (float v : far_acc_) s += v;
+      far_dec_.push_back(s / kDecimation);
+      ++far_dec_count_;
+      far_acc_.clear();
+    }
+  }
+  // Playout runs ahead of capture by up to a block or two: keep some spare.
+  const size_t far_keep = kEstimateWindow + static_cast<size_t>(options_.max_delay_ms) * 12 + 4 * 12000 / 10;
+  while (far_dec_.size() > far_keep) far_dec_.pop_front();
+}
+
+std::vector<float> EchoCanceller::ProcessCapture(std::span<const float> mic) {
+  mic_pending_.insert(mic_pending_.end(), mic.begin(), mic.end());
+  size_t done = 0;
+  std::vector<float> out_block(static_cast<size_t>(block_));
+  while (mic_pending_.size() - done >= static_cast<size_t>(block_)) {
+    ProcessBlock(mic_pending_.data() + done, out_block.data());
+    out_ready_.insert(out_ready_.end(), out_block.begin(), out_block.end());
+    done += static_cast<size_t>(block_);
+  }
+  mic_pending_.erase(mic_pending_.begin(), mic_pending_.begin() + static_cast<std::ptrdiff_t>(done));
+  // Hand back as many samples as came in, oldest first. When the caller's
+  // sizes are not whole 10 ms blocks the stream starts with up to one block of
+  // zeros (a constant delay from then on).
+  std::vector<float> out(mic.size(), 0.0f);
+  const size_t n = std::min(out_ready_.size(), mic.size());
+  std::copy(out_ready_.begin(), out_ready_.begin() + static_cast<std::ptrdiff_t>(n),
+            out.end() - static_cast<std::ptrdiff_t>(n));
+  out_ready_.erase(out_ready_.begin(), out_ready_.begin() + static_cast<std::ptrdiff_t>(n));
+  return out;
+}
+
+void EchoCanceller::ProcessBlock(const float* mic, float* out) {
+  if (options_.echo_cancellation) {
+    for (int i = 0; i < block_; ++i) {
+      mic_acc_.push_back(mic[i]);
+      if (mic_acc_.size() == kDecimation) {
+        float s = 0;
+        for (float v : mic_acc_) s += v;
+        mic_dec_.push_back(s / kDecimation);
+        ++mic_dec_count_;
+        mic_acc_.clear();
+        ++since_estimate_;
+      }
+    }
+    while (mic_dec_.size() > kEstimateWindow) mic_dec_.pop_front();
+    if (since_estimate_ >= kEstimateEvery && mic_dec_.size() == kEstimateWindow) {
+      since_estimate_ = 0;
+      EstimateDelay();
+    }
+  }
+  // The reference block for these mic samples: played `applied_delay_` samples earlier.
+  std::vector<float> ref(2 * static_cast<size_t>(block_), 0.0f);
+  const int64_t start = mic_count_ - applied_delay_;
+  for (int i = 0; i < block_; ++i) {
+    const int64_t k = start + i;
+    if (k < played_base_ || k >= played_count_) continue;
+    const size_t at = static_cast<size_t>(2 * (k - played_base_));
+    ref[2 * static_cast<size_t>(i)] = played_[at];
+    ref[2 * static_cast<size_t>(i) + 1] = played_[at + 1];
+  }
+  engine_->Process(ref.data(), mic, out);
+  mic_count_ += block_;
+}
+
+void EchoCanceller::EstimateDelay() {
+  const size_t max_lag = static_cast<size_t>(options_.max_delay_ms) * 12;
+  // The far segment ends at the same time as the mic segment (playout may have
+  // run ahead: those samples are not used); it reaches max_lag further back.
+  const int64_t far_first = far_dec_count_ - static_cast<int64_t>(far_dec_.size());
+  const int64_t seg_start = mic_dec_count_ - static_cast<int64_t>(kEstimateWindow + max_lag);
+  if (seg_start < far_first || mic_dec_count_ > far_dec_count_) return;
+  double far_e = 0, mic_e = 0;
+  for (float v : mic_dec_) mic_e += static_cast<double>(v) * v;
+  const size_t f0 = static_cast<size_t>(seg_start - far_first);
+  for (size_t i = f0; i < f0 + kEstimateWindow + max_lag; ++i) far_e += static_cast<double>(far_dec_[i]) * far_dec_[i];
+  if (far_e / static_cast<double>(kEstimateWindow + max_lag) < 1e-7 || mic_e / kEstimateWindow < 1e-9) return;
+  const size_t n = NextPow2(2 * kEstimateWindow + max_lag);
+  std::vector<float> m(n, 0.0f), f(n, 0.0f);
+  for (size_t i = 0; i < kEstimateWindow; ++i) m[i] = mic_dec_[i];
+  for (size_t i = 0; i < kEstimateWindow + max_lag; ++i) f[i] = far_dec_[f0 + i];
+  Eigen::FFT<float> fft;
+  std::vector<std::complex<float>> M, F;
+  fft.fwd(M, m);
+  fft.fwd(F, f);
+  for (size_t i = 0; i < M.size(); ++i) {
+    const std::complex<float> c = std::conj(M[i]) * F[i];
+    const float a = std::abs(c);
+    M[i] = a > 1e-20f ? c / a : std::complex<float>(0, 0);  // PHAT weighting
+  }
+  std::vector<float> corr;
+  fft.inv(corr, M);
+  // corr[j] = Σ m[t] f[t + j]; f[t + j] is the far end (max_lag − j) decimated samples before m[t].
+  size_t best = 0;
+  double best_v = -1, sum_sq = 0;
+  for (size_t j = 0; j <= max_lag; ++j) {
+    sum_sq += static_cast<double>(corr[j]) * corr[j];
+    if (corr[j] > best_v) {
+      best_v = corr[j];
+      best = j;
+    }
+  }
+  const double rms = std::sqrt(sum_sq / static_cast<double>(max_lag + 1));
+  if (rms <= 0 || best_v / rms < 8.0) return;  // no clear peak: keep what we have
+  // Strong reflections make peaks of their own at longer lags: the delay is
+  // the shortest lag (largest j) with a peak of at least half the largest.
+  for (size_t j = max_lag; j > best; --j) {
+    if (corr[j] >= 0.5 * best_v && corr[j] >= corr[j - 1] && (j == max_lag || corr[j] >= corr[j + 1])) {
+      best = j;
+      break;
+    }
+  }
+  const double lag = static_cast<double>(max_lag - best) * kDecimation;  // samples at 48 kHz
+  const bool agrees = last_estimate_ >= 0 && std::abs(lag - last_estimate_) <= 2 * kDecimation;
+  last_estimate_ = lag;
+  if (!agrees) return;
+  confident_delay_ms_ = lag * 1000.0 / options_.sample_rate;
+  const int margin = options_.align_margin_ms * options_.sample_rate / 1000;
+  const int wanted = std::max(0, static_cast<int>(lag) - margin);
+  // Moving the reference makes the filter re-adapt: only for a real change (> 1 ms).
+  if (std::abs(wanted - applied_delay_) > options_.sample_rate / 1000) {
+    applied_delay_ = wanted;
+    ++updates_;
+  }
+}
+
+double EchoCanceller::estimated_delay_ms() const { return confident_delay_ms_; }
+int EchoCanceller::delay_updates() const { return updates_; }
+
+EchoPath MakeEchoPath(const EchoPathOptions& o) {
+  const int rate = 48000;
+  const size_t d = static_cast<size_t>(o.delay_ms * rate / 1000.0);
+  const size_t len = d + static_cast<size_t>(o.ir_ms * rate / 1000.0);
+  EchoPath p;
+  p.ir_left.assign(len, 0.0f);
+  p.ir_right.assign(len, 0.0f);
+  std::mt19937_64 rng(o.seed);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int ch = 0; ch < 2; ++ch) {
+    auto& ir = ch == 0 ? p.ir_left : p.ir_right;
+    // The right speaker is a little further from the microphone.
+    const size_t direct = d + (ch == 0 ? 0 : static_cast<size_t>(0.0006 * rate));
+    ir[direct] = ch == 0 ? 1.0f : 0.8f;
+    for (int r = 0; r < 6; ++r) {  // early reflections 2..20 ms after the direct sound
+      const size_t at = direct + static_cast<size_t>((0.002 + 0.018 * u(rng)) * rate);
+      if (at < len) ir[at] += (u(rng) < 0.5f ? -1.0f : 1.0f) * (0.2f + 0.3f * u(rng));
+    }
+    const double decay = 6.907755 / (o.rt60_s * rate);  // ln(1000): −60 dB after rt60
+    float lp = 0;
+    for (size_t i = direct + static_cast<size_t>(0.005 * rate); i < len; ++i) {
+      lp = 0.6f * lp + 0.4f * g(rng);  // walls absorb highs: a gentle low-pass on the tail
+      ir[i] += 0.08f * lp * static_cast<float>(std::exp(-decay * static_cast<double>(i - direct)));
+    }
+    for (float& v : ir) v *= static_cast<float>(o.gain);
+  }
+  return p;
+}
+
+std::vector<float> ApplyEchoPath(const EchoPath& path, std::span<const float> played) {
+  const size_t frames = played.size() / 2;
+  const size_t ir = std::max(path.ir_left.size(), path.ir_right.size());
+  const size_t n = NextPow2(frames + ir);
+  Eigen::FFT<float> fft;
+  std::vector<std::complex<float>> acc(n, {0, 0});
+  for (int ch = 0; ch < 2; ++ch) {
+    std::vector<float> x(n, 0.0f), h(n, 0.0f);
+    for (size_t i = 0; i < frames; ++i) x[i] = played[2 * i + static_cast<size_t>(ch)];
+    const auto& src = ch == 0 ? path.ir_left : path.ir_right;
+    std::copy(src.begin(), src.end(), h.begin());
+    std::vector<std::complex<float>> X, H;
+    fft.fwd(X, x);
+    fft.fwd(H, h);
+    for (size_t i = 0; i < n; ++i) acc[i] += X[i] * H[i];
+  }
+  std::vector<float> y;
+  fft.inv(y, acc);
+  y.resize(frames);
+  return y;
+}
+
+double ErleDb(std::span<const float> echo, std::span<const float> out, std::span<const float> near, size_t begin,
+              size_t end, int near_lag) {
+  end = std::min({end, echo.size(), out.size()});
+  double e = 0, r = 0;
+  for (size_t i = begin; i < end; ++i) {
+    const int64_t k = static_cast<int64_t>(i) - near_lag;
+    const float nv = near.empty() || k < 0 || k >= static_cast<int64_t>(near.size()) ? 0.0f : near[static_cast<size_t>(k)];
+    const double res = out[i] - nv;
+    e += static_cast<double>(echo[i]) * echo[i];
+    r += res * res;
+  }
+  return 10.0 * std::log10((e + 1e-20) / (r + 1e-20));
+}
+
+namespace {
+
+double SnrDb(std::span<const float> clean, std::span<const float> x, size_t skip) {
+  const size_t f = 960;
+  const size_t n = std::min(clean.size(), x.size());
+  std::vector<double> ce, xe;
+  for (size_t i = skip; i + f <= n; i += f) {
+    double c = 0, e = 0;
+    for (size_t k = i; k < i + f; ++k) {
+      c += static_cast<double>(clean[k]) * clean[k];
+      e += static_cast<double>(x[k]) * x[k];
+    }
+    ce.push_back(c);
+    xe.push_back(e);
+  }
+  const double peak = ce.empty() ? 0 : *std::max_element(ce.begin(), ce.end());
+  double sp = 0, pa = 0;
+  int ns = 0, np = 0;
+  for (size_t i = 0; i < ce.size(); ++i) {
+    if (ce[i] >= peak * 1e-3) {
+      sp += xe[i];
+      ++ns;
+    } else if (ce[i] <= peak * 1e-5) {
+      pa += xe[i];
+      ++np;
+    }
+  }
+  if (ns == 0 || np == 0) return 0;
+  sp /= ns;
+  pa /= np;
+  return 10.0 * std::log10(std::max(sp - pa, 1e-20) / std::max(pa, 1e-20));
+}
+
+}  // namespace
+
+double NoiseSuppressionGainDb(std::span<const float> clean, std::span<const float> noisy,
+                              std::span<const float> processed, size_t skip) {
+  return SnrDb(clean, processed, skip) - SnrDb(clean, noisy, skip);
+}
+
+}  // namespace holo::audio

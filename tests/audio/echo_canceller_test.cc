@@ -1,0 +1,165 @@
+#include "audio/echo_canceller.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <random>
+
+#include "audio/speech_quality.h"
+#include "audio/wav.h"
+#include "test_util.h"
+
+namespace holo::audio {
+namespace {
+
+constexpr int kRate = 48000;
+
+std::vector<float> Load(const char* name) {
+  auto w = ReadMonoWav(test::TestDataPath(std::string("audio/") + name), kRate);
+  EXPECT_TRUE(w.ok()) << w.status().ToString();
+  return w.ok() ? *w : std::vector<float>{};
+}
+
+// Far end: 10 s of read speech, played as a slightly different stereo pair
+// (right ear quieter and 0.3 ms later, as a source on the left would be).
+std::vector<float> FarEndStereo(size_t frames) {
+  const std::vector<float> s = Load("speech_48k.wav");
+  std::vector<float> st(2 * frames, 0.0f);
+  for (size_t i = 0; i < frames && !s.empty(); ++i) {
+    st[2 * i] = s[i % s.size()];
+    st[2 * i + 1] = i >= 15 ? 0.7f * s[(i - 15) % s.size()] : 0.0f;
+  }
+  return st;
+}
+
+struct Cancelled {
+  std::vector<float> out;
+  double delay_ms = -1;
+};
+
+// Plays `far` in 20 ms blocks, captures `mic` in step, returns the cleaned capture.
+Cancelled Cancel(const EchoCancellerOptions& o, const std::vector<float>& far, const std::vector<float>& mic) {
+  auto ec = EchoCanceller::Create(o);
+  EXPECT_TRUE(ec.ok()) << ec.status().ToString();
+  Cancelled r;
+  const size_t block = 960;
+  for (size_t i = 0; i + block <= mic.size(); i += block) {
+    (*ec)->PushPlayed(std::span<const float>(far).subspan(2 * i, 2 * block));
+    const auto y = (*ec)->ProcessCapture(std::span<const float>(mic).subspan(i, block));
+    r.out.insert(r.out.end(), y.begin(), y.end());
+  }
+  r.delay_ms = (*ec)->estimated_delay_ms();
+  return r;
+}
+
+class EchoCancellerTest : public ::testing::TestWithParam<AecEngine> {};
+
+// Known echo path: 37 ms playout → capture delay, RT60 0.25 s room, shipped
+// settings (noise suppression on). Single talk: from 4 s on (after
+// convergence) the echo must be ≥ 25 dB down with either engine, and the
+// delay estimated within 1 ms.
+TEST_P(EchoCancellerTest, SingleTalkEchoAttenuatedAndDelayFound) {
+  const size_t n = 10 * kRate;
+  const std::vector<float> far = FarEndStereo(n);
+  EchoPathOptions po;
+  po.delay_ms = 37.0;
+  const EchoPath path = MakeEchoPath(po);
+  const std::vector<float> echo = ApplyEchoPath(path, far);
+  std::vector<float> mic = echo;
+  float peak = 0;
+  for (float v : echo) peak = std::max(peak, std::abs(v));
+  ASSERT_LT(peak, 0.9f) << "the simulated echo must not clip (a linear path)";
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0f, 1e-4f);  // −80 dBFS sensor noise
+  for (float& v : mic) v += noise(rng);
+  EchoCancellerOptions o;
+  o.engine = GetParam();
+  const Cancelled r = Cancel(o, far, mic);
+  ASSERT_EQ(r.out.size(), mic.size());
+  EXPECT_NEAR(r.delay_ms, 37.0, 1.0);
+  const double erle = ErleDb(echo, r.out, {}, 4 * kRate, n);
+  std::printf("%s: ERLE %.1f dB (4..10 s), delay %.2f ms\n", AecEngineName(GetParam()), erle, r.delay_ms);
+  EXPECT_GE(erle, 25.0) << AecEngineName(GetParam());
+  // Control: with cancellation off the echo passes (ERLE ≈ 0 dB).
+  o.echo_cancellation = false;
+  const Cancelled off = Cancel(o, far, mic);
+  EXPECT_LT(ErleDb(echo, off.out, {}, 4 * kRate, n), 3.0);
+}
+
+// Double talk with the default engine (speexdsp): the near-end talker starts
+// at 5 s while the far end keeps talking. The near-end speech must come
+// through: fwSNRseg against the clean near-end ≥ 12 dB and ≥ 3 dB above the
+// uncancelled mix. (Measured 14.4 dB vs 23.8 dB for the same processing
+// without echo and 9.9 dB uncancelled: the "within 3 dB" target is missed,
+// docs/audio.md. WebRTC's AEC scores 3.5 dB here, below the uncancelled mix:
+// its suppressor removes the near end while both talk.)
+TEST(EchoCanceller, DoubleTalkKeepsNearEndSpeech) {
+  const size_t n = 10 * kRate;
+  const std::vector<float> far = FarEndStereo(n);
+  const std::vector<float> speech = Load("espeak_speech_22k.wav");
+  ASSERT_FALSE(speech.empty());
+  std::vector<float> near(n, 0.0f);
+  for (size_t i = 0; i < speech.size() && 5 * kRate + i < n; ++i) near[5 * kRate + i] = 0.25f * speech[i];
+  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath({}), far);
+  std::vector<float> mic(n);
+  for (size_t i = 0; i < n; ++i) mic[i] = echo[i] + near[i];
+  EchoCancellerOptions o;
+  const Cancelled dt = Cancel(o, far, mic);
+  std::vector<float> silent_far(far.size(), 0.0f);
+  const Cancelled clean = Cancel(o, silent_far, near);
+  const std::span<const float> ref = std::span<const float>(near).subspan(5 * kRate);
+  // The suppressors may delay their output by a few ms (overlap-add).
+  auto quality = [&](const std::vector<float>& y) {
+    const std::span<const float> out = std::span<const float>(y).subspan(5 * kRate);
+    return FwSegSnrDb(ref, out, BestLag(ref, out, 960), kRate);
+  };
+  const double q_dt = quality(dt.out), q_clean = quality(clean.out), q_mix = quality(mic);
+  std::printf("fwSNRseg: double talk %.2f dB, no echo %.2f dB, uncancelled %.2f dB\n", q_dt, q_clean, q_mix);
+  EXPECT_GE(q_dt, 12.0) << "double talk " << q_dt << " dB, no echo " << q_clean << " dB";
+  EXPECT_GT(q_dt, q_mix + 3.0) << "cancelled " << q_dt << " dB, echo left in " << q_mix << " dB";
+}
+
+INSTANTIATE_TEST_SUITE_P(Engines, EchoCancellerTest, ::testing::Values(AecEngine::kSpeex, AecEngine::kWebRtc),
+                         [](const auto& info) { return std::string(AecEngineName(info.param)); });
+
+TEST(EchoCanceller, RefusesBadOptions) {
+  EchoCancellerOptions o;
+  o.sample_rate = 44100;
+  EXPECT_FALSE(EchoCanceller::Create(o).ok());
+  o = {};
+  o.max_delay_ms = 5000;
+  auto r = EchoCanceller::Create(o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("max_delay_ms"), std::string::npos);
+  EXPECT_FALSE(ParseAecEngine("dsp").ok());
+}
+
+// Noise suppression: speech in white noise at 10 dB SNR; the noise in the
+// pauses must drop by ≥ 6 dB more than the speech does.
+TEST(EchoCanceller, NoiseSuppressionRaisesSnr) {
+  const std::vector<float> speech = Load("espeak_speech_22k.wav");
+  ASSERT_FALSE(speech.empty());
+  const size_t lead = kRate;  // 1 s of noise alone first: the estimators learn it
+  std::vector<float> clean(lead + speech.size(), 0.0f);
+  for (size_t i = 0; i < speech.size(); ++i) clean[lead + i] = 0.5f * speech[i];
+  double ps = 0;
+  for (float v : clean) ps += static_cast<double>(v) * v;
+  ps /= static_cast<double>(speech.size());
+  std::mt19937 rng(9);
+  std::normal_distribution<float> noise(0.0f, static_cast<float>(std::sqrt(ps / 10.0)));
+  std::vector<float> noisy = clean;
+  std::vector<float> nz(clean.size());
+  for (size_t i = 0; i < noisy.size(); ++i) noisy[i] += (nz[i] = noise(rng));
+  for (AecEngine e : {AecEngine::kSpeex, AecEngine::kWebRtc}) {
+    EchoCancellerOptions o;
+    o.engine = e;
+    o.echo_cancellation = false;
+    const std::vector<float> silent(2 * noisy.size(), 0.0f);
+    const Cancelled r = Cancel(o, silent, noisy);
+    const double gain = NoiseSuppressionGainDb(clean, noisy, r.out, lead);
+    EXPECT_GE(gain, 6.0) << AecEngineName(e);
+  }
+}
+
+}  // namespace
+}  // namespace holo::audio
