@@ -14,6 +14,7 @@ PACKAGES=(
   openssl libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
   libsoxr-dev
   libjpeg62-turbo-dev
+  libavcodec-dev libavutil-dev
 )
 
 missing=()
