@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <mutex>
 #include <string>
 
 extern "C" {
@@ -11,6 +12,7 @@ extern "C" {
 #include <libavutil/dict.h>
 #include <libavutil/frame.h>
 #include <libavutil/imgutils.h>
+#include <libavutil/log.h>
 #include <libavutil/pixdesc.h>
 }
 
@@ -246,11 +248,18 @@ void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, uint8_t* con
   }
 }
 
+// libavcodec logs every bitstream error of untrusted input and every
+// encoder's statistics to stderr; our errors travel as Status instead. The
+// level is process-wide (no other module of ours uses libavcodec).
+void QuietLibav() {
+  static std::once_flag once;
+  std::call_once(once, [] { av_log_set_level(AV_LOG_FATAL); });
+}
+
 const char* EncoderName(VideoLibrary lib) {
   switch (lib) {
     case VideoLibrary::kH264: return "libx264";
     case VideoLibrary::kVp9: return "libvpx-vp9";
-    case VideoLibrary::kAv1: return "libsvtav1";
   }
   return "";
 }
@@ -259,7 +268,6 @@ const char* DecoderName(VideoLibrary lib) {
   switch (lib) {
     case VideoLibrary::kH264: return "h264";
     case VideoLibrary::kVp9: return "libvpx-vp9";
-    case VideoLibrary::kAv1: return "libdav1d";
   }
   return "";
 }
@@ -285,17 +293,13 @@ const char* VideoLibraryName(VideoLibrary library) {
   switch (library) {
     case VideoLibrary::kH264: return "x264";
     case VideoLibrary::kVp9: return "vpx-vp9";
-    case VideoLibrary::kAv1: return "svt-av1";
   }
   return "?";
 }
 
 Status VideoEncodeOptions::Check() const {
-  if (library != VideoLibrary::kH264 && library != VideoLibrary::kVp9 && library != VideoLibrary::kAv1) {
-    return InvalidArgument("video.library must be 1 (H.264), 2 (VP9) or 3 (AV1), got " + Str(uint8_t(library)));
-  }
-  if (library == VideoLibrary::kAv1 && chroma_444) {
-    return InvalidArgument("video.chroma_444: SVT-AV1 codes 4:2:0 only");
+  if (library != VideoLibrary::kH264 && library != VideoLibrary::kVp9) {
+    return InvalidArgument("video.library must be 1 (H.264) or 2 (VP9), got " + Str(uint8_t(library)));
   }
   const int max_crf = library == VideoLibrary::kH264 ? 51 : 63;
   if (crf < -1 || crf > max_crf) {
@@ -324,6 +328,7 @@ VideoEncoder::~VideoEncoder() = default;
 
 StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Create(const VideoEncodeOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
+  QuietLibav();
   if (!avcodec_find_encoder_by_name(EncoderName(options.library))) {
     return Unavailable(std::string("video: this libavcodec has no ") + EncoderName(options.library) + " encoder");
   }
@@ -350,7 +355,6 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
   ctx->thread_count = 1;
   ctx->bit_rate = 0;
   AVDictionary* opts = nullptr;
-  const std::string kint = std::to_string(o.keyframe_interval);
   switch (o.library) {
     case VideoLibrary::kH264:
       av_dict_set(&opts, "preset", o.preset.empty() ? "ultrafast" : o.preset.c_str(), 0);
@@ -365,11 +369,6 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
       av_dict_set(&opts, "lag-in-frames", "0", 0);
       av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 32 : o.crf).c_str(), 0);
       av_dict_set(&opts, "row-mt", "0", 0);
-      break;
-    case VideoLibrary::kAv1:
-      av_dict_set(&opts, "preset", o.preset.empty() ? "12" : o.preset.c_str(), 0);
-      av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 35 : o.crf).c_str(), 0);
-      av_dict_set(&opts, "svtav1-params", ("pred-struct=1:lookahead=0:lp=1:keyint=" + kint).c_str(), 0);
       break;
   }
   const int err = avcodec_open2(ctx.get(), codec, &opts);
@@ -494,11 +493,9 @@ StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limi
   info.width = w;
   info.height = h;
   HOLO_RETURN_IF_ERROR(r.U8("v1.library", &lib));
+  if (lib == 3) return UnsupportedVersion("v1.library: 3 (AV1) is reserved, not implemented");
   if (lib < 1 || lib > 3) return UnsupportedVersion("v1.library: unknown video library " + Str(lib));
   info.library = static_cast<VideoLibrary>(lib);
-  if (info.library == VideoLibrary::kAv1 && (info.flags & kVideoFlagChroma444)) {
-    return DataLoss("v1.flags: AV1 streams are 4:2:0");
-  }
   HOLO_RETURN_IF_ERROR(r.U32("v1.frame_number", &info.frame_number));
   std::span<const uint8_t> zmask, video;
   HOLO_RETURN_IF_ERROR(r.Blob32("v1.mask", r.remaining(), &zmask));
@@ -513,6 +510,7 @@ StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limi
 struct VideoDecoder::Impl {
   CodecCtxPtr ctx;
   FramePtr frame;
+  FramePtr extra;  // receives a second picture of a blob, if any (refused)
   PacketPtr packet;
   VideoLibrary library = VideoLibrary::kH264;
   uint8_t chroma_flag = 0;
@@ -522,7 +520,7 @@ struct VideoDecoder::Impl {
   std::vector<uint8_t> padded;
 };
 
-VideoDecoder::VideoDecoder() : impl_(std::make_unique<Impl>()) {}
+VideoDecoder::VideoDecoder() : impl_(std::make_unique<Impl>()) { QuietLibav(); }
 VideoDecoder::~VideoDecoder() = default;
 
 namespace {
@@ -535,8 +533,10 @@ Status OpenDecoder(VideoLibrary lib, uint32_t w, uint32_t h, CodecCtxPtr* out) {
   ctx->thread_count = 1;
   ctx->flags |= AV_CODEC_FLAG_LOW_DELAY;
   ctx->err_recognition = AV_EF_EXPLODE;
-  // The library may not allocate more than the header's picture.
-  ctx->max_pixels = int64_t{w} * h;
+  // The library may not allocate much more than the header's picture (its
+  // buffers are padded and aligned beyond the picture, hence the margin; a
+  // picture of another size is refused after decoding).
+  ctx->max_pixels = (int64_t{w} + 128) * (int64_t{h} + 128);
   ctx->width = static_cast<int>(w);
   ctx->height = static_cast<int>(h);
   const int err = avcodec_open2(ctx.get(), codec, nullptr);
@@ -585,8 +585,9 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
     }
   }
   if (!s.frame) s.frame.reset(av_frame_alloc());
+  if (!s.extra) s.extra.reset(av_frame_alloc());
   if (!s.packet) s.packet.reset(av_packet_alloc());
-  if (!s.frame || !s.packet) return Internal("video: cannot allocate a frame");
+  if (!s.frame || !s.extra || !s.packet) return Internal("video: cannot allocate a frame");
   // libavcodec reads up to AV_INPUT_BUFFER_PADDING_SIZE bytes past the data.
   s.padded.assign(video.size() + AV_INPUT_BUFFER_PADDING_SIZE, 0);
   std::memcpy(s.padded.data(), video.data(), video.size());
@@ -619,7 +620,8 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
     bad = DataLoss("v1.video: the picture has decode errors");
   }
   // One blob is one picture: a second one would come out with the next blob.
-  if (bad.ok() && avcodec_receive_frame(s.ctx.get(), f) != AVERROR(EAGAIN)) {
+  if (bad.ok() && avcodec_receive_frame(s.ctx.get(), s.extra.get()) != AVERROR(EAGAIN)) {
+    av_frame_unref(s.extra.get());
     bad = DataLoss("v1.video: the blob holds more than one picture");
   }
   if (!bad.ok()) {

@@ -21,7 +21,9 @@
 //           decoder. The default: fastest on one core at the best PSNR per bit
 //           measured (docs/codecs.md).
 //   kVp9  — libvpx-vp9 encoder (profile 1 for 4:4:4) and decoder.
-//   kAv1  — SVT-AV1 encoder (4:2:0 only in Debian 12's 1.4), dav1d decoder.
+// Library id 3 is reserved for AV1: Debian 12's SVT-AV1 1.4 through
+// libavcodec 5.1 held frames back (no picture out per picture in, even with
+// the low-delay structure and no lookahead), so it is not zero-latency here.
 #pragma once
 
 #include <cstdint>
@@ -44,23 +46,22 @@ inline constexpr uint8_t kColorCodecVideo = 4;
 inline constexpr uint8_t kVideoFlagKeyframe = 1;  // decodes without earlier blobs
 inline constexpr uint8_t kVideoFlagChroma444 = 2; // the picture is 4:4:4 (else 4:2:0)
 
-enum class VideoLibrary : uint8_t { kH264 = 1, kVp9 = 2, kAv1 = 3 };
+enum class VideoLibrary : uint8_t { kH264 = 1, kVp9 = 2 };
 
-// "x264", "vpx-vp9", "svt-av1"; "?" for other values.
+// "x264", "vpx-vp9"; "?" for other values.
 const char* VideoLibraryName(VideoLibrary library);
 
 struct VideoEncodeOptions {
   VideoLibrary library = VideoLibrary::kH264;
   // 4:4:4 (true) or 4:2:0 chroma. The studio's saturated stripes and checks
-  // lose most to 4:2:0 chroma (docs/codecs.md); SVT-AV1 only does 4:2:0.
+  // lose most to 4:2:0 chroma (docs/codecs.md).
   bool chroma_444 = true;
-  // Constant-quality factor: x264 CRF 0..51, VP9 and AV1 CRF 0..63; -1 = the
-  // library's default here (x264 20, VP9 32, AV1 35).
+  // Constant-quality factor: x264 CRF 0..51, VP9 CRF 0..63; -1 = the
+  // library's default here (x264 20, VP9 32).
   int crf = -1;
   // Encoder speed preset: x264 "ultrafast".."placebo" (default "ultrafast":
   // the 8 pods must fit a few ms per frame on one core), VP9 cpu-used 5..9
-  // as a number, AV1 preset 0..13 as a number. Empty = the default here
-  // (x264 "ultrafast", VP9 "8", AV1 "12").
+  // as a number. Empty = the default here (x264 "ultrafast", VP9 "8").
   std::string preset;
   // A keyframe at least every `keyframe_interval` frames (1..1000): a new
   // viewer, a recorder's seek or a viewer after loss decodes again within
