@@ -798,7 +798,7 @@ int RunCodecs(const BenchArgs& args) {
   std::map<std::string, double> video_bytes_of, video_cpu_of;
   for (const VideoRun& run : (wanted("video") ? video_runs : std::vector<VideoRun>{})) {
     Figures fig;
-    std::vector<double> key_bytes, delta_bytes;
+    std::vector<double> key_bytes, delta_bytes, mask_bytes;
     const size_t npods = inputs.empty() ? 0 : inputs[0].pods.size();
     for (int rep = 0; rep < args.repeats; ++rep) {
       std::vector<std::unique_ptr<protocol::VideoEncoder>> encoders;
@@ -838,7 +838,10 @@ int RunCodecs(const BenchArgs& args) {
           if (rep == 0) {
             psnr += ForegroundPsnr(pod, decoders[p]->image()) / static_cast<double>(in.pods.size());
             auto info = protocol::ParseVideoBlob(blob);
-            if (info.ok()) (info->keyframe() ? key_bytes : delta_bytes).push_back(static_cast<double>(blob.size()));
+            if (info.ok()) {
+              (info->keyframe() ? key_bytes : delta_bytes).push_back(static_cast<double>(blob.size()));
+              mask_bytes.push_back(static_cast<double>(info->mask_bytes));
+            }
           }
         }
         fig.bytes.push_back(bytes);
@@ -864,6 +867,7 @@ int RunCodecs(const BenchArgs& args) {
     emit("video", "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
     emit("video", "keyframe_bytes_per_pod", Mean(key_bytes), "B", extra);
     emit("video", "delta_bytes_per_pod", Mean(delta_bytes), "B", extra);
+    emit("video", "mask_bytes_per_pod", Mean(mask_bytes), "B", extra);
     emit("video", "encode_ms", Median(fig.enc), "ms", extra);
     emit("video", "decode_ms", Median(fig.dec), "ms", extra);
     emit("video", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
@@ -954,12 +958,14 @@ int RunCodecs(const BenchArgs& args) {
     if (codec_cpu_of.count("C1") && peer_ms > 0)
       emit("C1", "codec_cpu_ratio_vs_jpeg_box", codec_cpu_of["C1"] / peer_ms, "1", {{"peer", "turbojpeg"}});
   }
-  emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
-  emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (bytes_of.count("G0") && bytes_of.count("C0"))
+    emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (bytes_of.count("G1") && bytes_of.count("C1"))
+    emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
   if (codec_cpu_of.count("C1") && geom_cpu_of.count("G1"))
     emit("G1+C1", "codec_cpu_ms", geom_cpu_of["G1"] + codec_cpu_of["C1"], "ms");
   for (const VideoRun& run : video_runs) {
-    if (!video_bytes_of.count(run.label)) continue;
+    if (!video_bytes_of.count(run.label) || !bytes_of.count("G1")) continue;
     const std::map<std::string, std::string> extra{{"library", protocol::VideoLibraryName(run.o.library)},
                                                    {"chroma", run.o.chroma_444 ? "444" : "420"}};
     emit("G1+video", "stream_mbps", (bytes_of["G1"] + video_bytes_of[run.label]) * 8 * 30 / 1e6, "Mbit/s", extra);

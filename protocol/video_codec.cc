@@ -358,8 +358,8 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
   switch (o.library) {
     case VideoLibrary::kH264:
       av_dict_set(&opts, "preset", o.preset.empty() ? "ultrafast" : o.preset.c_str(), 0);
-      av_dict_set(&opts, "tune", "zerolatency", 0);
-      av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 20 : o.crf).c_str(), 0);
+      av_dict_set(&opts, "tune", "zerolatency,psnr", 0);
+      av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 24 : o.crf).c_str(), 0);
       av_dict_set(&opts, "forced-idr", "1", 0);
       av_dict_set(&opts, "x264-params", "scenecut=0:rc-lookahead=0:sync-lookahead=0:bframes=0", 0);
       break;
