@@ -2,7 +2,7 @@
 //                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444|--chroma420] [--chroma-shift=S]
 //                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
-//                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420]
+//                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
 // Unknown options are refused (exit 2).
 //
@@ -453,6 +453,53 @@ int RunCodecs(const BenchArgs& args) {
     std::fprintf(stderr, "codecs: --content must be 'truth' or 'fused', got '%s'\n", content.c_str());
     return 2;
   }
+  // Video runs, checked before any work.
+  struct VideoRun {
+    std::string label;  // "x264-444"
+    protocol::VideoEncodeOptions o;
+  };
+  std::vector<VideoRun> video_runs;
+  {
+    const std::string list = StrFlag(args, "--video", "x264-444,x264-420");
+    size_t at = 0;
+    while (at <= list.size()) {
+      const size_t comma = std::min(list.find(',', at), list.size());
+      std::string label = list.substr(at, comma - at);
+      at = comma + 1;
+      if (label.empty()) continue;
+      // "x264-444@22": this run's CRF (a rate–distortion sweep in one run).
+      int crf = IntFlag(args, "--video-crf", -1);
+      if (const size_t amp = label.find('@'); amp != std::string::npos) {
+        char* end = nullptr;
+        crf = static_cast<int>(std::strtol(label.c_str() + amp + 1, &end, 10));
+        if (end == label.c_str() + amp + 1 || *end != '\0') {
+          std::fprintf(stderr, "codecs: --video: bad CRF in '%s'\n", label.c_str());
+          return 2;
+        }
+        label.resize(amp);
+      }
+      VideoRun r{label, {}};
+      if (label == "x264-444" || label == "x264-420") {
+        r.o.library = protocol::VideoLibrary::kH264;
+      } else if (label == "vpx-vp9-444" || label == "vpx-vp9-420") {
+        r.o.library = protocol::VideoLibrary::kVp9;
+      } else {
+        std::fprintf(stderr, "codecs: --video: unknown '%s' (x264-444, x264-420, vpx-vp9-444, vpx-vp9-420)\n",
+                     label.c_str());
+        return 2;
+      }
+      r.o.chroma_444 = label.size() > 4 && label.substr(label.size() - 3) == "444";
+      r.o.crf = crf;
+      r.label.append(1, '@').append(std::to_string(crf));
+      r.o.preset = StrFlag(args, "--video-preset", "");
+      r.o.keyframe_interval = IntFlag(args, "--keyframe-interval", r.o.keyframe_interval);
+      if (const Status st = r.o.Check(); !st.ok()) {
+        std::fprintf(stderr, "codecs: --video %s: %s\n", label.c_str(), st.ToString().c_str());
+        return 2;
+      }
+      video_runs.push_back(r);
+    }
+  }
   const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || HasFlag(args, "--synthetic");
   if (synthetic && content == "fused") {
     std::fprintf(stderr, "codecs: --content fused needs the studio (not --synthetic)\n");
@@ -761,40 +808,6 @@ int RunCodecs(const BenchArgs& args) {
   }
 
   // ---- video colour (V1): one encoder and one decoder per pod over the sequence
-  struct VideoRun {
-    std::string label;  // "x264-444"
-    protocol::VideoEncodeOptions o;
-  };
-  std::vector<VideoRun> video_runs;
-  {
-    const std::string list = StrFlag(args, "--video", "x264-444,x264-420");
-    size_t at = 0;
-    while (at <= list.size()) {
-      const size_t comma = std::min(list.find(',', at), list.size());
-      const std::string label = list.substr(at, comma - at);
-      at = comma + 1;
-      if (label.empty()) continue;
-      VideoRun r{label, {}};
-      if (label == "x264-444" || label == "x264-420") {
-        r.o.library = protocol::VideoLibrary::kH264;
-      } else if (label == "vpx-vp9-444" || label == "vpx-vp9-420") {
-        r.o.library = protocol::VideoLibrary::kVp9;
-      } else {
-        std::fprintf(stderr, "codecs: --video: unknown '%s' (x264-444, x264-420, vpx-vp9-444, vpx-vp9-420)\n",
-                     label.c_str());
-        return 2;
-      }
-      r.o.chroma_444 = label.size() > 4 && label.substr(label.size() - 3) == "444";
-      r.o.crf = IntFlag(args, "--video-crf", -1);
-      r.o.preset = StrFlag(args, "--video-preset", "");
-      r.o.keyframe_interval = IntFlag(args, "--keyframe-interval", r.o.keyframe_interval);
-      if (const Status st = r.o.Check(); !st.ok()) {
-        std::fprintf(stderr, "codecs: --video %s: %s\n", label.c_str(), st.ToString().c_str());
-        return 2;
-      }
-      video_runs.push_back(r);
-    }
-  }
   std::map<std::string, double> video_bytes_of, video_cpu_of;
   for (const VideoRun& run : (wanted("video") ? video_runs : std::vector<VideoRun>{})) {
     Figures fig;
@@ -967,7 +980,8 @@ int RunCodecs(const BenchArgs& args) {
   for (const VideoRun& run : video_runs) {
     if (!video_bytes_of.count(run.label) || !bytes_of.count("G1")) continue;
     const std::map<std::string, std::string> extra{{"library", protocol::VideoLibraryName(run.o.library)},
-                                                   {"chroma", run.o.chroma_444 ? "444" : "420"}};
+                                                   {"chroma", run.o.chroma_444 ? "444" : "420"},
+                                                   {"crf", std::to_string(run.o.crf)}};
     emit("G1+video", "stream_mbps", (bytes_of["G1"] + video_bytes_of[run.label]) * 8 * 30 / 1e6, "Mbit/s", extra);
     if (geom_cpu_of.count("G1"))
       emit("G1+video", "codec_cpu_ms", geom_cpu_of["G1"] + video_cpu_of[run.label], "ms", extra);
