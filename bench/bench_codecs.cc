@@ -991,6 +991,6 @@ int RunCodecs(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1) codecs: bytes, time, error", RunCodecs);
+HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1, V1 video) codecs on truth or fused content: bytes, time, error", RunCodecs);
 
 }  // namespace holo::bench
