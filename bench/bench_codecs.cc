@@ -2,6 +2,22 @@
 //                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444|--chroma420] [--chroma-shift=S]
 //                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
+//                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
+//                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
+// Unknown options are refused (exit 2).
+//
+// --content truth (the default): the studio's ground-truth foreground mesh and
+// the pods' images with exact masks, frames 0, 1, 2, ... (consecutive, as a
+// video codec sees them). --content fused: the real capture site run
+// in-process (CaptureSite, MaskSource::kSegment, background learned from the
+// empty room, the workload's voxel size): the site's fused, textured mesh and
+// the pods' images with the site's own segmentation masks. Default frames:
+// 4 on truth, 60 on fused (a video codec needs a sequence; --frames N).
+//
+// Video colour (V1, protocol/video_codec.h) runs as codec "video" with a
+// `library` and `chroma` qualifier, one encoder and one decoder per pod over
+// the frame sequence (fresh ones per repeat); its bytes are the mean over the
+// sequence (keyframes included), its times the median per frame of all pods.
 // (--hash prints a hash of every geometry blob of the first repeat to stderr;
 // --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
 //
@@ -44,9 +60,11 @@
 #include "protocol/color_codec.h"
 #include "protocol/draco_peer.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/video_codec.h"
 
 #if __has_include("server/studio/workloads.h") && __has_include("server/studio/studio.cc")
 #define HOLO_BENCH_HAVE_STUDIO 1
+#include "server/pipeline/capture_site.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
 #else
@@ -80,6 +98,41 @@ int IntFlag(const BenchArgs& args, const std::string& name, int fallback) {
   for (const std::string& e : args.extra)
     if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
   return fallback;
+}
+
+// The value of "--name=value" (or "--name value") among the extra arguments, or `fallback`.
+std::string StrFlag(const BenchArgs& args, const std::string& name, const std::string& fallback) {
+  for (size_t i = 0; i < args.extra.size(); ++i) {
+    const std::string& e = args.extra[i];
+    if (e.rfind(name + "=", 0) == 0) return e.substr(name.size() + 1);
+    if (e == name && i + 1 < args.extra.size()) return args.extra[i + 1];
+  }
+  return fallback;
+}
+
+// Empty if every extra argument is an option of this benchmark; else the first unknown one.
+std::string UnknownOption(const BenchArgs& args) {
+  static const char* kFlags[] = {"--synthetic", "--chroma444", "--chroma420", "--fill-pad", "--fill-push-pull",
+                                 "--fill-mean", "--fast-dct", "--quant-standard", "--no-optimize-huffman", "--no-pack",
+                                 "--hash"};
+  static const char* kValued[] = {"--only", "--jpeg-quality", "--chroma-shift", "--mask-zstd-level", "--huffman-refresh",
+                                  "--peer-jpeg-quality", "--content", "--video", "--video-crf", "--video-preset",
+                                  "--keyframe-interval"};
+  for (size_t i = 0; i < args.extra.size(); ++i) {
+    const std::string& e = args.extra[i];
+    bool known = false;
+    for (const char* f : kFlags) known = known || e == f;
+    for (const char* v : kValued) {
+      const std::string n(v);
+      if (e.rfind(n + "=", 0) == 0) known = true;
+      if (e == n && (n == "--content") && i + 1 < args.extra.size()) {
+        known = true;
+        ++i;  // its value
+      }
+    }
+    if (!known) return e;
+  }
+  return "";
 }
 
 struct PodImageInput {
@@ -336,6 +389,53 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
   return std::min(99.0, 10 * std::log10(255.0 * 255.0 / (se / n)));
 }
 
+#if HOLO_BENCH_HAVE_STUDIO
+// Runs the capture site in-process on the workload's studio (segmentation
+// masks learned from the empty room, the workload's voxel size) for `frames`
+// frames and keeps, per frame, the site's fused textured mesh and the pods'
+// colour images with the masks the site used. Returns the frames kept, or -1
+// (error printed).
+int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs) {
+  auto studio = SyntheticStudio::Create(wl.rig, wl.studio);
+  StudioOptions empty_options = wl.studio;
+  empty_options.empty_room = true;
+  auto empty = SyntheticStudio::Create(wl.rig, empty_options);
+  if (!studio.ok() || !empty.ok()) {
+    std::fprintf(stderr, "codecs: studio: %s %s\n", studio.status().ToString().c_str(), empty.status().ToString().c_str());
+    return -1;
+  }
+  CaptureSiteOptions o;
+  o.masks = MaskSource::kSegment;
+  o.tsdf.voxel_size = wl.voxel_size_m;
+  o.pipeline.max_frames = frames;
+  auto site = CaptureSite::Create(studio->get(), empty->get(), studio->get(), o);
+  if (!site.ok()) {
+    std::fprintf(stderr, "codecs: capture site: %s\n", site.status().ToString().c_str());
+    return -1;
+  }
+  int n = 0;
+  auto run = (*site)->Run([&](const FrameWork& w) -> Status {
+    if (n >= frames) return OkStatus();
+    FrameInput& in = (*inputs)[n++];
+    in.mesh = w.mesh;
+    in.pods.clear();
+    for (const RgbdFrame& f : w.frames.frames) {
+      if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) {
+        return InvalidArgument("pod " + std::to_string(f.pod_id) + ": the site's mask is not the colour image's size");
+      }
+      in.pods.push_back({f.color, f.mask});
+    }
+    return OkStatus();
+  });
+  if (!run.ok()) {
+    std::fprintf(stderr, "codecs: capture site: %s\n", run.status().ToString().c_str());
+    return -1;
+  }
+  inputs->resize(n);
+  return n;
+}
+#endif
+
 struct Figures {
   std::vector<double> bytes, enc, dec, enc_cpu, dec_cpu, a, b;  // a, b: rms/max mm or psnr
   std::vector<double> n_mean, n_p99, n_max;                      // normal angle errors, degrees
@@ -343,11 +443,73 @@ struct Figures {
 };
 
 int RunCodecs(const BenchArgs& args) {
+  if (const std::string bad = UnknownOption(args); !bad.empty()) {
+    std::fprintf(stderr, "codecs: unknown option '%s' (see the comment at the top of bench/bench_codecs.cc)\n",
+                 bad.c_str());
+    return 2;
+  }
+  const std::string content = StrFlag(args, "--content", "truth");
+  if (content != "truth" && content != "fused") {
+    std::fprintf(stderr, "codecs: --content must be 'truth' or 'fused', got '%s'\n", content.c_str());
+    return 2;
+  }
+  // Video runs, checked before any work.
+  struct VideoRun {
+    std::string label;  // "x264-444"
+    protocol::VideoEncodeOptions o;
+  };
+  std::vector<VideoRun> video_runs;
+  {
+    const std::string list = StrFlag(args, "--video", "x264-444,x264-420");
+    size_t at = 0;
+    while (at <= list.size()) {
+      const size_t comma = std::min(list.find(',', at), list.size());
+      std::string label = list.substr(at, comma - at);
+      at = comma + 1;
+      if (label.empty()) continue;
+      // "x264-444@22": this run's CRF (a rate–distortion sweep in one run).
+      int crf = IntFlag(args, "--video-crf", -1);
+      if (const size_t amp = label.find('@'); amp != std::string::npos) {
+        char* end = nullptr;
+        crf = static_cast<int>(std::strtol(label.c_str() + amp + 1, &end, 10));
+        if (end == label.c_str() + amp + 1 || *end != '\0') {
+          std::fprintf(stderr, "codecs: --video: bad CRF in '%s'\n", label.c_str());
+          return 2;
+        }
+        label.resize(amp);
+      }
+      VideoRun r{label, {}};
+      if (label == "x264-444" || label == "x264-420") {
+        r.o.library = protocol::VideoLibrary::kH264;
+      } else if (label == "vpx-vp9-444" || label == "vpx-vp9-420") {
+        r.o.library = protocol::VideoLibrary::kVp9;
+      } else {
+        std::fprintf(stderr, "codecs: --video: unknown '%s' (x264-444, x264-420, vpx-vp9-444, vpx-vp9-420)\n",
+                     label.c_str());
+        return 2;
+      }
+      r.o.chroma_444 = label.size() > 4 && label.substr(label.size() - 3) == "444";
+      r.o.crf = crf;
+      r.label.append(1, '@').append(std::to_string(crf));
+      r.o.preset = StrFlag(args, "--video-preset", "");
+      r.o.keyframe_interval = IntFlag(args, "--keyframe-interval", r.o.keyframe_interval);
+      if (const Status st = r.o.Check(); !st.ok()) {
+        std::fprintf(stderr, "codecs: --video %s: %s\n", label.c_str(), st.ToString().c_str());
+        return 2;
+      }
+      video_runs.push_back(r);
+    }
+  }
   const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || HasFlag(args, "--synthetic");
-  const int frames = args.frames > 0 ? args.frames : 4;
+  if (synthetic && content == "fused") {
+    std::fprintf(stderr, "codecs: --content fused needs the studio (not --synthetic)\n");
+    return 2;
+  }
+  const int frames = args.frames > 0 ? args.frames : (content == "fused" ? 60 : 4);
   std::string workload = args.workload;
   std::map<std::string, std::string> q0;
   std::vector<FrameInput> inputs(frames);
+  if (!synthetic) q0["content"] = content;
   if (synthetic) {
     int w = 640, h = 480;
     if (args.workload == "S8-QVGA") {
@@ -371,12 +533,18 @@ int RunCodecs(const BenchArgs& args) {
       std::fprintf(stderr, "codecs: %s\n", wl.status().ToString().c_str());
       return 2;
     }
+    if (content == "fused") {
+      const int got = FusedInputs(*wl, frames, &inputs);
+      if (got < 0) return 1;
+      q0["mesh"] = "site-fused";
+      q0["masks"] = "segment";
+    } else {
     SyntheticStudio studio(wl->rig, wl->studio);
     q0["mesh"] = "studio-ground-truth";
     RgbdFrameSet fs;
     StudioGroundTruth gt;
     for (int f = 0; f < frames; ++f) {
-      studio.RenderFrame(f * 7, &fs, &gt);
+      studio.RenderFrame(f, &fs, &gt);
       inputs[f].mesh = gt.foreground_mesh;
       for (size_t p = 0; p < fs.frames.size(); ++p) {
         PodImageInput pi;
@@ -387,13 +555,19 @@ int RunCodecs(const BenchArgs& args) {
         inputs[f].pods.push_back(std::move(pi));
       }
     }
+    }
 #endif
+  }
+  if (inputs.empty()) {
+    std::fprintf(stderr, "codecs: no frames\n");
+    return 1;
   }
   if (!args.json) {
     std::fprintf(stderr, "codecs: %s, %d frames, mesh %zu vertices %zu triangles, %zu pods\n", workload.c_str(), frames,
                  inputs[0].mesh.num_vertices(), inputs[0].mesh.num_triangles(), inputs[0].pods.size());
   }
   q0["vertices"] = std::to_string(inputs[0].mesh.num_vertices());
+  q0["triangles"] = std::to_string(inputs[0].mesh.num_triangles());
 
   auto emit = [&](const std::string& codec, const std::string& metric, double v, const std::string& unit,
                   std::map<std::string, std::string> extra = {}) {
@@ -403,7 +577,7 @@ int RunCodecs(const BenchArgs& args) {
     EmitFigure("codecs", workload, metric, v, unit, q);
   };
 
-  std::map<std::string, double> bytes_of, codec_cpu_of;
+  std::map<std::string, double> bytes_of, codec_cpu_of, geom_cpu_of;
   // ---- geometry
   struct GeomRun {
     std::string name;
@@ -501,6 +675,7 @@ int RunCodecs(const BenchArgs& args) {
     emit(run.name, "decode_ms", Median(fig.dec), "ms", extra);
     emit(run.name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
     emit(run.name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    geom_cpu_of[run.name] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
     if (!fig.vcol_psnr.empty()) emit(run.name, "vertex_color_psnr_db", Median(fig.vcol_psnr), "dB", extra);
@@ -632,6 +807,91 @@ int RunCodecs(const BenchArgs& args) {
     emit(name, "color_psnr_db", Median(fig.a), "dB", extra);
   }
 
+  // ---- video colour (V1): one encoder and one decoder per pod over the sequence
+  std::map<std::string, double> video_bytes_of, video_cpu_of;
+  for (const VideoRun& run : (wanted("video") ? video_runs : std::vector<VideoRun>{})) {
+    Figures fig;
+    std::vector<double> key_bytes, delta_bytes, mask_bytes;
+    const size_t npods = inputs.empty() ? 0 : inputs[0].pods.size();
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      std::vector<std::unique_ptr<protocol::VideoEncoder>> encoders;
+      std::vector<std::unique_ptr<protocol::VideoDecoder>> decoders;
+      for (size_t p = 0; p < npods; ++p) {
+        auto e = protocol::VideoEncoder::Create(run.o);
+        if (!e.ok()) {
+          std::fprintf(stderr, "codecs: video %s: %s\n", run.label.c_str(), e.status().ToString().c_str());
+          return 1;
+        }
+        encoders.push_back(std::move(*e));
+        decoders.push_back(std::make_unique<protocol::VideoDecoder>());
+      }
+      std::vector<uint8_t> blob;
+      for (const FrameInput& in : inputs) {
+        double bytes = 0, enc = 0, dec = 0, enc_cpu = 0, dec_cpu = 0, psnr = 0;
+        for (size_t p = 0; p < in.pods.size() && p < npods; ++p) {
+          const PodImageInput& pod = in.pods[p];
+          blob.clear();
+          const double c0 = ThreadCpuMs();
+          const double t0 = NowMs();
+          const Status es = encoders[p]->Encode(pod.color, pod.mask, &blob);
+          const double t1 = NowMs();
+          const double c1 = ThreadCpuMs();
+          const Status ds = es.ok() ? decoders[p]->Decode(blob) : es;
+          const double t2 = NowMs();
+          const double c2 = ThreadCpuMs();
+          if (!es.ok() || !ds.ok()) {
+            std::fprintf(stderr, "codecs: video %s failed: %s\n", run.label.c_str(), ds.ToString().c_str());
+            return 1;
+          }
+          bytes += static_cast<double>(blob.size());
+          enc += t1 - t0;
+          dec += t2 - t1;
+          enc_cpu += c1 - c0;
+          dec_cpu += c2 - c1;
+          if (rep == 0) {
+            psnr += ForegroundPsnr(pod, decoders[p]->image()) / static_cast<double>(in.pods.size());
+            auto info = protocol::ParseVideoBlob(blob);
+            if (info.ok()) {
+              (info->keyframe() ? key_bytes : delta_bytes).push_back(static_cast<double>(blob.size()));
+              mask_bytes.push_back(static_cast<double>(info->mask_bytes));
+            }
+          }
+        }
+        fig.bytes.push_back(bytes);
+        fig.enc.push_back(enc);
+        fig.dec.push_back(dec);
+        fig.enc_cpu.push_back(enc_cpu);
+        fig.dec_cpu.push_back(dec_cpu);
+        if (rep == 0) fig.a.push_back(psnr);
+      }
+    }
+    const protocol::VideoEncodeOptions& o = run.o;
+    std::map<std::string, std::string> extra{
+        {"pods", std::to_string(npods)},
+        {"library", protocol::VideoLibraryName(o.library)},
+        {"chroma", o.chroma_444 ? "444" : "420"},
+        {"crf", std::to_string(o.crf)},
+        {"preset", o.preset.empty() ? "default" : o.preset},
+        {"keyframe_interval", std::to_string(o.keyframe_interval)},
+        {"frames", std::to_string(inputs.size())}};
+    const double bytes = Mean(fig.bytes);  // keyframes included
+    video_bytes_of[run.label] = bytes;
+    emit("video", "bytes_per_frame", bytes, "B", extra);
+    emit("video", "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit("video", "keyframe_bytes_per_pod", Mean(key_bytes), "B", extra);
+    emit("video", "delta_bytes_per_pod", Mean(delta_bytes), "B", extra);
+    emit("video", "mask_bytes_per_pod", Mean(mask_bytes), "B", extra);
+    emit("video", "encode_ms", Median(fig.enc), "ms", extra);
+    emit("video", "decode_ms", Median(fig.dec), "ms", extra);
+    emit("video", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit("video", "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit("video", "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
+    emit("video", "decode_cpu_ms_mean", Mean(fig.dec_cpu), "ms", extra);
+    video_cpu_of[run.label] = Mean(fig.enc_cpu) + Mean(fig.dec_cpu);
+    emit("video", "codec_cpu_ms", video_cpu_of[run.label], "ms", extra);
+    emit("video", "color_psnr_db", Mean(fig.a), "dB", extra);
+  }
+
   // ---- peer for C1's time: plain TurboJPEG (4:4:4, standard tables, accurate
   // DCT) of each pod's foreground bounding box as it is, encoded and decoded
   // into buffers kept between frames — the least work a JPEG-of-the-box
@@ -711,13 +971,26 @@ int RunCodecs(const BenchArgs& args) {
     if (codec_cpu_of.count("C1") && peer_ms > 0)
       emit("C1", "codec_cpu_ratio_vs_jpeg_box", codec_cpu_of["C1"] / peer_ms, "1", {{"peer", "turbojpeg"}});
   }
-  emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
-  emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (bytes_of.count("G0") && bytes_of.count("C0"))
+    emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (bytes_of.count("G1") && bytes_of.count("C1"))
+    emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (codec_cpu_of.count("C1") && geom_cpu_of.count("G1"))
+    emit("G1+C1", "codec_cpu_ms", geom_cpu_of["G1"] + codec_cpu_of["C1"], "ms");
+  for (const VideoRun& run : video_runs) {
+    if (!video_bytes_of.count(run.label) || !bytes_of.count("G1")) continue;
+    const std::map<std::string, std::string> extra{{"library", protocol::VideoLibraryName(run.o.library)},
+                                                   {"chroma", run.o.chroma_444 ? "444" : "420"},
+                                                   {"crf", std::to_string(run.o.crf)}};
+    emit("G1+video", "stream_mbps", (bytes_of["G1"] + video_bytes_of[run.label]) * 8 * 30 / 1e6, "Mbit/s", extra);
+    if (geom_cpu_of.count("G1"))
+      emit("G1+video", "codec_cpu_ms", geom_cpu_of["G1"] + video_cpu_of[run.label], "ms", extra);
+  }
   return 0;
 }
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1) codecs: bytes, time, error", RunCodecs);
+HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1, V1 video) codecs on truth or fused content: bytes, time, error", RunCodecs);
 
 }  // namespace holo::bench

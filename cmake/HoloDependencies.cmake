@@ -24,6 +24,10 @@ pkg_check_modules(TURBOJPEG REQUIRED IMPORTED_TARGET libturbojpeg)
 pkg_check_modules(LIBJPEG REQUIRED IMPORTED_TARGET libjpeg)  # C1 encoder: own quantization tables
 find_package(meshoptimizer REQUIRED)
 find_package(draco REQUIRED)
+# Video colour (V1, protocol/video_codec.h): libavcodec with Debian's libx264,
+# libvpx, SVT-AV1 and dav1d.
+pkg_check_modules(AVCODEC REQUIRED IMPORTED_TARGET libavcodec)
+pkg_check_modules(AVUTIL REQUIRED IMPORTED_TARGET libavutil)
 # Spatial voice (audio/): Opus and OpenAL Soft.
 pkg_check_modules(OPUS REQUIRED IMPORTED_TARGET opus)
 find_package(OpenAL REQUIRED)

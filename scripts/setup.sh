@@ -15,6 +15,7 @@ PACKAGES=(
   libsoxr-dev
   libjpeg62-turbo-dev
   libwebrtc-audio-processing-dev libspeexdsp-dev libmysofa-dev
+  libavcodec-dev libavutil-dev
 )
 
 missing=()

@@ -1,0 +1,651 @@
+#include "protocol/video_codec.h"
+
+#include <zstd.h>
+
+#include <algorithm>
+#include <cstring>
+#include <mutex>
+#include <string>
+
+extern "C" {
+#include <libavcodec/avcodec.h>
+#include <libavutil/dict.h>
+#include <libavutil/frame.h>
+#include <libavutil/imgutils.h>
+#include <libavutil/log.h>
+#include <libavutil/pixdesc.h>
+}
+
+#include "protocol/byte_io.h"
+
+namespace holo::protocol {
+namespace {
+
+std::string Str(uint64_t v) { return std::to_string(v); }
+
+std::string AvError(int err) {
+  char buf[AV_ERROR_MAX_STRING_SIZE] = {};
+  av_strerror(err, buf, sizeof(buf));
+  return buf;
+}
+
+// ------------------------------------------------------------ mask rows
+// The same row format as C1's mask (PROTOCOL.md §8, "Mask rows"), over the
+// whole image instead of a box.
+
+void PutVarint(std::vector<uint8_t>* out, uint32_t v) {
+  while (v >= 0x80) {
+    out->push_back(static_cast<uint8_t>(v | 0x80));
+    v >>= 7;
+  }
+  out->push_back(static_cast<uint8_t>(v));
+}
+
+bool GetVarint(const uint8_t*& p, const uint8_t* end, uint32_t* v) {
+  uint64_t r = 0;
+  for (int shift = 0; shift < 35; shift += 7) {
+    if (p == end) return false;
+    const uint8_t b = *p++;
+    r |= uint64_t{b & 0x7fu} << shift;
+    if (!(b & 0x80)) {
+      if (r > 0xffffffffu) return false;
+      *v = static_cast<uint32_t>(r);
+      return true;
+    }
+  }
+  return false;
+}
+
+uint32_t ZigZag(int32_t v) { return (static_cast<uint32_t>(v) << 1) ^ static_cast<uint32_t>(v >> 31); }
+int64_t UnZigZag(uint32_t z) { return static_cast<int64_t>(z >> 1) ^ -static_cast<int64_t>(z & 1u); }
+
+Status EncodeMask(const ImageGray8& mask, int w, int h, std::vector<uint8_t>* rle, std::vector<uint8_t>* out) {
+  rle->clear();
+  std::vector<uint32_t> prev, cur;
+  for (int y = 0; y < h; ++y) {
+    cur.clear();
+    if (mask.empty()) {
+      cur.push_back(0);
+    } else {
+      const uint8_t* m = mask.row(y);
+      bool in = false;
+      for (int x = 0; x < w; ++x) {
+        if ((m[x] != 0) != in) {
+          cur.push_back(static_cast<uint32_t>(x));
+          in = !in;
+        }
+      }
+    }
+    if (cur.size() == prev.size()) {
+      rle->push_back(0);
+      for (size_t i = 0; i < cur.size(); ++i) {
+        PutVarint(rle, ZigZag(static_cast<int32_t>(cur[i]) - static_cast<int32_t>(prev[i])));
+      }
+    } else {
+      PutVarint(rle, static_cast<uint32_t>(cur.size() + 1));
+      for (size_t i = 0; i < cur.size(); ++i) PutVarint(rle, i == 0 ? cur[0] : cur[i] - cur[i - 1] - 1);
+    }
+    std::swap(prev, cur);
+  }
+  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> zc(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!zc) return Internal("zstd: cannot create a compression context");
+  out->resize(ZSTD_compressBound(rle->size()));
+  const size_t z = ZSTD_compressCCtx(zc.get(), out->data(), out->size(), rle->data(), rle->size(), 3);
+  if (ZSTD_isError(z)) return Internal(std::string("zstd: ") + ZSTD_getErrorName(z));
+  out->resize(z);
+  return OkStatus();
+}
+
+Status DecodeMask(std::span<const uint8_t> zmask, int w, int h, std::vector<uint8_t>* rle, ImageGray8* mask) {
+  const unsigned long long declared = ZSTD_getFrameContentSize(zmask.data(), zmask.size());
+  const uint64_t bound = uint64_t(h) * (uint64_t(w) + 1) * 3;
+  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > bound ||
+      declared < static_cast<uint64_t>(h)) {
+    return DataLoss("v1.mask: zstd frame size is missing or impossible for the image");
+  }
+  rle->resize(declared);
+  thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> zd(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  if (!zd) return Internal("zstd: cannot create a decompression context");
+  const size_t got = ZSTD_decompressDCtx(zd.get(), rle->data(), rle->size(), zmask.data(), zmask.size());
+  if (ZSTD_isError(got) || got != declared) return DataLoss("v1.mask: zstd data is corrupt");
+  mask->Resize(w, h, 0);
+  const uint8_t* p = rle->data();
+  const uint8_t* end = p + rle->size();
+  std::vector<uint32_t> prev, cur;
+  for (int y = 0; y < h; ++y) {
+    uint32_t head = 0;
+    if (!GetVarint(p, end, &head)) return DataLoss("v1.mask: row " + Str(y) + " ends early");
+    cur.clear();
+    if (head == 0) {
+      for (size_t i = 0; i < prev.size(); ++i) {
+        uint32_t z = 0;
+        if (!GetVarint(p, end, &z)) return DataLoss("v1.mask: row " + Str(y) + " ends early");
+        const int64_t t = int64_t{prev[i]} + UnZigZag(z);
+        if (t < 0 || t >= w || (i > 0 && t <= int64_t{cur.back()})) {
+          return DataLoss("v1.mask: row " + Str(y) + " transition " + Str(i) + " out of order or outside the row");
+        }
+        cur.push_back(static_cast<uint32_t>(t));
+      }
+    } else {
+      const uint32_t k = head - 1;
+      if (k > static_cast<uint32_t>(w)) return DataLoss("v1.mask: row " + Str(y) + " has " + Str(k) + " transitions");
+      int64_t t = -1;
+      for (uint32_t i = 0; i < k; ++i) {
+        uint32_t g = 0;
+        if (!GetVarint(p, end, &g)) return DataLoss("v1.mask: row " + Str(y) + " ends early");
+        t = (i == 0) ? int64_t{g} : t + int64_t{g} + 1;
+        if (t >= w) return DataLoss("v1.mask: row " + Str(y) + " transition " + Str(i) + " outside the row");
+        cur.push_back(static_cast<uint32_t>(t));
+      }
+    }
+    uint8_t* m = mask->row(y);
+    for (size_t i = 0; i < cur.size(); i += 2) {
+      const uint32_t a = cur[i];
+      const uint32_t b = i + 1 < cur.size() ? cur[i + 1] : static_cast<uint32_t>(w);
+      std::memset(m + a, 255, b - a);
+    }
+    std::swap(prev, cur);
+  }
+  if (p != end) return DataLoss("v1.mask: " + Str(static_cast<uint64_t>(end - p)) + " bytes after the last row");
+  return OkStatus();
+}
+
+// ------------------------------------------------------------ colour
+// Full-range BT.601 (JPEG) YCbCr, 16-bit fixed point. Both ends are ours, so
+// the range flag in the bitstream is informative only.
+
+inline uint8_t Clamp8(int v) { return static_cast<uint8_t>(v < 0 ? 0 : (v > 255 ? 255 : v)); }
+
+inline void RgbToYcc(const uint8_t* p, uint8_t* y, uint8_t* cb, uint8_t* cr) {
+  const int r = p[0], g = p[1], b = p[2];
+  *y = Clamp8((19595 * r + 38470 * g + 7471 * b + 32768) >> 16);
+  *cb = Clamp8(((-11059 * r - 21709 * g + 32768 * b + 32768) >> 16) + 128);
+  *cr = Clamp8(((32768 * r - 27439 * g - 5329 * b + 32768) >> 16) + 128);
+}
+
+inline void YccToRgb(int y, int cb, int cr, uint8_t* p) {
+  cb -= 128;
+  cr -= 128;
+  p[0] = Clamp8(y + ((91881 * cr + 32768) >> 16));
+  p[1] = Clamp8(y - ((22554 * cb + 46802 * cr - 32768) >> 16));
+  p[2] = Clamp8(y + ((116130 * cb + 32768) >> 16));
+}
+
+constexpr int kBlock = 16;
+constexpr uint8_t kFlat = 128;
+
+// Writes `image` as YCbCr 4:4:4 into three planes (`stride` bytes per row),
+// filling the background: flat grey in blocks without foreground, the
+// foreground continued along rows, then columns, in blocks with some.
+void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, uint8_t* const planes[3], const int strides[3]) {
+  const int w = image.width(), h = image.height();
+  for (int by = 0; by < h; by += kBlock) {
+    const int bh = std::min(kBlock, h - by);
+    for (int bx = 0; bx < w; bx += kBlock) {
+      const int bw = std::min(kBlock, w - bx);
+      int fg = 0;
+      if (mask.empty()) {
+        fg = bw * bh;
+      } else {
+        for (int y = by; y < by + bh; ++y) {
+          const uint8_t* m = mask.row(y) + bx;
+          for (int x = 0; x < bw; ++x) fg += m[x] != 0;
+        }
+      }
+      if (fg == 0) {
+        for (int c = 0; c < 3; ++c) {
+          for (int y = by; y < by + bh; ++y) std::memset(planes[c] + size_t(y) * strides[c] + bx, kFlat, bw);
+        }
+        continue;
+      }
+      bool row_has[kBlock] = {};
+      for (int y = by; y < by + bh; ++y) {
+        const uint8_t* src = image.row(y) + size_t(bx) * 3;
+        const uint8_t* m = mask.empty() ? nullptr : mask.row(y) + bx;
+        uint8_t* py = planes[0] + size_t(y) * strides[0] + bx;
+        uint8_t* pu = planes[1] + size_t(y) * strides[1] + bx;
+        uint8_t* pv = planes[2] + size_t(y) * strides[2] + bx;
+        int first = -1, last = -1;
+        for (int x = 0; x < bw; ++x) {
+          if (!m || m[x]) {
+            RgbToYcc(src + x * 3, py + x, pu + x, pv + x);
+            if (first < 0) first = x;
+            last = x;
+          } else if (last >= 0) {
+            py[x] = py[last];
+            pu[x] = pu[last];
+            pv[x] = pv[last];
+          }
+        }
+        if (first < 0) continue;
+        row_has[y - by] = true;
+        for (int x = 0; x < first; ++x) {
+          py[x] = py[first];
+          pu[x] = pu[first];
+          pv[x] = pv[first];
+        }
+      }
+      // Rows without foreground: copy the nearest row that has some (below first, then above).
+      int src_row = -1;
+      for (int j = 0; j < bh; ++j) {
+        if (row_has[j]) {
+          if (src_row < 0) {
+            for (int k = 0; k < j; ++k) {
+              for (int c = 0; c < 3; ++c) {
+                std::memcpy(planes[c] + size_t(by + k) * strides[c] + bx, planes[c] + size_t(by + j) * strides[c] + bx, bw);
+              }
+            }
+          }
+          src_row = j;
+        } else if (src_row >= 0) {
+          for (int c = 0; c < 3; ++c) {
+            std::memcpy(planes[c] + size_t(by + j) * strides[c] + bx, planes[c] + size_t(by + src_row) * strides[c] + bx,
+                        bw);
+          }
+        }
+      }
+    }
+  }
+}
+
+// libavcodec logs every bitstream error of untrusted input and every
+// encoder's statistics to stderr; our errors travel as Status instead. The
+// level is process-wide (no other module of ours uses libavcodec).
+void QuietLibav() {
+  static std::once_flag once;
+  std::call_once(once, [] { av_log_set_level(AV_LOG_FATAL); });
+}
+
+const char* EncoderName(VideoLibrary lib) {
+  switch (lib) {
+    case VideoLibrary::kH264: return "libx264";
+    case VideoLibrary::kVp9: return "libvpx-vp9";
+  }
+  return "";
+}
+
+const char* DecoderName(VideoLibrary lib) {
+  switch (lib) {
+    case VideoLibrary::kH264: return "h264";
+    case VideoLibrary::kVp9: return "libvpx-vp9";
+  }
+  return "";
+}
+
+struct CodecCtxDeleter {
+  void operator()(AVCodecContext* c) const { avcodec_free_context(&c); }
+};
+struct FrameDeleter {
+  void operator()(AVFrame* f) const { av_frame_free(&f); }
+};
+struct PacketDeleter {
+  void operator()(AVPacket* p) const { av_packet_free(&p); }
+};
+using CodecCtxPtr = std::unique_ptr<AVCodecContext, CodecCtxDeleter>;
+using FramePtr = std::unique_ptr<AVFrame, FrameDeleter>;
+using PacketPtr = std::unique_ptr<AVPacket, PacketDeleter>;
+
+constexpr size_t kHeaderBytes = 6 + 1 + 4;
+
+}  // namespace
+
+const char* VideoLibraryName(VideoLibrary library) {
+  switch (library) {
+    case VideoLibrary::kH264: return "x264";
+    case VideoLibrary::kVp9: return "vpx-vp9";
+  }
+  return "?";
+}
+
+Status VideoEncodeOptions::Check() const {
+  if (library != VideoLibrary::kH264 && library != VideoLibrary::kVp9) {
+    return InvalidArgument("video.library must be 1 (H.264) or 2 (VP9), got " + Str(uint8_t(library)));
+  }
+  const int max_crf = library == VideoLibrary::kH264 ? 51 : 63;
+  if (crf < -1 || crf > max_crf) {
+    return InvalidArgument("video.crf must be -1 or 0.." + std::to_string(max_crf) + ", got " + std::to_string(crf));
+  }
+  if (keyframe_interval < 1 || keyframe_interval > 1000) {
+    return InvalidArgument("video.keyframe_interval must be 1..1000, got " + std::to_string(keyframe_interval));
+  }
+  return OkStatus();
+}
+
+// ------------------------------------------------------------ encoder
+
+struct VideoEncoder::Impl {
+  CodecCtxPtr ctx;
+  FramePtr frame;
+  PacketPtr packet;
+  int width = 0, height = 0;
+  // 4:2:0: the full-resolution chroma planes before subsampling.
+  std::vector<uint8_t> cb, cr;
+  std::vector<uint8_t> rle, zmask;
+};
+
+VideoEncoder::VideoEncoder(const VideoEncodeOptions& options) : options_(options), impl_(std::make_unique<Impl>()) {}
+VideoEncoder::~VideoEncoder() = default;
+
+StatusOr<std::unique_ptr<VideoEncoder>> VideoEncoder::Create(const VideoEncodeOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  QuietLibav();
+  if (!avcodec_find_encoder_by_name(EncoderName(options.library))) {
+    return Unavailable(std::string("video: this libavcodec has no ") + EncoderName(options.library) + " encoder");
+  }
+  return std::unique_ptr<VideoEncoder>(new VideoEncoder(options));
+}
+
+namespace {
+
+Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) {
+  const AVCodec* codec = avcodec_find_encoder_by_name(EncoderName(o.library));
+  if (!codec) return Unavailable(std::string("video: no ") + EncoderName(o.library) + " encoder");
+  CodecCtxPtr ctx(avcodec_alloc_context3(codec));
+  if (!ctx) return Internal("video: cannot allocate an encoder context");
+  ctx->width = w;
+  ctx->height = h;
+  ctx->time_base = AVRational{1, 30};
+  ctx->framerate = AVRational{30, 1};
+  ctx->pix_fmt = o.chroma_444 ? AV_PIX_FMT_YUV444P : AV_PIX_FMT_YUV420P;
+  ctx->color_range = AVCOL_RANGE_JPEG;
+  ctx->colorspace = AVCOL_SPC_BT470BG;
+  ctx->gop_size = o.keyframe_interval;
+  ctx->keyint_min = o.keyframe_interval;
+  ctx->max_b_frames = 0;
+  ctx->thread_count = 1;
+  ctx->bit_rate = 0;
+  AVDictionary* opts = nullptr;
+  switch (o.library) {
+    case VideoLibrary::kH264:
+      av_dict_set(&opts, "preset", o.preset.empty() ? "ultrafast" : o.preset.c_str(), 0);
+      av_dict_set(&opts, "tune", "zerolatency,psnr", 0);
+      av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 24 : o.crf).c_str(), 0);
+      av_dict_set(&opts, "forced-idr", "1", 0);
+      av_dict_set(&opts, "x264-params", "scenecut=0:rc-lookahead=0:sync-lookahead=0:bframes=0", 0);
+      break;
+    case VideoLibrary::kVp9:
+      av_dict_set(&opts, "deadline", "realtime", 0);
+      av_dict_set(&opts, "cpu-used", o.preset.empty() ? "8" : o.preset.c_str(), 0);
+      av_dict_set(&opts, "lag-in-frames", "0", 0);
+      av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 32 : o.crf).c_str(), 0);
+      av_dict_set(&opts, "row-mt", "0", 0);
+      break;
+  }
+  const int err = avcodec_open2(ctx.get(), codec, &opts);
+  av_dict_free(&opts);
+  if (err < 0) return Internal(std::string("video: cannot open ") + EncoderName(o.library) + ": " + AvError(err));
+  *out = std::move(ctx);
+  return OkStatus();
+}
+
+}  // namespace
+
+Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std::vector<uint8_t>* out) {
+  const int w = image.width(), h = image.height();
+  if (w <= 0 || h <= 0 || w > 8192 || h > 8192 || (w & 1) || (h & 1)) {
+    return InvalidArgument("video: image must be even-sized, 2..8192 per side, got " + Str(w) + "x" + Str(h));
+  }
+  if (!mask.empty() && (mask.width() != w || mask.height() != h)) {
+    return InvalidArgument("video: mask " + Str(mask.width()) + "x" + Str(mask.height()) + " != image " + Str(w) + "x" +
+                           Str(h));
+  }
+  Impl& s = *impl_;
+  if (s.ctx && (w != s.width || h != s.height)) {
+    return InvalidArgument("video: the stream's images are " + Str(s.width) + "x" + Str(s.height) + ", got " + Str(w) +
+                           "x" + Str(h));
+  }
+  if (!s.ctx) {
+    HOLO_RETURN_IF_ERROR(OpenEncoder(options_, w, h, &s.ctx));
+    s.width = w;
+    s.height = h;
+    s.frame.reset(av_frame_alloc());
+    s.packet.reset(av_packet_alloc());
+    if (!s.frame || !s.packet) return Internal("video: cannot allocate a frame");
+    s.frame->format = s.ctx->pix_fmt;
+    s.frame->width = w;
+    s.frame->height = h;
+    s.frame->color_range = AVCOL_RANGE_JPEG;
+    if (av_frame_get_buffer(s.frame.get(), 0) < 0) return Internal("video: cannot allocate frame planes");
+    since_keyframe_ = 0;
+    keyframe_requested_ = true;
+  }
+  AVFrame* f = s.frame.get();
+  if (av_frame_make_writable(f) < 0) return Internal("video: cannot make the frame writable");
+  if (options_.chroma_444) {
+    uint8_t* planes[3] = {f->data[0], f->data[1], f->data[2]};
+    const int strides[3] = {f->linesize[0], f->linesize[1], f->linesize[2]};
+    ConvertAndFill(image, mask, planes, strides);
+  } else {
+    s.cb.resize(size_t(w) * h);
+    s.cr.resize(size_t(w) * h);
+    uint8_t* planes[3] = {f->data[0], s.cb.data(), s.cr.data()};
+    const int strides[3] = {f->linesize[0], w, w};
+    ConvertAndFill(image, mask, planes, strides);
+    for (int y = 0; y < h / 2; ++y) {
+      const uint8_t* a = s.cb.data() + size_t(2 * y) * w;
+      const uint8_t* b = s.cr.data() + size_t(2 * y) * w;
+      uint8_t* u = f->data[1] + size_t(y) * f->linesize[1];
+      uint8_t* v = f->data[2] + size_t(y) * f->linesize[2];
+      for (int x = 0; x < w / 2; ++x) {
+        u[x] = static_cast<uint8_t>((a[2 * x] + a[2 * x + 1] + a[w + 2 * x] + a[w + 2 * x + 1] + 2) >> 2);
+        v[x] = static_cast<uint8_t>((b[2 * x] + b[2 * x + 1] + b[w + 2 * x] + b[w + 2 * x + 1] + 2) >> 2);
+      }
+    }
+  }
+  const bool force_key = keyframe_requested_ || since_keyframe_ >= options_.keyframe_interval;
+  f->pict_type = force_key ? AV_PICTURE_TYPE_I : AV_PICTURE_TYPE_NONE;
+  f->pts = frame_number_;
+  int err = avcodec_send_frame(s.ctx.get(), f);
+  if (err >= 0) err = avcodec_receive_packet(s.ctx.get(), s.packet.get());
+  if (err < 0) {
+    // Start over: the next image opens a fresh encoder and is a keyframe.
+    s.ctx.reset();
+    return Internal(std::string("video: ") + EncoderName(options_.library) +
+                    (err == AVERROR(EAGAIN) ? " held the frame back (not zero-latency)" : ": " + AvError(err)));
+  }
+  const bool key = (s.packet->flags & AV_PKT_FLAG_KEY) != 0;
+  if (force_key && !key) {
+    av_packet_unref(s.packet.get());
+    s.ctx.reset();
+    return Internal(std::string("video: ") + EncoderName(options_.library) + " ignored a keyframe request");
+  }
+  HOLO_RETURN_IF_ERROR(EncodeMask(mask, w, h, &s.rle, &s.zmask));
+  ByteWriter wr(out);
+  wr.U8(kColorCodecVideo);
+  wr.U8(static_cast<uint8_t>((key ? kVideoFlagKeyframe : 0) | (options_.chroma_444 ? kVideoFlagChroma444 : 0)));
+  wr.U16(static_cast<uint16_t>(w));
+  wr.U16(static_cast<uint16_t>(h));
+  wr.U8(static_cast<uint8_t>(options_.library));
+  wr.U32(frame_number_);
+  wr.Blob32(s.zmask);
+  wr.Blob32(std::span<const uint8_t>(s.packet->data, static_cast<size_t>(s.packet->size)));
+  av_packet_unref(s.packet.get());
+  ++frame_number_;
+  if (key) {
+    ++keyframes_;
+    since_keyframe_ = 1;
+    keyframe_requested_ = false;
+  } else {
+    ++since_keyframe_;
+  }
+  return OkStatus();
+}
+
+// ------------------------------------------------------------ decoder
+
+StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limits& limits) {
+  ByteReader r(blob);
+  VideoBlobInfo info;
+  uint8_t codec = 0, lib = 0;
+  uint16_t w = 0, h = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("v1.codec", &codec));
+  if (codec != kColorCodecVideo) return DataLoss("v1.codec: " + Str(codec) + " is not the video codec (4)");
+  HOLO_RETURN_IF_ERROR(r.U8("v1.flags", &info.flags));
+  if (info.flags & ~(kVideoFlagKeyframe | kVideoFlagChroma444)) {
+    return DataLoss("v1.flags: unknown bits in " + Str(info.flags));
+  }
+  HOLO_RETURN_IF_ERROR(r.U16("v1.width", &w));
+  HOLO_RETURN_IF_ERROR(r.U16("v1.height", &h));
+  if (w == 0 || h == 0 || (w & 1) || (h & 1) || w > limits.max_image_dim || h > limits.max_image_dim ||
+      uint64_t{w} * h > limits.max_image_pixels) {
+    return DataLoss("v1.size: " + Str(w) + "x" + Str(h) + " is not even or exceeds the limits");
+  }
+  info.width = w;
+  info.height = h;
+  HOLO_RETURN_IF_ERROR(r.U8("v1.library", &lib));
+  if (lib == 3) return UnsupportedVersion("v1.library: 3 (AV1) is reserved, not implemented");
+  if (lib < 1 || lib > 3) return UnsupportedVersion("v1.library: unknown video library " + Str(lib));
+  info.library = static_cast<VideoLibrary>(lib);
+  HOLO_RETURN_IF_ERROR(r.U32("v1.frame_number", &info.frame_number));
+  std::span<const uint8_t> zmask, video;
+  HOLO_RETURN_IF_ERROR(r.Blob32("v1.mask", r.remaining(), &zmask));
+  HOLO_RETURN_IF_ERROR(r.Blob32("v1.video", r.remaining(), &video));
+  HOLO_RETURN_IF_ERROR(r.ExpectEnd("v1 blob"));
+  if (video.empty()) return DataLoss("v1.video: empty picture");
+  info.mask_bytes = zmask.size();
+  info.video_bytes = video.size();
+  return info;
+}
+
+struct VideoDecoder::Impl {
+  CodecCtxPtr ctx;
+  FramePtr frame;
+  FramePtr extra;  // receives a second picture of a blob, if any (refused)
+  PacketPtr packet;
+  VideoLibrary library = VideoLibrary::kH264;
+  uint8_t chroma_flag = 0;
+  uint32_t width = 0, height = 0;
+  uint32_t last_frame = 0;
+  std::vector<uint8_t> rle;
+  std::vector<uint8_t> padded;
+};
+
+VideoDecoder::VideoDecoder() : impl_(std::make_unique<Impl>()) { QuietLibav(); }
+VideoDecoder::~VideoDecoder() = default;
+
+namespace {
+
+Status OpenDecoder(VideoLibrary lib, uint32_t w, uint32_t h, CodecCtxPtr* out) {
+  const AVCodec* codec = avcodec_find_decoder_by_name(DecoderName(lib));
+  if (!codec) return Unavailable(std::string("video: this libavcodec has no ") + DecoderName(lib) + " decoder");
+  CodecCtxPtr ctx(avcodec_alloc_context3(codec));
+  if (!ctx) return Internal("video: cannot allocate a decoder context");
+  ctx->thread_count = 1;
+  ctx->flags |= AV_CODEC_FLAG_LOW_DELAY;
+  ctx->err_recognition = AV_EF_EXPLODE;
+  // The library may not allocate much more than the header's picture (its
+  // buffers are padded and aligned beyond the picture, hence the margin; a
+  // picture of another size is refused after decoding).
+  ctx->max_pixels = (int64_t{w} + 128) * (int64_t{h} + 128);
+  ctx->width = static_cast<int>(w);
+  ctx->height = static_cast<int>(h);
+  const int err = avcodec_open2(ctx.get(), codec, nullptr);
+  if (err < 0) return Internal(std::string("video: cannot open ") + DecoderName(lib) + ": " + AvError(err));
+  *out = std::move(ctx);
+  return OkStatus();
+}
+
+}  // namespace
+
+Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits) {
+  Impl& s = *impl_;
+  const bool was_synced = synced_;
+  synced_ = false;  // until this blob decodes
+  auto info_or = ParseVideoBlob(blob, limits);
+  if (!info_or.ok()) return info_or.status();
+  const VideoBlobInfo& info = *info_or;
+  const uint8_t chroma = info.flags & kVideoFlagChroma444;
+  if (!info.keyframe()) {
+    if (!was_synced) return Unavailable("v1: delta frame " + Str(info.frame_number) + ": waiting for a keyframe");
+    if (info.frame_number != s.last_frame + 1) {
+      return Unavailable("v1: frame " + Str(info.frame_number) + " after " + Str(s.last_frame) +
+                         ": frames missing, waiting for a keyframe");
+    }
+    if (info.width != s.width || info.height != s.height || info.library != s.library || chroma != s.chroma_flag) {
+      return Unavailable("v1: delta frame " + Str(info.frame_number) +
+                         " changes the stream's size, library or chroma: waiting for a keyframe");
+    }
+  }
+  // Both blobs were bounds-checked by ParseVideoBlob: re-read their positions.
+  const std::span<const uint8_t> zmask = blob.subspan(kHeaderBytes + 4, info.mask_bytes);
+  const std::span<const uint8_t> video = blob.subspan(kHeaderBytes + 4 + info.mask_bytes + 4, info.video_bytes);
+  HOLO_RETURN_IF_ERROR(DecodeMask(zmask, static_cast<int>(info.width), static_cast<int>(info.height), &s.rle, &mask_));
+
+  if (info.keyframe()) {
+    if (!s.ctx || info.library != s.library || info.width != s.width || info.height != s.height ||
+        chroma != s.chroma_flag) {
+      s.ctx.reset();
+      HOLO_RETURN_IF_ERROR(OpenDecoder(info.library, info.width, info.height, &s.ctx));
+      s.library = info.library;
+      s.width = info.width;
+      s.height = info.height;
+      s.chroma_flag = chroma;
+    } else {
+      avcodec_flush_buffers(s.ctx.get());
+    }
+  }
+  if (!s.frame) s.frame.reset(av_frame_alloc());
+  if (!s.extra) s.extra.reset(av_frame_alloc());
+  if (!s.packet) s.packet.reset(av_packet_alloc());
+  if (!s.frame || !s.extra || !s.packet) return Internal("video: cannot allocate a frame");
+  // libavcodec reads up to AV_INPUT_BUFFER_PADDING_SIZE bytes past the data.
+  s.padded.assign(video.size() + AV_INPUT_BUFFER_PADDING_SIZE, 0);
+  std::memcpy(s.padded.data(), video.data(), video.size());
+  s.packet->data = s.padded.data();
+  s.packet->size = static_cast<int>(video.size());
+  int err = avcodec_send_packet(s.ctx.get(), s.packet.get());
+  s.packet->data = nullptr;
+  s.packet->size = 0;
+  if (err < 0) {
+    s.ctx.reset();
+    return DataLoss("v1.video: the " + std::string(DecoderName(info.library)) + " decoder refused the picture: " +
+                    AvError(err));
+  }
+  err = avcodec_receive_frame(s.ctx.get(), s.frame.get());
+  if (err < 0) {
+    s.ctx.reset();
+    return DataLoss("v1.video: no picture came out of the blob" + (err == AVERROR(EAGAIN) ? "" : ": " + AvError(err)));
+  }
+  AVFrame* f = s.frame.get();
+  const bool is444 = f->format == AV_PIX_FMT_YUV444P || f->format == AV_PIX_FMT_YUVJ444P;
+  const bool is420 = f->format == AV_PIX_FMT_YUV420P || f->format == AV_PIX_FMT_YUVJ420P;
+  Status bad;
+  if (f->width != static_cast<int>(info.width) || f->height != static_cast<int>(info.height)) {
+    bad = DataLoss("v1.video: picture is " + Str(f->width) + "x" + Str(f->height) + ", the header says " +
+                   Str(info.width) + "x" + Str(info.height));
+  } else if (!(chroma ? is444 : is420)) {
+    const char* name = av_get_pix_fmt_name(static_cast<AVPixelFormat>(f->format));
+    bad = DataLoss(std::string("v1.video: picture format ") + (name ? name : "?") + " does not match the header");
+  } else if (f->decode_error_flags != 0 || (f->flags & AV_FRAME_FLAG_CORRUPT)) {
+    bad = DataLoss("v1.video: the picture has decode errors");
+  }
+  // One blob is one picture: a second one would come out with the next blob.
+  if (bad.ok() && avcodec_receive_frame(s.ctx.get(), s.extra.get()) != AVERROR(EAGAIN)) {
+    av_frame_unref(s.extra.get());
+    bad = DataLoss("v1.video: the blob holds more than one picture");
+  }
+  if (!bad.ok()) {
+    av_frame_unref(f);
+    s.ctx.reset();
+    return bad;
+  }
+  const int w = static_cast<int>(info.width), h = static_cast<int>(info.height);
+  image_.Resize(w, h, 0);
+  const int shift = chroma ? 0 : 1;
+  for (int y = 0; y < h; ++y) {
+    const uint8_t* m = mask_.row(y);
+    const uint8_t* py = f->data[0] + size_t(y) * f->linesize[0];
+    const uint8_t* pu = f->data[1] + size_t(y >> shift) * f->linesize[1];
+    const uint8_t* pv = f->data[2] + size_t(y >> shift) * f->linesize[2];
+    uint8_t* dst = image_.row(y);
+    for (int x = 0; x < w; ++x) {
+      if (m[x]) YccToRgb(py[x], pu[x >> shift], pv[x >> shift], dst + size_t(x) * 3);
+    }
+  }
+  av_frame_unref(f);
+  s.last_frame = info.frame_number;
+  synced_ = true;
+  return OkStatus();
+}
+
+}  // namespace holo::protocol

@@ -1,0 +1,286 @@
+// V1 video colour (protocol/video_codec.h): round trips on a moving sequence,
+// keyframes (interval, on request, a viewer joining mid-stream, recovery
+// after loss), and refusal of malformed, truncated and bit-flipped blobs.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+#include "protocol/fuzz_video.h"
+#include "protocol/video_codec.h"
+
+namespace holo::protocol {
+namespace {
+
+// Frame `t` of a moving scene: a striped, checked ellipse (saturated colours,
+// like the studio's clothing) that moves and changes its shape a little every
+// frame, over a black background that the mask excludes.
+void Scene(int w, int h, int t, ImageRgb8* im, ImageGray8* mask) {
+  im->Resize(w, h, 0);
+  mask->Resize(w, h, 0);
+  const double cx = w * 0.45 + 2.0 * t, cy = h * 0.5 + std::sin(t * 0.3) * 3;
+  const double rx = w * 0.25 + (t % 5), ry = h * 0.35;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double dx = (x - cx) / rx, dy = (y - cy) / ry;
+      if (dx * dx + dy * dy > 1) continue;
+      mask->at(x, y) = 255;
+      const int u = x - 2 * t;  // the texture moves with the ellipse
+      const bool stripe = (u / 6) % 2 == 0, check = ((u / 10) + (y / 10)) % 2 == 0;
+      im->at(x, y, 0) = stripe ? 220 : 30;
+      im->at(x, y, 1) = check ? 40 : 200;
+      im->at(x, y, 2) = static_cast<uint8_t>(60 + (y * 150) / h);
+    }
+}
+
+double ForegroundPsnr(const ImageRgb8& a, const ImageRgb8& b, const ImageGray8& mask) {
+  double se = 0;
+  size_t n = 0;
+  for (int y = 0; y < a.height(); ++y)
+    for (int x = 0; x < a.width(); ++x) {
+      if (!mask.at(x, y)) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double d = double(a.at(x, y, c)) - b.at(x, y, c);
+        se += d * d;
+        ++n;
+      }
+    }
+  return se == 0 ? 99 : 10 * std::log10(255.0 * 255.0 * n / se);
+}
+
+std::vector<std::vector<uint8_t>> EncodeSequence(VideoEncoder& enc, int w, int h, int frames, int first = 0) {
+  std::vector<std::vector<uint8_t>> blobs;
+  ImageRgb8 im;
+  ImageGray8 mask;
+  for (int t = first; t < first + frames; ++t) {
+    Scene(w, h, t, &im, &mask);
+    blobs.emplace_back();
+    const Status s = enc.Encode(im, mask, &blobs.back());
+    EXPECT_TRUE(s.ok()) << s.ToString();
+  }
+  return blobs;
+}
+
+bool IsKey(const std::vector<uint8_t>& blob) {
+  auto info = ParseVideoBlob(blob);
+  return info.ok() && info->keyframe();
+}
+
+std::unique_ptr<VideoEncoder> MakeEncoder(VideoEncodeOptions o) {
+  auto e = VideoEncoder::Create(o);
+  EXPECT_TRUE(e.ok()) << e.status().ToString();
+  return e.ok() ? std::move(*e) : nullptr;
+}
+
+TEST(VideoCodec, RoundTripKeepsTheMaskExactAndTheColorClose) {
+  struct Case {
+    VideoLibrary lib;
+    bool c444;
+    double min_psnr;
+  };
+  // 4:2:0 loses the stripes' chroma edges; 4:4:4 keeps them.
+  for (const Case c : {Case{VideoLibrary::kH264, true, 34}, Case{VideoLibrary::kH264, false, 26},
+                       Case{VideoLibrary::kVp9, true, 30}, Case{VideoLibrary::kVp9, false, 24}}) {
+    SCOPED_TRACE(std::string(VideoLibraryName(c.lib)) + (c.c444 ? " 4:4:4" : " 4:2:0"));
+    VideoEncodeOptions o;
+    o.library = c.lib;
+    o.chroma_444 = c.c444;
+    auto enc = MakeEncoder(o);
+    ASSERT_TRUE(enc);
+    const auto blobs = EncodeSequence(*enc, 160, 120, 12);
+    VideoDecoder dec;
+    ImageRgb8 im;
+    ImageGray8 mask;
+    size_t key_bytes = 0, delta_bytes = 0;
+    for (int t = 0; t < 12; ++t) {
+      Scene(160, 120, t, &im, &mask);
+      const Status s = dec.Decode(blobs[t]);
+      ASSERT_TRUE(s.ok()) << "frame " << t << ": " << s.ToString();
+      ASSERT_TRUE(dec.mask() == mask) << "frame " << t;
+      EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), c.min_psnr) << "frame " << t;
+      for (int y = 0; y < 120; ++y)
+        for (int x = 0; x < 160; ++x)
+          if (!mask.at(x, y)) {
+            ASSERT_EQ(dec.image().at(x, y, 0) | dec.image().at(x, y, 1) | dec.image().at(x, y, 2), 0);
+          }
+      EXPECT_EQ(IsKey(blobs[t]), t == 0) << "frame " << t;
+      (t == 0 ? key_bytes : delta_bytes) += blobs[t].size();
+    }
+    // Inter-frame prediction: a delta frame costs well under a keyframe.
+    EXPECT_LT(delta_bytes / 11, key_bytes / 2);
+  }
+}
+
+TEST(VideoCodec, OptionsAreChecked) {
+  VideoEncodeOptions o;
+  o.keyframe_interval = 0;
+  EXPECT_EQ(VideoEncoder::Create(o).status().code(), StatusCode::kInvalidArgument);
+  o = {};
+  o.crf = 52;
+  EXPECT_EQ(VideoEncoder::Create(o).status().code(), StatusCode::kInvalidArgument);
+  o = {};
+  o.library = static_cast<VideoLibrary>(3);  // AV1: reserved
+  EXPECT_EQ(VideoEncoder::Create(o).status().code(), StatusCode::kInvalidArgument);
+  auto enc = MakeEncoder({});
+  ImageRgb8 im(161, 120);
+  ImageGray8 mask(161, 120);
+  std::vector<uint8_t> out;
+  EXPECT_EQ(enc->Encode(im, mask, &out).code(), StatusCode::kInvalidArgument);  // odd width
+  ImageRgb8 im2(160, 120);
+  ImageGray8 mask2(80, 60);
+  EXPECT_EQ(enc->Encode(im2, mask2, &out).code(), StatusCode::kInvalidArgument);
+  EXPECT_TRUE(out.empty());
+}
+
+TEST(VideoCodec, KeyframesComeAtTheIntervalAndOnRequest) {
+  VideoEncodeOptions o;
+  o.keyframe_interval = 5;
+  auto enc = MakeEncoder(o);
+  auto blobs = EncodeSequence(*enc, 96, 64, 12);
+  for (int t = 0; t < 12; ++t) EXPECT_EQ(IsKey(blobs[t]), t % 5 == 0) << "frame " << t;
+  enc->RequestKeyframe();
+  auto more = EncodeSequence(*enc, 96, 64, 2, 12);
+  EXPECT_TRUE(IsKey(more[0]));
+  EXPECT_FALSE(IsKey(more[1]));
+  EXPECT_EQ(enc->keyframes(), 4);
+}
+
+TEST(VideoCodec, ANewViewerDecodesWithinOneKeyframeInterval) {
+  VideoEncodeOptions o;
+  o.keyframe_interval = 5;
+  auto enc = MakeEncoder(o);
+  const auto blobs = EncodeSequence(*enc, 96, 64, 16);
+  VideoDecoder from_start;
+  std::vector<ImageRgb8> reference;
+  for (const auto& b : blobs) {
+    ASSERT_TRUE(from_start.Decode(b).ok());
+    reference.push_back(from_start.image());
+  }
+  VideoDecoder joiner;  // joins at frame 7
+  for (int t = 7; t < 16; ++t) {
+    const Status s = joiner.Decode(blobs[t]);
+    if (t < 10) {
+      EXPECT_EQ(s.code(), StatusCode::kUnavailable) << "frame " << t;
+      EXPECT_NE(s.message().find("keyframe"), std::string::npos) << s.message();
+      EXPECT_FALSE(joiner.synced());
+    } else {
+      ASSERT_TRUE(s.ok()) << "frame " << t << ": " << s.ToString();
+      EXPECT_TRUE(joiner.image() == reference[t]) << "frame " << t;  // the same picture as a viewer from the start
+    }
+  }
+}
+
+TEST(VideoCodec, ALostFrameRecoversAtTheRequestedKeyframe) {
+  auto enc = MakeEncoder({});  // interval 60: only a request brings a keyframe soon
+  auto blobs = EncodeSequence(*enc, 96, 64, 4);
+  VideoDecoder dec;
+  ASSERT_TRUE(dec.Decode(blobs[0]).ok());
+  ASSERT_TRUE(dec.Decode(blobs[1]).ok());
+  // blobs[2] is lost.
+  Status s = dec.Decode(blobs[3]);
+  EXPECT_EQ(s.code(), StatusCode::kUnavailable);
+  EXPECT_NE(s.message().find("missing"), std::string::npos) << s.message();
+  // Still out of sync: the next delta frame is refused as well.
+  auto next = EncodeSequence(*enc, 96, 64, 1, 4);
+  EXPECT_EQ(dec.Decode(next[0]).code(), StatusCode::kUnavailable);
+  enc->RequestKeyframe();
+  auto after = EncodeSequence(*enc, 96, 64, 2, 5);
+  ASSERT_TRUE(IsKey(after[0]));
+  ASSERT_TRUE(dec.Decode(after[0]).ok());
+  ASSERT_TRUE(dec.Decode(after[1]).ok());
+  ImageRgb8 im;
+  ImageGray8 mask;
+  Scene(96, 64, 6, &im, &mask);
+  EXPECT_TRUE(dec.mask() == mask);
+  EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 30);
+}
+
+TEST(VideoCodec, EveryPrefixIsRefused) {
+  auto enc = MakeEncoder({});
+  const auto blobs = EncodeSequence(*enc, 96, 64, 2);
+  for (const auto& blob : blobs) {
+    for (size_t n = 0; n < blob.size(); ++n) {
+      // A fresh buffer of exactly n bytes, so ASan sees any read past it.
+      std::vector<uint8_t> prefix(blob.begin(), blob.begin() + n);
+      VideoDecoder dec;
+      const Status s = dec.Decode(prefix);
+      ASSERT_EQ(s.code(), StatusCode::kDataLoss) << "prefix " << n << ": " << s.ToString();
+      ASSERT_FALSE(s.message().empty());
+    }
+  }
+}
+
+TEST(VideoCodec, MalformedHeadersAreRefusedWithAReason) {
+  auto enc = MakeEncoder({});
+  const auto blobs = EncodeSequence(*enc, 96, 64, 1);
+  const std::vector<uint8_t>& key = blobs[0];
+  auto refused = [](std::vector<uint8_t> b, StatusCode code, const char* field) {
+    VideoDecoder dec;
+    const Status s = dec.Decode(b);
+    EXPECT_EQ(s.code(), code) << s.ToString();
+    EXPECT_NE(s.message().find(field), std::string::npos) << s.message();
+  };
+  auto b = key;
+  b[0] = 2;
+  refused(b, StatusCode::kDataLoss, "v1.codec");
+  b = key;
+  b[1] |= 0x80;
+  refused(b, StatusCode::kDataLoss, "v1.flags");
+  b = key;
+  b[2] = 97;  // odd width
+  refused(b, StatusCode::kDataLoss, "v1.size");
+  b = key;
+  b[6] = 9;
+  refused(b, StatusCode::kUnsupportedVersion, "v1.library");
+  b[6] = 3;  // AV1, reserved
+  refused(b, StatusCode::kUnsupportedVersion, "reserved");
+  b = key;
+  b.push_back(0);
+  refused(b, StatusCode::kDataLoss, "v1 blob");
+  // The header says 48x32, the H.264 picture is 96x64 (and the mask rows are
+  // for 64 rows): refused before or by the library, never a bigger picture.
+  b = key;
+  b[2] = 48;
+  b[4] = 32;
+  refused(b, StatusCode::kDataLoss, "v1.");
+  Limits small;
+  small.max_image_pixels = 96 * 64 - 1;
+  VideoDecoder dec;
+  EXPECT_EQ(dec.Decode(key, small).code(), StatusCode::kDataLoss);
+}
+
+TEST(VideoCodec, BitFlipsNeverCrashAndDecodedPicturesKeepTheirSize) {
+  VideoEncodeOptions o;
+  o.keyframe_interval = 3;
+  auto enc = MakeEncoder(o);
+  const auto blobs = EncodeSequence(*enc, 96, 64, 2);
+  int refused = 0, decoded = 0;
+  for (size_t which = 0; which < blobs.size(); ++which) {
+    const auto& blob = blobs[which];
+    const size_t bits = blob.size() * 8;
+    for (size_t bit = 0; bit < bits; bit += (bit < 8 * 64 ? 1 : 7)) {
+      std::vector<uint8_t> b = blob;
+      b[bit / 8] ^= static_cast<uint8_t>(1u << (bit % 8));
+      VideoDecoder dec;
+      if (which == 1) {
+        ASSERT_TRUE(dec.Decode(blobs[0]).ok());
+      }
+      const Status s = dec.Decode(b);
+      if (s.ok()) {
+        ++decoded;
+        ASSERT_EQ(dec.image().width(), 96);
+        ASSERT_EQ(dec.mask().height(), 64);
+      } else {
+        ++refused;
+        ASSERT_FALSE(s.message().empty());
+      }
+      // The fuzz entry point runs the same input without crashing.
+      FuzzVideoDecoder(b.data(), b.size());
+    }
+  }
+  EXPECT_GT(refused, 0);
+}
+
+}  // namespace
+}  // namespace holo::protocol
