@@ -21,12 +21,12 @@ struct ProjectorCalibration {
   Eigen::Vector3f position = Eigen::Vector3f(0.04f, 0.0f, 0.0f);
   // Angular pitch of the speckle pattern's dot grid, milliradians (at the
   // optical axis); each grid cell holds at most one dot.
-  double dot_pitch_mrad = 3.0;
+  double dot_pitch_mrad = 8.0;
   // Fraction of grid cells that hold a dot, (0, 1].
   double dot_density = 0.5;
   // Irradiance of a dot on a surface 1 m away, facing the projector, as a
   // fraction of the IR sensor's full scale; falls off with distance².
-  double power_at_1m = 0.9;
+  double power_at_1m = 3.0;
 };
 struct StereoCalibration {
   bool enabled = false;  // false: the pod has no IR pair (depth arrives ready-made)

@@ -57,29 +57,41 @@ inline float Sym(uint64_t h, int shift) {
   return static_cast<float>((h >> shift) & 0x1fffff) * (2.0f / 2097152.0f) - 1.0f;
 }
 
-// One view's images and state.
+// One view's images and state. Image rows are padded by kPad replicated
+// pixels on each side, so a window's columns can be loaded without clamping.
+constexpr int kPad = 16;
 struct View {
-  int W = 0, H = 0;
-  float sign = -1.0f;         // the matching pixel in the other view is at x + sign·d
-  std::vector<float> I, G;    // intensity and x gradient, padded by one float
+  int W = 0, H = 0, stride = 0;
+  float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
+  std::vector<float> I, G;  // intensity and x gradient, padded rows
+  std::vector<float> wtot;  // per pixel: total support weight of its window
   std::vector<Plane> plane;
   std::vector<float> cost;
   std::vector<Plane> proposal;
   std::vector<uint8_t> has_proposal;
 
+  const float* IRow(int y) const { return I.data() + static_cast<size_t>(y) * stride + kPad; }
+  const float* GRow(int y) const { return G.data() + static_cast<size_t>(y) * stride + kPad; }
+
   void Load(const ImageGray8& img, float s) {
     W = img.width();
     H = img.height();
+    stride = W + 2 * kPad;
     sign = s;
     const size_t n = static_cast<size_t>(W) * H;
-    I.resize(n + 8);
-    G.resize(n + 8);
-    for (size_t i = 0; i < n; ++i) I[i] = img.data()[i];
+    I.resize(static_cast<size_t>(stride) * H + 8);
+    G.resize(I.size());
     for (int y = 0; y < H; ++y) {
-      const float* r = I.data() + static_cast<size_t>(y) * W;
-      float* g = G.data() + static_cast<size_t>(y) * W;
-      for (int x = 0; x < W; ++x) g[x] = 0.5f * (r[std::min(x + 1, W - 1)] - r[std::max(x - 1, 0)]);
+      const uint8_t* src = img.row(y);
+      float* r = I.data() + static_cast<size_t>(y) * stride;
+      float* g = G.data() + static_cast<size_t>(y) * stride;
+      for (int x = -kPad; x < W + kPad; ++x) r[x + kPad] = src[std::clamp(x, 0, W - 1)];
+      for (int x = -kPad; x < W + kPad; ++x) {
+        const int xc = std::clamp(x, 0, W - 1);
+        g[x + kPad] = 0.5f * (r[std::min(xc + 1, W - 1) + kPad] - r[std::max(xc - 1, 0) + kPad]);
+      }
     }
+    wtot.resize(n);
     plane.resize(n);
     cost.resize(n);
     proposal.resize(n);
@@ -96,20 +108,38 @@ struct CostParams {
 // The 8 column offsets of the window.
 inline int ColumnOffset(int lane, int step) { return step * lane - (7 * step) / 2; }
 
-float CostScalar(const View& self, const View& other, int x, int y, const Plane& p, const CostParams& cp) {
+inline float SupportWeight(float dI, float inv_gamma2) { return 1.0f / (1.0f + dI * dI * inv_gamma2); }
+
+// Total support weight of the window at (x, y) (depends on the view only).
+float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
+  const float centre = v.IRow(y)[x];
+  float w = 0;
+  for (int r = 0; r < cp.rows; ++r) {
+    const float* si = v.IRow(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1));
+    for (int l = 0; l < 8; ++l) w += SupportWeight(si[x + ColumnOffset(l, cp.step)] - centre, cp.inv_gamma2);
+  }
+  return w;
+}
+
+// Mean weighted cost of plane `p` at (x, y), or a value ≥ `bound` as soon as
+// the partial sum shows it cannot beat `bound`. Window columns beyond the
+// image read the replicated border.
+float CostScalar(const View& self, const View& other, int x, int y, const Plane& p, const CostParams& cp,
+                 float bound) {
   const int W = self.W, H = self.H;
-  const float centre = self.I[static_cast<size_t>(y) * W + x];
+  const float centre = self.IRow(y)[x];
   const float max_x = static_cast<float>(W - 1) - 1e-3f;
-  float sum = 0, wsum = 0;
+  const float limit = bound * self.wtot[static_cast<size_t>(y) * W + x];
+  float sum = 0;
   for (int r = 0; r < cp.rows; ++r) {
     const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
-    const float* si = self.I.data() + static_cast<size_t>(yy) * W;
-    const float* sg = self.G.data() + static_cast<size_t>(yy) * W;
-    const float* oi = other.I.data() + static_cast<size_t>(yy) * W;
-    const float* og = other.G.data() + static_cast<size_t>(yy) * W;
+    const float* si = self.IRow(yy);
+    const float* sg = self.GRow(yy);
+    const float* oi = other.IRow(yy);
+    const float* og = other.GRow(yy);
     const float row_d = p.b * static_cast<float>(yy) + p.c;
     for (int l = 0; l < 8; ++l) {
-      const int xx = std::clamp(x + ColumnOffset(l, cp.step), 0, W - 1);
+      const int xx = x + ColumnOffset(l, cp.step);
       const float xf = static_cast<float>(xx);
       const float d = p.a * xf + row_d;
       float xs = xf + self.sign * d;
@@ -118,28 +148,40 @@ float CostScalar(const View& self, const View& other, int x, int y, const Plane&
       const int i0 = static_cast<int>(xs);
       const float f = xs - static_cast<float>(i0);
       const float ov = oi[i0] + f * (oi[i0 + 1] - oi[i0]);
-      const float og_v = og[i0] + f * (og[i0 + 1] - og[i0]);
-      const float rho = inside ? (1.0f - cp.alpha) * std::min(std::abs(si[xx] - ov), cp.tau_c) +
-                                     cp.alpha * std::min(std::abs(sg[xx] - og_v), cp.tau_g)
-                               : cp.penalty;
-      const float dI = (si[xx] - centre);
-      const float w = 1.0f / (1.0f + dI * dI * cp.inv_gamma2);
-      sum += w * rho;
-      wsum += w;
+      float rho = (1.0f - cp.alpha) * std::min(std::abs(si[xx] - ov), cp.tau_c);
+      if (cp.alpha > 0.0f) {
+        const float og_v = og[i0] + f * (og[i0 + 1] - og[i0]);
+        rho += cp.alpha * std::min(std::abs(sg[xx] - og_v), cp.tau_g);
+      }
+      if (!inside) rho = cp.penalty;
+      sum += SupportWeight(si[xx] - centre, cp.inv_gamma2) * rho;
     }
+    if (sum >= limit) return bound;
   }
-  return sum / wsum;
+  return sum / self.wtot[static_cast<size_t>(y) * W + x];
 }
 
 #ifdef HOLO_PM_X86
+// The 8 window columns x + step·l − (7·step)/2 of a padded row.
+__attribute__((target("avx2,fma"))) inline __m256 LoadColumns(const float* row, int x, int step, __m256i idx) {
+  if (step == 1) return _mm256_loadu_ps(row + x - 3);
+  if (step == 2) {
+    // Even elements of row[x-7 .. x+8]: shuffle two loads, then restore lane order.
+    const __m256 v0 = _mm256_loadu_ps(row + x - 7), v1 = _mm256_loadu_ps(row + x + 1);
+    const __m256 e = _mm256_shuffle_ps(v0, v1, _MM_SHUFFLE(2, 0, 2, 0));
+    return _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(e), _MM_SHUFFLE(3, 1, 2, 0)));
+  }
+  return _mm256_i32gather_ps(row, idx, 4);
+}
+
+template <bool kGradient>
 __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View& other, int x, int y, const Plane& p,
-                                                    const CostParams& cp) {
+                                                    const CostParams& cp, float bound) {
   const int W = self.W, H = self.H;
-  const __m256 centre = _mm256_set1_ps(self.I[static_cast<size_t>(y) * W + x]);
+  const __m256 centre = _mm256_set1_ps(self.IRow(y)[x]);
   const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
-                                _mm256_set1_epi32(x - (7 * cp.step) / 2));
-  xx = _mm256_min_epi32(_mm256_max_epi32(xx, _mm256_setzero_si256()), _mm256_set1_epi32(W - 1));
+  const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
+                                      _mm256_set1_epi32(x - (7 * cp.step) / 2));
   const __m256 xf = _mm256_cvtepi32_ps(xx);
   const __m256 a = _mm256_set1_ps(p.a), sign = _mm256_set1_ps(self.sign);
   const __m256 zero = _mm256_setzero_ps(), max_x = _mm256_set1_ps(static_cast<float>(W - 1) - 1e-3f);
@@ -149,16 +191,16 @@ __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View&
   const __m256 one = _mm256_set1_ps(1.0f);
   const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256i one_i = _mm256_set1_epi32(1);
-  // a·x + sign·(...) part that does not change with the row.
+  const float wt = self.wtot[static_cast<size_t>(y) * W + x];
+  const float limit = bound * wt;
+  // x + sign·a·x: the part of the sample position that does not change with the row.
   const __m256 xs_base = _mm256_fmadd_ps(sign, _mm256_mul_ps(a, xf), xf);
-  __m256 sum = zero, wsum = zero;
+  __m256 sum = zero;
+  float total = 0;
   for (int r = 0; r < cp.rows; ++r) {
     const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
-    const size_t ro = static_cast<size_t>(yy) * W;
-    const float* si = self.I.data() + ro;
-    const float* sg = self.G.data() + ro;
-    const float* oi = other.I.data() + ro;
-    const float* og = other.G.data() + ro;
+    const float* si = self.IRow(yy);
+    const float* oi = other.IRow(yy);
     const __m256 row_d = _mm256_set1_ps(self.sign * (p.b * static_cast<float>(yy) + p.c));
     __m256 xs = _mm256_add_ps(xs_base, row_d);
     const __m256 inside = _mm256_and_ps(_mm256_cmp_ps(xs, zero, _CMP_GE_OQ), _mm256_cmp_ps(xs, max_x, _CMP_LE_OQ));
@@ -167,27 +209,37 @@ __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View&
     const __m256 f = _mm256_sub_ps(xs, _mm256_cvtepi32_ps(i0));
     const __m256i i1 = _mm256_add_epi32(i0, one_i);
     const __m256 o0 = _mm256_i32gather_ps(oi, i0, 4), o1 = _mm256_i32gather_ps(oi, i1, 4);
-    const __m256 g0 = _mm256_i32gather_ps(og, i0, 4), g1 = _mm256_i32gather_ps(og, i1, 4);
-    const __m256 sv = _mm256_i32gather_ps(si, xx, 4), sgv = _mm256_i32gather_ps(sg, xx, 4);
+    const __m256 sv = LoadColumns(si, x, cp.step, xx);
     const __m256 ov = _mm256_fmadd_ps(f, _mm256_sub_ps(o1, o0), o0);
-    const __m256 ogv = _mm256_fmadd_ps(f, _mm256_sub_ps(g1, g0), g0);
-    const __m256 ec = _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sv, ov), abs_mask), tau_c);
-    const __m256 eg = _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sgv, ogv), abs_mask), tau_g);
-    const __m256 rho = _mm256_blendv_ps(penalty, _mm256_fmadd_ps(wc, ec, _mm256_mul_ps(wg, eg)), inside);
+    __m256 rho = _mm256_mul_ps(wc, _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sv, ov), abs_mask), tau_c));
+    if constexpr (kGradient) {
+      const float* sg = self.GRow(yy);
+      const float* og = other.GRow(yy);
+      const __m256 g0 = _mm256_i32gather_ps(og, i0, 4), g1 = _mm256_i32gather_ps(og, i1, 4);
+      const __m256 sgv = LoadColumns(sg, x, cp.step, xx);
+      const __m256 ogv = _mm256_fmadd_ps(f, _mm256_sub_ps(g1, g0), g0);
+      const __m256 eg = _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sgv, ogv), abs_mask), tau_g);
+      rho = _mm256_fmadd_ps(wg, eg, rho);
+    }
+    rho = _mm256_blendv_ps(penalty, rho, inside);
     const __m256 dI = _mm256_sub_ps(sv, centre);
     const __m256 w = _mm256_div_ps(one, _mm256_fmadd_ps(_mm256_mul_ps(dI, dI), inv_g2, one));
     sum = _mm256_fmadd_ps(w, rho, sum);
-    wsum = _mm256_add_ps(wsum, w);
+    if (r >= 1) {
+      // Horizontal sum, to stop early when this plane cannot win.
+      const __m128 h = _mm_add_ps(_mm256_castps256_ps128(sum), _mm256_extractf128_ps(sum, 1));
+      const __m128 h2 = _mm_add_ps(h, _mm_movehl_ps(h, h));
+      total = _mm_cvtss_f32(_mm_add_ss(h2, _mm_shuffle_ps(h2, h2, 1)));
+      if (total >= limit) return bound;
+    }
   }
-  alignas(32) float s[8], ws[8];
-  _mm256_store_ps(s, sum);
-  _mm256_store_ps(ws, wsum);
-  float ts = 0, tw = 0;
-  for (int i = 0; i < 8; ++i) {
-    ts += s[i];
-    tw += ws[i];
+  if (cp.rows == 1) {
+    alignas(32) float t[8];
+    _mm256_store_ps(t, sum);
+    total = 0;
+    for (float v : t) total += v;
   }
-  return ts / tw;
+  return total / wt;
 }
 #endif
 
@@ -244,12 +296,15 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   cp.inv_gamma2 = 1.0f / (o.gamma * o.gamma);
   cp.penalty = (1.0f - o.alpha) * o.tau_color + o.alpha * o.tau_grad;
   const bool avx2 = im.avx2;
-  auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p) {
+  const bool gradient = o.alpha > 0.0f;
+  auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, float bound) {
 #ifdef HOLO_PM_X86
-    if (avx2) return CostAvx2(self, other, x, y, p, cp);
+    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, cp, bound)
+                              : CostAvx2<false>(self, other, x, y, p, cp, bound);
 #endif
-    return CostScalar(self, other, x, y, p, cp);
+    return CostScalar(self, other, x, y, p, cp, bound);
   };
+  constexpr float kNoBound = 3.0e38f;
   const float dmin = o.min_disparity, dmax = o.max_disparity, range = dmax - dmin;
   const float min_nz = o.min_normal_z;
   // Plane through disparity `d` at (x, y) with unit normal n (nz ≥ min_nz).
@@ -286,7 +341,8 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         float nz = std::sqrt(std::max(0.0f, 1.0f - nx * nx - ny * ny));
         const size_t i = static_cast<size_t>(y) * W + x;
         v.plane[i] = make_plane(static_cast<float>(x), static_cast<float>(y), d, nx, ny, nz);
-        v.cost[i] = cost(v, other, x, y, v.plane[i]);
+        v.wtot[i] = WindowWeight(v, x, y, cp);
+        v.cost[i] = cost(v, other, x, y, v.plane[i], kNoBound);
       }
     });
   };
@@ -296,7 +352,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   auto try_plane = [&](View& v, const View& other, int x, int y, const Plane& p) {
     if (!valid_at(p, static_cast<float>(x), static_cast<float>(y))) return;
     const size_t i = static_cast<size_t>(y) * W + x;
-    const float c = cost(v, other, x, y, p);
+    const float c = cost(v, other, x, y, p, v.cost[i]);
     if (c < v.cost[i]) {
       v.cost[i] = c;
       v.plane[i] = p;

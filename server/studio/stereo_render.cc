@@ -48,7 +48,7 @@ struct SpecklePattern {
     size = cells * kTexelsPerCell;
     texels_per_tan = static_cast<float>(size) / (2.0f * kTanRange);
     v.assign(static_cast<size_t>(size) * size, 0.0f);
-    const float sigma = 0.3f * kTexelsPerCell, inv2s2 = 1.0f / (2.0f * sigma * sigma);
+    const float sigma = 0.25f * kTexelsPerCell, inv2s2 = 1.0f / (2.0f * sigma * sigma);
     const uint64_t threshold = static_cast<uint64_t>(density * 4294967296.0);
     for (int cy = 0; cy < cells; ++cy) {
       for (int cx = 0; cx < cells; ++cx) {
