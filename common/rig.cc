@@ -18,11 +18,36 @@ bool PodCalibration::IsRegistered() const {
   return same_k && color_from_depth.matrix().isApprox(Eigen::Matrix4f::Identity(), 1e-6f);
 }
 
+CameraModel PodCalibration::RightIrCamera() const {
+  Pose left_from_right = Pose::Identity();
+  left_from_right.translation() = Eigen::Vector3f(static_cast<float>(stereo.baseline_m), 0.0f, 0.0f);
+  return {stereo.ir, world_from_depth * left_from_right};
+}
+
+Status StereoCalibration::Check() const {
+  if (!enabled) return OkStatus();
+  HOLO_RETURN_IF_ERROR(ir.Check().WithContext("ir"));
+  if (ir.HasDistortion()) return InvalidArgument("ir.distortion must be zero: the IR pair is rectified");
+  if (!(baseline_m >= 0.01 && baseline_m <= 1.0))
+    return InvalidArgument("baseline_m must be in [0.01, 1], got " + FormatNumber(baseline_m));
+  if (!(projector.position.allFinite() && projector.position.norm() <= 1.0f))
+    return InvalidArgument("projector.position must be finite and within 1 m of the left IR camera");
+  if (!(projector.dot_pitch_mrad >= 0.2 && projector.dot_pitch_mrad <= 50.0))
+    return InvalidArgument("projector.dot_pitch_mrad must be in [0.2, 50], got " +
+                           FormatNumber(projector.dot_pitch_mrad));
+  if (!(projector.dot_density > 0.0 && projector.dot_density <= 1.0))
+    return InvalidArgument("projector.dot_density must be in (0, 1], got " + FormatNumber(projector.dot_density));
+  if (!(projector.power_at_1m > 0.0 && projector.power_at_1m <= 100.0))
+    return InvalidArgument("projector.power_at_1m must be in (0, 100], got " + FormatNumber(projector.power_at_1m));
+  return OkStatus();
+}
+
 Rig Rig::Scaled(double s) const {
   Rig out = *this;
   for (auto& pod : out.pods) {
     pod.depth = pod.depth.Scaled(s);
     pod.color = pod.color.Scaled(s);
+    if (pod.stereo.enabled) pod.stereo.ir = pod.stereo.ir.Scaled(s);
   }
   return out;
 }
@@ -36,6 +61,7 @@ Status Rig::Check() const {
       return InvalidArgument(at + ".id: pods must be numbered 0..N-1 in order, got " + std::to_string(pods[i].id));
     HOLO_RETURN_IF_ERROR(pods[i].depth.Check().WithContext(at + ".depth"));
     HOLO_RETURN_IF_ERROR(pods[i].color.Check().WithContext(at + ".color"));
+    HOLO_RETURN_IF_ERROR(pods[i].stereo.Check().WithContext(at + ".stereo"));
   }
   return OkStatus();
 }
@@ -159,6 +185,38 @@ Status ParsePose(const YAML::Node& n, const std::string& key, Pose* pose) {
   return OkStatus();
 }
 
+// Optional `stereo:` block of a pod; `depth` is the default IR intrinsics.
+Status ParseStereo(const YAML::Node& n, const std::string& key, const Intrinsics& depth, StereoCalibration* st) {
+  if (!n.IsMap()) return KeyError(key, "must be a map with baseline_m (and optionally ir, projector)");
+  st->enabled = true;
+  st->ir = depth;
+  if (n["ir"].IsDefined()) HOLO_RETURN_IF_ERROR(ParseIntrinsics(n["ir"], key + ".ir", &st->ir));
+  if (st->ir.HasDistortion()) return KeyError(key + ".ir.distortion", "must be zero: the IR pair is rectified");
+  HOLO_RETURN_IF_ERROR(GetDouble(n, "baseline_m", key + ".baseline_m", &st->baseline_m));
+  const YAML::Node pj = n["projector"];
+  if (pj.IsDefined() && !pj.IsNull()) {
+    if (!pj.IsMap()) return KeyError(key + ".projector", "must be a map");
+    if (pj["position"].IsDefined()) {
+      std::vector<double> p;
+      HOLO_RETURN_IF_ERROR(GetVector(pj, "position", key + ".projector.position", 3, &p));
+      st->projector.position = Eigen::Vector3f(p[0], p[1], p[2]);
+    }
+    HOLO_RETURN_IF_ERROR(
+        GetDouble(pj, "dot_pitch_mrad", key + ".projector.dot_pitch_mrad", &st->projector.dot_pitch_mrad, false));
+    HOLO_RETURN_IF_ERROR(
+        GetDouble(pj, "dot_density", key + ".projector.dot_density", &st->projector.dot_density, false));
+    HOLO_RETURN_IF_ERROR(
+        GetDouble(pj, "power_at_1m", key + ".projector.power_at_1m", &st->projector.power_at_1m, false));
+  }
+  const Status s = st->Check();
+  if (!s.ok()) {
+    const std::string& m = s.message();
+    const size_t sp = m.find(' ');
+    return KeyError(key + "." + m.substr(0, sp), m.substr(sp + 1));
+  }
+  return OkStatus();
+}
+
 }  // namespace
 
 StatusOr<Rig> ParseRigYaml(const std::string& yaml_text, const std::string& source_name) {
@@ -198,6 +256,10 @@ StatusOr<Rig> ParseRigYaml(const std::string& yaml_text, const std::string& sour
     }
     s = ParsePose(p["world_from_depth"], key + ".world_from_depth", &pod.world_from_depth);
     if (!s.ok()) return fail(s);
+    if (p["stereo"].IsDefined() && !p["stereo"].IsNull()) {
+      s = ParseStereo(p["stereo"], key + ".stereo", pod.depth, &pod.stereo);
+      if (!s.ok()) return fail(s);
+    }
     rig.pods.push_back(pod);
   }
   return rig;
@@ -232,6 +294,15 @@ std::string RigToYaml(const Rig& rig) {
     EmitIntrinsics(o, "color", pod.color);
     EmitPose(o, "color_from_depth", pod.color_from_depth);
     EmitPose(o, "world_from_depth", pod.world_from_depth);
+    if (pod.stereo.enabled) {
+      const StereoCalibration& st = pod.stereo;
+      const Eigen::Vector3f& pp = st.projector.position;
+      o << "    stereo:\n      baseline_m: " << st.baseline_m << "\n  ";
+      EmitIntrinsics(o, "ir", st.ir);
+      o << "      projector: {position: [" << pp.x() << ", " << pp.y() << ", " << pp.z()
+        << "], dot_pitch_mrad: " << st.projector.dot_pitch_mrad << ", dot_density: " << st.projector.dot_density
+        << ", power_at_1m: " << st.projector.power_at_1m << "}\n";
+    }
   }
   return o.str();
 }

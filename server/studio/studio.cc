@@ -171,6 +171,12 @@ void SyntheticStudio::RenderView(int64_t frame_index, const CameraModel& camera,
   studio::WriteTruth(view, s, depth, mask);
 }
 
+void SyntheticStudio::WithPosedFrame(int64_t frame_index, const PosedFrameFn& fn) {
+  Impl& im = *impl_;
+  im.PoseFrame(frame_index, options_.fps, &im.frame, &im.pool);
+  fn(im.scene.tmpl(), im.frame, &im.pool);
+}
+
 Status SyntheticStudio::Next(RgbdFrameSet* out) {
   RenderFrame(next_frame_, out, nullptr);
   ++next_frame_;

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -19,6 +20,12 @@
 #include "server/capture/frame_source.h"
 
 namespace holo {
+
+class WorkerPool;
+namespace studio {
+struct SceneTemplate;
+struct FrameScene;
+}  // namespace studio
 
 struct DepthNoiseOptions {
   // Axial noise σ at 1 m, millimetres; σ grows with z² (σ(z) = σ1·z²).
@@ -102,6 +109,13 @@ class SyntheticStudio final : public FrameSource {
   Status Seek(int64_t index) override;
 
   const StudioOptions& options() const { return options_; }
+
+  // For renderers built on the studio (server/studio/stereo_render.h): poses
+  // frame `frame_index` (cached between calls) and calls `fn` with the posed
+  // scene and the studio's worker pool, on the calling thread.
+  using PosedFrameFn =
+      std::function<void(const studio::SceneTemplate& tmpl, const studio::FrameScene& scene, WorkerPool* pool)>;
+  void WithPosedFrame(int64_t frame_index, const PosedFrameFn& fn);
 
  private:
   struct Impl;

@@ -28,6 +28,7 @@
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
 #include "server/record/replay_command.h"
+#include "server/stereo/stereo_depth.h"
 #include "server/studio/studio.h"
 #include "server/studio/workloads.h"
 #include "server/texture/mesh_renderer.h"
@@ -94,6 +95,10 @@ int main(int argc, char** argv) {
                  "empty-room frames for segmentation and colour calibration: dataset:PATH "
                  "(default for the synthetic source: the studio's empty room)");
   app.add_option("--masks", masks_name, "segment | truth (synthetic only) | dataset | none")->capture_default_str();
+  std::string depth_mode = "direct";
+  app.add_option("--depth", depth_mode, "synthetic source: direct (the studio's depth sensor model) or stereo "
+                 "(PatchMatch on each pod's IR pair, docs/stereo.md)")->check(CLI::IsMember({"direct", "stereo"}))
+      ->capture_default_str();
   app.add_option("-n,--frames", frames, "frames to process (-1: until the source ends)")->capture_default_str();
   app.add_option("--voxel-mm", voxel_mm, "TSDF voxel size, mm (default: the workload's, 10 for datasets)");
   app.add_option("--trunc-voxels", trunc_voxels, "TSDF truncation, voxels")->capture_default_str();
@@ -307,6 +312,15 @@ int main(int argc, char** argv) {
       return Fail(holo::InvalidArgument("--masks truth needs --source synthetic"));
   } else {
     return Fail(holo::InvalidArgument("--source must be 'synthetic' or 'dataset:PATH', got '" + source_spec + "'"));
+  }
+  // Stereo depth: the studio's IR pairs through PatchMatch replace its depth.
+  std::unique_ptr<holo::FrameSource> stereo_source;
+  if (depth_mode == "stereo") {
+    if (!studio) return Fail(holo::InvalidArgument("--depth stereo needs --source synthetic"));
+    auto st = holo::StereoStudioSource::Create(studio.get(), holo::StereoDepthOptions{});
+    if (!st.ok()) return Fail(st.status());
+    stereo_source = std::move(*st);
+    source = stereo_source.get();
   }
   if (!background_spec.empty()) {
     if (background_spec.rfind("dataset:", 0) != 0)

@@ -1,0 +1,379 @@
+// holoport-bench stereo: slanted-plane PatchMatch against OpenCV's StereoSGBM
+// (the peer, same run, same threads) on the studio's active-stereo pairs and
+// on the Middlebury 2006 "Aloe" pair; and the fused mesh from stereo depth
+// against the fused mesh from the studio's direct depth.
+//
+// Figures per method (patchmatch | sgbm) and data (studio | middlebury):
+// bad1_pct / bad2_pct (pixels with ground truth whose disparity is off by
+// more than 1 / 2 px or missing), depth_err_mm (mean |z − z_true| where the
+// method gives a disparity), density_pct, ms and cpu_ms per stereo pair
+// (median of --repeats), and on the studio ms per frame set (all pods).
+//
+// Options: --middlebury DIR (default ../shared/data/stereo next to the
+// repository: a folder holding aloeL.jpg, aloeR.jpg, aloeGT.png, or a parent
+// of one), --threads N (2), --baseline M (0.15), --iterations N (PatchMatch),
+// --fuse-frames N (2; 0 skips the fused-mesh comparison), --contact-sheet PNG.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "bench.h"
+#include "common/image_io.h"
+#include "common/metrics/mesh_distance.h"
+#include "common/visualize.h"
+#include "server/fusion/tsdf.h"
+#include "server/stereo/patchmatch.h"
+#include "server/stereo/stereo_depth.h"
+#include "server/studio/stereo_render.h"
+#include "server/studio/workloads.h"
+
+namespace holo::bench {
+namespace {
+
+struct Scores {
+  double bad1 = 0, bad2 = 0, depth_err_mm = 0, density = 0;
+  size_t n = 0, bad1_n = 0, bad2_n = 0, valid_n = 0, depth_n = 0;
+  double depth_sum = 0;
+  void Add(float est, float truth, double fb_mm, double dmin_offset) {
+    if (!(truth > 0.0f)) return;
+    ++n;
+    const bool ok = est > 0.0f;
+    const float err = ok ? std::abs(est - truth) : 1e9f;
+    bad1_n += err > 1.0f;
+    bad2_n += err > 2.0f;
+    if (!ok) return;
+    ++valid_n;
+    depth_sum += std::abs(fb_mm / (est + dmin_offset) - fb_mm / (truth + dmin_offset));
+    ++depth_n;
+  }
+  void Finish() {
+    bad1 = 100.0 * bad1_n / std::max<size_t>(1, n);
+    bad2 = 100.0 * bad2_n / std::max<size_t>(1, n);
+    density = 100.0 * valid_n / std::max<size_t>(1, n);
+    depth_err_mm = depth_sum / std::max<size_t>(1, depth_n);
+  }
+};
+
+struct Timer {
+  std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
+  double cpu0 = ProcessCpuMs();
+  double Ms() const { return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(); }
+  double CpuMs() const { return ProcessCpuMs() - cpu0; }
+};
+
+// OpenCV's semi-global matcher with the settings its documentation suggests
+// for 8-bit grey images; disparity in pixels, 0 where it gives none.
+class Sgbm {
+ public:
+  Sgbm(float min_d, float max_d) : min_d_(static_cast<int>(std::floor(min_d))) {
+    const int num = std::max(16, static_cast<int>(std::ceil((max_d - min_d_) / 16.0)) * 16);
+    const int bs = 5;
+    sgbm_ = cv::StereoSGBM::create(min_d_, num, bs, 8 * bs * bs, 32 * bs * bs, 1, 0, 10, 100, 2,
+                                   cv::StereoSGBM::MODE_SGBM_3WAY);
+  }
+  void Compute(const ImageGray8& l, const ImageGray8& r, ImageFloat* out) {
+    const cv::Mat lm(l.height(), l.width(), CV_8UC1, const_cast<uint8_t*>(l.data()));
+    const cv::Mat rm(r.height(), r.width(), CV_8UC1, const_cast<uint8_t*>(r.data()));
+    sgbm_->compute(lm, rm, disp_);
+    out->Resize(l.width(), l.height());
+    for (int y = 0; y < l.height(); ++y) {
+      const int16_t* s = disp_.ptr<int16_t>(y);
+      float* o = out->row(y);
+      for (int x = 0; x < l.width(); ++x) o[x] = s[x] < min_d_ * 16 ? 0.0f : std::max(0.0f, s[x] / 16.0f);
+    }
+  }
+
+ private:
+  int min_d_;
+  cv::Ptr<cv::StereoSGBM> sgbm_;
+  cv::Mat disp_;
+};
+
+struct MethodRun {
+  Scores scores;
+  std::vector<double> ms, cpu_ms;  // per pair
+  std::vector<double> set_ms;      // per frame set (studio)
+};
+
+void EmitMethod(const std::string& wl, const std::string& method, const std::string& data, MethodRun& r,
+                const std::map<std::string, std::string>& extra) {
+  r.scores.Finish();
+  auto q = extra;
+  q["method"] = method;
+  q["data"] = data;
+  q["content"] = "truth";
+  EmitFigure("stereo", wl, "bad2_pct", r.scores.bad2, "%", q);
+  EmitFigure("stereo", wl, "bad1_pct", r.scores.bad1, "%", q);
+  EmitFigure("stereo", wl, "depth_err_mm", r.scores.depth_err_mm, "mm", q);
+  EmitFigure("stereo", wl, "density_pct", r.scores.density, "%", q);
+  EmitFigure("stereo", wl, "ms", Median(r.ms), "ms", q);
+  EmitFigure("stereo", wl, "cpu_ms", Median(r.cpu_ms), "ms", q);
+  if (!r.set_ms.empty()) EmitFigure("stereo", wl, "ms_per_frame_set", Median(r.set_ms), "ms", q);
+}
+
+ImageRgb8 Gray(const ImageGray8& g) {
+  ImageRgb8 o(g.width(), g.height());
+  for (size_t i = 0; i < g.num_pixels(); ++i) o.data()[3 * i] = o.data()[3 * i + 1] = o.data()[3 * i + 2] = g.data()[i];
+  return o;
+}
+
+// Error map: grey = within 1 px, yellow = 1..2 px off, red = more than 2 px off, black = missing.
+ImageRgb8 ErrorMap(const ImageFloat& est, const ImageFloat& truth) {
+  ImageRgb8 o(est.width(), est.height());
+  for (size_t i = 0; i < est.num_pixels(); ++i) {
+    uint8_t* p = o.data() + 3 * i;
+    const float t = truth.data()[i], e = est.data()[i];
+    if (!(t > 0.0f)) { p[0] = p[1] = p[2] = 40; continue; }
+    if (!(e > 0.0f)) { p[0] = p[1] = p[2] = 0; continue; }
+    const float err = std::abs(e - t);
+    if (err <= 1.0f) { p[0] = p[1] = p[2] = 170; } else if (err <= 2.0f) { p[0] = 230; p[1] = 200; p[2] = 0; }
+    else { p[0] = 220; p[1] = 30; p[2] = 30; }
+  }
+  return o;
+}
+
+ImageDepth16 DepthOf(const ImageFloat& disp, double fb_mm) {
+  ImageDepth16 d(disp.width(), disp.height());
+  for (size_t i = 0; i < disp.num_pixels(); ++i) {
+    const float v = disp.data()[i];
+    d.data()[i] = v > 0.0f ? static_cast<uint16_t>(std::min(65535.0, std::lround(fb_mm / v) * 1.0)) : 0;
+  }
+  return d;
+}
+
+int Fail(const std::string& m) {
+  std::fprintf(stderr, "holoport-bench stereo: %s\n", m.c_str());
+  return 2;
+}
+
+int RunStereoBench(const BenchArgs& args) {
+  std::string middlebury = std::string(HOLO_SOURCE_DIR) + "/../shared/data/stereo";
+  std::string sheet_path;
+  int threads = 2, iterations = -1, fuse_frames = 2;
+  double baseline = kDefaultStereoBaselineM;
+  for (size_t i = 0; i < args.extra.size(); ++i) {
+    const std::string& a = args.extra[i];
+    auto value = [&](std::string* out) {
+      if (i + 1 >= args.extra.size()) return false;
+      *out = args.extra[++i];
+      return true;
+    };
+    std::string v;
+    if (a == "--middlebury" && value(&v)) middlebury = v;
+    else if (a == "--contact-sheet" && value(&v)) sheet_path = v;
+    else if (a == "--threads" && value(&v)) threads = std::atoi(v.c_str());
+    else if (a == "--iterations" && value(&v)) iterations = std::atoi(v.c_str());
+    else if (a == "--fuse-frames" && value(&v)) fuse_frames = std::atoi(v.c_str());
+    else if (a == "--baseline" && value(&v)) baseline = std::atof(v.c_str());
+    else return Fail("unknown option or missing value: " + a +
+                     " (known: --middlebury DIR, --threads N, --iterations N, --fuse-frames N, --baseline M, "
+                     "--contact-sheet PNG)");
+  }
+  if (threads < 1 || threads > 64) return Fail("--threads must be in [1, 64]");
+  if (fuse_frames < 0 || fuse_frames > 100) return Fail("--fuse-frames must be in [0, 100]");
+  auto workload = GetWorkload(args.workload);
+  if (!workload.ok()) return Fail(workload.status().message());
+  const std::string& wl = workload->name;
+  cv::setNumThreads(threads);
+
+  // ---- Studio pairs -------------------------------------------------------
+  const Rig rig = WithStereoPods(workload->rig, baseline);
+  if (Status s = rig.Check(); !s.ok()) return Fail(s.ToString());
+  StudioOptions so = workload->studio;
+  so.threads = threads;
+  auto studio = SyntheticStudio::Create(rig, so);
+  if (!studio.ok()) return Fail(studio.status().ToString());
+  StereoDepthOptions sdo;
+  sdo.patchmatch.threads = threads;
+  if (iterations > 0) sdo.patchmatch.iterations = iterations;
+  auto source = StereoStudioSource::Create(studio->get(), sdo);
+  if (!source.ok()) return Fail(source.status().ToString());
+  auto renderer = StereoStudioRenderer::Create(studio->get(), rig, sdo.render);
+  if (!renderer.ok()) return Fail(renderer.status().ToString());
+  PatchMatchOptions pmo = sdo.patchmatch;
+  StereoSearchRange(rig.pods[0], sdo.near_m, sdo.far_m, &pmo);
+  for (const auto& pod : rig.pods) {
+    PatchMatchOptions r = pmo;
+    StereoSearchRange(pod, sdo.near_m, sdo.far_m, &r);
+    pmo.min_disparity = std::min(pmo.min_disparity, r.min_disparity);
+    pmo.max_disparity = std::max(pmo.max_disparity, r.max_disparity);
+  }
+  PatchMatchStereo pm(pmo);
+  Sgbm sgbm(pmo.min_disparity, pmo.max_disparity);
+  const int frames = args.frames > 0 ? args.frames : 3;
+  const std::map<std::string, std::string> studio_q = {
+      {"pods", std::to_string(rig.pods.size())},
+      {"resolution", std::to_string(rig.pods[0].stereo.ir.width) + "x" + std::to_string(rig.pods[0].stereo.ir.height)},
+      {"threads", std::to_string(threads)},
+      {"frames", std::to_string(frames)},
+      {"avx2", pm.uses_avx2() ? "1" : "0"}};
+  if (!args.json)
+    std::fprintf(stderr, "studio: %s, %zu stereo pods, baseline %.3f m, disparity [%g, %g], %d frames\n", wl.c_str(),
+                 rig.pods.size(), baseline, pmo.min_disparity, pmo.max_disparity, frames);
+  MethodRun pm_run, sgbm_run;
+  std::vector<StereoPair> pairs;
+  ImageFloat d_pm, d_sgbm;
+  std::vector<ImageRgb8> sheet;
+  for (int f = 0; f < frames; ++f) {
+    const int64_t frame = static_cast<int64_t>(f) * 10;
+    (*renderer)->Render(frame, &pairs);
+    double set_pm = 0, set_sgbm = 0;
+    for (size_t p = 0; p < pairs.size(); ++p) {
+      const StereoPair& sp = pairs[p];
+      const double fb_mm = sp.fx * sp.baseline_m * 1000.0;
+      for (int r = 0; r < std::max(1, args.repeats); ++r) {
+        Timer t;
+        if (Status s = pm.Compute(sp.left, sp.right, &d_pm); !s.ok()) return Fail(s.ToString());
+        pm_run.ms.push_back(t.Ms());
+        pm_run.cpu_ms.push_back(t.CpuMs());
+        if (r == 0) set_pm += pm_run.ms.back();
+        Timer u;
+        sgbm.Compute(sp.left, sp.right, &d_sgbm);
+        sgbm_run.ms.push_back(u.Ms());
+        sgbm_run.cpu_ms.push_back(u.CpuMs());
+        if (r == 0) set_sgbm += sgbm_run.ms.back();
+      }
+      for (size_t i = 0; i < sp.disparity.num_pixels(); ++i) {
+        pm_run.scores.Add(d_pm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        sgbm_run.scores.Add(d_sgbm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+      }
+      if (!sheet_path.empty() && f == 0 && p < 4) {
+        const uint16_t near_mm = 1000, far_mm = 6000;
+        sheet.push_back(Gray(sp.left));
+        sheet.push_back(ColorizeDepth(DepthOf(sp.disparity, fb_mm), near_mm, far_mm));
+        sheet.push_back(ColorizeDepth(DepthOf(d_pm, fb_mm), near_mm, far_mm));
+        sheet.push_back(ErrorMap(d_pm, sp.disparity));
+        sheet.push_back(ColorizeDepth(DepthOf(d_sgbm, fb_mm), near_mm, far_mm));
+        sheet.push_back(ErrorMap(d_sgbm, sp.disparity));
+      }
+    }
+    pm_run.set_ms.push_back(set_pm);
+    sgbm_run.set_ms.push_back(set_sgbm);
+  }
+  EmitMethod(wl, "patchmatch", "studio", pm_run, studio_q);
+  EmitMethod(wl, "sgbm", "studio", sgbm_run, studio_q);
+  if (!sheet_path.empty()) {
+    std::vector<const ImageRgb8*> tiles;
+    for (const auto& t : sheet) tiles.push_back(&t);
+    const ImageRgb8 img = TileImages(tiles, 6, 2);
+    if (Status s = WriteImageRgb8(sheet_path, img); !s.ok()) return Fail(s.ToString());
+    if (!args.json) std::fprintf(stderr, "contact sheet: %s\n", sheet_path.c_str());
+  }
+
+  // ---- Middlebury ---------------------------------------------------------
+  std::string dir = middlebury;
+  if (!std::filesystem::exists(dir + "/aloeL.jpg") &&
+      std::filesystem::exists(dir + "/middlebury2006_aloe_full/aloeL.jpg"))
+    dir += "/middlebury2006_aloe_full";
+  if (!std::filesystem::exists(dir + "/aloeL.jpg") || !std::filesystem::exists(dir + "/aloeR.jpg") ||
+      !std::filesystem::exists(dir + "/aloeGT.png")) {
+    std::fprintf(stderr,
+                 "holoport-bench stereo: Middlebury pair not found under %s (need aloeL.jpg, aloeR.jpg, aloeGT.png; "
+                 "pass --middlebury DIR): middlebury figures SKIPPED\n",
+                 middlebury.c_str());
+    EmitFigure("stereo", wl, "middlebury_available", 0, "1", {{"data", "middlebury"}, {"path", middlebury}});
+  } else {
+    const cv::Mat l = cv::imread(dir + "/aloeL.jpg", cv::IMREAD_GRAYSCALE);
+    const cv::Mat r = cv::imread(dir + "/aloeR.jpg", cv::IMREAD_GRAYSCALE);
+    const cv::Mat gt = cv::imread(dir + "/aloeGT.png", cv::IMREAD_GRAYSCALE);
+    if (l.empty() || r.empty() || gt.empty() || l.size() != r.size() || l.size() != gt.size())
+      return Fail("Middlebury images under " + dir + " unreadable or of different sizes");
+    ImageGray8 li(l.cols, l.rows), ri(l.cols, l.rows);
+    ImageFloat truth(l.cols, l.rows);
+    for (int y = 0; y < l.rows; ++y)
+      for (int x = 0; x < l.cols; ++x) {
+        li.at(x, y) = l.at<uint8_t>(y, x);
+        ri.at(x, y) = r.at<uint8_t>(y, x);
+        truth.at(x, y) = gt.at<uint8_t>(y, x);
+      }
+    PatchMatchOptions mo = sdo.patchmatch;
+    mo.min_disparity = 0;
+    mo.max_disparity = 256;
+    PatchMatchStereo pm_m(mo);
+    Sgbm sgbm_m(0, 256);
+    MethodRun a, b;
+    // Published geometry of the 2006 full-size sets: f = 3740 px, B = 160 mm;
+    // the disparity offset (dmin) of Aloe is not in the shipped data, taken as 0.
+    const double fb_mm = 3740.0 * 160.0;
+    for (int rep = 0; rep < std::max(1, std::min(args.repeats, 3)); ++rep) {
+      Timer t;
+      if (Status s = pm_m.Compute(li, ri, &d_pm); !s.ok()) return Fail(s.ToString());
+      a.ms.push_back(t.Ms());
+      a.cpu_ms.push_back(t.CpuMs());
+      Timer u;
+      sgbm_m.Compute(li, ri, &d_sgbm);
+      b.ms.push_back(u.Ms());
+      b.cpu_ms.push_back(u.CpuMs());
+    }
+    for (size_t i = 0; i < truth.num_pixels(); ++i) {
+      a.scores.Add(d_pm.data()[i], truth.data()[i], fb_mm, 0.0);
+      b.scores.Add(d_sgbm.data()[i], truth.data()[i], fb_mm, 0.0);
+    }
+    const std::map<std::string, std::string> mq = {
+        {"pair", "aloe_full"}, {"resolution", std::to_string(l.cols) + "x" + std::to_string(l.rows)},
+        {"threads", std::to_string(threads)}, {"depth_model", "f3740px_B160mm_dmin0_assumed"}};
+    EmitMethod(wl, "patchmatch", "middlebury", a, mq);
+    EmitMethod(wl, "sgbm", "middlebury", b, mq);
+  }
+
+  // ---- Fused mesh: stereo depth vs the studio's direct depth ---------------
+  if (fuse_frames > 0) {
+    TsdfOptions to;
+    to.voxel_size = workload->voxel_size_m;
+    to.threads = threads;
+    auto vol = TsdfVolume::Create(to);
+    if (!vol.ok()) return Fail(vol.status().ToString());
+    std::vector<double> chamfer_vs_direct, chamfer_stereo_truth, chamfer_direct_truth;
+    RgbdFrameSet direct, stereo;
+    StudioGroundTruth gt;
+    for (int f = 0; f < fuse_frames; ++f) {
+      const int64_t frame = static_cast<int64_t>(f) * 10 + 5;
+      (*studio)->RenderFrame(frame, &direct, &gt);
+      if (Status s = (*source)->RenderFrame(frame, &stereo, nullptr); !s.ok()) return Fail(s.ToString());
+      for (size_t p = 0; p < direct.frames.size(); ++p) {
+        direct.frames[p].mask = gt.mask[p];
+        stereo.frames[p].mask = gt.mask[p];
+      }
+      Mesh m_direct, m_stereo;
+      (*vol)->Reset();
+      if (Status s = (*vol)->Integrate(rig, direct); !s.ok()) return Fail(s.ToString());
+      (*vol)->ExtractMesh(&m_direct);
+      (*vol)->Reset();
+      if (Status s = (*vol)->Integrate(rig, stereo); !s.ok()) return Fail(s.ToString());
+      (*vol)->ExtractMesh(&m_stereo);
+      metrics::MeshDistanceOptions mo;
+      mo.num_threads = threads;
+      auto vs = metrics::ComputeMeshDistance(m_stereo, m_direct, mo);
+      auto st = metrics::ComputeMeshDistance(m_stereo, gt.foreground_mesh, mo);
+      auto dt = metrics::ComputeMeshDistance(m_direct, gt.foreground_mesh, mo);
+      if (!vs.ok() || !st.ok() || !dt.ok()) return Fail("mesh distance failed (empty fused mesh?)");
+      chamfer_vs_direct.push_back(vs->chamfer_mm);
+      chamfer_stereo_truth.push_back(st->chamfer_mm);
+      chamfer_direct_truth.push_back(dt->chamfer_mm);
+    }
+    const std::string n = std::to_string(fuse_frames);
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_vs_direct), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_stereo_truth), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_direct_truth), "mm",
+               {{"content", "fused"}, {"compare", "direct_vs_truth"}, {"frames", n}, {"masks", "truth"}});
+  }
+  return 0;
+}
+
+}  // namespace
+
+HOLO_REGISTER_BENCH("stereo", "active stereo: PatchMatch vs OpenCV SGBM (studio, Middlebury), fused mesh vs direct depth",
+                    RunStereoBench);
+
+}  // namespace holo::bench

@@ -1,0 +1,462 @@
+#include "server/stereo/patchmatch.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define HOLO_PM_X86 1
+#endif
+
+#include "common/worker_pool.h"
+
+namespace holo {
+
+Status PatchMatchOptions::Check() const {
+  if (!(std::isfinite(min_disparity) && std::isfinite(max_disparity) && min_disparity >= 0.0f &&
+        max_disparity > min_disparity + 1.0f && max_disparity <= 4096.0f))
+    return InvalidArgument("disparity range must satisfy 0 <= min_disparity < max_disparity - 1 <= 4095, got [" +
+                           FormatNumber(min_disparity) + ", " + FormatNumber(max_disparity) + "]");
+  if (window_rows < 1 || window_rows > 31 || window_rows % 2 == 0)
+    return InvalidArgument("window_rows must be odd and in [1, 31], got " + FormatNumber(window_rows));
+  if (window_step < 1 || window_step > 4)
+    return InvalidArgument("window_step must be in [1, 4], got " + FormatNumber(window_step));
+  if (iterations < 1 || iterations > 16)
+    return InvalidArgument("iterations must be in [1, 16], got " + FormatNumber(iterations));
+  if (refine_per_sweep < 0 || refine_per_sweep > 8)
+    return InvalidArgument("refine_per_sweep must be in [0, 8], got " + FormatNumber(refine_per_sweep));
+  if (!(alpha >= 0.0f && alpha <= 1.0f)) return InvalidArgument("alpha must be in [0, 1], got " + FormatNumber(alpha));
+  if (!(tau_color > 0.0f && tau_grad > 0.0f && gamma > 0.0f && std::isfinite(tau_color) && std::isfinite(tau_grad) &&
+        std::isfinite(gamma)))
+    return InvalidArgument("tau_color, tau_grad and gamma must be finite and > 0");
+  if (!(min_normal_z > 0.05f && min_normal_z <= 1.0f))
+    return InvalidArgument("min_normal_z must be in (0.05, 1], got " + FormatNumber(min_normal_z));
+  if (!std::isfinite(lr_max_diff)) return InvalidArgument("lr_max_diff must be finite");
+  if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256], got " + FormatNumber(threads));
+  return OkStatus();
+}
+
+namespace {
+
+struct Plane {
+  float a = 0, b = 0, c = 0;
+  float At(float x, float y) const { return a * x + b * y + c; }
+};
+
+inline uint64_t Mix(uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ULL;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebULL;
+  x ^= x >> 31;
+  return x;
+}
+// Uniform in [-1, 1) from 21 bits of `h` starting at `shift`.
+inline float Sym(uint64_t h, int shift) {
+  return static_cast<float>((h >> shift) & 0x1fffff) * (2.0f / 2097152.0f) - 1.0f;
+}
+
+// One view's images and state. Image rows are padded by kPad replicated
+// pixels on each side, so a window's columns can be loaded without clamping.
+constexpr int kPad = 16;
+struct View {
+  int W = 0, H = 0, stride = 0;
+  float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
+  std::vector<float> I, G;  // intensity and x gradient, padded rows
+  std::vector<float> wtot;  // per pixel: total support weight of its window
+  std::vector<Plane> plane;
+  std::vector<float> cost;
+  std::vector<Plane> proposal;
+  std::vector<uint8_t> has_proposal;
+
+  const float* IRow(int y) const { return I.data() + static_cast<size_t>(y) * stride + kPad; }
+  const float* GRow(int y) const { return G.data() + static_cast<size_t>(y) * stride + kPad; }
+
+  void Load(const ImageGray8& img, float s) {
+    W = img.width();
+    H = img.height();
+    stride = W + 2 * kPad;
+    sign = s;
+    const size_t n = static_cast<size_t>(W) * H;
+    I.resize(static_cast<size_t>(stride) * H + 8);
+    G.resize(I.size());
+    for (int y = 0; y < H; ++y) {
+      const uint8_t* src = img.row(y);
+      float* r = I.data() + static_cast<size_t>(y) * stride;
+      float* g = G.data() + static_cast<size_t>(y) * stride;
+      for (int x = -kPad; x < W + kPad; ++x) r[x + kPad] = src[std::clamp(x, 0, W - 1)];
+      for (int x = -kPad; x < W + kPad; ++x) {
+        const int xc = std::clamp(x, 0, W - 1);
+        g[x + kPad] = 0.5f * (r[std::min(xc + 1, W - 1) + kPad] - r[std::max(xc - 1, 0) + kPad]);
+      }
+    }
+    wtot.resize(n);
+    plane.resize(n);
+    cost.resize(n);
+    proposal.resize(n);
+    has_proposal.resize(n);
+  }
+};
+
+struct CostParams {
+  int rows = 5, step = 2;
+  float alpha = 0.5f, tau_c = 20, tau_g = 6, inv_gamma2 = 1.0f / 144.0f;
+  float penalty = 0;  // cost of a sample that falls outside the other image
+};
+
+// The 8 column offsets of the window.
+inline int ColumnOffset(int lane, int step) { return step * lane - (7 * step) / 2; }
+
+inline float SupportWeight(float dI, float inv_gamma2) { return 1.0f / (1.0f + dI * dI * inv_gamma2); }
+
+// Total support weight of the window at (x, y) (depends on the view only).
+float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
+  const float centre = v.IRow(y)[x];
+  float w = 0;
+  for (int r = 0; r < cp.rows; ++r) {
+    const float* si = v.IRow(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1));
+    for (int l = 0; l < 8; ++l) w += SupportWeight(si[x + ColumnOffset(l, cp.step)] - centre, cp.inv_gamma2);
+  }
+  return w;
+}
+
+// Mean weighted cost of plane `p` at (x, y), or a value ≥ `bound` as soon as
+// the partial sum shows it cannot beat `bound`. Window columns beyond the
+// image read the replicated border.
+float CostScalar(const View& self, const View& other, int x, int y, const Plane& p, const CostParams& cp,
+                 float bound) {
+  const int W = self.W, H = self.H;
+  const float centre = self.IRow(y)[x];
+  const float max_x = static_cast<float>(W - 1) - 1e-3f;
+  const float limit = bound * self.wtot[static_cast<size_t>(y) * W + x];
+  float sum = 0;
+  for (int r = 0; r < cp.rows; ++r) {
+    const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
+    const float* si = self.IRow(yy);
+    const float* sg = self.GRow(yy);
+    const float* oi = other.IRow(yy);
+    const float* og = other.GRow(yy);
+    const float row_d = p.b * static_cast<float>(yy) + p.c;
+    for (int l = 0; l < 8; ++l) {
+      const int xx = x + ColumnOffset(l, cp.step);
+      const float xf = static_cast<float>(xx);
+      const float d = p.a * xf + row_d;
+      float xs = xf + self.sign * d;
+      const bool inside = xs >= 0.0f && xs <= max_x;
+      xs = std::clamp(xs, 0.0f, max_x);
+      const int i0 = static_cast<int>(xs);
+      const float f = xs - static_cast<float>(i0);
+      const float ov = oi[i0] + f * (oi[i0 + 1] - oi[i0]);
+      float rho = (1.0f - cp.alpha) * std::min(std::abs(si[xx] - ov), cp.tau_c);
+      if (cp.alpha > 0.0f) {
+        const float og_v = og[i0] + f * (og[i0 + 1] - og[i0]);
+        rho += cp.alpha * std::min(std::abs(sg[xx] - og_v), cp.tau_g);
+      }
+      if (!inside) rho = cp.penalty;
+      sum += SupportWeight(si[xx] - centre, cp.inv_gamma2) * rho;
+    }
+    if (sum >= limit) return bound;
+  }
+  return sum / self.wtot[static_cast<size_t>(y) * W + x];
+}
+
+#ifdef HOLO_PM_X86
+// The 8 window columns x + step·l − (7·step)/2 of a padded row.
+__attribute__((target("avx2,fma"))) inline __m256 LoadColumns(const float* row, int x, int step, __m256i idx) {
+  if (step == 1) return _mm256_loadu_ps(row + x - 3);
+  if (step == 2) {
+    // Even elements of row[x-7 .. x+8]: shuffle two loads, then restore lane order.
+    const __m256 v0 = _mm256_loadu_ps(row + x - 7), v1 = _mm256_loadu_ps(row + x + 1);
+    const __m256 e = _mm256_shuffle_ps(v0, v1, _MM_SHUFFLE(2, 0, 2, 0));
+    return _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(e), _MM_SHUFFLE(3, 1, 2, 0)));
+  }
+  return _mm256_i32gather_ps(row, idx, 4);
+}
+
+template <bool kGradient>
+__attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View& other, int x, int y, const Plane& p,
+                                                    const CostParams& cp, float bound) {
+  const int W = self.W, H = self.H;
+  const __m256 centre = _mm256_set1_ps(self.IRow(y)[x]);
+  const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
+                                      _mm256_set1_epi32(x - (7 * cp.step) / 2));
+  const __m256 xf = _mm256_cvtepi32_ps(xx);
+  const __m256 a = _mm256_set1_ps(p.a), sign = _mm256_set1_ps(self.sign);
+  const __m256 zero = _mm256_setzero_ps(), max_x = _mm256_set1_ps(static_cast<float>(W - 1) - 1e-3f);
+  const __m256 wc = _mm256_set1_ps(1.0f - cp.alpha), wg = _mm256_set1_ps(cp.alpha);
+  const __m256 tau_c = _mm256_set1_ps(cp.tau_c), tau_g = _mm256_set1_ps(cp.tau_g);
+  const __m256 penalty = _mm256_set1_ps(cp.penalty), inv_g2 = _mm256_set1_ps(cp.inv_gamma2);
+  const __m256 one = _mm256_set1_ps(1.0f);
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  const __m256i one_i = _mm256_set1_epi32(1);
+  const float wt = self.wtot[static_cast<size_t>(y) * W + x];
+  const float limit = bound * wt;
+  // x + sign·a·x: the part of the sample position that does not change with the row.
+  const __m256 xs_base = _mm256_fmadd_ps(sign, _mm256_mul_ps(a, xf), xf);
+  __m256 sum = zero;
+  float total = 0;
+  for (int r = 0; r < cp.rows; ++r) {
+    const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
+    const float* si = self.IRow(yy);
+    const float* oi = other.IRow(yy);
+    const __m256 row_d = _mm256_set1_ps(self.sign * (p.b * static_cast<float>(yy) + p.c));
+    __m256 xs = _mm256_add_ps(xs_base, row_d);
+    const __m256 inside = _mm256_and_ps(_mm256_cmp_ps(xs, zero, _CMP_GE_OQ), _mm256_cmp_ps(xs, max_x, _CMP_LE_OQ));
+    xs = _mm256_min_ps(_mm256_max_ps(xs, zero), max_x);
+    const __m256i i0 = _mm256_cvttps_epi32(xs);
+    const __m256 f = _mm256_sub_ps(xs, _mm256_cvtepi32_ps(i0));
+    const __m256i i1 = _mm256_add_epi32(i0, one_i);
+    const __m256 o0 = _mm256_i32gather_ps(oi, i0, 4), o1 = _mm256_i32gather_ps(oi, i1, 4);
+    const __m256 sv = LoadColumns(si, x, cp.step, xx);
+    const __m256 ov = _mm256_fmadd_ps(f, _mm256_sub_ps(o1, o0), o0);
+    __m256 rho = _mm256_mul_ps(wc, _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sv, ov), abs_mask), tau_c));
+    if constexpr (kGradient) {
+      const float* sg = self.GRow(yy);
+      const float* og = other.GRow(yy);
+      const __m256 g0 = _mm256_i32gather_ps(og, i0, 4), g1 = _mm256_i32gather_ps(og, i1, 4);
+      const __m256 sgv = LoadColumns(sg, x, cp.step, xx);
+      const __m256 ogv = _mm256_fmadd_ps(f, _mm256_sub_ps(g1, g0), g0);
+      const __m256 eg = _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sgv, ogv), abs_mask), tau_g);
+      rho = _mm256_fmadd_ps(wg, eg, rho);
+    }
+    rho = _mm256_blendv_ps(penalty, rho, inside);
+    const __m256 dI = _mm256_sub_ps(sv, centre);
+    const __m256 w = _mm256_div_ps(one, _mm256_fmadd_ps(_mm256_mul_ps(dI, dI), inv_g2, one));
+    sum = _mm256_fmadd_ps(w, rho, sum);
+    if (r >= 1) {
+      // Horizontal sum, to stop early when this plane cannot win.
+      const __m128 h = _mm_add_ps(_mm256_castps256_ps128(sum), _mm256_extractf128_ps(sum, 1));
+      const __m128 h2 = _mm_add_ps(h, _mm_movehl_ps(h, h));
+      total = _mm_cvtss_f32(_mm_add_ss(h2, _mm_shuffle_ps(h2, h2, 1)));
+      if (total >= limit) return bound;
+    }
+  }
+  if (cp.rows == 1) {
+    alignas(32) float t[8];
+    _mm256_store_ps(t, sum);
+    total = 0;
+    for (float v : t) total += v;
+  }
+  return total / wt;
+}
+#endif
+
+}  // namespace
+
+struct PatchMatchStereo::Impl {
+  explicit Impl(int threads) : pool(threads) {}
+  WorkerPool pool;
+  View left, right;
+  ImageFloat right_disparity;
+  bool avx2 = false;
+};
+
+PatchMatchStereo::PatchMatchStereo(PatchMatchOptions options) : options_(options) {
+  const Status s = options_.Check();
+  HOLO_CHECK_MSG(s.ok(), s.ToString());
+  impl_ = std::make_unique<Impl>(options_.threads);
+#ifdef HOLO_PM_X86
+  impl_->avx2 = !options_.force_scalar && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#endif
+}
+
+PatchMatchStereo::~PatchMatchStereo() = default;
+
+StatusOr<std::unique_ptr<PatchMatchStereo>> PatchMatchStereo::Create(PatchMatchOptions options) {
+  HOLO_RETURN_IF_ERROR(options.Check().WithContext("patchmatch options"));
+  return std::make_unique<PatchMatchStereo>(options);
+}
+
+const ImageFloat& PatchMatchStereo::right_disparity() const { return impl_->right_disparity; }
+bool PatchMatchStereo::uses_avx2() const { return impl_->avx2; }
+
+Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity) {
+  if (left.width() != right.width() || left.height() != right.height())
+    return InvalidArgument("stereo pair sizes differ: left " + std::to_string(left.width()) + "x" +
+                           std::to_string(left.height()) + ", right " + std::to_string(right.width()) + "x" +
+                           std::to_string(right.height()));
+  if (left.width() < 16 || left.height() < 8)
+    return InvalidArgument("stereo pair too small: " + std::to_string(left.width()) + "x" +
+                           std::to_string(left.height()) + " (at least 16x8)");
+  const PatchMatchOptions& o = options_;
+  Impl& im = *impl_;
+  View& L = im.left;
+  View& R = im.right;
+  L.Load(left, -1.0f);
+  R.Load(right, +1.0f);
+  const int W = L.W, H = L.H;
+  CostParams cp;
+  cp.rows = o.window_rows;
+  cp.step = o.window_step;
+  cp.alpha = o.alpha;
+  cp.tau_c = o.tau_color;
+  cp.tau_g = o.tau_grad;
+  cp.inv_gamma2 = 1.0f / (o.gamma * o.gamma);
+  cp.penalty = (1.0f - o.alpha) * o.tau_color + o.alpha * o.tau_grad;
+  const bool avx2 = im.avx2;
+  const bool gradient = o.alpha > 0.0f;
+  auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, float bound) {
+#ifdef HOLO_PM_X86
+    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, cp, bound)
+                              : CostAvx2<false>(self, other, x, y, p, cp, bound);
+#endif
+    return CostScalar(self, other, x, y, p, cp, bound);
+  };
+  constexpr float kNoBound = 3.0e38f;
+  const float dmin = o.min_disparity, dmax = o.max_disparity, range = dmax - dmin;
+  const float min_nz = o.min_normal_z;
+  // Plane through disparity `d` at (x, y) with unit normal n (nz ≥ min_nz).
+  auto make_plane = [&](float x, float y, float d, float nx, float ny, float nz) {
+    nz = std::max(nz, min_nz);
+    Plane p;
+    p.a = -nx / nz;
+    p.b = -ny / nz;
+    p.c = d - p.a * x - p.b * y;
+    return p;
+  };
+  auto normal_of = [](const Plane& p, float* nx, float* ny, float* nz) {
+    const float inv = 1.0f / std::sqrt(p.a * p.a + p.b * p.b + 1.0f);
+    *nx = -p.a * inv;
+    *ny = -p.b * inv;
+    *nz = inv;
+  };
+  auto valid_at = [&](const Plane& p, float x, float y) {
+    const float d = p.At(x, y);
+    return d >= dmin && d <= dmax;
+  };
+  const uint64_t seed = Mix(o.seed + 0x7f4a7c15ULL);
+  auto rng = [&](uint64_t pass, int x, int y, uint64_t k) {
+    return Mix(seed ^ Mix((pass << 40) ^ (k << 32) ^ (static_cast<uint64_t>(y) << 16) ^ static_cast<uint64_t>(x)));
+  };
+
+  // Random initialisation.
+  auto init = [&](View& v, const View& other, uint64_t tag) {
+    im.pool.Run(H, [&](int y, int) {
+      for (int x = 0; x < W; ++x) {
+        const uint64_t h = rng(tag, x, y, 0);
+        const float d = dmin + range * 0.5f * (Sym(h, 0) + 1.0f);
+        float nx = 0.5f * Sym(h, 21), ny = 0.5f * Sym(h, 42);
+        float nz = std::sqrt(std::max(0.0f, 1.0f - nx * nx - ny * ny));
+        const size_t i = static_cast<size_t>(y) * W + x;
+        v.plane[i] = make_plane(static_cast<float>(x), static_cast<float>(y), d, nx, ny, nz);
+        v.wtot[i] = WindowWeight(v, x, y, cp);
+        v.cost[i] = cost(v, other, x, y, v.plane[i], kNoBound);
+      }
+    });
+  };
+  init(L, R, 1);
+  init(R, L, 2);
+
+  auto try_plane = [&](View& v, const View& other, int x, int y, const Plane& p) {
+    if (!valid_at(p, static_cast<float>(x), static_cast<float>(y))) return;
+    const size_t i = static_cast<size_t>(y) * W + x;
+    const float c = cost(v, other, x, y, p, v.cost[i]);
+    if (c < v.cost[i]) {
+      v.cost[i] = c;
+      v.plane[i] = p;
+    }
+  };
+  auto refine = [&](View& v, const View& other, int x, int y, uint64_t pass, float scale) {
+    const size_t i = static_cast<size_t>(y) * W + x;
+    for (int k = 0; k < o.refine_per_sweep; ++k) {
+      const uint64_t h = rng(pass, x, y, static_cast<uint64_t>(k) + 1);
+      const float s = scale * std::ldexp(1.0f, -k);
+      const Plane& cur = v.plane[i];
+      const float xf = static_cast<float>(x), yf = static_cast<float>(y);
+      const float d = std::clamp(cur.At(xf, yf) + Sym(h, 0) * 0.25f * range * s, dmin, dmax);
+      float nx, ny, nz;
+      normal_of(cur, &nx, &ny, &nz);
+      nx += Sym(h, 21) * s;
+      ny += Sym(h, 42) * s;
+      nz += Sym(Mix(h), 0) * s;
+      const float inv = 1.0f / std::sqrt(nx * nx + ny * ny + nz * nz + 1e-12f);
+      try_plane(v, other, x, y, make_plane(xf, yf, d, nx * inv, ny * inv, nz * inv));
+    }
+  };
+  // The other view's planes, converted and offered to the pixels they land on
+  // (rows are independent in a rectified pair: parallel over rows).
+  auto scatter = [&](View& v, const View& other) {
+    im.pool.Run(H, [&](int y, int) {
+      const size_t ro = static_cast<size_t>(y) * W;
+      std::fill(v.has_proposal.begin() + ro, v.has_proposal.begin() + ro + W, 0);
+      for (int x = 0; x < W; ++x) {
+        const Plane& p = other.plane[ro + x];
+        const float d = p.At(static_cast<float>(x), static_cast<float>(y));
+        const int tx = static_cast<int>(std::lround(static_cast<float>(x) + other.sign * d));
+        if (tx < 0 || tx >= W) continue;
+        const float den = 1.0f + other.sign * p.a;
+        if (std::abs(den) < 1e-3f) continue;
+        const Plane q{p.a / den, p.b / den, p.c / den};
+        // Several pixels may land on one: the nearest surface (largest disparity) wins.
+        if (v.has_proposal[ro + tx] &&
+            v.proposal[ro + tx].At(static_cast<float>(tx), static_cast<float>(y)) >= d)
+          continue;
+        v.proposal[ro + tx] = q;
+        v.has_proposal[ro + tx] = 1;
+      }
+    });
+  };
+
+  constexpr int kColumnBlock = 16;
+  const int column_blocks = (W + kColumnBlock - 1) / kColumnBlock;
+  int step_index = 0;
+  for (int it = 0; it < o.iterations; ++it) {
+    const bool forward = it % 2 == 0;
+    for (int vi = 0; vi < 2; ++vi) {
+      View& v = vi == 0 ? L : R;
+      const View& other = vi == 0 ? R : L;
+      const uint64_t pass = static_cast<uint64_t>(it) * 8 + static_cast<uint64_t>(vi) * 4 + 16;
+      scatter(v, other);
+      const int per_sweep = std::max(1, o.refine_per_sweep);
+      const float scale_h = std::ldexp(1.0f, -step_index);
+      const float scale_v = std::ldexp(1.0f, -(step_index + per_sweep));
+      // Horizontal sweep: view proposal, left (or right) neighbour, refinement.
+      im.pool.Run(H, [&](int y, int) {
+        const size_t ro = static_cast<size_t>(y) * W;
+        for (int k = 0; k < W; ++k) {
+          const int x = forward ? k : W - 1 - k;
+          if (v.has_proposal[ro + x]) try_plane(v, other, x, y, v.proposal[ro + x]);
+          if (k > 0) try_plane(v, other, x, y, v.plane[ro + (forward ? x - 1 : x + 1)]);
+          refine(v, other, x, y, pass, scale_h);
+        }
+      });
+      // Vertical sweep over blocks of columns.
+      im.pool.Run(column_blocks, [&](int blk, int) {
+        const int x0 = blk * kColumnBlock, x1 = std::min(W, x0 + kColumnBlock);
+        for (int k = 1; k < H; ++k) {
+          const int y = forward ? k : H - 1 - k;
+          const int yn = forward ? y - 1 : y + 1;
+          for (int x = x0; x < x1; ++x) {
+            try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x]);
+            refine(v, other, x, y, pass + 1, scale_v);
+          }
+        }
+      });
+    }
+    step_index += 2 * std::max(1, o.refine_per_sweep);
+  }
+
+  // Disparities and the left-right check.
+  if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
+  if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
+  im.pool.Run(H, [&](int y, int) {
+    const size_t ro = static_cast<size_t>(y) * W;
+    float* rd = im.right_disparity.row(y);
+    for (int x = 0; x < W; ++x) rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
+    float* out = disparity->row(y);
+    for (int x = 0; x < W; ++x) {
+      const float d = L.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
+      bool ok = d >= dmin && d <= dmax && d > 0.0f;
+      if (ok && o.lr_max_diff >= 0.0f) {
+        const int xr = static_cast<int>(std::lround(static_cast<float>(x) - d));
+        ok = xr >= 0 && xr < W && std::abs(rd[xr] - d) <= o.lr_max_diff;
+      }
+      out[x] = ok ? d : 0.0f;
+    }
+  });
+  return OkStatus();
+}
+
+}  // namespace holo

@@ -1,0 +1,93 @@
+// Slanted-plane PatchMatch stereo (Bleyer, Rhemann, Rother, BMVC 2011) on the
+// CPU, for a rectified pair (rows aligned, disparity = x_left − x_right ≥ 0).
+//
+// Every pixel of both views holds a plane d(x, y) = a·x + b·y + c in
+// disparity space. Planes start random; each iteration, for the left then the
+// right view: view propagation (the other view's planes, converted, offered
+// to the pixels they land on), a horizontal sweep (each pixel tries the plane
+// of the pixel before it in the row; rows run in parallel), a vertical sweep
+// (the pixel above or below; blocks of columns in parallel), each followed by
+// random refinement of the pixel's disparity and normal with a shrinking
+// range. Sweep directions alternate between iterations. Last, a left-right
+// consistency check drops pixels whose two views disagree.
+//
+// Matching cost of a plane: a sparse window (8 columns × window_rows rows,
+// `window_step` pixels apart) of truncated absolute differences of intensity
+// and x gradient, each sample weighted by its intensity similarity to the
+// centre pixel (1 / (1 + (ΔI/γ)²), an adaptive support weight), the other
+// view sampled with linear interpolation at the plane's sub-pixel disparity.
+// The 8 columns are one AVX2 vector (runtime dispatch; a scalar path runs the
+// same arithmetic elsewhere). Random numbers come from a counter-based hash
+// of (seed, pixel, pass): results do not depend on the thread count.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "common/image.h"
+#include "common/status.h"
+
+namespace holo {
+
+class WorkerPool;
+
+struct PatchMatchOptions {
+  // Disparity search range, pixels.
+  float min_disparity = 0.0f;
+  float max_disparity = 64.0f;
+  // Window: 8 columns × window_rows rows (odd), samples window_step apart.
+  int window_rows = 5;
+  int window_step = 2;
+  // Propagation iterations (each: both views, horizontal and vertical sweeps).
+  int iterations = 3;
+  // Random refinement candidates after each sweep, each with half the
+  // perturbation range of the one before; the range keeps halving from
+  // sweep to sweep (disparity ±range/4 at first, normal ±1).
+  int refine_per_sweep = 2;
+  // Cost: (1 − alpha)·min(|ΔI|, tau_color) + alpha·min(|Δ∂I/∂x|, tau_grad),
+  // grey levels; support weight 1 / (1 + (ΔI/gamma)²).
+  float alpha = 0.5f;
+  float tau_color = 20.0f;
+  float tau_grad = 6.0f;
+  float gamma = 12.0f;
+  // Steepest allowed plane: the normal's z component (in (x, y, d) space) at
+  // least this (1 = fronto-parallel only).
+  float min_normal_z = 0.6f;
+  // Left-right check: largest |d_left − d_right| kept, pixels (< 0: no check).
+  float lr_max_diff = 1.0f;
+  // Threads (counting the caller); 0 = hardware concurrency.
+  int threads = 0;
+  uint64_t seed = 1;
+  // Scalar cost path even where AVX2 exists (tests compare the two).
+  bool force_scalar = false;
+  // OK, or InvalidArgument naming the field.
+  Status Check() const;
+};
+
+class PatchMatchStereo {
+ public:
+  // `options` must pass Check() (HOLO_CHECK otherwise; use Create for untrusted values).
+  explicit PatchMatchStereo(PatchMatchOptions options);
+  static StatusOr<std::unique_ptr<PatchMatchStereo>> Create(PatchMatchOptions options);
+  ~PatchMatchStereo();
+  PatchMatchStereo(const PatchMatchStereo&) = delete;
+  PatchMatchStereo& operator=(const PatchMatchStereo&) = delete;
+
+  // Disparity of every left pixel, pixels (sub-pixel), 0 where the
+  // left-right check or the search range rejects it. Reuses internal buffers
+  // between calls. InvalidArgument if the images differ in size or are
+  // smaller than 16×8.
+  Status Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity);
+  // The right view's disparity of the last Compute (x_left − x_right, at right pixels), unfiltered.
+  const ImageFloat& right_disparity() const;
+  // True when the AVX2 cost path runs.
+  bool uses_avx2() const;
+  const PatchMatchOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  PatchMatchOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace holo

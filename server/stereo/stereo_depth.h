@@ -1,0 +1,72 @@
+// Depth from active-stereo pods: disparity → depth in the pod's depth camera,
+// and a FrameSource that turns the synthetic studio's IR pairs into depth
+// with PatchMatch, so every stage downstream runs unchanged on stereo depth.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "common/image.h"
+#include "common/rig.h"
+#include "common/status.h"
+#include "server/capture/frame_source.h"
+#include "server/stereo/patchmatch.h"
+#include "server/studio/stereo_render.h"
+#include "server/studio/studio.h"
+
+namespace holo {
+
+// Depth (mm, 0 = invalid) in `pod`'s depth camera from a left-IR disparity
+// map (pixels, 0 = invalid): z = fx·baseline / d. When the IR intrinsics
+// equal the depth camera's, pixel for pixel; otherwise each IR pixel is
+// re-projected into the depth camera (nearest surface wins). Depth beyond
+// `max_range_m` is dropped. InvalidArgument if `pod` is not a stereo pod or
+// the disparity size differs from its IR intrinsics.
+Status DisparityToDepth(const PodCalibration& pod, const ImageFloat& disparity, float max_range_m,
+                        ImageDepth16* depth);
+
+// PatchMatch's disparity search range for a pod whose surfaces lie between
+// `near_m` and `far_m`: [fx·B/far, fx·B/near].
+void StereoSearchRange(const PodCalibration& pod, float near_m, float far_m, PatchMatchOptions* options);
+
+struct StereoDepthOptions {
+  StereoRenderOptions render;
+  PatchMatchOptions patchmatch;  // its disparity range is set per rig from near_m / far_m
+  float near_m = 0.5f, far_m = 6.0f;
+  Status Check() const;
+};
+
+// The synthetic studio with stereo depth: Next() renders the studio's frame
+// (colour, as before), every pod's IR pair, runs PatchMatch on each pair and
+// replaces the pod's depth with the stereo depth. Pods of the studio's rig
+// without a stereo block get the default one (WithStereoPods).
+class StereoStudioSource final : public FrameSource {
+ public:
+  // `studio` is borrowed for the source's lifetime.
+  static StatusOr<std::unique_ptr<StereoStudioSource>> Create(SyntheticStudio* studio, StereoDepthOptions options);
+
+  // The studio's rig with the stereo blocks used.
+  const Rig& rig() const override { return renderer_->rig(); }
+  Status Next(RgbdFrameSet* out) override;
+  int64_t num_frames() const override { return -1; }
+  Status Seek(int64_t index) override;
+
+  // Renders frame `frame_index` with stereo depth; `pairs` (optional) gets the IR pairs and their truth.
+  Status RenderFrame(int64_t frame_index, RgbdFrameSet* out, std::vector<StereoPair>* pairs);
+  // Wall time of the stereo matching of the last frame (all pods), ms.
+  double last_match_ms() const { return last_match_ms_; }
+
+ private:
+  StereoStudioSource() = default;
+  SyntheticStudio* studio_ = nullptr;
+  StereoDepthOptions options_;
+  std::unique_ptr<StereoStudioRenderer> renderer_;
+  std::unique_ptr<PatchMatchStereo> matcher_;
+  std::vector<StereoPair> pairs_;
+  ImageFloat disparity_;
+  int64_t next_frame_ = 0;
+  double last_match_ms_ = 0;
+};
+
+}  // namespace holo
