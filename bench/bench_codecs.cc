@@ -55,6 +55,7 @@
 #include <turbojpeg.h>
 
 #include "bench.h"
+#include "common/clock.h"
 #include "common/image.h"
 #include "common/mesh.h"
 #include "protocol/color_codec.h"
@@ -83,12 +84,6 @@ double NowMs() {
 
 // CPU time of the calling thread: robust to other load on a shared machine
 // (wall time still counts the cache and frequency effects of that load).
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
 bool HasFlag(const BenchArgs& args, const std::string& flag) {
   return std::find(args.extra.begin(), args.extra.end(), flag) != args.extra.end();
 }
@@ -624,15 +619,15 @@ int RunCodecs(const BenchArgs& args) {
           }
           dopt.position_bits = protocol::DracoBitsForStep((hi - lo).maxCoeff(), 0.001f);
         }
-        const double c0 = ThreadCpuMs();
+        const double c0 = holo::ThreadCpuTimeMs();
         const double t0 = NowMs();
         const Status es = run.draco ? protocol::EncodeDraco(in.mesh, dopt, &blob)
                                     : protocol::EncodeGeometry(in.mesh, run.g, &blob, &map);
         const double t1 = NowMs();
-        const double c1 = ThreadCpuMs();
+        const double c1 = holo::ThreadCpuTimeMs();
         const Status ds = run.draco ? protocol::DecodeDraco(blob, &out) : protocol::DecodeGeometry(blob, &out);
         const double t2 = NowMs();
-        const double c2 = ThreadCpuMs();
+        const double c2 = holo::ThreadCpuTimeMs();
         if (!es.ok() || !ds.ok()) {
           std::fprintf(stderr, "codecs: %s failed: %s %s\n", run.name.c_str(), es.ToString().c_str(),
                        ds.ToString().c_str());
@@ -754,14 +749,14 @@ int RunCodecs(const BenchArgs& args) {
           const PodImageInput& pod = in.pods[p];
           std::vector<uint8_t>& blob = blobs[p];
           blob.clear();
-          const double c0 = ThreadCpuMs();
+          const double c0 = holo::ThreadCpuTimeMs();
           const double t0 = NowMs();
           const Status es = encoders[p].Encode(pod.color, pod.mask, &blob);
           const double t1 = NowMs();
-          const double c1 = ThreadCpuMs();
+          const double c1 = holo::ThreadCpuTimeMs();
           const Status ds = decoders[p].Decode(blob);
           const double t2 = NowMs();
-          const double c2 = ThreadCpuMs();
+          const double c2 = holo::ThreadCpuTimeMs();
           enc_cpu += c1 - c0;
           dec_cpu += c2 - c1;
           if (!es.ok() || !ds.ok()) {
@@ -831,14 +826,14 @@ int RunCodecs(const BenchArgs& args) {
         for (size_t p = 0; p < in.pods.size() && p < npods; ++p) {
           const PodImageInput& pod = in.pods[p];
           blob.clear();
-          const double c0 = ThreadCpuMs();
+          const double c0 = holo::ThreadCpuTimeMs();
           const double t0 = NowMs();
           const Status es = encoders[p]->Encode(pod.color, pod.mask, &blob);
           const double t1 = NowMs();
-          const double c1 = ThreadCpuMs();
+          const double c1 = holo::ThreadCpuTimeMs();
           const Status ds = es.ok() ? decoders[p]->Decode(blob) : es;
           const double t2 = NowMs();
-          const double c2 = ThreadCpuMs();
+          const double c2 = holo::ThreadCpuTimeMs();
           if (!es.ok() || !ds.ok()) {
             std::fprintf(stderr, "codecs: video %s failed: %s\n", run.label.c_str(), ds.ToString().c_str());
             return 1;
@@ -922,14 +917,14 @@ int RunCodecs(const BenchArgs& args) {
           pixels.resize(static_cast<size_t>(bw) * bh * 3);
           unsigned char* dst = jpeg.data();
           unsigned long size = jpeg.size();
-          const double c0 = ThreadCpuMs();
+          const double c0 = holo::ThreadCpuTimeMs();
           const int e = tjCompress2(enc_h, &pod.color.at(x0, y0), bw, W * 3, bh, TJPF_RGB, &dst, &size, TJSAMP_444,
                                     quality, TJFLAG_ACCURATEDCT | TJFLAG_NOREALLOC);
-          const double c1 = ThreadCpuMs();
+          const double c1 = holo::ThreadCpuTimeMs();
           const int d = e != 0 ? -1
                                : tjDecompress2(dec_h, jpeg.data(), size, pixels.data(), bw, bw * 3, bh, TJPF_RGB,
                                                TJFLAG_ACCURATEDCT);
-          const double c2 = ThreadCpuMs();
+          const double c2 = holo::ThreadCpuTimeMs();
           if (e != 0 || d != 0) {
             std::fprintf(stderr, "codecs: jpeg-box peer failed: %s\n", tjGetErrorStr2(e != 0 ? enc_h : dec_h));
             return 1;

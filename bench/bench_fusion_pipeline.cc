@@ -6,6 +6,7 @@
 
 #include "common/file_util.h"
 #include "server/capture/dataset.h"
+#include "server/capture/prerendered.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "fusion_pipeline.h"
@@ -26,38 +27,6 @@ struct Kept {
 void Progress(const BenchArgs& args, const char* what) {
   if (!args.json) std::fprintf(stderr, "fusion pipeline: %s\n", what);
 }
-
-// Frames rendered before the run, handed out by copy: a stand-in for pods
-// that deliver frames into memory, so that acquire costs what a live site
-// pays (a copy), not the studio's rendering.
-class PrerenderedSource final : public FrameSource {
- public:
-  PrerenderedSource(const Rig& rig, std::shared_ptr<const std::vector<RgbdFrameSet>> frames)
-      : rig_(rig), frames_(std::move(frames)) {}
-  const Rig& rig() const override { return rig_; }
-  Status Next(RgbdFrameSet* out) override {
-    if (next_ >= frames_->size()) return OutOfRange("end of the prerendered frames");
-    const RgbdFrameSet& in = (*frames_)[next_++];
-    out->frame_index = in.frame_index;
-    out->frames.resize(in.frames.size());
-    for (size_t p = 0; p < in.frames.size(); ++p) {
-      // Assignment into the recycled item reuses its buffers once they have the size.
-      out->frames[p] = in.frames[p];
-    }
-    return OkStatus();
-  }
-  int64_t num_frames() const override { return static_cast<int64_t>(frames_->size()); }
-  Status Seek(int64_t index) override {
-    if (index < 0 || index > static_cast<int64_t>(frames_->size())) return OutOfRange("seek past the end");
-    next_ = static_cast<size_t>(index);
-    return OkStatus();
-  }
-
- private:
-  Rig rig_;
-  std::shared_ptr<const std::vector<RgbdFrameSet>> frames_;  // shared by the runs' sources
-  size_t next_ = 0;
-};
 
 std::string SourceName(const std::string& src) { return src.rfind("dataset:", 0) == 0 ? "dataset" : src; }
 
@@ -116,7 +85,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     HOLO_ASSIGN_OR_RETURN(out->empty, SyntheticStudio::Create(workload->rig, studio_options));
     FrameSource* source = out->studio.get();
     if (src == "prerendered") {
-      out->source = std::make_unique<PrerenderedSource>(workload->rig, prerendered);
+      out->source = std::make_unique<PrerenderedSource>(workload->rig, prerendered, /*loop=*/false);
       source = out->source.get();
     } else if (src.rfind("dataset:", 0) == 0) {
       HOLO_ASSIGN_OR_RETURN(auto reader, DatasetReader::Open(src.substr(8)));

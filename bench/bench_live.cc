@@ -50,6 +50,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench.h"
+#include "common/clock.h"
 #include "client/net/site_client.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
@@ -82,19 +83,6 @@ struct LiveOptions {
   std::string keep_dir;  // keep the site's logs here
   std::vector<std::string> site_args;  // passed on to holoport-server
 };
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t i = static_cast<size_t>(std::ceil(p / 100.0 * static_cast<double>(v.size()))) ;
-  return v[std::min(v.size() - 1, i == 0 ? 0 : i - 1)];
-}
-
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
 double ProcessCpuMsOf(pid_t pid) {
@@ -453,7 +441,7 @@ int Run(const BenchArgs& args) {
         net::ReceivedFrame newer;
         while (render_client->LatestFrame(&newer)) rf = std::move(newer);
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;
-        const double cpu0 = ThreadCpuMs();
+        const double cpu0 = holo::ThreadCpuTimeMs();
         const auto r0 = std::chrono::steady_clock::now();
         auto rig = render_client->rig();
         Status s = (*renderer)->SetRemoteMesh(rf.mesh);
@@ -481,7 +469,7 @@ int Run(const BenchArgs& args) {
         ++render_frames_seen;
         if (!measuring) continue;
         render_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - r0).count());
-        render_cpu_ms.push_back(ThreadCpuMs() - cpu0);
+        render_cpu_ms.push_back(holo::ThreadCpuTimeMs() - cpu0);
         FrameRecord r;
         r.frame_index = rf.frame_index;
         r.at_us = shown;
@@ -496,7 +484,7 @@ int Run(const BenchArgs& args) {
           kept.push_back({rf.frame_index, rf.mesh, rf.images});
         }
       }
-      render_thread_cpu_ms = ThreadCpuMs();
+      render_thread_cpu_ms = holo::ThreadCpuTimeMs();
     });
   }
 
@@ -525,16 +513,13 @@ int Run(const BenchArgs& args) {
   }
   std::this_thread::sleep_for(std::chrono::duration<double>(o.warmup_s));
   progress("measuring for " + std::to_string(o.seconds) + " s");
+  // Frames the site has published so far (its per-frame stats lines).
   auto count_site_frames = [&] {
-    int64_t n = 0, last = -1;
-    for (const auto& j : ReadJsonLines(stats_path))
-      if (j.contains("triangles")) {
-        ++n;
-        last = j.value("frame", int64_t{-1});
-      }
-    return std::make_pair(n, last);
+    int64_t n = 0;
+    for (const auto& j : ReadJsonLines(stats_path)) n += j.contains("triangles");
+    return n;
   };
-  const auto [site_frames0, site_last0] = count_site_frames();
+  const int64_t site_frames0 = count_site_frames();
   const double site_cpu0 = ProcessCpuMsOf(site->pid);
   const double self_cpu0 = ProcessCpuMs();
   std::vector<uint64_t> bytes0;
@@ -547,12 +532,10 @@ int Run(const BenchArgs& args) {
   const double window_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
   const double site_cpu1 = ProcessCpuMsOf(site->pid);
   const double self_cpu1 = ProcessCpuMs();
-  const auto [site_frames1, site_last1] = count_site_frames();
+  const int64_t site_frames1 = count_site_frames();
   std::vector<uint64_t> bytes1;
   for (auto& d : decoders) bytes1.push_back(d->stats().bytes_received);
   const uint64_t render_bytes1 = render_client ? render_client->stats().bytes_received : 0;
-  (void)site_last0;
-  (void)site_last1;
 
   // Site figures.
   const double site_frames = static_cast<double>(site_frames1 - site_frames0);
@@ -572,18 +555,19 @@ int Run(const BenchArgs& args) {
   if (content != "truth") emit("site_latency_ms", Median(latency_site), "ms", {{"at", "encoded"}});
 
   // Viewer figures.
-  std::vector<double> dec_fps, dec_lat, mbps;
+  std::vector<double> dec_fps, mbps;
+  std::vector<float> dec_lat;
   for (size_t i = 0; i < decoders.size(); ++i) {
     std::lock_guard<std::mutex> l(logs[i]->mu);
     dec_fps.push_back(static_cast<double>(logs[i]->frames.size()) / window_s);
-    for (const auto& r : logs[i]->frames) dec_lat.push_back(r.latency_decoded_ms);
+    for (const auto& r : logs[i]->frames) dec_lat.push_back(static_cast<float>(r.latency_decoded_ms));
     mbps.push_back(static_cast<double>(bytes1[i] - bytes0[i]) * 8.0 / (window_s * 1e6));
   }
   if (!decoders.empty()) {
     emit("viewer_fps", Median(dec_fps), "1/s", {{"viewer", "decode"}, {"of", std::to_string(decoders.size())}});
     emit("viewer_fps_min", *std::min_element(dec_fps.begin(), dec_fps.end()), "1/s", {{"viewer", "decode"}});
-    emit("latency_p50_ms", Percentile(dec_lat, 50), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
-    emit("latency_p99_ms", Percentile(dec_lat, 99), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
+    emit("latency_p50_ms", metrics::Percentile(dec_lat, 50), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
+    emit("latency_p99_ms", metrics::Percentile(dec_lat, 99), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
     emit("mbps", Median(mbps), "Mbit/s", {{"viewer", "decode"}});
   }
   stop = true;
@@ -593,21 +577,21 @@ int Run(const BenchArgs& args) {
     return 1;
   }
   if (render_client) {
-    std::vector<double> lat_shown, lat_dec;
+    std::vector<float> lat_shown, lat_dec;
     size_t n = 0;
     {
       std::lock_guard<std::mutex> l(render_log.mu);
       n = render_log.frames.size();
       for (const auto& r : render_log.frames) {
-        lat_shown.push_back(r.latency_displayed_ms);
-        lat_dec.push_back(r.latency_decoded_ms);
+        lat_shown.push_back(static_cast<float>(r.latency_displayed_ms));
+        lat_dec.push_back(static_cast<float>(r.latency_decoded_ms));
       }
     }
     const std::string res = std::to_string(o.width) + "x" + std::to_string(o.height);
     emit("viewer_fps", static_cast<double>(n) / window_s, "1/s", {{"viewer", "render"}, {"resolution", res}});
-    emit("latency_p50_ms", Percentile(lat_shown, 50), "ms", {{"at", "displayed"}, {"viewer", "render"}});
-    emit("latency_p99_ms", Percentile(lat_shown, 99), "ms", {{"at", "displayed"}, {"viewer", "render"}});
-    emit("latency_p50_ms", Percentile(lat_dec, 50), "ms", {{"at", "received"}, {"viewer", "render"}});
+    emit("latency_p50_ms", metrics::Percentile(lat_shown, 50), "ms", {{"at", "displayed"}, {"viewer", "render"}});
+    emit("latency_p99_ms", metrics::Percentile(lat_shown, 99), "ms", {{"at", "displayed"}, {"viewer", "render"}});
+    emit("latency_p50_ms", metrics::Percentile(lat_dec, 50), "ms", {{"at", "received"}, {"viewer", "render"}});
     emit("render_ms", Median(render_ms), "ms", {{"viewer", "render"}, {"resolution", res}});
     emit("render_cpu_ms", Median(render_cpu_ms), "ms", {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}});
     emit("mbps", static_cast<double>(render_bytes1 - render_bytes0) * 8.0 / (window_s * 1e6), "Mbit/s",

@@ -30,6 +30,7 @@
 #include <time.h>
 
 #include "bench.h"
+#include "common/clock.h"
 #include "client/net/raw_peer.h"
 #include "client/net/site_client.h"
 #include "protocol/color_codec.h"
@@ -48,12 +49,6 @@ int Flag(const BenchArgs& args, const std::string& name, int fallback) {
   for (const std::string& e : args.extra)
     if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
   return fallback;
-}
-
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
 std::string LoadAverage() {
@@ -271,7 +266,7 @@ int RunSessions(const BenchArgs& args) {
   std::atomic<int64_t> published_at_window_start{0};
   double publisher_cpu_ms = 0;
   std::thread publisher([&] {
-    const double cpu0 = ThreadCpuMs();
+    const double cpu0 = holo::ThreadCpuTimeMs();
     const auto start = Clock::now();
     const int64_t total = static_cast<int64_t>(seconds * fps);
     for (int64_t i = 0; i < total; ++i) {
@@ -281,7 +276,7 @@ int RunSessions(const BenchArgs& args) {
       ++published;
       std::this_thread::sleep_until(start + std::chrono::microseconds(static_cast<int64_t>((i + 1) * 1e6 / fps)));
     }
-    publisher_cpu_ms = ThreadCpuMs() - cpu0;
+    publisher_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   });
 
   // Window: after the warm-up until the end of publishing.

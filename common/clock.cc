@@ -1,5 +1,7 @@
 #include "common/clock.h"
 
+#include <time.h>
+
 #include <chrono>
 #include <thread>
 
@@ -33,5 +35,11 @@ void SimulatedClock::SleepUntilUs(int64_t deadline_us) {
 Stopwatch::Stopwatch() : start_ns_(SteadyNs()) {}
 void Stopwatch::Restart() { start_ns_ = SteadyNs(); }
 double Stopwatch::ElapsedMs() const { return static_cast<double>(SteadyNs() - start_ns_) * 1e-6; }
+
+double ThreadCpuTimeMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
 
 }  // namespace holo

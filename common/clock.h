@@ -37,6 +37,10 @@ class SimulatedClock final : public Clock {
   std::atomic<int64_t> now_us_;
 };
 
+// CPU time of the calling thread so far, ms (CLOCK_THREAD_CPUTIME_ID): what
+// one thread's work cost, steadier than wall time on a shared machine.
+double ThreadCpuTimeMs();
+
 // Measures elapsed wall time, for stage timings.
 class Stopwatch {
  public:

@@ -1,4 +1,5 @@
 #include "client/reproject/offload_sim.h"
+#include "common/clock.h"
 
 #include <algorithm>
 #include <cmath>
@@ -13,12 +14,6 @@
 
 namespace holo::reproject {
 namespace {
-
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 double MeanOf(const std::vector<double>& v) {
   if (v.empty()) return 0;
@@ -141,9 +136,9 @@ StatusOr<std::vector<OffloadResult>> SimulateOffload(const std::vector<pose::Pos
         }
         ropt.method = mode == OffloadMode::kIdeal || mode == OffloadMode::kStale ? ReprojectMethod::kNone : o.method;
         ReprojectStats stats;
-        const double cpu0 = ThreadCpuMs();
+        const double cpu0 = holo::ThreadCpuTimeMs();
         HOLO_RETURN_IF_ERROR(Reproject(received.color, &received.depth, received.camera, target, ropt, &shown, &valid, &stats));
-        const double cpu1 = ThreadCpuMs();
+        const double cpu1 = holo::ThreadCpuTimeMs();
         content.Resize(o.width, o.height);
         for (size_t i = 0; i < content.num_pixels(); ++i) {
           const uint8_t* c = shown.data() + 3 * i;

@@ -188,4 +188,10 @@ Status CleanupMesh(const MeshCleanupOptions& options, Mesh* mesh, MeshCleanupSta
   return OkStatus();
 }
 
+void RemoveUnreferencedVertices(Mesh* mesh) {
+  CleanupScratch& s = ThreadScratch();
+  s.keep.assign(mesh->triangles.size(), 1);
+  Compact(s.keep, s.remap, mesh);
+}
+
 }  // namespace holo

@@ -36,4 +36,8 @@ struct MeshCleanupStats {
 // fails Mesh::Validate().
 Status CleanupMesh(const MeshCleanupOptions& options, Mesh* mesh, MeshCleanupStats* stats = nullptr);
 
+// Drops the vertices no triangle uses (with their normals and colours),
+// keeping the order of the others and renumbering the triangles.
+void RemoveUnreferencedVertices(Mesh* mesh);
+
 }  // namespace holo

@@ -86,31 +86,12 @@ Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* 
   const size_t n = meshopt_simplify(simplified_.data(), indices_.data(), indices_.size(), out->positions[0].data(),
                                     out->positions.size(), sizeof(Eigen::Vector3f), 3 * options_.max_triangles,
                                     /*target_error=*/1.0f, /*options=*/0, &st.simplify_error);
-  // Keep the surviving vertices (in their order) and their attributes.
-  const size_t nv = out->positions.size();
-  remap_.assign(nv, UINT32_MAX);
-  for (size_t i = 0; i < n; ++i) remap_[simplified_[i]] = 0;
-  uint32_t next = 0;
-  const bool has_n = !out->normals.empty(), has_c = !out->colors.empty();
-  for (size_t v = 0; v < nv; ++v) {
-    if (remap_[v] == UINT32_MAX) continue;
-    remap_[v] = next;
-    out->positions[next] = out->positions[v];
-    if (has_n) out->normals[next] = out->normals[v];
-    if (has_c) out->colors[next] = out->colors[v];
-    ++next;
-  }
-  out->positions.resize(next);
-  if (has_n) out->normals.resize(next);
-  if (has_c) out->colors.resize(next);
+  // The surviving triangles (meshoptimizer keeps original vertices), then
+  // only the vertices they use.
   out->triangles.resize(n / 3);
-  size_t kept = 0;
-  for (size_t t = 0; t < n / 3; ++t) {
-    const uint32_t a = remap_[simplified_[3 * t]], b = remap_[simplified_[3 * t + 1]], c = remap_[simplified_[3 * t + 2]];
-    if (a == b || b == c || a == c) continue;
-    out->triangles[kept++] = {a, b, c};
-  }
-  out->triangles.resize(kept);
+  for (size_t t = 0; t < n / 3; ++t)
+    out->triangles[t] = {simplified_[3 * t], simplified_[3 * t + 1], simplified_[3 * t + 2]};
+  RemoveUnreferencedVertices(out);
   st.simplify_ms = sw.ElapsedMs();
   st.triangles = out->num_triangles();
   return OkStatus();

@@ -67,7 +67,6 @@ class StreamMesher {
   std::unique_ptr<TsdfVolume> coarse_;
   Mesh scratch_;
   std::vector<unsigned int> indices_, simplified_;
-  std::vector<uint32_t> remap_;
 };
 
 }  // namespace holo

@@ -172,8 +172,7 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
       has_pos |= t >= 0;
       has_band |= t >= 0 && t < kTsdfBandLimit;
     }
-    out.set_flags(c, static_cast<uint8_t>((has_neg ? kBlockHasNegative : 0) | (has_pos ? kBlockHasPositive : 0) |
-                                          (has_band ? kBlockHasPositiveInBand : 0)));
+    out.set_flags(c, BlockFlagsOf(has_neg, has_pos, has_band));
   }
   return OkStatus();
 }
@@ -976,9 +975,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         vb.b[i] = static_cast<uint8_t>((vb.b[i] * w_old + acc.b[i] * s) * inv + 0.5f);
       }
 #endif
-      const uint8_t flags = static_cast<uint8_t>((has_neg ? kBlockHasNegative : 0) | (has_pos ? kBlockHasPositive : 0) |
-                                                 (has_band ? kBlockHasPositiveInBand : 0));
-      blocks_.set_flags(b, flags);
+      blocks_.set_flags(b, BlockFlagsOf(has_neg, has_pos, has_band));
     }
   });
   const auto t3 = std::chrono::steady_clock::now();

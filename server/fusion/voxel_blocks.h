@@ -58,6 +58,11 @@ enum BlockFlags : uint8_t {
   kBlockHasPositiveInBand = 4,  // some observed voxel has 0 ≤ tsdf < 0.999 (not beyond the band in every view)
 };
 
+inline uint8_t BlockFlagsOf(bool has_negative, bool has_positive, bool has_positive_in_band) {
+  return static_cast<uint8_t>((has_negative ? kBlockHasNegative : 0) | (has_positive ? kBlockHasPositive : 0) |
+                              (has_positive_in_band ? kBlockHasPositiveInBand : 0));
+}
+
 class VoxelBlockMap {
  public:
   static constexpr int32_t kNotFound = -1;

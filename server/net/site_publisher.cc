@@ -1,4 +1,5 @@
 #include "server/net/site_publisher.h"
+#include "common/clock.h"
 
 #include <time.h>
 
@@ -8,11 +9,6 @@ namespace holo::net {
 namespace {
 double MsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 }  // namespace
 
@@ -36,14 +32,14 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
   out->frame_index = frame_index;
   out->capture_wall_us = capture_wall_us;
   auto t0 = std::chrono::steady_clock::now();
-  double cpu0 = ThreadCpuMs();
+  double cpu0 = holo::ThreadCpuTimeMs();
   protocol::GeometryEncodeOptions g = options_.geometry;
   g.colors = g.colors && !mesh.colors.empty();
   out->codec = g.codec;
   out->geometry.clear();  // the encoder appends
   HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
   t->geometry_ms = MsSince(t0);
-  t->geometry_cpu_ms = ThreadCpuMs() - cpu0;
+  t->geometry_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   t->geometry_bytes = out->geometry.size();
   protocol::ColorFrame& color = out->color;
   color.codec = options_.color_options.codec;
@@ -51,7 +47,7 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
   size_t used = 0;
   if (options_.color) {
     t0 = std::chrono::steady_clock::now();
-    cpu0 = ThreadCpuMs();
+    cpu0 = holo::ThreadCpuTimeMs();
     for (const PodColor& p : pods) {
       if (p.image == nullptr || p.mask == nullptr || p.mask->width() != p.image->width() ||
           p.mask->height() != p.image->height() || p.image->width() == 0)
@@ -65,7 +61,7 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
       t->color_bytes += pi.data.size();
     }
     t->color_ms = MsSince(t0);
-    t->color_cpu_ms = ThreadCpuMs() - cpu0;
+    t->color_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   }
   color.images.resize(used);
   return OkStatus();

@@ -499,8 +499,7 @@ int main(int argc, char** argv) {
       return publisher->Encode(w.frames.frame_index, capture_us, w.mesh, pods, e);
     };
   }
-  const double cpu_start = holo::ProcessCpuTimeMs();
-  double cpu_window = cpu_start;
+  double cpu_window = holo::ProcessCpuTimeMs();
   auto sink = [&](const holo::FrameWork& w) -> holo::Status {
     if (!snapshot_path.empty()) {
       last_mesh = w.mesh;
