@@ -8,6 +8,7 @@
 # build-asan/fuzz-crashes/<name>/crash-* and the script fails. Keep a crash
 # input in protocol/fuzz/corpus/<name>/ once the bug is fixed.
 # Prints one JSON line per target: {"fuzz":NAME,"seconds":S,"execs":N,"crashes":0,...}.
+# HOLO_FUZZ_ONLY="message wav" limits the run to those targets (and builds only them).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 case "${1:-}" in
@@ -23,11 +24,19 @@ BUILD=${HOLO_ASAN_BUILD_DIR:-build-asan}
 if [[ ! -f "$BUILD/CMakeCache.txt" ]]; then
   ./scripts/configure_asan.sh "$BUILD"
 fi
-cmake --build "$BUILD" --parallel "$(nproc)" --target holo_fuzzers
-
-fail=0
+NAMES=()
 for src in protocol/fuzz/fuzz_*.cc; do
   name=$(basename "$src" .cc); name=${name#fuzz_}
+  if [[ -n "${HOLO_FUZZ_ONLY:-}" && " $HOLO_FUZZ_ONLY " != *" $name "* ]]; then continue; fi
+  NAMES+=("$name")
+done
+((${#NAMES[@]} > 0)) || { echo "fuzz.sh: no target matches HOLO_FUZZ_ONLY='${HOLO_FUZZ_ONLY:-}'" >&2; exit 2; }
+TARGETS=()
+for name in "${NAMES[@]}"; do TARGETS+=("holoport-fuzz-${name//_/-}"); done
+cmake --build "$BUILD" --parallel "$(nproc)" --target "${TARGETS[@]}" > /dev/null
+
+fail=0
+for name in "${NAMES[@]}"; do
   exe="$BUILD/bin/holoport-fuzz-${name//_/-}"
   seeds=protocol/fuzz/corpus/$name
   [[ "$name" == decoders ]] && seeds=tests/protocol/corpus
