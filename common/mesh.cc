@@ -296,6 +296,9 @@ StatusOr<Mesh> ReadPly(const std::string& path) {
     }
   }
   HOLO_RETURN_IF_ERROR(mesh.Validate().WithContext(path));
+  // Validate() does not look at normals; a file's must be finite too (found by fuzzing).
+  for (size_t i = 0; i < mesh.normals.size(); ++i)
+    if (!mesh.normals[i].allFinite()) return DataLoss(path + ": normal " + std::to_string(i) + " is not finite");
   return mesh;
 }
 
