@@ -8,7 +8,8 @@
 # build-asan/fuzz-crashes/<name>/crash-* and the script fails. Keep a crash
 # input in protocol/fuzz/corpus/<name>/ once the bug is fixed.
 # Prints one JSON line per target: {"fuzz":NAME,"seconds":S,"execs":N,"crashes":0,...}.
-# HOLO_FUZZ_ONLY="message wav" limits the run to those targets (and builds only them).
+# HOLO_FUZZ_ONLY="message wav" limits the run to those targets (and builds only them);
+# HOLO_FUZZ_NO_BUILD=1 runs the programs as built.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 case "${1:-}" in
@@ -33,7 +34,9 @@ done
 ((${#NAMES[@]} > 0)) || { echo "fuzz.sh: no target matches HOLO_FUZZ_ONLY='${HOLO_FUZZ_ONLY:-}'" >&2; exit 2; }
 TARGETS=()
 for name in "${NAMES[@]}"; do TARGETS+=("holoport-fuzz-${name//_/-}"); done
-cmake --build "$BUILD" --parallel "$(nproc)" --target "${TARGETS[@]}" > /dev/null
+if [[ -z "${HOLO_FUZZ_NO_BUILD:-}" ]]; then
+  cmake --build "$BUILD" --parallel "$(nproc)" --target "${TARGETS[@]}" > /dev/null
+fi
 
 fail=0
 for name in "${NAMES[@]}"; do
