@@ -6,6 +6,10 @@
 #include <string>
 #include <vector>
 
+namespace CLI {
+class App;
+}  // namespace CLI
+
 namespace holo::bench {
 
 struct BenchArgs {
@@ -13,19 +17,32 @@ struct BenchArgs {
   bool json = false;       // JSON lines only (no human-readable text)
   int frames = 0;          // 0 = the benchmark's default
   int repeats = 3;         // runs to take the median of
-  std::vector<std::string> extra;  // unparsed options for the benchmark
+  std::vector<std::string> extra;  // options of a benchmark without declared options (it parses them)
 };
 
 // Returns a process exit code (0 = success).
 using BenchFn = std::function<int(const BenchArgs&)>;
 
+// A benchmark's own options, through CLI11: its setup function declares them
+// on `app` (bound to state the function owns, e.g. a shared_ptr to an options
+// struct) and returns the function that runs the benchmark once
+// holoport-bench has parsed the command line. holoport-bench adds the common
+// options (--workload, --json, --frames, --repeats) and --help, prints the
+// benchmark's help for `holoport-bench NAME --help`, and refuses any option
+// the benchmark did not declare (an error naming it, exit 2).
+using BenchSetup = std::function<BenchFn(CLI::App& app)>;
+
 struct BenchInfo {
   std::string description;
-  BenchFn fn;
+  BenchFn fn;        // a benchmark registered without declared options (own parser of `extra`)
+  BenchSetup setup;  // a benchmark that declares its options
 };
 
 std::map<std::string, BenchInfo>& Registry();
 bool Register(const std::string& name, const std::string& description, BenchFn fn);
+bool RegisterWithOptions(const std::string& name, const std::string& description, BenchSetup setup);
+// Setup of a benchmark with no options besides the common ones.
+BenchSetup NoOptions(BenchFn fn);
 
 // Prints one figure as a JSON line:
 // {"bench":"studio","workload":"S8-QVGA","metric":"fps","value":31.4,"unit":"1/s", ...qualifiers}
@@ -41,5 +58,12 @@ double Mean(const std::vector<double>& values);
 
 }  // namespace holo::bench
 
+// Prefer HOLO_REGISTER_BENCH_OPTIONS (CLI11-declared options); the plain form
+// leaves the benchmark's options in args.extra for its own parser.
 #define HOLO_REGISTER_BENCH(name, description, fn) \
   static const bool holo_bench_registered_##fn = ::holo::bench::Register(name, description, fn)
+#define HOLO_BENCH_CONCAT_(a, b) a##b
+#define HOLO_BENCH_CONCAT(a, b) HOLO_BENCH_CONCAT_(a, b)
+#define HOLO_REGISTER_BENCH_OPTIONS(name, description, setup)                     \
+  static const bool HOLO_BENCH_CONCAT(holo_bench_registered_, __LINE__) = \
+      ::holo::bench::RegisterWithOptions(name, description, setup)

@@ -19,10 +19,13 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <CLI/CLI.hpp>
 
 #include "bench.h"
 #include "client/offload/render_host.h"
@@ -49,50 +52,40 @@ struct ConfigResult {
   std::string renderer;
 };
 
-int RunClientOffloadBench(const bench::BenchArgs& args) {
-  std::vector<int> latencies = {30, 50, 80};
-  int frames = args.frames > 0 ? args.frames : 120;
-  int width = 640, height = 360, sample_every = 4;
-  double trace_start = 5.0, view_distance = 2.6;
-  bool sim = true;
-  offload::HostRenderer renderer = offload::HostRenderer::kCpu;
+// Options (holoport-bench client-offload --help).
+struct OffloadArgs {
+  std::string latencies = "30,50,80";
+  std::string size = "640x360";
   std::string trace_path = std::string(HOLO_SOURCE_DIR) + "/tests/data/head/lookaround_72hz.csv";
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    const bool v = i + 1 < args.extra.size();
-    const std::string& a = args.extra[i];
-    if (a == "--latencies" && v) {
-      latencies.clear();
-      std::stringstream ss(args.extra[++i]);
-      std::string tok;
-      while (std::getline(ss, tok, ',')) latencies.push_back(std::atoi(tok.c_str()));
-    } else if (a == "--size" && v) {
-      if (std::sscanf(args.extra[++i].c_str(), "%dx%d", &width, &height) != 2) {
-        std::fprintf(stderr, "client-offload: --size must be WxH\n");
-        return 2;
-      }
-    } else if (a == "--trace" && v) {
-      trace_path = args.extra[++i];
-    } else if (a == "--trace-start" && v) {
-      trace_start = std::atof(args.extra[++i].c_str());
-    } else if (a == "--sample-every" && v) {
-      sample_every = std::max(1, std::atoi(args.extra[++i].c_str()));
-    } else if (a == "--renderer" && v) {
-      auto r = offload::ParseHostRenderer(args.extra[++i]);
-      if (!r.ok()) {
-        std::fprintf(stderr, "client-offload: %s\n", r.status().ToString().c_str());
-        return 2;
-      }
-      renderer = *r;
-    } else if (a == "--no-sim") {
-      sim = false;
-    } else {
-      std::fprintf(stderr,
-                   "client-offload: unknown option %s (known: --latencies L,.. --size WxH --trace FILE --trace-start S "
-                   "--sample-every N --renderer cpu|gl|auto --no-sim; --frames N)\n",
-                   a.c_str());
-      return 2;
-    }
+  double trace_start = 5.0;
+  int sample_every = 4;
+  std::string renderer = "cpu";
+  bool sim = true;
+};
+
+int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
+  std::vector<int> latencies;
+  {
+    std::stringstream ss(o.latencies);
+    std::string tok;
+    while (std::getline(ss, tok, ',')) latencies.push_back(std::atoi(tok.c_str()));
   }
+  int frames = args.frames > 0 ? args.frames : 120;
+  int width = 640, height = 360;
+  const int sample_every = std::max(1, o.sample_every);
+  const double trace_start = o.trace_start, view_distance = 2.6;
+  const bool sim = o.sim;
+  const std::string& trace_path = o.trace_path;
+  if (std::sscanf(o.size.c_str(), "%dx%d", &width, &height) != 2) {
+    std::fprintf(stderr, "client-offload: --size must be WxH\n");
+    return 2;
+  }
+  auto parsed_renderer = offload::ParseHostRenderer(o.renderer);
+  if (!parsed_renderer.ok()) {
+    std::fprintf(stderr, "client-offload: %s\n", parsed_renderer.status().ToString().c_str());
+    return 2;
+  }
+  const offload::HostRenderer renderer = *parsed_renderer;
   for (int l : latencies) {
     if (l < 0 || l > 1000) {
       std::fprintf(stderr, "client-offload: latencies must be 0..1000 ms\n");
@@ -333,7 +326,19 @@ int RunClientOffloadBench(const bench::BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("client-offload",
-                    "networked render offload over loopback: PSNR stale/reprojected/predicted/enlarged vs ground truth, "
-                    "black border, pose->photon latency (and the simulation at the measured latency)",
-                    RunClientOffloadBench);
+bench::BenchFn SetupClientOffload(CLI::App& app) {
+  auto o = std::make_shared<OffloadArgs>();
+  app.add_option("--latencies", o->latencies, "network latencies, comma-separated ms (0..1000)")->capture_default_str();
+  app.add_option("--size", o->size, "display size WxH")->capture_default_str();
+  app.add_option("--trace", o->trace_path, "head trace CSV")->capture_default_str();
+  app.add_option("--trace-start", o->trace_start, "start in the trace, s")->capture_default_str();
+  app.add_option("--sample-every", o->sample_every, "evaluate every N frames")->capture_default_str();
+  app.add_option("--renderer", o->renderer, "host renderer: cpu, gl or auto")->capture_default_str();
+  app.add_flag("--no-sim{false}", o->sim, "skip the simulation at the measured latency");
+  return [o](const bench::BenchArgs& args) { return RunClientOffloadBench(args, *o); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("client-offload",
+                            "networked render offload over loopback: PSNR stale/reprojected/predicted/enlarged vs "
+                            "ground truth, black border, pose->photon latency (and the simulation at the measured latency)",
+                            SetupClientOffload);

@@ -21,8 +21,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
+
+#include <CLI/CLI.hpp>
 
 #include "bench.h"
 #include "client/pose/head_motion.h"
@@ -100,56 +103,43 @@ int RunPrediction(const holo::bench::BenchArgs& args, const holo::pose::Predicto
 // (people and props) drawn by the CPU mesh renderer on black, as a viewer of
 // the received mesh shows it; "studio" — the whole studio (room included)
 // from its ground-truth renderer, which fills the frame.
-int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::PredictorOptions& predictor_options,
-                         const std::string& trace_path, const std::vector<std::string>& extra) {
-  using namespace holo::reproject;
-  OffloadSimOptions o;
-  o.predictor_options = predictor_options;
-  o.encode.jpeg_quality = 90;
+// Options of the reprojection part (holoport-bench client-pose --help).
+struct ReprojArgs {
+  holo::reproject::OffloadSimOptions o = [] {
+    holo::reproject::OffloadSimOptions d;
+    d.encode.jpeg_quality = 90;
+    return d;
+  }();
+  std::string size;  // WxH, empty = the default
+  std::string filter = "bilinear";  // OffloadSimOptions' default
+  std::string latencies;  // comma-separated ms, empty = the default
   double view_distance_m = 2.6;
   std::string scenes = "both", method_name = "plane";
+};
+
+int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::PredictorOptions& predictor_options,
+                         const std::string& trace_path, const ReprojArgs& r) {
+  using namespace holo::reproject;
+  OffloadSimOptions o = r.o;
+  o.predictor_options = predictor_options;
+  const double view_distance_m = r.view_distance_m;
+  const std::string& scenes = r.scenes;
+  const std::string& method_name = r.method_name;
   // Display frames per scene (the room renders 3× slower than the person).
   const int fg_frames = args.frames > 0 ? args.frames : 120;
   const int studio_frames = args.frames > 0 ? args.frames : 60;
-  for (size_t i = 0; i < extra.size(); ++i) {
-    const bool has_value = i + 1 < extra.size();
-    if (extra[i] == "--size" && has_value) {
-      if (std::sscanf(extra[++i].c_str(), "%dx%d", &o.width, &o.height) != 2) {
-        std::fprintf(stderr, "client-pose: --size must be WxH, got %s\n", extra[i].c_str());
-        return 2;
-      }
-    } else if (extra[i] == "--hfov" && has_value) {
-      o.hfov_deg = std::strtod(extra[++i].c_str(), nullptr);
-    } else if (extra[i] == "--margin" && has_value) {
-      o.margin = std::strtod(extra[++i].c_str(), nullptr);
-    } else if (extra[i] == "--scene" && has_value) {
-      scenes = extra[++i];
-    } else if (extra[i] == "--method" && has_value) {
-      method_name = extra[++i];
-    } else if (extra[i] == "--filter" && has_value) {
-      const std::string f = extra[++i];
-      if (f != "bilinear" && f != "bicubic") {
-        std::fprintf(stderr, "client-pose: --filter must be bilinear or bicubic, got %s\n", f.c_str());
-        return 2;
-      }
-      o.filter = f == "bilinear" ? ReprojectFilter::kBilinear : ReprojectFilter::kBicubic;
-    } else if (extra[i] == "--quality" && has_value) {
-      o.encode.jpeg_quality = std::atoi(extra[++i].c_str());
-    } else if (extra[i] == "--distance" && has_value) {
-      view_distance_m = std::strtod(extra[++i].c_str(), nullptr);
-    } else if (extra[i] == "--png" && has_value) {
-      o.png_dir = extra[++i];
-    } else if (extra[i] == "--latencies" && has_value) {
-      o.latencies_ms.clear();
-      const std::string list = extra[++i];
-      for (size_t start = 0; start <= list.size();) {
-        const size_t comma = std::min(list.find(',', start), list.size());
-        o.latencies_ms.push_back(std::atoi(list.substr(start, comma - start).c_str()));
-        start = comma + 1;
-      }
-    } else {
-      std::fprintf(stderr, "client-pose: unknown option %s\n", extra[i].c_str());
-      return 2;
+  if (!r.size.empty() && std::sscanf(r.size.c_str(), "%dx%d", &o.width, &o.height) != 2) {
+    std::fprintf(stderr, "client-pose: --size must be WxH, got %s\n", r.size.c_str());
+    return 2;
+  }
+  o.filter = r.filter == "bilinear" ? ReprojectFilter::kBilinear : ReprojectFilter::kBicubic;
+  if (!r.latencies.empty()) {
+    o.latencies_ms.clear();
+    const std::string& list = r.latencies;
+    for (size_t start = 0; start <= list.size();) {
+      const size_t comma = std::min(list.find(',', start), list.size());
+      o.latencies_ms.push_back(std::atoi(list.substr(start, comma - start).c_str()));
+      start = comma + 1;
     }
   }
   if (scenes != "foreground" && scenes != "studio" && scenes != "both") {
@@ -290,33 +280,17 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
   return 0;
 }
 
-int RunClientPoseBench(const holo::bench::BenchArgs& args) {
+struct ClientPoseArgs {
   std::string part = "all";
   std::string trace_path = std::string(HOLO_SOURCE_DIR) + "/tests/data/head/lookaround_72hz.csv";
   holo::pose::PredictorOptions options;
-  std::vector<std::string> reproj_extra;
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    const std::string& a = args.extra[i];
-    const bool has_value = i + 1 < args.extra.size();
-    auto number = [&]() { return std::strtod(args.extra[++i].c_str(), nullptr); };
-    if (a == "--part" && has_value) {
-      part = args.extra[++i];
-    } else if (a == "--trace" && has_value) {
-      trace_path = args.extra[++i];
-    } else if (a == "--jerk_pos" && has_value) {
-      options.position_jerk_psd = number();
-    } else if (a == "--jerk_ang" && has_value) {
-      options.angle_jerk_psd = number();
-    } else if (a == "--accel_tau" && has_value) {
-      options.accel_tau_s = number();
-    } else if (a == "--vel_tau" && has_value) {
-      options.velocity_tau_s = number();
-    } else if (a == "--cv_window" && has_value) {
-      options.window_s = number();
-    } else {
-      reproj_extra.push_back(a);
-    }
-  }
+  ReprojArgs reproj;
+};
+
+int RunClientPoseBench(const holo::bench::BenchArgs& args, const ClientPoseArgs& c) {
+  const std::string& part = c.part;
+  const std::string& trace_path = c.trace_path;
+  const holo::pose::PredictorOptions& options = c.options;
   if (part != "pred" && part != "reproj" && part != "all") {
     std::fprintf(stderr, "client-pose: --part must be pred, reproj or all, got %s\n", part.c_str());
     return 2;
@@ -326,18 +300,44 @@ int RunClientPoseBench(const holo::bench::BenchArgs& args) {
     return 2;
   }
   if (part != "reproj") {
-    if (!reproj_extra.empty()) {
-      std::fprintf(stderr, "client-pose: unknown option %s\n", reproj_extra[0].c_str());
-      return 2;
-    }
     if (int rc = RunPrediction(args, options, trace_path); rc != 0) return rc;
   }
-  if (part != "pred") return RunReprojectionBench(args, options, trace_path, reproj_extra);
+  if (part != "pred") return RunReprojectionBench(args, options, trace_path, c.reproj);
   return 0;
 }
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("client-pose",
-                    "head-pose prediction error (pred_err_deg/mm) and reprojection PSNR (reproj_psnr_db) for the thin client",
-                    RunClientPoseBench);
+holo::bench::BenchFn SetupClientPose(CLI::App& app) {
+  auto c = std::make_shared<ClientPoseArgs>();
+  app.add_option("--part", c->part, "pred (prediction), reproj (reprojection) or all")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"pred", "reproj", "all"}));
+  app.add_option("--trace", c->trace_path, "head trace CSV")->capture_default_str();
+  app.add_option("--jerk_pos", c->options.position_jerk_psd, "predictor: position jerk PSD");
+  app.add_option("--jerk_ang", c->options.angle_jerk_psd, "predictor: angle jerk PSD");
+  app.add_option("--accel_tau", c->options.accel_tau_s, "predictor: acceleration time constant, s");
+  app.add_option("--vel_tau", c->options.velocity_tau_s, "predictor: velocity time constant, s");
+  app.add_option("--cv_window", c->options.window_s, "predictor: constant-velocity window, s");
+  ReprojArgs& r = c->reproj;
+  app.add_option("--size", r.size, "reprojection: display size WxH");
+  app.add_option("--hfov", r.o.hfov_deg, "reprojection: horizontal field of view, degrees")->capture_default_str();
+  app.add_option("--margin", r.o.margin, "reprojection: rendered margin")->capture_default_str();
+  app.add_option("--scene", r.scenes, "reprojection: foreground, studio or both")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"foreground", "studio", "both"}));
+  app.add_option("--method", r.method_name, "reprojection method")->capture_default_str();
+  app.add_option("--filter", r.filter, "reprojection filter: bilinear or bicubic")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"bilinear", "bicubic"}));
+  app.add_option("--quality", r.o.encode.jpeg_quality, "reprojection: JPEG quality")->capture_default_str();
+  app.add_option("--distance", r.view_distance_m, "reprojection: viewing distance, m")->capture_default_str();
+  app.add_option("--png", r.o.png_dir, "reprojection: write images here");
+  app.add_option("--latencies", r.latencies, "reprojection: latencies, comma-separated ms");
+  return [c](const holo::bench::BenchArgs& args) { return RunClientPoseBench(args, *c); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS(
+    "client-pose",
+    "head-pose prediction error (pred_err_deg/mm) and reprojection PSNR (reproj_psnr_db) for the thin client",
+    SetupClientPose);

@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,8 @@
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
+
+#include <CLI/CLI.hpp>
 
 #include "bench.h"
 #include "fusion_pipeline.h"
@@ -219,48 +222,33 @@ struct ExtraArgs {
   bool peer = true;
   double voxel_mm = 0, depth_max_m = 0, min_weight = 0;
   long decimate = -1;
-  bool ok = true;
   // Whole-pipeline figures (our segmentation + texturing), see fusion_pipeline.h.
   bool pipeline = true, pipeline_only = false;
   PipelineBenchOptions pipeline_options;
 };
 
-ExtraArgs ParseExtra(const std::vector<std::string>& extra) {
-  ExtraArgs a;
-  for (size_t i = 0; i < extra.size(); ++i) {
-    auto value = [&]() -> std::string {
-      if (i + 1 >= extra.size()) {
-        std::fprintf(stderr, "fusion: %s needs a value\n", extra[i].c_str());
-        a.ok = false;
-        return "";
-      }
-      return extra[++i];
-    };
-    if (extra[i] == "--dataset") a.dataset = value();
-    else if (extra[i] == "--keep") a.keep = value();
-    else if (extra[i] == "--no-peer") a.peer = false;
-    else if (extra[i] == "--voxel-mm") a.voxel_mm = std::atof(value().c_str());
-    else if (extra[i] == "--depth-max-m") a.depth_max_m = std::atof(value().c_str());
-    else if (extra[i] == "--min-weight") a.min_weight = std::atof(value().c_str());
-    else if (extra[i] == "--decimate") a.decimate = std::atol(value().c_str());
-    else if (extra[i] == "--no-pipeline") a.pipeline = false;
-    else if (extra[i] == "--pipeline-only") a.pipeline_only = true;
-    else if (extra[i] == "--pipeline-frames") a.pipeline_options.frames = std::max(1, std::atoi(value().c_str()));
-    else if (extra[i] == "--png") a.pipeline_options.png_dir = value();
-    else if (extra[i] == "--texture-cluster-mm") a.pipeline_options.texture_cluster_mm = std::atof(value().c_str());
-    else if (extra[i] == "--texture-transfer") a.pipeline_options.texture_transfer = std::atoi(value().c_str());
-    else if (extra[i] == "--seg-iterations") a.pipeline_options.seg_iterations = std::atoi(value().c_str());
-    else if (extra[i] == "--seg-downsample") a.pipeline_options.seg_downsample = std::atoi(value().c_str());
-    else if (extra[i] == "--seg-grid-px") a.pipeline_options.seg_grid_px = std::atof(value().c_str());
-    else if (extra[i] == "--eval-every") a.pipeline_options.eval_every = std::max(1, std::atoi(value().c_str()));
-    else if (extra[i] == "--pipeline-source") a.pipeline_options.source = value();
-    else if (extra[i] == "--cpu-frames") a.pipeline_options.cpu_frames = std::max(0, std::atoi(value().c_str()));
-    else {
-      std::fprintf(stderr, "fusion: unknown option %s\n", extra[i].c_str());
-      a.ok = false;
-    }
-  }
-  return a;
+// The fusion benchmark's options (holoport-bench fusion --help).
+void DeclareOptions(CLI::App& app, ExtraArgs* a) {
+  PipelineBenchOptions& p = a->pipeline_options;
+  app.add_option("--dataset", a->dataset, "Redwood-style dataset folder (else the synthetic studio)");
+  app.add_option("--keep", a->keep, "keep the peer's work folder here");
+  app.add_flag("--no-peer{false}", a->peer, "skip the Open3D peer");
+  app.add_option("--voxel-mm", a->voxel_mm, "TSDF voxel size, mm (default: the workload's)");
+  app.add_option("--depth-max-m", a->depth_max_m, "largest depth integrated, m (default 5)");
+  app.add_option("--min-weight", a->min_weight, "TSDF minimum weight to extract");
+  app.add_option("--decimate", a->decimate, "also decimate to this many triangles");
+  app.add_flag("--no-pipeline{false}", a->pipeline, "skip the whole-pipeline figures");
+  app.add_flag("--pipeline-only", a->pipeline_only, "only the whole-pipeline figures");
+  app.add_option("--pipeline-frames", p.frames, "frames of the pipeline run")->check(CLI::PositiveNumber);
+  app.add_option("--png", p.png_dir, "write pipeline images here");
+  app.add_option("--texture-cluster-mm", p.texture_cluster_mm, "texture cluster size, mm");
+  app.add_option("--texture-transfer", p.texture_transfer, "texture transfer mode");
+  app.add_option("--seg-iterations", p.seg_iterations, "segmentation CRF iterations");
+  app.add_option("--seg-downsample", p.seg_downsample, "segmentation downsampling");
+  app.add_option("--seg-grid-px", p.seg_grid_px, "segmentation grid, px");
+  app.add_option("--eval-every", p.eval_every, "evaluate every N frames")->check(CLI::PositiveNumber);
+  app.add_option("--pipeline-source", p.source, "pipeline source");
+  app.add_option("--cpu-frames", p.cpu_frames, "frames timed for CPU figures")->check(CLI::NonNegativeNumber);
 }
 
 std::map<std::string, std::string> Q(std::initializer_list<std::pair<const std::string, std::string>> q) { return q; }
@@ -510,17 +498,22 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
   return 0;
 }
 
-int RunFusionBench(const BenchArgs& args) {
-  const ExtraArgs extra = ParseExtra(args.extra);
-  if (!extra.ok) return 2;
+int RunFusionBench(const BenchArgs& args, const ExtraArgs& extra) {
   if (!extra.dataset.empty()) return RunDataset(args, extra);
   const int rc = extra.pipeline_only ? 0 : RunWorkload(args, extra);
   if (rc != 0 || !extra.pipeline) return rc;
   return RunPipelineFigures(args, extra.pipeline_options);
 }
 
-HOLO_REGISTER_BENCH("fusion", "TSDF fusion + marching cubes vs ground truth and Open3D (--dataset DIR for Redwood)",
-                    RunFusionBench);
+BenchFn SetupFusion(CLI::App& app) {
+  auto extra = std::make_shared<ExtraArgs>();
+  DeclareOptions(app, extra.get());
+  return [extra](const BenchArgs& args) { return RunFusionBench(args, *extra); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("fusion",
+                            "TSDF fusion + marching cubes vs ground truth and Open3D (--dataset DIR for Redwood)",
+                            SetupFusion);
 
 }  // namespace
 }  // namespace holo::bench

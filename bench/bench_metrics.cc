@@ -71,7 +71,7 @@ int RunMetricsBench(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("metrics", "Chamfer 100k x 100k on the ground-truth mesh; closest-point index vs brute force",
-                    RunMetricsBench);
+HOLO_REGISTER_BENCH_OPTIONS("metrics", "Chamfer 100k x 100k on the ground-truth mesh; closest-point index vs brute force",
+                            NoOptions(RunMetricsBench));
 
 }  // namespace holo::bench

@@ -27,6 +27,8 @@
 #include <mutex>
 #include <thread>
 
+#include <CLI/CLI.hpp>
+
 #include "bench.h"
 #include "client/net/site_client.h"
 #include "common/clock.h"
@@ -209,11 +211,11 @@ double ThreadCpuMs() {
   return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
 }
 
-int RunReplayNetBench(const BenchArgs& args) {
+constexpr int kReplayNetDefaultViewers = 10;
+
+int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
   const int frames = args.frames > 0 ? args.frames : 300;
-  int viewers = 10;
-  for (size_t i = 0; i + 1 < args.extra.size(); ++i)
-    if (args.extra[i] == "--viewers") viewers = std::max(1, std::atoi(args.extra[i + 1].c_str()));
+  const int viewers = std::max(1, viewers_option);
   record::SyntheticStreamOptions so;
   so.workload = args.workload;
   auto stream = record::SyntheticStream::Create(so);
@@ -398,10 +400,16 @@ int RunReplayNetBench(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("replaynet",
-                    "replay served over loopback to N viewers (latency vs schedule, CPU) and recording a live site",
-                    RunReplayNetBench);
-HOLO_REGISTER_BENCH("record", "recording write throughput, size per minute, open/seek time, replay cost",
-                    RunRecordBench);
+BenchFn SetupReplayNet(CLI::App& app) {
+  auto viewers = std::make_shared<int>(kReplayNetDefaultViewers);
+  app.add_option("--viewers", *viewers, "viewers of the replay")->capture_default_str()->check(CLI::PositiveNumber);
+  return [viewers](const BenchArgs& args) { return RunReplayNetBench(args, *viewers); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("replaynet",
+                            "replay served over loopback to N viewers (latency vs schedule, CPU) and recording a live site",
+                            SetupReplayNet);
+HOLO_REGISTER_BENCH_OPTIONS("record", "recording write throughput, size per minute, open/seek time, replay cost",
+                            NoOptions(RunRecordBench));
 
 }  // namespace holo::bench

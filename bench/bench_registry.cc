@@ -15,8 +15,17 @@ std::map<std::string, BenchInfo>& Registry() {
 }
 
 bool Register(const std::string& name, const std::string& description, BenchFn fn) {
-  Registry()[name] = BenchInfo{description, std::move(fn)};
+  Registry()[name] = BenchInfo{description, std::move(fn), nullptr};
   return true;
+}
+
+bool RegisterWithOptions(const std::string& name, const std::string& description, BenchSetup setup) {
+  Registry()[name] = BenchInfo{description, nullptr, std::move(setup)};
+  return true;
+}
+
+BenchSetup NoOptions(BenchFn fn) {
+  return [fn = std::move(fn)](CLI::App&) { return fn; };
 }
 
 void EmitFigure(const std::string& bench, const std::string& workload, const std::string& metric, double value,

@@ -17,10 +17,13 @@
 #include <cstdlib>
 #include <ctime>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
+
+#include <CLI/CLI.hpp>
 
 #include "bench.h"
 #include "common/clock.h"
@@ -107,14 +110,14 @@ double MeanAbsDiff(const RgbdFrameSet& a, const std::vector<ImageRgb8>& b, int s
   return sum / static_cast<double>(std::max<size_t>(1, n));
 }
 
-int RunSegmentBench(const BenchArgs& args) {
+int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& settings) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
     std::fprintf(stderr, "holoport-bench: %s\n", workload.status().message().c_str());
     return 2;
   }
   SegmenterOptions options;
-  for (const std::string& e : args.extra) {
+  for (const std::string& e : settings) {
     if (!SetOption(&options, e)) {
       std::fprintf(stderr, "holoport-bench segment: unknown argument '%s' (expected a SegmenterOptions name=value)\n",
                    e.c_str());
@@ -262,7 +265,13 @@ int RunSegmentBench(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("segment", "foreground segmentation (CRF vs unary vs MOG2) and colour calibration",
-                    RunSegmentBench);
+BenchFn SetupSegment(CLI::App& app) {
+  auto settings = std::make_shared<std::vector<std::string>>();
+  app.add_option("settings", *settings, "SegmenterOptions fields to change, as NAME=VALUE (e.g. depth_sigma_m=0.02)");
+  return [settings](const BenchArgs& args) { return RunSegmentBench(args, *settings); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("segment", "foreground segmentation (CRF vs unary vs MOG2) and colour calibration",
+                            SetupSegment);
 
 }  // namespace holo::bench

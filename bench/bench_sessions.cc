@@ -23,11 +23,14 @@
 #include <cstdlib>
 #include <fstream>
 #include <mutex>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <time.h>
+
+#include <CLI/CLI.hpp>
 
 #include "bench.h"
 #include "common/clock.h"
@@ -45,11 +48,13 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-int Flag(const BenchArgs& args, const std::string& name, int fallback) {
-  for (const std::string& e : args.extra)
-    if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
-  return fallback;
-}
+struct SessionsOptions {
+  int viewers = 100;
+  int seconds = 20;
+  int server_threads = 2;
+  int client_threads = 1;
+  std::string content = "truth";
+};
 
 std::string LoadAverage() {
   std::ifstream f("/proc/loadavg");
@@ -141,18 +146,12 @@ StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
   return c;
 }
 
-int RunSessions(const BenchArgs& args) {
-  const int num_viewers = std::max(1, Flag(args, "--viewers", 100));
-  const int seconds = std::max(4, Flag(args, "--seconds", 20));
-  const int server_threads = std::max(1, Flag(args, "--server-threads", 2));
-  const int client_threads = std::max(1, Flag(args, "--client-threads", 1));
-  std::string content_kind = "truth";
-  for (const std::string& e : args.extra)
-    if (e.rfind("--content=", 0) == 0) content_kind = e.substr(10);
-  if (content_kind != "truth" && content_kind != "fused") {
-    std::fprintf(stderr, "sessions: --content must be truth or fused\n");
-    return 2;
-  }
+int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
+  const int num_viewers = std::max(1, o.viewers);
+  const int seconds = std::max(4, o.seconds);
+  const int server_threads = std::max(1, o.server_threads);
+  const int client_threads = std::max(1, o.client_threads);
+  const std::string content_kind = o.content;
   const int content_frames = args.frames > 0 ? args.frames : (content_kind == "truth" ? 30 : 8);
   const double fps = 30.0;
   auto wl = GetWorkload(args.workload);
@@ -380,10 +379,22 @@ int RunSessions(const BenchArgs& args) {
   return 0;
 }
 
-HOLO_REGISTER_BENCH("sessions",
-                    "broadcast fan-out on loopback: N viewers + slow + stalled at 30 fps (viewers_held, "
-                    "delivered_fraction, latency, cpu_per_viewer_pct)",
-                    RunSessions);
+BenchFn SetupSessions(CLI::App& app) {
+  auto o = std::make_shared<SessionsOptions>();
+  app.add_option("--viewers", o->viewers, "viewers on loopback")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--seconds", o->seconds, "seconds of broadcast (at least 4)")->capture_default_str();
+  app.add_option("--server-threads", o->server_threads, "session server threads")->capture_default_str();
+  app.add_option("--client-threads", o->client_threads, "threads of the viewers' client side")->capture_default_str();
+  app.add_option("--content", o->content, "what is broadcast: truth (ground-truth meshes) or fused")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"truth", "fused"}));
+  return [o](const BenchArgs& args) { return RunSessions(args, *o); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("sessions",
+                            "broadcast fan-out on loopback: N viewers + slow + stalled at 30 fps (viewers_held, "
+                            "delivered_fraction, latency, cpu_per_viewer_pct)",
+                            SetupSessions);
 
 }  // namespace
 }  // namespace holo::bench

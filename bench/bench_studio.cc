@@ -54,4 +54,5 @@ int RunStudioBench(const holo::bench::BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("studio", "synthetic studio: render all pods of a workload with ground truth", RunStudioBench);
+HOLO_REGISTER_BENCH_OPTIONS("studio", "synthetic studio: render all pods of a workload with ground truth",
+                            holo::bench::NoOptions(RunStudioBench));

@@ -29,6 +29,8 @@
 #include <string>
 #include <vector>
 
+#include <CLI/CLI.hpp>
+
 #include "bench.h"
 #include "common/metrics/flicker.h"
 #include "common/metrics/mesh_distance.h"
@@ -64,57 +66,35 @@ struct Extra {
   int sparse = -1;
   double sparse_weight = -1;
   bool still = false;  // repeat frame 0 (a static scene): checks the warp's resampling
-  bool ok = true;
 };
 
-Extra ParseExtra(const std::vector<std::string>& extra) {
-  Extra a;
-  for (size_t i = 0; i < extra.size(); ++i) {
-    auto value = [&]() -> std::string {
-      if (i + 1 >= extra.size()) {
-        std::fprintf(stderr, "temporal: %s needs a value\n", extra[i].c_str());
-        a.ok = false;
-        return "0";
-      }
-      return extra[++i];
-    };
-    if (extra[i] == "--solver") a.solver = value();
-    else if (extra[i] == "--spacing-cm") a.spacing_cm = std::atof(value().c_str());
-    else if (extra[i] == "--max-weight") a.max_weight = std::atof(value().c_str());
-    else if (extra[i] == "--track-points") a.track_points = std::atoi(value().c_str());
-    else if (extra[i] == "--points-per-node") a.points_per_node = std::atof(value().c_str());
-    else if (extra[i] == "--reg-weight") a.reg_weight = std::atof(value().c_str());
-    else if (extra[i] == "--rot-weight") a.rot_weight = std::atof(value().c_str());
-    else if (extra[i] == "--hull-weight") a.hull_weight = std::atof(value().c_str());
-    else if (extra[i] == "--iterations") a.iterations = std::atoi(value().c_str());
-    else if (extra[i] == "--rigid-iterations") a.rigid_iterations = std::atoi(value().c_str());
-    else if (extra[i] == "--normal-radius") a.normal_radius = std::atoi(value().c_str());
-    else if (extra[i] == "--min-track-weight") a.min_track_weight = std::atof(value().c_str());
-    else if (extra[i] == "--fail-residual-mm") a.fail_residual_mm = std::atof(value().c_str());
-    else if (extra[i] == "--eval-every") a.eval_every = std::max(1, std::atoi(value().c_str()));
-    else if (extra[i] == "--no-predict") a.predict = false;
-    else if (extra[i] == "--sparse") a.sparse = std::atoi(value().c_str());
-    else if (extra[i] == "--sparse-weight") a.sparse_weight = std::atof(value().c_str());
-    else if (extra[i] == "--parallel-pcg") a.parallel_pcg = std::atoi(value().c_str());
-    else if (extra[i] == "--still") a.still = true;
-    else if (extra[i] == "--pcg") a.pcg = std::atoi(value().c_str());
-    else if (extra[i] == "--data-window") a.data_window = std::atoi(value().c_str());
-    else if (extra[i] == "--snap-mm") a.snap_mm = std::atof(value().c_str());
-    else if (extra[i] == "--drop-pod") a.drop_pod = std::atoi(value().c_str());
-    else if (extra[i] == "--drop-from") a.drop_from = std::max(1, std::atoi(value().c_str()));
-    else {
-      std::fprintf(stderr,
-                   "temporal: unknown option %s\noptions: --solver gn|ceres, --spacing-cm S, --max-weight W, "
-                   "--track-points N, --points-per-node P, --reg-weight W, --rot-weight W, --hull-weight W, --iterations N, "
-                   "--rigid-iterations N, --normal-radius R (tracked normals from the TSDF, voxels; 0 = mesh), "
-                   "--min-track-weight W, "
-                   "--fail-residual-mm R, --no-predict, --parallel-pcg 0|1, --sparse 0|1, --sparse-weight W, --still, --pcg N, --snap-mm S, --eval-every N, --data-window R, "
-                   "--drop-pod K (-1 = none), --drop-from F\n",
-                   extra[i].c_str());
-      a.ok = false;
-    }
-  }
-  return a;
+// The temporal benchmark's options (holoport-bench temporal --help); a
+// negative value keeps the tracker's default.
+void DeclareOptions(CLI::App& app, Extra* a) {
+  app.add_option("--solver", a->solver, "non-rigid solver: gn or ceres")->capture_default_str();
+  app.add_option("--spacing-cm", a->spacing_cm, "deformation node spacing, cm");
+  app.add_option("--max-weight", a->max_weight, "TSDF weight cap");
+  app.add_option("--track-points", a->track_points, "tracked points");
+  app.add_option("--points-per-node", a->points_per_node, "tracked points per node");
+  app.add_option("--reg-weight", a->reg_weight, "regularisation weight");
+  app.add_option("--rot-weight", a->rot_weight, "rotation weight");
+  app.add_option("--hull-weight", a->hull_weight, "visual hull weight");
+  app.add_option("--iterations", a->iterations, "Gauss-Newton iterations");
+  app.add_option("--rigid-iterations", a->rigid_iterations, "rigid pre-alignment iterations");
+  app.add_option("--normal-radius", a->normal_radius, "tracked normals from the TSDF, voxels (0 = mesh)");
+  app.add_option("--min-track-weight", a->min_track_weight, "minimum TSDF weight of a tracked point");
+  app.add_option("--fail-residual-mm", a->fail_residual_mm, "residual above which tracking resets, mm");
+  app.add_flag("--no-predict{false}", a->predict, "no motion prediction");
+  app.add_option("--parallel-pcg", a->parallel_pcg, "parallel PCG (0|1)");
+  app.add_option("--sparse", a->sparse, "sparse feature term (0|1)");
+  app.add_option("--sparse-weight", a->sparse_weight, "sparse feature weight");
+  app.add_flag("--still", a->still, "repeat frame 0 (a static scene): checks the warp's resampling");
+  app.add_option("--pcg", a->pcg, "PCG iterations");
+  app.add_option("--snap-mm", a->snap_mm, "snap distance, mm");
+  app.add_option("--eval-every", a->eval_every, "evaluate every N frames")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--data-window", a->data_window, "data term window");
+  app.add_option("--drop-pod", a->drop_pod, "pod dropped (-1 = none)")->capture_default_str();
+  app.add_option("--drop-from", a->drop_from, "frame from which the pod is dropped")->capture_default_str()->check(CLI::PositiveNumber);
 }
 
 // One fusion run (a mode) over the frames, with its figures.
@@ -438,9 +418,7 @@ struct Diag {
   }
 };
 
-int RunTemporal(const BenchArgs& args) {
-  const Extra extra = ParseExtra(args.extra);
-  if (!extra.ok) return 2;
+int RunTemporal(const BenchArgs& args, const Extra& extra) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
     std::fprintf(stderr, "temporal: %s\n", workload.status().ToString().c_str());
@@ -671,9 +649,15 @@ int RunTemporal(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("temporal",
-                    "per-frame vs temporal fusion (non-rigid ED tracking): ms per stage, fps, flicker, Chamfer, "
-                    "completeness, resets; a dropped pod's exclusive surface",
-                    RunTemporal);
+BenchFn SetupTemporal(CLI::App& app) {
+  auto extra = std::make_shared<Extra>();
+  DeclareOptions(app, extra.get());
+  return [extra](const BenchArgs& args) { return RunTemporal(args, *extra); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("temporal",
+                            "per-frame vs temporal fusion (non-rigid ED tracking): ms per stage, fps, flicker, Chamfer, "
+                            "completeness, resets; a dropped pod's exclusive surface",
+                            SetupTemporal);
 
 }  // namespace holo::bench

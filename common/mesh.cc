@@ -265,14 +265,14 @@ StatusOr<Mesh> ReadPly(const std::string& path) {
           continue;
         }
         double cnt_d;
-        if (!reader.Read(p.count_type, &cnt_d) || cnt_d < 0 || cnt_d > 1024)
+        if (!reader.Read(p.count_type, &cnt_d) || !(cnt_d >= 0 && cnt_d <= 1024))  // NaN too (found by fuzzing)
           return bad("bad list length in element '" + e.name + "' item " + std::to_string(item));
         const int cnt = static_cast<int>(cnt_d);
         std::vector<uint32_t> poly(static_cast<size_t>(cnt));
         for (int j = 0; j < cnt; ++j) {
           double v;
           if (!reader.Read(p.type, &v)) return bad("truncated in element '" + e.name + "'");
-          if (v < 0 || v > 4294967295.0) return bad("negative or huge vertex index in face " + std::to_string(item));
+          if (!(v >= 0 && v <= 4294967295.0)) return bad("negative or huge vertex index in face " + std::to_string(item));
           poly[static_cast<size_t>(j)] = static_cast<uint32_t>(v);
         }
         if (is_face && (p.name == "vertex_indices" || p.name == "vertex_index")) {
@@ -296,6 +296,9 @@ StatusOr<Mesh> ReadPly(const std::string& path) {
     }
   }
   HOLO_RETURN_IF_ERROR(mesh.Validate().WithContext(path));
+  // Validate() does not look at normals; a file's must be finite too (found by fuzzing).
+  for (size_t i = 0; i < mesh.normals.size(); ++i)
+    if (!mesh.normals[i].allFinite()) return DataLoss(path + ": normal " + std::to_string(i) + " is not finite");
   return mesh;
 }
 

@@ -1,7 +1,8 @@
-// One entry point that drives every decoder of the protocol with arbitrary
-// bytes: the libFuzzer target (protocol/fuzz/) and the corpus-replay and
-// mutation tests (tests/protocol/) call it. The first byte selects the
-// decoder, the rest is its input:
+// Fuzz entry points of the protocol decoders, one per decoder (the libFuzzer
+// targets protocol/fuzz/fuzz_<decoder>.cc call them), and FuzzDecoders, which
+// drives all of them from one input (the corpus-replay and mutation tests of
+// tests/protocol/ and the combined target). FuzzDecoders' first byte selects
+// the decoder, the rest is its input:
 //   0 — byte stream: FrameParser (fed in uneven chunks) + MessageAssembler
 //   1 — one whole message (DecodeMessage)
 //   2 — a geometry blob (DecodeGeometry)
@@ -13,13 +14,20 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 namespace holo::protocol {
 
 enum class FuzzTarget : uint8_t { kStream = 0, kMessage = 1, kGeometry = 2, kColor = 3 };
 
-// Returns the number of items decoded successfully (for tests); never crashes.
+// Each returns the number of items decoded successfully (for tests) and never
+// crashes on any input.
+int FuzzStream(std::span<const uint8_t> bytes);    // FrameParser (uneven chunks) + MessageAssembler
+int FuzzMessage(std::span<const uint8_t> bytes);   // DecodeMessage
+int FuzzGeometry(std::span<const uint8_t> bytes);  // DecodeGeometry (G0, G1, …)
+int FuzzColor(std::span<const uint8_t> bytes);     // DecodeColor (C0, C1, …) and ColorDecoder
+
 int FuzzDecoders(const uint8_t* data, size_t size);
 
 // `target` byte followed by `body`, the input format of FuzzDecoders.

@@ -1,4 +1,4 @@
-// The standard workloads every benchmark names (DESIGN.md §6, docs/workloads.md).
+// The standard workloads every benchmark names (docs/workloads.md).
 #pragma once
 
 #include <string>

@@ -66,5 +66,28 @@ TEST(FuzzCorpus, ReplayCorpusDirectory) {
   EXPECT_GT(files, 10);
 }
 
+// The corpora of the per-decoder libFuzzer targets (protocol/fuzz/corpus/NAME:
+// seeds plus inputs kept from fuzz runs) through the same entry points.
+TEST(FuzzCorpus, ReplayPerDecoderCorpora) {
+  const std::string base = std::string(HOLO_SOURCE_DIR) + "/protocol/fuzz/corpus/";
+  const std::vector<std::pair<std::string, int (*)(std::span<const uint8_t>)>> decoders = {
+      {"stream", FuzzStream}, {"message", FuzzMessage}, {"geometry", FuzzGeometry}, {"color", FuzzColor}};
+  for (const auto& [name, fn] : decoders) {
+    ASSERT_TRUE(std::filesystem::is_directory(base + name)) << base + name;
+    int seeds = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(base + name)) {
+      if (!entry.is_regular_file()) continue;
+      std::ifstream in(entry.path(), std::ios::binary);
+      const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      const int decoded = fn(bytes);  // must not crash
+      if (entry.path().filename().string().rfind("seed-", 0) == 0) {
+        EXPECT_GE(decoded, 1) << entry.path();
+        ++seeds;
+      }
+    }
+    EXPECT_GE(seeds, 1) << name;
+  }
+}
+
 }  // namespace
 }  // namespace holo::protocol

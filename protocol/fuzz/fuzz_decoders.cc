@@ -1,4 +1,5 @@
-// libFuzzer entry point over every protocol decoder (see fuzz_decoders.h).
+// libFuzzer target over every protocol decoder at once (the first byte picks
+// the decoder, see protocol/fuzz_decoders.h); corpus: tests/protocol/corpus.
 #include <cstddef>
 #include <cstdint>
 

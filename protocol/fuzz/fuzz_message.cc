@@ -1,0 +1,11 @@
+// libFuzzer target: protocol FuzzMessage (protocol/fuzz_decoders.h) on raw bytes.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "protocol/fuzz_decoders.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  holo::protocol::FuzzMessage(std::span<const uint8_t>(data, size));
+  return 0;
+}
