@@ -16,6 +16,7 @@ PACKAGES=(
   libjpeg62-turbo-dev
   libwebrtc-audio-processing-dev libspeexdsp-dev libmysofa-dev
   libavcodec-dev libavutil-dev
+  nginx-light
 )
 
 missing=()

@@ -4,12 +4,15 @@
 // commands.
 #include <time.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -17,6 +20,7 @@
 #include "common/clock.h"
 #include "server/net/server_config.h"
 #include "server/record/inspect.h"
+#include "server/record/live_packager.h"
 #include "server/record/recording_reader.h"
 #include "server/record/recording_sink.h"
 #include "server/record/recording_writer.h"
@@ -265,6 +269,153 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   return code;
 }
 
+// Packages a live stream for HTTP caches (docs/broadcast.md): a live site
+// (--connect, as a viewer-side recorder) or the synthetic studio paced in real
+// time (--source synthetic). Parts and segments appear in `o.dir` as they
+// complete; a site disconnect closes the segment (the next one is a
+// discontinuity). Runs until --duration, Ctrl-C or a write failure.
+int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect, const std::string& source_spec,
+                std::string token, double duration_s, bool tls, const std::string& ca_file, double connect_timeout_s,
+                bool quiet) {
+  holo::RealClock& clock = holo::RealClock::Instance();
+  auto wall_us = [] {
+    timespec ts{};
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return static_cast<int64_t>(ts.tv_sec) * 1000000 + ts.tv_nsec / 1000;
+  };
+  if (!(duration_s >= 0)) return Fail(holo::InvalidArgument("--duration must be ≥ 0"));
+  o.source = (connect.empty() ? source_spec : "site:" + connect).substr(0, 31);
+  auto packager = holo::record::LivePackager::Open(o, wall_us());
+  if (!packager.ok()) return Fail(packager.status());
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  const int64_t start = clock.NowUs();
+  const int64_t end = duration_s > 0 ? start + static_cast<int64_t>(duration_s * 1e6) : INT64_MAX;
+  std::mutex mu;
+  holo::Status failed;  // a write failure ends the broadcast (under mu)
+  std::vector<uint8_t> frame;
+  auto add = [&](const holo::protocol::Header& h, std::span<const uint8_t> payload, int64_t at) {
+    frame.resize(holo::protocol::kHeaderSize + payload.size());
+    holo::protocol::Header hh = h;
+    hh.payload_length = static_cast<uint32_t>(payload.size());
+    holo::protocol::EncodeHeader(hh, frame.data());
+    std::copy(payload.begin(), payload.end(), frame.begin() + holo::protocol::kHeaderSize);
+    holo::Status s = (*packager)->AddMessage(frame, at);
+    if (s.code() == holo::StatusCode::kInvalidArgument) {
+      if (!quiet) std::fprintf(stderr, "holoport-record: skipped a message: %s\n", s.message().c_str());
+    } else if (!s.ok() && failed.ok()) {
+      failed = s;
+    }
+  };
+  if (!quiet)
+    std::fprintf(stderr, "holoport-record: %s → %s (segments %.2f s, parts %lld ms)\n", o.source.c_str(),
+                 o.dir.c_str(), static_cast<double>(o.segment_us) * 1e-6, static_cast<long long>(o.part_us / 1000));
+  std::unique_ptr<holo::net::SiteClient> client;
+  std::unique_ptr<holo::record::SyntheticStream> synthetic;
+  if (!connect.empty()) {
+    holo::net::ClientOptions co;
+    holo::Status st = holo::net::ParseHostPort(connect, &co.host, &co.port);
+    if (!st.ok()) return Fail(st.WithContext("--connect"));
+    if (co.host == "0.0.0.0") co.host = "127.0.0.1";
+    if (token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) token = std::getenv("HOLO_VIEWER_TOKEN");
+    if (token.empty())
+      return Fail(holo::InvalidArgument("--connect needs the site's viewer token: --token or env HOLO_VIEWER_TOKEN"));
+    co.role = holo::protocol::Role::kRecorder;
+    co.token = token;
+    co.name = "holoport-record --live-dir";
+    co.decode = false;
+    co.subscribe = holo::net::kSubscribeAll;
+    co.tls.enabled = tls;
+    co.tls.ca_file = ca_file;
+    co.connect_timeout_s = connect_timeout_s;
+    holo::Status check = co.Check();
+    if (!check.ok()) return Fail(check);
+    holo::net::ClientCallbacks cb;
+    cb.on_raw = [&](const holo::net::RawMessage& m) {
+      std::lock_guard<std::mutex> l(mu);
+      add(m.header, m.payload, m.received_us);
+    };
+    cb.on_state = [&](holo::net::ClientState state, const holo::Status& why) {
+      if (state == holo::net::ClientState::kBackoff || state == holo::net::ClientState::kRefused) {
+        std::lock_guard<std::mutex> l(mu);
+        holo::Status s = (*packager)->Discontinuity(wall_us());
+        if (!s.ok() && failed.ok()) failed = s;
+      }
+      if (quiet) return;
+      if (state == holo::net::ClientState::kConnected)
+        std::fprintf(stderr, "holoport-record: connected to %s; packaging\n", connect.c_str());
+      else if (state == holo::net::ClientState::kBackoff)
+        std::fprintf(stderr, "holoport-record: %s (retrying): %s\n", connect.c_str(), why.message().c_str());
+    };
+    auto c = holo::net::SiteClient::Start(co, cb);
+    if (!c.ok()) return Fail(c.status());
+    client = std::move(*c);
+  } else {
+    holo::record::SyntheticStreamOptions so;
+    if (source_spec == "synthetic") {
+      so.workload = "S8-QVGA";
+    } else if (source_spec.rfind("synthetic:", 0) == 0) {
+      so.workload = source_spec.substr(10);
+    } else {
+      return Fail(holo::InvalidArgument("--live-dir needs --connect HOST:PORT or --source synthetic[:WORKLOAD], got '" +
+                                        source_spec + "'"));
+    }
+    auto s = holo::record::SyntheticStream::Create(so);
+    if (!s.ok()) return Fail(s.status());
+    synthetic = std::move(*s);
+  }
+  const int64_t wall_start = wall_us();
+  holo::record::StreamMessage sm;
+  bool have_sm = false;
+  bool refused = false;
+  while (!g_stop && clock.NowUs() < end) {
+    if (synthetic) {
+      // Everything due now, then sleep until the next message or tick.
+      while (true) {
+        if (!have_sm) {
+          holo::Status s = synthetic->Next(&sm);
+          if (!s.ok()) return Fail(s);
+          have_sm = true;
+        }
+        if (wall_start + sm.time_us > wall_us()) break;
+        auto h = holo::protocol::DecodeHeader(sm.frame.data(), sm.frame.size(), holo::protocol::Limits{});
+        if (!h.ok()) return Fail(h.status());
+        std::lock_guard<std::mutex> l(mu);
+        add(*h, std::span<const uint8_t>(sm.frame).subspan(holo::protocol::kHeaderSize), wall_us());
+        have_sm = false;
+      }
+    }
+    clock.SleepUntilUs(clock.NowUs() + 5000);
+    std::lock_guard<std::mutex> l(mu);
+    holo::Status s = (*packager)->Tick(wall_us());
+    if (!s.ok() && failed.ok()) failed = s;
+    if (!failed.ok()) break;
+    if (client && client->state() == holo::net::ClientState::kRefused) {
+      refused = true;
+      break;
+    }
+  }
+  if (client) client->Stop();  // no callback runs after this
+  std::lock_guard<std::mutex> l(mu);
+  if (!failed.ok()) return Fail(failed);
+  holo::Status f = (*packager)->Finish(wall_us());
+  if (!f.ok()) return Fail(f);
+  const auto& st = (*packager)->stats();
+  if (!quiet)
+    std::fprintf(stderr,
+                 "holoport-record: %llu messages in %llu parts, %llu segments closed (%llu pruned), %llu dropped "
+                 "before a key frame, %llu rejected; next segment %llu\n",
+                 static_cast<unsigned long long>(st.messages), static_cast<unsigned long long>(st.parts),
+                 static_cast<unsigned long long>(st.segments), static_cast<unsigned long long>(st.pruned_segments),
+                 static_cast<unsigned long long>(st.dropped_before_key), static_cast<unsigned long long>(st.rejected),
+                 static_cast<unsigned long long>((*packager)->next_segment()));
+  if (refused) {
+    std::fprintf(stderr, "holoport-record: the site refused the packager: %s\n", client->status().message().c_str());
+    return 1;
+  }
+  return 0;
+}
+
 int Info(const std::string& path, bool deep, bool json, bool salvage) {
   holo::record::RecordingReaderOptions o;
   o.salvage = salvage;
@@ -345,6 +496,15 @@ int main(int argc, char** argv) {
   app.add_option("--ca-file", ca_file, "--connect --tls: trusted certificates (PEM)");
   app.add_option("--connect-timeout", connect_timeout_s, "--connect: seconds for connect + handshake per attempt")
       ->capture_default_str();
+  std::string live_dir;
+  double part_ms = 250;
+  int window = 10;
+  app.add_option("--live-dir", live_dir,
+                 "package a live stream for HTTP caches into DIR (docs/broadcast.md): seg_NNNNN.pK parts, "
+                 "seg_NNNNN.hrec segments and live.json, from --connect HOST:PORT or --source synthetic (paced in "
+                 "real time); --segment-seconds, --part-ms, --window; runs until --duration or Ctrl-C");
+  app.add_option("--part-ms", part_ms, "--live-dir: target part length, ms")->capture_default_str();
+  app.add_option("--window", window, "--live-dir: segments listed in live.json")->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "no progress output");
   out_opt->excludes(info_opt)->excludes(cut_opt);
   info_opt->excludes(cut_opt);
@@ -355,6 +515,16 @@ int main(int argc, char** argv) {
   if (!cut_path.empty()) {
     if (out_dir.empty()) return Fail(holo::InvalidArgument("--cut needs --out-dir DIR"));
     return Cut(cut_path, segment_s, out_dir, quiet);
+  }
+  if (!live_dir.empty()) {
+    if (!out.empty()) return Fail(holo::InvalidArgument("--live-dir and --out exclude each other"));
+    if (app.count("--duration") == 0) duration = 0;
+    holo::record::LivePackagerOptions lo;
+    lo.dir = live_dir;
+    lo.segment_us = static_cast<int64_t>(segment_s * 1e6);
+    lo.part_us = static_cast<int64_t>(part_ms * 1e3);
+    lo.window_segments = window;
+    return PackageLive(lo, connect, source, token, duration, tls, ca_file, connect_timeout_s, quiet);
   }
   if (out.empty()) return Fail(holo::InvalidArgument("nothing to do: pass --out FILE, --info FILE or --cut FILE (see --help)"));
   if (!connect.empty())
