@@ -1,10 +1,10 @@
 // libFuzzer target: the live broadcast's part parser
-// (server/record/live_format.h, docs/broadcast.md §2).
+// (protocol/live_format.h, docs/broadcast.md §2).
 #include <cstddef>
 #include <cstdint>
 
 #include "common/status.h"
-#include "server/record/live_format.h"
+#include "protocol/live_format.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto records = holo::record::ParseLiveRecords(std::span<const uint8_t>(data, size), 1u << 20);

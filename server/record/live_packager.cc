@@ -14,7 +14,7 @@
 
 #include "common/file_util.h"
 #include "protocol/messages.h"
-#include "server/record/recording_format.h"
+#include "protocol/recording_format.h"
 
 namespace holo::record {
 namespace {

@@ -12,7 +12,7 @@
 
 #include "common/file_util.h"
 #include "record/record_test_util.h"
-#include "server/record/live_format.h"
+#include "protocol/live_format.h"
 #include "server/record/live_packager.h"
 #include "server/record/recording_reader.h"
 #include "test_util.h"

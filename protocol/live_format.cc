@@ -1,8 +1,8 @@
-#include "server/record/live_format.h"
+#include "protocol/live_format.h"
 
 #include <string>
 
-#include "server/record/recording_format.h"
+#include "protocol/recording_format.h"
 
 namespace holo::record {
 

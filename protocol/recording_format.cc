@@ -1,4 +1,4 @@
-#include "server/record/recording_format.h"
+#include "protocol/recording_format.h"
 
 #include <algorithm>
 #include <array>
