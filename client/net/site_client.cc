@@ -108,8 +108,8 @@ const char* ClientStateName(ClientState s) {
 }
 
 Status ClientOptions::Check() const {
-  if (host.empty()) return InvalidArgument("client: host must be set");
-  if (port == 0) return InvalidArgument("client: port must be set (1..65535)");
+  if (!fed && host.empty()) return InvalidArgument("client: host must be set");
+  if (!fed && port == 0) return InvalidArgument("client: port must be set (1..65535)");
   if (token.size() > 256) return InvalidArgument("client: token over 256 bytes");
   if (name.size() > 1024) return InvalidArgument("client: name over 1024 bytes");
   if (subscribe > kSubscribeAll) return InvalidArgument("client: subscribe bits must be 0..7");
@@ -426,6 +426,12 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       ArmPing();
       return;
     }
+    Deliver(raw);
+  }
+
+  // A whole content message after Welcome (from the socket, or Feed()).
+  void Deliver(const RawMessage& raw) {
+    const MessageType t = raw.header.type;
     if (cb.on_raw) cb.on_raw(raw);
     switch (t) {
       case MessageType::kMeshFrame: OnMesh(raw); return;
@@ -720,8 +726,29 @@ StatusOr<std::unique_ptr<SiteClient>> SiteClient::Start(ClientOptions options, C
   HOLO_RETURN_IF_ERROR(impl->SetUpTls());
   impl->subscription = impl->opt.subscribe;
   Impl* raw = impl.get();
-  asio::post(impl->strand, [raw, keep = impl] { raw->Connect(); });
+  if (raw->opt.fed) {
+    asio::post(impl->strand, [raw, keep = impl] {
+      raw->welcomed = true;
+      raw->SetState(ClientState::kConnected, OkStatus());
+    });
+  } else {
+    asio::post(impl->strand, [raw, keep = impl] { raw->Connect(); });
+  }
   return std::unique_ptr<SiteClient>(new SiteClient(std::move(impl)));
+}
+
+void SiteClient::Feed(RawMessage message) {
+  if (!impl_ || !impl_->opt.fed || impl_->stopped) return;
+  auto impl = impl_;
+  asio::post(impl->strand, [impl, m = std::move(message)]() mutable {
+    if (impl->stopped) return;
+    {
+      std::lock_guard<std::mutex> l(impl->mu);
+      ++impl->stats.messages_received;
+      impl->stats.bytes_received += m.payload.size() + protocol::kHeaderSize;
+    }
+    impl->Deliver(m);
+  });
 }
 
 void SiteClient::Stop() {

@@ -76,6 +76,9 @@ struct ClientOptions {
                                       {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0},
                                       {protocol::AudioCodec::kOpus, protocol::AudioCodec::kPcm16}};
   TlsClientConfig tls;
+  // No connection: content messages come from Feed() (an HTTP broadcast
+  // player, client/net/broadcast_player.h); the state is kConnected at once.
+  bool fed = false;
   Status Check() const;
 };
 
@@ -176,6 +179,11 @@ class SiteClient {
   void SetSpeed(float speed);
 
   ClientStats stats() const;
+
+  // ClientOptions::fed: one whole content message (Rig, MeshFrame,
+  // ColorFrame, AudioPose, Stats) for the same decode and delivery path as
+  // a site's; untrusted (decoded and checked there). Ignored otherwise.
+  void Feed(RawMessage message);
 
   struct Impl;
 

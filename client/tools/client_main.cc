@@ -101,6 +101,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
   app.add_option("--connect", o.connect, "watch the site server at HOST:PORT (instead of --source)");
+  app.add_option("--http", o.http,
+                 "play a live broadcast from an HTTP edge: http://EDGE/NAME/live.json[?md5=..&expires=..] "
+                 "(docs/broadcast.md); --seconds / --frames as with --connect");
   app.add_option("--token", o.token, "viewer token for --connect (default: env HOLO_VIEWER_TOKEN)");
   app.add_option("--call", o.call,
                  "one side of a two-site call: call config YAML (docs/sessions.md); watches the remote site, "
@@ -122,8 +125,8 @@ int main(int argc, char** argv) {
                  "give up when the site has not answered within this many seconds (0: wait forever)")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
-  if (!o.connect.empty() && !o.call.empty()) {
-    std::fprintf(stderr, "holoport-client: give --connect or --call, not both\n");
+  if (!o.connect.empty() + !o.call.empty() + !o.http.empty() > 1) {
+    std::fprintf(stderr, "holoport-client: give one of --connect, --call and --http\n");
     return 2;
   }
   if ((!o.audio_in.empty() || !o.audio_out.empty()) && o.call.empty()) {

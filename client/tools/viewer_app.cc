@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "audio/room.h"
+#include "client/net/broadcast_player.h"
 #include "client/net/participant.h"
 #include "client/net/site_client.h"
 #include "client/render/gl_context.h"
@@ -138,7 +139,7 @@ class Viewer {
       return Unavailable("--pose-trace needs the head-trace reader (client/pose), which this build does not have");
 #endif
     }
-    net_mode_ = !o_.connect.empty() || !o_.call.empty();
+    net_mode_ = !o_.connect.empty() || !o_.call.empty() || !o_.http.empty();
     if (net_mode_) {
       HOLO_RETURN_IF_ERROR(StartNetwork());
     } else {
@@ -208,6 +209,7 @@ class Viewer {
   std::string SourceName() const {
     if (!o_.call.empty()) return "call " + o_.call;
     if (!o_.connect.empty()) return "site " + o_.connect;
+    if (!o_.http.empty()) return "broadcast " + o_.http;
     return o_.source;
   }
   const Rig& CurrentRig() const { return net_mode_ ? net_rig_ : source_->rig(); }
@@ -265,6 +267,35 @@ class Viewer {
       client_ = &participant_->viewer();
       // The remote room through the call's room transform (rendering and voices alike).
       call_local_from_remote_ = call.room.local_from_remote.matrix();
+    } else if (!o_.http.empty()) {
+      // The broadcast's messages go through the same decode and delivery path
+      // as a site connection (SiteClient fed by the HTTP player).
+      co.fed = true;
+      HOLO_ASSIGN_OR_RETURN(own_client_, net::SiteClient::Start(co, cb));
+      client_ = own_client_.get();
+      net::BroadcastPlayerOptions bo;
+      bo.url = o_.http;
+      net::SiteClient* fed = own_client_.get();
+      HOLO_ASSIGN_OR_RETURN(player_, net::BroadcastPlayer::Start(bo, [fed](const protocol::Header& h,
+                                                                           std::span<const uint8_t> payload,
+                                                                           int64_t received_us) {
+        net::RawMessage m;
+        m.header = h;
+        m.payload.assign(payload.begin(), payload.end());
+        m.received_us = received_us;
+        fed->Feed(std::move(m));
+      }));
+      // The Rig comes with the first part: wait for it like for a site's Welcome.
+      const double wait_rig = o_.connect_timeout_s > 0 ? o_.connect_timeout_s : 1e9;
+      const auto t0 = std::chrono::steady_clock::now();
+      while (!own_client_->rig() && !g_viewer_stop &&
+             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < wait_rig)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      if (!own_client_->rig()) {
+        const auto ps = player_->stats();
+        return Unavailable("no broadcast from " + o_.http + " within " + std::to_string(static_cast<int>(wait_rig)) +
+                           " s" + (ps.last_error.empty() ? std::string() : ": " + ps.last_error));
+      }
     } else {
       if (!net::ParseSiteAddress(o_.connect, &co.host, &co.port)) {
         return InvalidArgument("--connect: expected HOST:PORT, got '" + o_.connect + "'");
@@ -882,6 +913,26 @@ class Viewer {
       j["rtt_min_ms"] = cs.rtt_min_ms;
       j["clock_offset_us"] = cs.clock_offset_us;
       j["seconds"] = net_elapsed_s_;
+      if (player_) {
+        const net::BroadcastPlayerStats bs = player_->stats();
+        j["broadcast"] = {{"manifests", bs.manifests},
+                          {"parts", bs.parts},
+                          {"messages", bs.messages},
+                          {"bytes", bs.bytes},
+                          {"http_errors", bs.http_errors},
+                          {"not_found", bs.not_found},
+                          {"damaged_parts", bs.damaged_parts},
+                          {"refused", bs.refused},
+                          {"joins", bs.follower.joins},
+                          {"catch_ups", bs.follower.catch_ups},
+                          {"skips", bs.follower.skips},
+                          {"discontinuities", bs.follower.discontinuities},
+                          {"latency_ms_p50", Percentile(bs.latency_ms, 0.5)},
+                          {"latency_ms_p99", Percentile(bs.latency_ms, 0.99)},
+                          {"latency_definition",
+                           "packager receive time of a part's last message to the part's arrival here (Unix clocks)"},
+                          {"last_error", bs.last_error}};
+      }
       if (participant_) {
         const net::ParticipantStats ps = participant_->stats();
         j["audio"] = {{"voice_frames_sent", ps.voice_frames_sent},
@@ -941,6 +992,7 @@ class Viewer {
   bool net_mode_ = false;
   std::unique_ptr<net::Participant> participant_;
   std::unique_ptr<net::SiteClient> own_client_;
+  std::unique_ptr<net::BroadcastPlayer> player_;  // --http: feeds own_client_
   net::SiteClient* client_ = nullptr;
   Eigen::Matrix4f call_local_from_remote_ = Eigen::Matrix4f::Identity();
   std::atomic<int> net_state_{static_cast<int>(net::ClientState::kConnecting)};
@@ -980,7 +1032,7 @@ class Viewer {
 int RunViewer(const ViewerOptions& options) {
   Viewer viewer(options);
   if (Status s = viewer.Init(); !s.ok()) return viewer.Fail(s);
-  if (!options.connect.empty() || !options.call.empty()) {
+  if (!options.connect.empty() || !options.call.empty() || !options.http.empty()) {
     std::signal(SIGINT, [](int) { g_viewer_stop = true; });
     std::signal(SIGTERM, [](int) { g_viewer_stop = true; });
     return viewer.RunNetwork();

@@ -41,6 +41,9 @@ struct ViewerOptions {
   // voices into --audio-out). Either replaces --source.
   std::string connect;
   std::string token;
+  // Play a live broadcast from an HTTP edge instead (docs/broadcast.md):
+  // http://EDGE/NAME/live.json[?md5=…&expires=…].
+  std::string http;
   std::string call;
   std::string name = "holoport-client";
   // --call: where the participant's head stands in the own room (metres,
