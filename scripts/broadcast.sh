@@ -7,6 +7,7 @@
 #                              [--edge-port 8081] [--secret SECRET] [--host 127.0.0.1]
 #       ROOT holds one directory per broadcast (holoport-record --live-dir ROOT/NAME);
 #       edge i listens on edge-port + i. With --secret the edges serve only signed URLs.
+#       --no-origin: start only the edges (of an origin already running on --origin-port).
 #   scripts/broadcast.sh stop --run RUN
 #   scripts/broadcast.sh sign --name NAME --secret SECRET [--ttl 3600] [--base http://HOST:PORT]
 #                              [--expires UNIX_S]
@@ -21,7 +22,7 @@ cmd="${1:-}"
 [[ -n "$cmd" ]] || die "usage: broadcast.sh start|stop|sign [options] (see the header of this script)"
 shift
 run="" root="" origin_port=8080 edges=2 edge_port=8081 secret="" host=127.0.0.1
-name="" ttl=3600 base="" expires=""
+name="" ttl=3600 base="" expires="" no_origin=0
 while (($#)); do
   case "$1" in
     --run) run="$2"; shift 2 ;;
@@ -35,6 +36,7 @@ while (($#)); do
     --ttl) ttl="$2"; shift 2 ;;
     --base) base="$2"; shift 2 ;;
     --expires) expires="$2"; shift 2 ;;
+    --no-origin) no_origin=1; shift ;;
     *) die "unknown option '$1'" ;;
   esac
 done
@@ -85,10 +87,12 @@ case "$cmd" in
     mkdir -p "$run" "$root"
     run="$(cd "$run" && pwd)"
     root="$(cd "$root" && pwd)"
-    mkdir -p "$run/origin"
-    fill "$conf_dir/origin.conf.in" "$run/origin/nginx.conf" "$run/origin" "$host:$origin_port"
-    start_one "$run/origin" "$run/origin/nginx.conf"
-    echo "origin  http://$host:$origin_port/  (root $root, logs $run/origin/)"
+    if ((!no_origin)); then
+      mkdir -p "$run/origin"
+      fill "$conf_dir/origin.conf.in" "$run/origin/nginx.conf" "$run/origin" "$host:$origin_port"
+      start_one "$run/origin" "$run/origin/nginx.conf"
+      echo "origin  http://$host:$origin_port/  (root $root, logs $run/origin/)"
+    fi
     for ((i = 0; i < edges; ++i)); do
       d="$run/edge$i"
       mkdir -p "$d"

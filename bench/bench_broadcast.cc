@@ -1,0 +1,632 @@
+// holoport-bench broadcast: a live broadcast through nginx caches on this
+// machine (docs/broadcast.md).
+//
+//   holoport-bench broadcast [--viewers N] [--edges E] [--content fused|truth] [--seconds S] [--json]
+//
+// A site (holoport-server, its own process: the real pipeline on pre-rendered
+// pod frames at 30 fps, or the studio's meshes with --content truth), the
+// packager (holoport-record --live-dir, a viewer of the site), an nginx
+// origin and E nginx edges (scripts/broadcast.sh; loopback ports), and N light
+// HTTP viewers in this process (Asio, many connections per thread) that do
+// what a player does on time — poll live.json, join at the newest segment,
+// fetch every part in order over one keep-alive connection — without
+// decoding or rendering. Viewers are spread over the edges round-robin.
+//
+// Figures (JSON lines, "content" qualifier): viewers_held (viewers that got
+// every part of the window, each within 2 s of the capture of its newest
+// frame), latency_p50_ms / latency_p99_ms (capture of a part's newest frame,
+// the site's wall clock, on this machine, to the part received whole at a
+// viewer; also for the part's oldest frame), mbps per viewer and in total,
+// origin_requests_per_object_per_edge (parts; target ≤ 1),
+// origin_requests_per_segment (everything the origin served, per segment
+// published), edge_hit_ratio, edge_cpu_pct per edge (CPU of its nginx
+// processes over the window, % of one core), packager and site CPU, and the
+// loopback ceiling the bytes are compared with.
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <asio.hpp>
+#include <CLI/CLI.hpp>
+
+#include "bench.h"
+#include "client/net/broadcast_player.h"
+#include "common/status.h"
+
+namespace holo::bench {
+namespace {
+
+constexpr char kPublisherToken[] = "broadcast-bench-publisher";
+constexpr char kViewerToken[] = "broadcast-bench-viewer";
+
+struct BroadcastOptions {
+  int viewers = 200;
+  int edges = 2;
+  std::string content = "fused";
+  double seconds = 15;
+  double warmup_s = 4;
+  int prerender = 60;
+  double segment_s = 2;
+  int part_ms = 250;
+  int window = 3;
+  int threads = 2;
+  double manifest_poll_ms = 500;
+  double in_time_ms = 2000;
+  std::string keep_dir;
+};
+
+int64_t SteadyUs() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+int64_t WallUs() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+double WallS() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+double CpuMsOf(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(f, line)) return 0;
+  const size_t close = line.rfind(')');
+  if (close == std::string::npos) return 0;
+  std::istringstream in(line.substr(close + 2));
+  std::vector<std::string> fields;
+  std::string field;
+  while (in >> field) fields.push_back(field);
+  if (fields.size() < 13) return 0;
+  return 1e3 * (std::stod(fields[11]) + std::stod(fields[12])) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+// CPU of an nginx instance: its master and the master's children (workers).
+double NginxCpuMs(pid_t master) {
+  double ms = CpuMsOf(master);
+  std::ifstream f("/proc/" + std::to_string(master) + "/task/" + std::to_string(master) + "/children");
+  pid_t child = 0;
+  while (f >> child) ms += CpuMsOf(child);
+  return ms;
+}
+
+uint16_t FreePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  uint16_t port = 0;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
+    port = ntohs(a.sin_port);
+  close(fd);
+  return port;
+}
+
+std::string SelfDir() {
+  char buf[4096];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
+  if (n <= 0) return ".";
+  std::string p(buf, static_cast<size_t>(n));
+  return p.substr(0, p.rfind('/'));
+}
+
+pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
+  std::vector<char*> cargv;
+  for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
+  cargv.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    FILE* log = std::fopen(log_path.c_str(), "w");
+    if (log) {
+      dup2(fileno(log), 1);
+      dup2(fileno(log), 2);
+    }
+    execv(cargv[0], cargv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+void StopChild(pid_t pid) {
+  if (pid <= 0) return;
+  kill(pid, SIGTERM);
+  for (int i = 0; i < 250; ++i) {
+    int st = 0;
+    if (waitpid(pid, &st, WNOHANG) == pid) return;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, nullptr, 0);
+}
+
+double Pct(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
+}
+
+// Capture times (site clock) of the first and last MeshFrame of a part, by
+// walking its records (lengths only: the load generator does not CRC or
+// decode). False if the part holds no MeshFrame or is malformed.
+bool PartCaptureTimes(const std::vector<uint8_t>& b, size_t head, int64_t* first, int64_t* last) {
+  auto u32 = [&](size_t at) {
+    return static_cast<uint32_t>(b[at]) | static_cast<uint32_t>(b[at + 1]) << 8 |
+           static_cast<uint32_t>(b[at + 2]) << 16 | static_cast<uint32_t>(b[at + 3]) << 24;
+  };
+  bool any = false;
+  for (size_t at = head; at + 24 + 32 <= b.size();) {
+    const uint32_t len = u32(at + 8);
+    if (len < 32 || len > b.size() - at - 24) return false;
+    const size_t body = at + 24;
+    const uint16_t type = static_cast<uint16_t>(b[body + 6] | b[body + 7] << 8);
+    if (type == static_cast<uint16_t>(protocol::MessageType::kMeshFrame)) {
+      int64_t t = 0;
+      for (int i = 7; i >= 0; --i) t = (t << 8) | b[body + 20 + static_cast<size_t>(i)];
+      if (!any) *first = t;
+      *last = t;
+      any = true;
+    }
+    at = body + len;
+  }
+  return any;
+}
+
+struct ViewerResult {
+  uint64_t parts = 0, bytes = 0, late = 0, errors = 0, skips = 0, catch_ups = 0, manifests = 0;
+  std::vector<double> latency_newest_ms, latency_oldest_ms;
+};
+
+// One light viewer: a keep-alive connection to its edge and a LiveFollower.
+class LightViewer : public std::enable_shared_from_this<LightViewer> {
+ public:
+  LightViewer(asio::io_context& io, asio::ip::tcp::endpoint edge, std::string dir, const BroadcastOptions& o,
+              std::atomic<bool>* measuring, std::atomic<bool>* stop)
+      : io_(io), socket_(io), timer_(io), edge_(edge), dir_(std::move(dir)), o_(o), measuring_(measuring),
+        stop_(stop) {}
+
+  void Start() {
+    auto self = shared_from_this();
+    socket_.async_connect(edge_, [self](std::error_code ec) {
+      if (ec) {
+        self->result.errors += 1;
+        self->Retry();
+        return;
+      }
+      self->socket_.set_option(asio::ip::tcp::no_delay(true));
+      self->Step();
+    });
+  }
+
+  ViewerResult result;
+
+ private:
+  void Retry() {
+    if (*stop_) return;
+    auto self = shared_from_this();
+    std::error_code ignore;
+    socket_.close(ignore);
+    timer_.expires_after(std::chrono::milliseconds(200));
+    timer_.async_wait([self](std::error_code) { self->Start(); });
+  }
+
+  void Step() {
+    if (*stop_) return;
+    const int64_t now = SteadyUs();
+    if (now >= next_manifest_us_) {
+      next_manifest_us_ = now + static_cast<int64_t>(o_.manifest_poll_ms * 1000);
+      Get("live.json", true, {});
+      return;
+    }
+    if (auto p = follower_.Next()) {
+      Get(p->name, false, *p);
+      return;
+    }
+    auto self = shared_from_this();
+    timer_.expires_after(std::chrono::microseconds(std::max<int64_t>(1000, std::min<int64_t>(20000, next_manifest_us_ - now))));
+    timer_.async_wait([self](std::error_code) { self->Step(); });
+  }
+
+  void Get(const std::string& name, bool manifest, net::LivePartRef part) {
+    request_ = "GET " + dir_ + name + " HTTP/1.1\r\nHost: edge\r\n\r\n";
+    auto self = shared_from_this();
+    asio::async_write(socket_, asio::buffer(request_), [self, manifest, part](std::error_code ec, size_t) {
+      if (ec) return self->Fail();
+      self->ReadHead(manifest, part);
+    });
+  }
+
+  void ReadHead(bool manifest, net::LivePartRef part) {
+    auto self = shared_from_this();
+    asio::async_read_until(socket_, asio::dynamic_buffer(buf_), "\r\n\r\n",
+                           [self, manifest, part](std::error_code ec, size_t) {
+                             if (ec) return self->Fail();
+                             bool complete = false;
+                             auto h = net::ParseHttpResponseHead(
+                                 std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(self->buf_.data()),
+                                                          self->buf_.size()),
+                                 &complete);
+                             if (!h.ok() || !complete) return self->Fail();
+                             self->head_ = *h;
+                             const size_t want = h->head_bytes + h->content_length;
+                             if (self->buf_.size() >= want) return self->Body(manifest, part);
+                             asio::async_read(self->socket_, asio::dynamic_buffer(self->buf_),
+                                              asio::transfer_exactly(want - self->buf_.size()),
+                                              [self, manifest, part](std::error_code ec2, size_t) {
+                                                if (ec2) return self->Fail();
+                                                self->Body(manifest, part);
+                                              });
+                           });
+  }
+
+  void Body(bool manifest, const net::LivePartRef& part) {
+    // Capture times are the site's wall clock (Unix µs); the site runs on this machine.
+    const int64_t now = WallUs();
+    const size_t end = head_.head_bytes + head_.content_length;
+    const bool measured = measuring_->load();
+    if (manifest) {
+      if (head_.status == 200) {
+        const std::string_view body(buf_.data() + head_.head_bytes, head_.content_length);
+        if (body != last_manifest_) {
+          auto m = net::ParseLiveManifest(body);
+          if (m.ok()) {
+            follower_.OnManifest(*m);
+            last_manifest_ = std::string(body);
+          }
+        }
+        if (measured) result.manifests += 1;
+      } else if (measured) {
+        result.errors += 1;
+      }
+    } else if (head_.status == 200) {
+      if (measured) {
+        std::vector<uint8_t> bytes(buf_.begin() + static_cast<std::ptrdiff_t>(head_.head_bytes),
+                                   buf_.begin() + static_cast<std::ptrdiff_t>(end));
+        int64_t first = 0, last = 0;
+        result.parts += 1;
+        result.bytes += head_.content_length;
+        if (PartCaptureTimes(bytes, 0, &first, &last)) {
+          const double newest = static_cast<double>(now - last) * 1e-3;
+          result.latency_newest_ms.push_back(newest);
+          result.latency_oldest_ms.push_back(static_cast<double>(now - first) * 1e-3);
+          if (newest > o_.in_time_ms) result.late += 1;
+        }
+      }
+      follower_.Done(part);
+    } else {
+      if (measured) result.errors += 1;
+      follower_.Skip(part);
+    }
+    if (measured) {
+      result.skips = follower_.stats().skips - skips_at_start_;
+      result.catch_ups = follower_.stats().catch_ups - catch_ups_at_start_;
+    } else {
+      skips_at_start_ = follower_.stats().skips;
+      catch_ups_at_start_ = follower_.stats().catch_ups;
+    }
+    buf_.erase(0, end);
+    if (!head_.keep_alive) {
+      std::error_code ignore;
+      socket_.close(ignore);
+      buf_.clear();
+      return Start();
+    }
+    Step();
+  }
+
+  void Fail() {
+    if (measuring_->load()) result.errors += 1;
+    buf_.clear();
+    Retry();
+  }
+
+  asio::io_context& io_;
+  asio::ip::tcp::socket socket_;
+  asio::steady_timer timer_;
+  asio::ip::tcp::endpoint edge_;
+  std::string dir_;
+  const BroadcastOptions& o_;
+  std::atomic<bool>* measuring_;
+  std::atomic<bool>* stop_;
+  net::LiveFollower follower_;
+  int64_t next_manifest_us_ = 0;
+  std::string request_, buf_, last_manifest_;
+  net::HttpResponseHead head_;
+  uint64_t skips_at_start_ = 0, catch_ups_at_start_ = 0;
+};
+
+struct LogCounts {
+  std::map<std::string, int> by_kind;  // "part", "manifest", "segment", "other"
+  int hits = 0, total = 0;
+};
+
+// Lines of an access log (holo format: $msec first, "$request", …, cache
+// status last on edges) with $msec in [t0, t1].
+LogCounts CountLog(const std::string& path, double t0, double t1) {
+  LogCounts c;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    const double t = std::atof(line.c_str());
+    if (t < t0 || t > t1) continue;
+    const size_t q = line.find('"');
+    const size_t q2 = line.find('"', q + 1);
+    if (q == std::string::npos || q2 == std::string::npos) continue;
+    const std::string req = line.substr(q + 1, q2 - q - 1);
+    std::string kind = "other";
+    if (req.find("/live.json") != std::string::npos) kind = "manifest";
+    else if (req.find(".hrec") != std::string::npos) kind = "segment";
+    else if (req.find("/seg_") != std::string::npos) kind = "part";
+    c.by_kind[kind] += 1;
+    const std::string status = line.substr(line.rfind(' ') + 1);
+    if (kind == "part" || kind == "manifest") {
+      c.total += 1;
+      if (status == "HIT") c.hits += 1;
+    }
+  }
+  return c;
+}
+
+int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
+  if (std::system("command -v nginx > /dev/null 2>&1") != 0) {
+    std::fprintf(stderr, "broadcast: nginx is not installed (scripts/setup.sh installs nginx-light)\n");
+    return 2;
+  }
+  const std::string bin = SelfDir();
+  const std::string script = std::string(HOLO_SOURCE_DIR) + "/scripts/broadcast.sh";
+  std::string dir = o.keep_dir;
+  if (dir.empty()) {
+    char tmpl[] = "/tmp/holoport-broadcast-XXXXXX";
+    if (!mkdtemp(tmpl)) return 1;
+    dir = tmpl;
+  }
+  if (std::system(("mkdir -p '" + dir + "/root'").c_str()) != 0) return 1;
+  auto progress = [&](const std::string& s) {
+    if (!args.json) std::fprintf(stderr, "broadcast: %s\n", s.c_str());
+  };
+  const std::string content = o.content;
+  auto emit = [&](const std::string& metric, double value, const std::string& unit,
+                  std::map<std::string, std::string> q = {}) {
+    q["content"] = content;
+    q["viewers"] = std::to_string(o.viewers);
+    q["edges"] = std::to_string(o.edges);
+    EmitFigure("broadcast", args.workload, metric, value, unit, q);
+  };
+
+  // 1. The site and the packager.
+  const uint16_t site_port = FreePort();
+  std::vector<std::string> site = {bin + "/holoport-server", "--source", "synthetic", "--workload", args.workload,
+                                   "--listen", "127.0.0.1:" + std::to_string(site_port), "--publisher-token",
+                                   kPublisherToken, "--viewer-token", kViewerToken, "--pace", "30"};
+  if (o.content == "truth") {
+    site.insert(site.end(), {"--truth-mesh", "--truth-loop", std::to_string(o.prerender), "-n", "-1"});
+  } else {
+    site.insert(site.end(), {"--prerender", std::to_string(o.prerender), "-n", "-1"});
+  }
+  progress("site: " + o.content + " " + args.workload + " (pre-rendering " + std::to_string(o.prerender) + " frames)");
+  const pid_t site_pid = Spawn(site, dir + "/site.log");
+  const pid_t packager_pid =
+      Spawn({bin + "/holoport-record", "--live-dir", dir + "/root/show", "--connect",
+             "127.0.0.1:" + std::to_string(site_port), "--token", kViewerToken, "--segment-seconds",
+             std::to_string(o.segment_s), "--part-ms", std::to_string(o.part_ms), "--window", std::to_string(o.window),
+             "--connect-timeout", "120", "-q"},
+            dir + "/packager.log");
+  // 2. nginx origin + edges.
+  const uint16_t origin_port = FreePort();
+  std::vector<uint16_t> edge_ports;
+  for (int i = 0; i < o.edges; ++i) {
+    uint16_t p = FreePort();
+    while (std::find(edge_ports.begin(), edge_ports.end(), p) != edge_ports.end() || p == origin_port) p = FreePort();
+    edge_ports.push_back(p);
+  }
+  // broadcast.sh numbers edges from one base port: start each edge on its own.
+  std::string cmd = script + " start --run '" + dir + "/run' --root '" + dir + "/root' --origin-port " +
+                    std::to_string(origin_port) + " --edges 0 > '" + dir + "/nginx.log' 2>&1";
+  int rc = std::system(cmd.c_str());
+  for (int i = 0; i < o.edges && rc == 0; ++i) {
+    // One edge per run directory, pointing at the shared origin.
+    cmd = script + " start --run '" + dir + "/run_e" + std::to_string(i) + "' --root '" + dir + "/root' --origin-port " +
+          std::to_string(origin_port) + " --no-origin --edges 1 --edge-port " + std::to_string(edge_ports[i]) +
+          " >> '" + dir + "/nginx.log' 2>&1";
+    rc = std::system(cmd.c_str());
+  }
+  auto stop_all = [&] {
+    std::system((script + " stop --run '" + dir + "/run' > /dev/null 2>&1").c_str());
+    for (int i = 0; i < o.edges; ++i)
+      std::system((script + " stop --run '" + dir + "/run_e" + std::to_string(i) + "' > /dev/null 2>&1").c_str());
+    StopChild(packager_pid);
+    StopChild(site_pid);
+  };
+  if (rc != 0) {
+    std::fprintf(stderr, "broadcast: nginx did not start (see %s/nginx.log)\n", dir.c_str());
+    stop_all();
+    return 1;
+  }
+  // 3. Wait for the broadcast at an edge (the site pre-renders first).
+  {
+    net::HttpGetter probe("127.0.0.1", edge_ports[0], 2.0);
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(300);
+    bool live = false;
+    while (!live && std::chrono::steady_clock::now() < until) {
+      auto r = probe.Get("/show/live.json");
+      if (r.ok() && r->status == 200) {
+        auto m = net::ParseLiveManifest(std::string_view(reinterpret_cast<const char*>(r->body.data()), r->body.size()));
+        live = m.ok() && m->segments.size() >= 2;
+      }
+      if (!live) std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    }
+    if (!live) {
+      std::fprintf(stderr, "broadcast: no broadcast at the edge within 300 s (see %s)\n", dir.c_str());
+      stop_all();
+      return 1;
+    }
+  }
+  progress("live; " + std::to_string(o.viewers) + " viewers on " + std::to_string(o.edges) + " edges, " +
+           std::to_string(o.threads) + " threads");
+  // 4. The viewers.
+  std::atomic<bool> measuring{false}, stop{false};
+  std::vector<std::unique_ptr<asio::io_context>> ios;
+  std::vector<std::shared_ptr<LightViewer>> viewers;
+  for (int t = 0; t < o.threads; ++t) ios.push_back(std::make_unique<asio::io_context>());
+  for (int i = 0; i < o.viewers; ++i) {
+    asio::ip::tcp::endpoint ep(asio::ip::make_address("127.0.0.1"), edge_ports[static_cast<size_t>(i % o.edges)]);
+    viewers.push_back(std::make_shared<LightViewer>(*ios[static_cast<size_t>(i % o.threads)], ep, "/show/", o,
+                                                    &measuring, &stop));
+  }
+  for (auto& v : viewers) v->Start();
+  std::vector<std::thread> threads;
+  std::vector<double> thread_cpu(static_cast<size_t>(o.threads), 0);
+  for (int t = 0; t < o.threads; ++t)
+    threads.emplace_back([&, t] {
+      ios[static_cast<size_t>(t)]->run();
+    });
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.warmup_s));
+  // 5. The measured window.
+  std::vector<pid_t> edge_masters;
+  auto read_pid = [](const std::string& path) {
+    std::ifstream f(path);
+    pid_t p = 0;
+    f >> p;
+    return p;
+  };
+  for (int i = 0; i < o.edges; ++i) edge_masters.push_back(read_pid(dir + "/run_e" + std::to_string(i) + "/edge0/nginx.pid"));
+  const pid_t origin_master = read_pid(dir + "/run/origin/nginx.pid");
+  std::vector<double> edge_cpu0;
+  for (pid_t p : edge_masters) edge_cpu0.push_back(NginxCpuMs(p));
+  const double origin_cpu0 = NginxCpuMs(origin_master), site_cpu0 = CpuMsOf(site_pid),
+               packager_cpu0 = CpuMsOf(packager_pid), self_cpu0 = ProcessCpuMs();
+  auto segments_now = [&]() -> int64_t {
+    auto text = std::ifstream(dir + "/root/show/live.json");
+    std::stringstream ss;
+    ss << text.rdbuf();
+    auto m = net::ParseLiveManifest(ss.str());
+    return m.ok() && !m->segments.empty() ? static_cast<int64_t>(m->segments.back().number) : -1;
+  };
+  const int64_t seg0 = segments_now();
+  const double t0 = WallS();
+  measuring = true;
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.seconds));
+  measuring = false;
+  const double t1 = WallS();
+  const int64_t seg1 = segments_now();
+  std::vector<double> edge_cpu;
+  for (size_t i = 0; i < edge_masters.size(); ++i) edge_cpu.push_back(NginxCpuMs(edge_masters[i]) - edge_cpu0[i]);
+  const double origin_cpu = NginxCpuMs(origin_master) - origin_cpu0, site_cpu = CpuMsOf(site_pid) - site_cpu0,
+               packager_cpu = CpuMsOf(packager_pid) - packager_cpu0, self_cpu = ProcessCpuMs() - self_cpu0;
+  stop = true;
+  for (auto& io : ios) io->stop();
+  for (auto& t : threads) t.join();
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // edges flush their buffered logs
+  stop_all();
+
+  // 6. Figures.
+  const double window_s = t1 - t0;
+  const double segments = static_cast<double>(std::max<int64_t>(1, seg1 - seg0));
+  std::vector<double> newest, oldest, mbps;
+  int held = 0;
+  uint64_t total_bytes = 0, total_parts = 0, total_errors = 0, total_late = 0;
+  const double parts_expected = window_s * 1000.0 / o.part_ms;
+  for (auto& v : viewers) {
+    const ViewerResult& r = v->result;
+    newest.insert(newest.end(), r.latency_newest_ms.begin(), r.latency_newest_ms.end());
+    oldest.insert(oldest.end(), r.latency_oldest_ms.begin(), r.latency_oldest_ms.end());
+    mbps.push_back(static_cast<double>(r.bytes) * 8 / window_s / 1e6);
+    total_bytes += r.bytes;
+    total_parts += r.parts;
+    total_errors += r.errors;
+    total_late += r.late;
+    // Every part of the window (allowing one at each end), none late, no error, skip or jump.
+    if (r.errors == 0 && r.skips == 0 && r.catch_ups == 0 && r.late == 0 &&
+        static_cast<double>(r.parts) >= parts_expected - 2)
+      ++held;
+  }
+  const LogCounts origin = CountLog(dir + "/run/origin/access.log", t0, t1);
+  int edge_hits = 0, edge_total = 0;
+  for (int i = 0; i < o.edges; ++i) {
+    const LogCounts e = CountLog(dir + "/run_e" + std::to_string(i) + "/edge0/access.log", t0, t1);
+    edge_hits += e.hits;
+    edge_total += e.total;
+  }
+  const double parts_published = segments * (o.segment_s * 1000.0 / o.part_ms);
+  auto count = [&](const LogCounts& c, const std::string& k) {
+    auto it = c.by_kind.find(k);
+    return it == c.by_kind.end() ? 0 : it->second;
+  };
+  int origin_total = 0;
+  for (const auto& [k, n] : origin.by_kind) origin_total += n;
+  emit("viewers_held", held, "viewers", {{"of", std::to_string(o.viewers)}, {"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
+  emit("latency_p50_ms", Pct(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_p99_ms", Pct(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p50_ms", Pct(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p99_ms", Pct(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("mbps", Pct(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
+  emit("mbps_total", static_cast<double>(total_bytes) * 8 / window_s / 1e6, "Mbit/s",
+       {{"note", "all viewers; loopback ceiling ~23,700 Mbit/s for one TCP stream"}});
+  emit("parts_per_viewer_per_s", static_cast<double>(total_parts) / window_s / o.viewers, "1/s",
+       {{"published", std::to_string(1000.0 / o.part_ms)}});
+  emit("viewer_errors", static_cast<double>(total_errors), "count");
+  emit("parts_late", static_cast<double>(total_late), "count", {{"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
+  emit("origin_requests_per_object_per_edge", count(origin, "part") / std::max(1.0, parts_published) / o.edges, "requests",
+       {{"object", "part"}, {"target", "<= 1"}});
+  emit("origin_requests_per_segment", origin_total / segments, "requests",
+       {{"note", "all origin requests (parts + live.json) per segment published, all edges"},
+        {"parts_per_segment", std::to_string(static_cast<int>(o.segment_s * 1000 / o.part_ms))}});
+  emit("origin_manifest_requests_per_s", count(origin, "manifest") / window_s, "1/s");
+  emit("edge_hit_ratio", edge_total ? static_cast<double>(edge_hits) / edge_total : 0.0, "ratio",
+       {{"objects", "parts + live.json"}});
+  for (size_t i = 0; i < edge_cpu.size(); ++i)
+    emit("edge_cpu_pct", edge_cpu[i] / (window_s * 10.0), "% of one core", {{"edge", std::to_string(i)}});
+  emit("origin_cpu_pct", origin_cpu / (window_s * 10.0), "% of one core");
+  emit("packager_cpu_pct", packager_cpu / (window_s * 10.0), "% of one core");
+  emit("site_cpu_pct", site_cpu / (window_s * 10.0), "% of one core");
+  emit("viewers_cpu_pct", self_cpu / (window_s * 10.0), "% of one core", {{"threads", std::to_string(o.threads)}});
+  emit("segments_published", segments, "count", {{"seconds", std::to_string(window_s)}});
+  if (!args.json) std::fprintf(stderr, "broadcast: logs in %s\n", dir.c_str());
+  return 0;
+}
+
+BenchFn Setup(CLI::App& app) {
+  auto o = std::make_shared<BroadcastOptions>();
+  app.add_option("--viewers", o->viewers, "light HTTP viewers")->check(CLI::Range(1, 20000));
+  app.add_option("--edges", o->edges, "nginx edge caches")->check(CLI::Range(1, 16));
+  app.add_option("--content", o->content, "fused (the real pipeline on pre-rendered frames) or truth (studio meshes)")
+      ->check(CLI::IsMember({"fused", "truth"}));
+  app.add_option("--seconds", o->seconds, "measured window, s")->check(CLI::Range(3.0, 3600.0));
+  app.add_option("--warmup", o->warmup_s, "seconds between the viewers' start and the window")->check(CLI::Range(0.0, 120.0));
+  app.add_option("--prerender", o->prerender, "pod frame sets the site renders first and loops")->check(CLI::Range(2, 600));
+  app.add_option("--segment-seconds", o->segment_s, "packager segment length")->check(CLI::Range(0.5, 10.0));
+  app.add_option("--part-ms", o->part_ms, "packager part length")->check(CLI::Range(50, 2000));
+  app.add_option("--window", o->window, "segments in live.json")->check(CLI::Range(1, 100));
+  app.add_option("--threads", o->threads, "viewer threads (each an Asio loop with many connections)")
+      ->check(CLI::Range(1, 64));
+  app.add_option("--manifest-poll-ms", o->manifest_poll_ms, "how often a viewer polls live.json")
+      ->check(CLI::Range(50.0, 5000.0));
+  app.add_option("--in-time-ms", o->in_time_ms, "a part is in time within this of its newest frame's capture")
+      ->check(CLI::Range(100.0, 60000.0));
+  app.add_option("--keep", o->keep_dir, "keep logs, configs and the broadcast in this directory");
+  return [o](const BenchArgs& args) { return RunBroadcast(args, *o); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS("broadcast",
+                            "live broadcast through an nginx origin + edges to N light HTTP viewers (docs/broadcast.md)",
+                            Setup);
+
+}  // namespace
+}  // namespace holo::bench
