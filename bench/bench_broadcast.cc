@@ -16,7 +16,8 @@
 // every part of the window, each within 2 s of the capture of its newest
 // frame), latency_p50_ms / latency_p99_ms (capture of a part's newest frame,
 // the site's wall clock, on this machine, to the part received whole at a
-// viewer; also for the part's oldest frame), mbps per viewer and in total,
+// viewer; also for the part's oldest frame; and latency_tier_*: from the
+// packager's receipt of the part's last message, the broadcast tier alone), mbps per viewer and in total,
 // origin_requests_per_object_per_edge (parts; target ≤ 1),
 // origin_requests_per_segment (everything the origin served, per segment
 // published), edge_hit_ratio, edge_cpu_pct per edge (CPU of its nginx
@@ -37,6 +38,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -166,7 +168,8 @@ double Pct(std::vector<double> v, double p) {
 // Capture times (site clock) of the first and last MeshFrame of a part, by
 // walking its records (lengths only: the load generator does not CRC or
 // decode). False if the part holds no MeshFrame or is malformed.
-bool PartCaptureTimes(const std::vector<uint8_t>& b, size_t head, int64_t* first, int64_t* last) {
+bool PartCaptureTimes(std::span<const uint8_t> b, size_t head, int64_t* first, int64_t* last,
+                      int64_t* last_record_time) {
   auto u32 = [&](size_t at) {
     return static_cast<uint32_t>(b[at]) | static_cast<uint32_t>(b[at + 1]) << 8 |
            static_cast<uint32_t>(b[at + 2]) << 16 | static_cast<uint32_t>(b[at + 3]) << 24;
@@ -176,6 +179,9 @@ bool PartCaptureTimes(const std::vector<uint8_t>& b, size_t head, int64_t* first
     const uint32_t len = u32(at + 8);
     if (len < 32 || len > b.size() - at - 24) return false;
     const size_t body = at + 24;
+    int64_t rt = 0;
+    for (int i = 7; i >= 0; --i) rt = (rt << 8) | b[at + 16 + static_cast<size_t>(i)];
+    *last_record_time = rt;
     const uint16_t type = static_cast<uint16_t>(b[body + 6] | b[body + 7] << 8);
     if (type == static_cast<uint16_t>(protocol::MessageType::kMeshFrame)) {
       int64_t t = 0;
@@ -192,6 +198,7 @@ bool PartCaptureTimes(const std::vector<uint8_t>& b, size_t head, int64_t* first
 struct ViewerResult {
   uint64_t parts = 0, bytes = 0, late = 0, errors = 0, skips = 0, catch_ups = 0, manifests = 0;
   std::vector<double> latency_newest_ms, latency_oldest_ms;
+  std::vector<double> latency_tier_ms;  // packager receive of the part's last message → part received
 };
 
 // One light viewer: a keep-alive connection to its edge and a LiveFollower.
@@ -288,6 +295,7 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
           auto m = net::ParseLiveManifest(body);
           if (m.ok()) {
             follower_.OnManifest(*m);
+            availability_start_ = m->availability_start_unix_us;
             last_manifest_ = std::string(body);
           }
         }
@@ -297,12 +305,15 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
       }
     } else if (head_.status == 200) {
       if (measured) {
-        std::vector<uint8_t> bytes(buf_.begin() + static_cast<std::ptrdiff_t>(head_.head_bytes),
-                                   buf_.begin() + static_cast<std::ptrdiff_t>(end));
-        int64_t first = 0, last = 0;
+        const std::span<const uint8_t> bytes(reinterpret_cast<const uint8_t*>(buf_.data()) + head_.head_bytes,
+                                             head_.content_length);
+        int64_t first = 0, last = 0, record_time = 0;
         result.parts += 1;
         result.bytes += head_.content_length;
-        if (PartCaptureTimes(bytes, 0, &first, &last)) {
+        const bool have = PartCaptureTimes(bytes, 0, &first, &last, &record_time);
+        if (availability_start_ > 0)
+          result.latency_tier_ms.push_back(static_cast<double>(now - availability_start_ - record_time) * 1e-3);
+        if (have) {
           const double newest = static_cast<double>(now - last) * 1e-3;
           result.latency_newest_ms.push_back(newest);
           result.latency_oldest_ms.push_back(static_cast<double>(now - first) * 1e-3);
@@ -350,6 +361,7 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
   std::string request_, buf_, last_manifest_;
   net::HttpResponseHead head_;
   uint64_t skips_at_start_ = 0, catch_ups_at_start_ = 0;
+  int64_t availability_start_ = 0;
 };
 
 struct LogCounts {
@@ -539,23 +551,27 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   // 6. Figures.
   const double window_s = t1 - t0;
   const double segments = static_cast<double>(std::max<int64_t>(1, seg1 - seg0));
-  std::vector<double> newest, oldest, mbps;
-  int held = 0;
-  uint64_t total_bytes = 0, total_parts = 0, total_errors = 0, total_late = 0;
+  std::vector<double> newest, oldest, tier, mbps;
+  int held = 0, complete = 0;
+  uint64_t total_bytes = 0, total_parts = 0, total_errors = 0, total_late = 0, total_skips = 0, total_catch_ups = 0;
   const double parts_expected = window_s * 1000.0 / o.part_ms;
   for (auto& v : viewers) {
     const ViewerResult& r = v->result;
     newest.insert(newest.end(), r.latency_newest_ms.begin(), r.latency_newest_ms.end());
     oldest.insert(oldest.end(), r.latency_oldest_ms.begin(), r.latency_oldest_ms.end());
+    tier.insert(tier.end(), r.latency_tier_ms.begin(), r.latency_tier_ms.end());
     mbps.push_back(static_cast<double>(r.bytes) * 8 / window_s / 1e6);
     total_bytes += r.bytes;
     total_parts += r.parts;
     total_errors += r.errors;
     total_late += r.late;
+    total_skips += r.skips;
+    total_catch_ups += r.catch_ups;
     // Every part of the window (allowing one at each end), none late, no error, skip or jump.
-    if (r.errors == 0 && r.skips == 0 && r.catch_ups == 0 && r.late == 0 &&
-        static_cast<double>(r.parts) >= parts_expected - 2)
-      ++held;
+    const bool all = r.errors == 0 && r.skips == 0 && r.catch_ups == 0 &&
+                     static_cast<double>(r.parts) >= parts_expected - 2;
+    if (all) ++complete;
+    if (all && r.late == 0) ++held;
   }
   const LogCounts origin = CountLog(dir + "/run/origin/access.log", t0, t1);
   int edge_hits = 0, edge_total = 0;
@@ -572,16 +588,25 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   int origin_total = 0;
   for (const auto& [k, n] : origin.by_kind) origin_total += n;
   emit("viewers_held", held, "viewers", {{"of", std::to_string(o.viewers)}, {"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
+  emit("viewers_complete", complete, "viewers",
+       {{"of", std::to_string(o.viewers)}, {"what", "every part of the window, no skip, jump or error, any latency"}});
   emit("latency_p50_ms", Pct(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
   emit("latency_p99_ms", Pct(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
   emit("latency_oldest_p50_ms", Pct(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
   emit("latency_oldest_p99_ms", Pct(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_tier_p50_ms", Pct(tier, 0.5), "ms",
+       {{"from", "packager received the part's last message"}, {"to", "part received"}});
+  emit("latency_tier_p99_ms", Pct(tier, 0.99), "ms",
+       {{"from", "packager received the part's last message"}, {"to", "part received"}});
   emit("mbps", Pct(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
   emit("mbps_total", static_cast<double>(total_bytes) * 8 / window_s / 1e6, "Mbit/s",
        {{"note", "all viewers; loopback ceiling ~23,700 Mbit/s for one TCP stream"}});
   emit("parts_per_viewer_per_s", static_cast<double>(total_parts) / window_s / o.viewers, "1/s",
        {{"published", std::to_string(1000.0 / o.part_ms)}});
   emit("viewer_errors", static_cast<double>(total_errors), "count");
+  emit("viewer_skips", static_cast<double>(total_skips), "count", {{"what", "parts given up (404, damaged)"}});
+  emit("viewer_catch_ups", static_cast<double>(total_catch_ups), "count",
+       {{"what", "jumps to the newest segment after falling 2 segments behind"}});
   emit("parts_late", static_cast<double>(total_late), "count", {{"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
   emit("origin_requests_per_object_per_edge", count(origin, "part") / std::max(1.0, parts_published) / o.edges, "requests",
        {{"object", "part"}, {"target", "<= 1"}});
