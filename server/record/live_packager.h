@@ -45,8 +45,10 @@ struct LivePackagerOptions {
   // Segments whose files stay on disk after leaving the list (players a little
   // behind still find them).
   int keep_extra_segments = 3;
-  // How long an edge may serve a cached live.json, ms (written into it).
-  int max_age_ms = 1000;
+  // How long an edge may serve a cached live.json, ms (written into it). The
+  // shipped edges do not cache it (nginx caches in whole seconds, longer than
+  // a part).
+  int max_age_ms = 0;
   // Stored in the segment files' header and live.json ("site:HOST:PORT").
   std::string source = "live";
   Status Check() const;

@@ -1,7 +1,7 @@
 // The shipped nginx origin + edge configuration (config/nginx/, started by
 // scripts/broadcast.sh; docs/broadcast.md §5–6) on free loopback ports:
 // concurrent misses make one origin request, content types, cache headers
-// and CORS for browsers, the manifest is not cached past ~1 s, and a private
+// and CORS for browsers, the manifest is never served stale, and a private
 // broadcast answers 403 to a missing, wrong or expired signature without
 // asking the origin.
 #include <arpa/inet.h>
@@ -179,7 +179,7 @@ TEST_F(Broadcast, ConcurrentMissesMakeOneOriginRequestAndBrowsersGetCorsAndTypes
   const Response manifest = Request(edge_, "/show/live.json");
   ASSERT_EQ(manifest.status, 200);
   EXPECT_EQ(manifest.Header("content-type"), "application/json");
-  EXPECT_EQ(manifest.Header("cache-control"), "public, max-age=1");
+  EXPECT_EQ(manifest.Header("cache-control"), "no-cache");
   EXPECT_EQ(manifest.Header("access-control-allow-origin"), "*");
   const Response preflight = Request(edge_, "/show/live.json", "OPTIONS");
   EXPECT_EQ(preflight.status, 204);
@@ -194,27 +194,18 @@ TEST_F(Broadcast, ConcurrentMissesMakeOneOriginRequestAndBrowsersGetCorsAndTypes
   EXPECT_EQ(Request(origin_, "/show/.seg_00000.p1.tmp").status, 404);
 }
 
-TEST_F(Broadcast, TheManifestIsNotCachedPastAboutASecond) {
+TEST_F(Broadcast, TheManifestIsNeverServedStale) {
   Start("");
   if (IsSkipped()) return;
-  ASSERT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 1}\n");
+  const Response first = Request(edge_, "/show/live.json");
+  ASSERT_EQ(first.body, "{\"n\": 1}\n");
+  EXPECT_EQ(first.Header("cache-control"), "no-cache");
+  // It changes every part (250 ms); nginx caches in whole seconds, so the
+  // edge passes every poll through: the next request sees the new one.
   ASSERT_TRUE(WriteStringToFile(dir_ + "/root/show/live.json", "{\"n\": 2}\n").ok());
-  // Served from the cache at first; the new one within 1 s of cache life plus
-  // one background refresh (generous bound for a loaded machine).
-  const auto start = std::chrono::steady_clock::now();
-  bool fresh = false;
-  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(5)) {
-    if (Request(edge_, "/show/live.json").body == "{\"n\": 2}\n") {
-      fresh = true;
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  EXPECT_TRUE(fresh);
-  // Many polls, few origin requests: about one per second of polling.
-  const int before = OriginRequests(OriginLog(), "/show/live.json");
-  for (int i = 0; i < 50; ++i) ASSERT_EQ(Request(edge_, "/show/live.json").status, 200);
-  EXPECT_LE(OriginRequests(OriginLog(), "/show/live.json") - before, 3);
+  EXPECT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 2}\n");
+  ASSERT_TRUE(WriteStringToFile(dir_ + "/root/show/live.json", "{\"n\": 3}\n").ok());
+  EXPECT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 3}\n");
 }
 
 TEST_F(Broadcast, PrivateBroadcastServesOnlySignedUnexpiredUrls) {
