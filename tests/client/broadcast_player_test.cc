@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "client/net/broadcast_player.h"
+#include "client/net/site_client.h"
 #include "common/file_util.h"
 #include "record/record_test_util.h"
 #include "server/record/live_packager.h"
@@ -277,6 +278,45 @@ class TestEdge {
   std::mutex mu_;
   std::vector<std::string> log_;
 };
+
+// holoport-client --http feeds the broadcast's messages into a SiteClient in
+// fed mode: the same decode and delivery path as a site connection.
+TEST(FedSiteClient, DecodesFedMessagesLikeASiteConnection) {
+  ClientOptions co;
+  co.fed = true;
+  co.subscribe = kSubscribeGeometry | kSubscribeAudio;
+  auto client = SiteClient::Start(co);
+  ASSERT_TRUE(client.ok()) << client.status().ToString();
+  ASSERT_TRUE((*client)->WaitConnected(2.0));
+  const auto stream = test::MakeTestStream(3, 30, 4);
+  auto feed = [&](const std::vector<uint8_t>& frame) {
+    auto h = protocol::DecodeHeader(frame.data(), frame.size());
+    HOLO_CHECK(h.ok());
+    RawMessage m;
+    m.header = *h;
+    m.payload.assign(frame.begin() + protocol::kHeaderSize, frame.end());
+    m.received_us = WallUs();
+    (*client)->Feed(std::move(m));
+  };
+  std::vector<uint8_t> bad_mesh;
+  for (const auto& m : stream) {
+    if (m.type == protocol::MessageType::kMeshFrame && bad_mesh.empty()) {
+      bad_mesh = m.frame;
+      bad_mesh[protocol::kHeaderSize + 8] = 99;  // the geometry codec: unknown
+    }
+    feed(m.frame);
+  }
+  ReceivedFrame f;
+  ASSERT_TRUE((*client)->WaitFrame(&f, 2.0));
+  EXPECT_TRUE(f.has_mesh);
+  EXPECT_GT(f.mesh.num_vertices(), 0u);
+  EXPECT_TRUE((*client)->rig().has_value());
+  feed(bad_mesh);
+  for (int i = 0; i < 100 && (*client)->stats().decode_errors == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ((*client)->stats().decode_errors, 1u);
+  (*client)->Stop();
+}
 
 TEST(BroadcastPlayer, SurvivesA404AStalledEdgeAndASiteRestart) {
   const std::string dir = test::MakeTempDir("bp_live");
