@@ -207,7 +207,7 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
  public:
   LightViewer(asio::io_context& io, asio::ip::tcp::endpoint edge, std::string dir, const BroadcastOptions& o,
               std::atomic<bool>* measuring, std::atomic<bool>* stop)
-      : io_(io), socket_(io), timer_(io), edge_(edge), dir_(std::move(dir)), o_(o), measuring_(measuring),
+      : socket_(io), timer_(io), edge_(edge), dir_(std::move(dir)), o_(o), measuring_(measuring),
         stop_(stop) {}
 
   void Start() {
@@ -349,7 +349,6 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
     Retry();
   }
 
-  asio::io_context& io_;
   asio::ip::tcp::socket socket_;
   asio::steady_timer timer_;
   asio::ip::tcp::endpoint edge_;
@@ -507,7 +506,6 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   }
   for (auto& v : viewers) v->Start();
   std::vector<std::thread> threads;
-  std::vector<double> thread_cpu(static_cast<size_t>(o.threads), 0);
   for (int t = 0; t < o.threads; ++t)
     threads.emplace_back([&, t] {
       ios[static_cast<size_t>(t)]->run();
