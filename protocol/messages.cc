@@ -139,7 +139,7 @@ Status Read(ByteReader& r, const Limits& l, Hello* m) {
   HOLO_RETURN_IF_ERROR(r.U16("hello.max_version", &m->max_version));
   if (m->min_version > m->max_version) return DataLoss("hello.min_version: greater than max_version");
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.geometry_codecs", 2, &m->capabilities.geometry));
-  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 3, &m->capabilities.color));
+  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 4, &m->capabilities.color));
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.audio_codecs", 2, &m->capabilities.audio));
   HOLO_RETURN_IF_ERROR(r.String16("hello.access_token", l.max_token, &m->access_token));
   HOLO_RETURN_IF_ERROR(r.String16("hello.client_name", l.max_string, &m->client_name));
@@ -163,7 +163,7 @@ Status Read(ByteReader& r, const Limits& l, Welcome* m) {
   HOLO_RETURN_IF_ERROR(r.U8("welcome.color_codec", &c));
   HOLO_RETURN_IF_ERROR(r.U8("welcome.audio_codec", &a));
   if (g < 1 || g > 2) return DataLoss("welcome.geometry_codec: unknown codec " + Str(g));
-  if (c < 1 || c > 3) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
+  if (c < 1 || c > 4) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
   if (a < 1 || a > 2) return DataLoss("welcome.audio_codec: unknown codec " + Str(a));
   m->geometry_codec = static_cast<GeometryCodec>(g);
   m->color_codec = static_cast<ColorCodec>(c);
@@ -252,7 +252,7 @@ Status Read(ByteReader& r, const Limits& l, ColorFrame* m) {
   HOLO_RETURN_IF_ERROR(r.I64("color_frame.frame_index", &m->frame_index));
   uint8_t c = 0, n = 0;
   HOLO_RETURN_IF_ERROR(r.U8("color_frame.codec", &c));
-  if (c < 1 || c > 3) return DataLoss("color_frame.codec: unknown color codec " + Str(c));
+  if (c < 1 || c > 4) return DataLoss("color_frame.codec: unknown color codec " + Str(c));
   m->codec = static_cast<ColorCodec>(c);
   HOLO_RETURN_IF_ERROR(r.U8("color_frame.num_images", &n));
   if (n > l.max_pods) return DataLoss("color_frame.num_images: " + Str(n) + " exceeds limit " + Str(l.max_pods));

@@ -52,7 +52,9 @@ inline constexpr uint16_t kKnownFlags = kFlagMoreFragments | kFlagKeyFrame;
 
 // Codec identifiers (one byte on the wire; 0 is never valid).
 enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2 };
-enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */ };
+// kV1: per-pod inter-frame video (protocol/video_codec.h); its blobs need a
+// VideoDecoder per pod stream, not DecodeColor.
+enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */, kV1 = 4 };
 enum class AudioCodec : uint8_t { kPcm16 = 1, kOpus = 2 };
 
 // Limits every decoder enforces. The defaults are the protocol's hard limits;

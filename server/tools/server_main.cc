@@ -150,6 +150,8 @@ int main(int argc, char** argv) {
   bool truth_mesh = false, no_color_stream = false, mesh_colors = false;
   double position_step_mm = 2.0;
   int jpeg_quality = 55;
+  std::string color_codec = "c1";
+  int video_crf = -1;
   int truth_loop = 0;
   app.add_option("--listen", listen_spec,
                  "stream to viewers: listen on HOST:PORT (default: off, no networking; overrides the "
@@ -175,6 +177,14 @@ int main(int argc, char** argv) {
   app.add_option("--jpeg-quality", jpeg_quality, "C1 JPEG quality of the streamed pod images, 1..100")
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
+  app.add_option("--color-codec", color_codec,
+                 "codec of the streamed pod images: c1 (per-frame JPEG, every frame decodes alone) or v1 (per-pod "
+                 "inter-frame video, x264 4:4:4: fewer bytes; key frames every 2 s and when a viewer joins or asks)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"c1", "v1"}));
+  app.add_option("--video-crf", video_crf, "v1: x264 constant-quality factor 0..51 (-1: the codec's default, 24)")
+      ->capture_default_str()
+      ->check(CLI::Range(-1, 51));
   app.add_flag("--mesh-colors", mesh_colors,
                "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
@@ -229,6 +239,11 @@ int main(int argc, char** argv) {
   publish_options.color = !no_color_stream;
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
   publish_options.color_options.jpeg_quality = jpeg_quality;
+  if (color_codec == "v1") {
+    publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
+    publish_options.video.crf = video_crf;
+    if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
+  }
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
