@@ -1,0 +1,230 @@
+// A live broadcast over HTTP (docs/broadcast.md): polls live.json, joins at
+// the live edge (a segment's part 0: Rig + key frame), fetches parts in
+// order, splits them into messages, and reports trouble (a damaged or missing
+// part, a stalled edge) through `onStatus` without ever stopping: it keeps
+// polling and recovers when data returns.
+
+import { parseRecords } from './protocol.js';
+
+export function partName(segment, part) {
+  return `seg_${String(segment).padStart(5, '0')}.p${part}`;
+}
+
+export class LiveSource {
+  // url: the manifest URL (…/live.json, query string kept for signed URLs).
+  // onMessages(messages, info): a part's messages, in order; info = {segment,
+  //   part, bytes, discontinuity, availabilityStartUs}.
+  // onStatus({level: 'ok'|'warn'|'error', text}).
+  constructor(url, { onMessages, onStatus, stallMs = 3000, fetchImpl = fetch.bind(globalThis) }) {
+    this.url = new URL(url, globalThis.location ? globalThis.location.href : undefined);
+    this.query = this.url.search;
+    this.base = new URL('.', this.url);
+    this.onMessages = onMessages;
+    this.onStatus = onStatus;
+    this.stallMs = stallMs;
+    this.fetch = fetchImpl;
+    this.manifest = null;
+    this.next = null;          // {segment, part} to fetch next
+    this.lastDataMs = 0;       // performance.now() of the last part received
+    this.stopped = false;
+    this.problem = null;       // the current trouble's text, null when healthy
+    this.bytes = 0;
+    this.parts = 0;
+    this.errors = 0;
+  }
+
+  objectUrl(name) {
+    return new URL(name + this.query, this.base).href;
+  }
+
+  setProblem(text, level = 'warn') {
+    if (text === this.problem) return;
+    this.problem = text;
+    this.onStatus(text ? { level, text } : { level: 'ok', text: '' });
+  }
+
+  async fetchManifest() {
+    const res = await this.fetchWithTimeout(this.url.href, 4000, { cache: 'no-store' });
+    if (!res.ok) throw new Error(`live.json: HTTP ${res.status}`);
+    const m = JSON.parse(new TextDecoder().decode(res.body));
+    if (m.format !== 'holoport-live') throw new Error('live.json: not a holoport-live manifest');
+    if (m.version !== 1) throw new Error(`live.json: version ${m.version} is not supported`);
+    if (!Array.isArray(m.segments)) throw new Error('live.json: no segments');
+    this.manifest = m;
+    return m;
+  }
+
+  // The newest segment whose part 0 is listed (the live edge's join point).
+  joinPoint(m) {
+    for (let i = m.segments.length - 1; i >= 0; --i) {
+      const s = m.segments[i];
+      if (s.parts && s.parts.length > 0) return { segment: s.number, part: 0 };
+    }
+    return null;
+  }
+
+  segmentOf(m, n) {
+    return m.segments.find((s) => s.number === n) || null;
+  }
+
+  // What follows {segment, part} by the manifest (docs/broadcast.md §4.3), or
+  // null when it is not known yet.
+  following(m, pos) {
+    const seg = this.segmentOf(m, pos.segment);
+    if (seg && (!seg.complete || pos.part + 1 < seg.parts.length)) {
+      if (pos.part + 1 < seg.parts.length || !seg.complete) return { segment: pos.segment, part: pos.part + 1 };
+    }
+    const later = m.segments.filter((s) => s.number > pos.segment && s.parts.length > 0);
+    if (later.length) return { segment: later[0].number, part: 0 };
+    if (seg && seg.complete) return null;  // the next segment is not listed yet
+    return null;
+  }
+
+  listed(m, pos) {
+    const seg = this.segmentOf(m, pos.segment);
+    return !!(seg && pos.part < seg.parts.length);
+  }
+
+  // Skip to the part 0 of the next segment after `segment` that the manifest
+  // lists (or the live edge).
+  skipSegment(m, segment) {
+    const later = m.segments.filter((s) => s.number > segment && s.parts.length > 0);
+    return later.length ? { segment: later[0].number, part: 0 } : null;
+  }
+
+  // fetch with a deadline: a stalled edge must not hang the player.
+  async fetchWithTimeout(url, ms, init = {}) {
+    const ctrl = new AbortController();
+    const timer = setTimeout(() => ctrl.abort(), ms);
+    try {
+      const res = await this.fetch(url, { ...init, signal: ctrl.signal });
+      const body = new Uint8Array(await res.arrayBuffer());
+      return { ok: res.ok, status: res.status, body };
+    } catch (e) {
+      throw new Error(ctrl.signal.aborted ? `no answer within ${ms / 1000} s` : e.message);
+    } finally {
+      clearTimeout(timer);
+    }
+  }
+
+  // Watchdog: nothing new for stallMs → tell the viewer (the fetch loop may
+  // be waiting on a request that does not answer).
+  watchStall() {
+    this.watchdog = setInterval(() => {
+      const idle = performance.now() - this.lastDataMs;
+      const ended = this.manifest && this.manifest.ended;
+      if (!ended && idle > this.stallMs) {
+        this.setProblem(`No new data from the edge for ${Math.floor(idle / 1000)} s — waiting for the broadcast to resume…`, 'error');
+      }
+    }, 500);
+  }
+
+  async run() {
+    this.watchStall();
+    const poll = () => Math.max(100, (this.manifest && this.manifest.update_interval_ms) || 250);
+    let lastManifestMs = 0;
+    this.lastDataMs = performance.now();
+    let skipAfter = -1;  // a damaged/missing part in this segment: resume at the next one
+    while (!this.stopped) {
+      const now = performance.now();
+      if (!this.manifest || now - lastManifestMs >= poll()) {
+        try {
+          await this.fetchManifest();
+          lastManifestMs = performance.now();
+        } catch (e) {
+          lastManifestMs = performance.now();
+          this.errors++;
+          this.setProblem(`Cannot load the broadcast manifest (${e.message}); retrying…`, 'error');
+          await sleep(Math.min(1000, poll() * 2));
+          continue;
+        }
+      }
+      const m = this.manifest;
+      if (!this.next) {
+        this.next = this.joinPoint(m);
+        if (!this.next) {
+          this.setProblem(m.ended ? 'The broadcast has ended.' : 'Waiting for the broadcast to start…');
+          await sleep(poll());
+          continue;
+        }
+      }
+      if (skipAfter >= 0) {
+        const n = this.skipSegment(m, skipAfter);
+        if (!n) {
+          await sleep(poll());
+          continue;
+        }
+        this.next = n;
+        skipAfter = -1;
+      }
+      // Catch up when far behind (more than ~2 segments).
+      const edge = this.joinPoint(m);
+      if (edge && edge.segment - this.next.segment > 2) this.next = edge;
+      // A segment that fell out of the window: go to the oldest listed one.
+      if (m.segments.length && this.next.segment < m.segments[0].number) this.next = this.joinPoint(m);
+      const pos = this.next;
+      if (!this.listed(m, pos) && pos.part === 0) {
+        // The segment we wait for is absent but a later one is listed: go there.
+        const later = m.segments.find((s) => s.number > pos.segment && s.parts.length > 0);
+        if (later) this.next = { segment: later.number, part: 0 };
+      }
+      if (!this.listed(m, this.next)) {
+        if (m.ended && !this.following(m, pos)) this.setProblem('The broadcast has ended.');
+        // Not listed yet: the edge may be stalled if nothing came for a while.
+        await sleep(poll());
+        continue;
+      }
+      const seg = this.segmentOf(m, pos.segment);
+      let res;
+      try {
+        res = await this.fetchWithTimeout(this.objectUrl(partName(pos.segment, pos.part)), 10000);
+      } catch (e) {
+        this.errors++;
+        this.setProblem(`Network error fetching ${partName(pos.segment, pos.part)} (${e.message}); retrying…`, 'error');
+        await sleep(poll());
+        continue;
+      }
+      if (!res.ok) {
+        this.errors++;
+        this.setProblem(`Part ${partName(pos.segment, pos.part)} is unavailable (HTTP ${res.status}); skipping to the next segment…`);
+        skipAfter = pos.segment;
+        continue;
+      }
+      const bytes = res.body;
+      let messages;
+      try {
+        messages = parseRecords(bytes);
+        if (pos.part === 0 && (!messages.length || messages[0].header.type !== 4)) {
+          throw new Error('part 0 does not start with the Rig');
+        }
+      } catch (e) {
+        this.errors++;
+        this.setProblem(`Part ${partName(pos.segment, pos.part)} is damaged (${e.message}); skipping to the next segment…`);
+        skipAfter = pos.segment;
+        continue;
+      }
+      this.bytes += bytes.length;
+      this.parts++;
+      this.lastDataMs = performance.now();
+      this.setProblem(null);
+      this.onMessages(messages, {
+        segment: pos.segment, part: pos.part, bytes: bytes.length,
+        discontinuity: pos.part === 0 && !!(seg && seg.discontinuity),
+        availabilityStartUs: m.availability_start_unix_us,
+      });
+      this.next = this.following(m, pos) || { segment: pos.segment, part: pos.part + 1 };
+      if (seg && seg.complete && pos.part + 1 >= seg.parts.length && !this.following(m, pos)) {
+        this.next = { segment: pos.segment + 1, part: 0 };
+      }
+    }
+  }
+
+  stop() {
+    this.stopped = true;
+    clearInterval(this.watchdog);
+  }
+}
+
+function sleep(ms) {
+  return new Promise((r) => setTimeout(r, ms));
+}

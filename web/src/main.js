@@ -1,0 +1,256 @@
+// The Holoport broadcast viewer page: plays a live broadcast from an edge
+// (docs/broadcast.md) — geometry and colour decoded here, the person drawn
+// with three.js (WebGL2), the site's voice placed in space with Web Audio's
+// HRTF panner, WebXR's immersive mode offered where the browser has it.
+//
+// Query parameters:
+//   src=URL          the broadcast's live.json at an edge (required; its query
+//                    string, e.g. a signature, is added to every request)
+//   color=vertex|projective   how the person is coloured (default projective)
+//   cam=ex,ey,ez,tx,ty,tz     initial camera eye and target (world, Z up)
+//   hfov=DEG         horizontal field of view (default 50)
+//   freeze=K         stop at frame K and keep showing it (tests, stills)
+//   overlay=0        hide the statistics overlay
+//   stall_ms=MS      silence after which the edge counts as stalled (3000)
+
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { VRButton } from 'three/examples/jsm/webxr/VRButton.js';
+import { decodeGeometry } from './geometry.js';
+import { decodeColor } from './color.js';
+import { MSG, parseRig, parseMeshFrame, parseColorFrame, parseAudioPose } from './protocol.js';
+import { LiveSource } from './live.js';
+import { applyNativeProjection } from './view.js';
+import { PersonRenderer } from './person.js';
+import { SpatialVoice } from './voice.js';
+
+THREE.ColorManagement.enabled = false;
+
+const params = new URLSearchParams(location.search);
+const state = {
+  status: 'starting', problem: '', framesShown: 0, frameIndex: -1, frozen: false,
+  latencyMs: null, bufferMs: 0, fps: 0, geometryMs: [], colorMs: [], triangles: 0,
+  bytes: 0, parts: 0, errors: 0, problems: [], audioChunks: 0, mode: '',
+};
+window.holoport = {
+  state,
+  // Stop at frame k (the first frame ≥ k) and keep showing it.
+  freezeAt(k) {
+    freezeAt = k;
+  },
+};
+let freezeAt = params.get('freeze') === null ? null : Number(params.get('freeze'));
+
+const overlayEl = document.getElementById('overlay');
+const statusEl = document.getElementById('status');
+if (params.get('overlay') === '0') overlayEl.style.display = 'none';
+
+function showStatus(level, text) {
+  state.problem = text;
+  if (text) state.problems.push({ t: performance.now(), level, text });
+  statusEl.textContent = text;
+  statusEl.className = text ? `visible ${level}` : '';
+}
+
+// ---------------------------------------------------------------- rendering
+
+const canvas = document.getElementById('view');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true });
+renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
+renderer.setPixelRatio(1);
+renderer.setClearColor(new THREE.Color(24 / 255, 26 / 255, 30 / 255), 1);
+const scene = new THREE.Scene();
+const content = new THREE.Group();  // the remote room (Z up); turned Y-up in XR
+scene.add(content);
+const camera = new THREE.PerspectiveCamera(40, 16 / 9, 0.02, 100);
+camera.up.set(0, 0, 1);
+const hfov = Number(params.get('hfov') || 50);
+const cam = (params.get('cam') || '2.2,-1.6,1.6,0,0,1').split(',').map(Number);
+camera.position.set(cam[0], cam[1], cam[2]);
+const controls = new OrbitControls(camera, canvas);
+controls.target.set(cam[3], cam[4], cam[5]);
+controls.update();
+const person = new PersonRenderer(content, params.get('color') || 'projective');
+state.mode = person.mode;
+
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== w || canvas.height !== h) renderer.setSize(w, h, false);
+}
+
+// WebXR: offered where the browser has an immersive mode.
+renderer.xr.enabled = true;
+if (navigator.xr) {
+  navigator.xr.isSessionSupported('immersive-vr').then((ok) => {
+    if (ok) document.body.appendChild(VRButton.createButton(renderer));
+  }).catch(() => {});
+  renderer.xr.addEventListener('sessionstart', () => content.rotation.set(-Math.PI / 2, 0, 0));
+  renderer.xr.addEventListener('sessionend', () => content.rotation.set(0, 0, 0));
+}
+
+// ---------------------------------------------------------------- decoding
+
+const decodeJpeg = async (bytes) => {
+  const bitmap = await createImageBitmap(new Blob([bytes], { type: 'image/jpeg' }),
+    { colorSpaceConversion: 'none', premultiplyAlpha: 'none' });
+  const c = new OffscreenCanvas(bitmap.width, bitmap.height);
+  const g = c.getContext('2d', { willReadFrequently: true });
+  g.drawImage(bitmap, 0, 0);
+  bitmap.close();
+  return g.getImageData(0, 0, c.width, c.height, { colorSpace: 'srgb' });
+};
+
+let rig = null;
+const pending = [];      // messages not yet due: {timeUs, header, payload}
+let delayUs = null;      // playhead = (now − availability start) − delayUs
+let availStartUs = 0;
+let newestShownUs = null;
+const voice = new SpatialVoice();
+const colorBusy = { n: 0 };
+
+function nowUnixUs() {
+  return (performance.timeOrigin + performance.now()) * 1000;
+}
+
+function onMessages(messages, info) {
+  availStartUs = info.availabilityStartUs;
+  state.bytes += info.bytes;
+  state.parts++;
+  if (info.discontinuity) person.reset();
+  const first = messages[0].timeUs;
+  const broadcastNow = nowUnixUs() - availStartUs;
+  // Join, a jump (catch-up, a skipped segment) or a restart: re-anchor so
+  // that this part starts playing now.
+  if (delayUs === null || first > broadcastNow - delayUs + 1e6 || info.discontinuity) {
+    delayUs = broadcastNow - first;
+    pending.length = 0;
+  }
+  for (const m of messages) pending.push(m);
+}
+
+async function handle(m) {
+  const t = m.header.type;
+  if (t === MSG.RIG) {
+    rig = parseRig(m.payload);
+    person.setRig(rig);
+  } else if (t === MSG.MESH) {
+    if (state.frozen) return;
+    const mf = parseMeshFrame(m.payload);
+    const t0 = performance.now();
+    const mesh = decodeGeometry(mf.data);
+    state.geometryMs.push(performance.now() - t0);
+    person.setMesh(mf.frameIndex, mesh);
+    state.triangles = mesh.indices.length / 3;
+    state.framesShown++;
+    state.frameIndex = mf.frameIndex;
+    newestShownUs = m.timeUs;
+    frameTimes.push(performance.now());
+    if (freezeAt !== null && mf.frameIndex >= freezeAt) {
+      state.frozen = true;
+      state.frozenFrame = mf.frameIndex;
+    }
+  } else if (t === MSG.COLOR) {
+    if (state.frozen && state.frozenFrame !== undefined) {
+      const cf0 = parseColorFrame(m.payload);
+      if (cf0.frameIndex !== state.frozenFrame) return;
+    }
+    const cf = parseColorFrame(m.payload);
+    if (!rig || colorBusy.n > 1) return;  // falling behind: drop colour, never geometry
+    colorBusy.n++;
+    const t0 = performance.now();
+    try {
+      const images = await Promise.all(cf.images.map((im) => decodeColor(im.data, decodeJpeg)));
+      state.colorMs.push(performance.now() - t0);
+      person.setPodImages(cf.frameIndex, cf.images.map((im) => im.podId), images);
+    } finally {
+      colorBusy.n--;
+    }
+  } else if (t === MSG.AUDIO) {
+    const a = parseAudioPose(m.payload);
+    state.audioChunks++;
+    voice.push(a, m.timeUs - (nowUnixUs() - availStartUs - delayUs));
+  }
+}
+
+function pump() {
+  if (delayUs === null) return;
+  const playhead = nowUnixUs() - availStartUs - delayUs;
+  // Hold at most a few seconds: beyond that, catch up by skipping ahead.
+  if (pending.length && pending[pending.length - 1].timeUs - playhead > 4e6) {
+    delayUs -= pending[pending.length - 1].timeUs - playhead - 0.5e6;
+  }
+  while (pending.length && pending[0].timeUs <= nowUnixUs() - availStartUs - delayUs) {
+    const m = pending.shift();
+    handle(m).catch((e) => {
+      state.errors++;
+      showStatus('warn', `A ${m.header.type === MSG.COLOR ? 'colour' : 'message'} frame could not be decoded (${e.message}); continuing.`);
+      setTimeout(() => { if (state.problem.startsWith('A ')) showStatus('ok', ''); }, 2000);
+    });
+  }
+  state.bufferMs = pending.length ? (pending[pending.length - 1].timeUs - playhead) / 1000 : 0;
+  if (newestShownUs !== null) state.latencyMs = (nowUnixUs() - (availStartUs + newestShownUs)) / 1000;
+}
+
+// ---------------------------------------------------------------- loop
+
+const frameTimes = [];
+function median(a) {
+  if (!a.length) return 0;
+  const s = [...a].slice(-60).sort((x, y) => x - y);
+  return s[s.length >> 1];
+}
+
+function updateOverlay() {
+  const now = performance.now();
+  while (frameTimes.length && now - frameTimes[0] > 2000) frameTimes.shift();
+  state.fps = frameTimes.length / 2;
+  overlayEl.textContent = [
+    `frame ${state.frameIndex}  ${state.fps.toFixed(1)} fps  ${state.triangles} triangles  ${person.mode}`,
+    `latency ${state.latencyMs === null ? '–' : (state.latencyMs / 1000).toFixed(2) + ' s'}  buffer ${(state.bufferMs / 1000).toFixed(2)} s`,
+    `decode: geometry ${median(state.geometryMs).toFixed(1)} ms  colour ${median(state.colorMs).toFixed(1)} ms`,
+    `received ${(state.bytes / 1e6).toFixed(1)} MB in ${state.parts} parts  voice ${voice.enabled ? 'on' : 'off (click)'}`,
+  ].join('\n');
+}
+
+let lastOverlay = 0;
+renderer.setAnimationLoop(() => {
+  resize();
+  pump();
+  if (!renderer.xr.isPresenting) {
+    controls.update();
+    camera.aspect = canvas.width / canvas.height;
+    applyNativeProjection(camera, canvas.width, canvas.height, hfov);
+    camera.updateMatrixWorld();
+  }
+  person.prepare(renderer, camera);
+  state.renders = (state.renders || 0) + 1;
+  renderer.render(scene, camera);
+  const xrCam = renderer.xr.isPresenting ? renderer.xr.getCamera() : camera;
+  voice.setListener(xrCam, renderer.xr.isPresenting);
+  if (performance.now() - lastOverlay > 250) {
+    updateOverlay();
+    lastOverlay = performance.now();
+  }
+});
+
+// Voice needs a user gesture in most browsers.
+const enableVoice = () => voice.enable();
+window.addEventListener('pointerdown', enableVoice, { once: true });
+window.addEventListener('keydown', enableVoice, { once: true });
+if (params.get('voice') === '1') voice.enable();
+
+// ---------------------------------------------------------------- start
+
+const src = params.get('src');
+if (!src) {
+  showStatus('error', 'No broadcast given: open this page with ?src=http://EDGE/NAME/live.json');
+} else {
+  const live = new LiveSource(src, {
+    onMessages,
+    onStatus: ({ level, text }) => showStatus(level, text),
+    stallMs: Number(params.get('stall_ms') || 3000),
+  });
+  window.holoport.live = live;
+  state.status = 'playing';
+  live.run().catch((e) => showStatus('error', `Player stopped: ${e.message}`));
+}

@@ -1,0 +1,210 @@
+// The browser viewer in a real browser (headless Chromium through
+// puppeteer-core), against a local live broadcast (live_server.mjs).
+//
+//   playback: plays ≥ 5 s from the live edge, freezes a frame, screenshots it
+//             from a fixed camera and compares with the native renderer's
+//             image of the same frame and camera (holoport-web-fixture
+//             render): PSNR ≥ 30 dB.
+//   faults:   a damaged part, then a stalled edge: the page shows a message
+//             (and keeps rendering), then recovers when data returns.
+//
+// Usage: node browser_test.mjs playback|faults --recording R --dist DIR
+//        [--fixture BIN --out DIR] [--color vertex|projective]
+// Exit 0 pass, 1 fail, 77 Chromium cannot start (the reason printed).
+
+import { spawn, execFileSync } from 'node:child_process';
+import { readFileSync, writeFileSync, mkdirSync, statSync } from 'node:fs';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import puppeteer from 'puppeteer-core';
+
+const here = dirname(fileURLToPath(import.meta.url));
+const args = process.argv.slice(2);
+const mode = args[0];
+function opt(name, def) {
+  const i = args.indexOf(name);
+  return i >= 0 ? args[i + 1] : def;
+}
+const known = new Set(['--recording', '--dist', '--fixture', '--out', '--color', '--chromium']);
+for (let i = 1; i < args.length; i += 2) {
+  if (!known.has(args[i])) {
+    console.error(`browser_test: unknown option ${args[i]}`);
+    process.exit(2);
+  }
+}
+if (mode !== 'playback' && mode !== 'faults') {
+  console.error('usage: node browser_test.mjs playback|faults --recording R --dist DIR [--fixture BIN --out DIR]');
+  process.exit(2);
+}
+const recording = opt('--recording');
+const dist = opt('--dist');
+const outDir = opt('--out', '/tmp/holoport-web-test');
+const color = opt('--color', 'vertex');
+const chromium = opt('--chromium', '/usr/bin/chromium');
+mkdirSync(outDir, { recursive: true });
+const W = 640, H = 360, HFOV = 50, EYE = [2.2, -1.6, 1.6], TARGET = [0, 0, 1.0];
+
+let failures = 0;
+function check(cond, what) {
+  console.log(`${cond ? 'ok' : 'FAIL'}: ${what}`);
+  if (!cond) failures++;
+}
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+async function waitFor(page, fn, timeoutMs, what, arg) {
+  const t0 = Date.now();
+  while (Date.now() - t0 < timeoutMs) {
+    if (await page.evaluate(fn, arg)) return true;
+    await sleep(100);
+  }
+  console.log(`timed out after ${timeoutMs} ms waiting for ${what}`);
+  return false;
+}
+
+// ---- the broadcast and the page
+const server = spawn(process.execPath, [join(here, 'live_server.mjs'), recording, '--page-dir', dist], {
+  stdio: ['ignore', 'pipe', 'inherit'],
+});
+const urls = await new Promise((resolve, reject) => {
+  let buf = '';
+  server.stdout.on('data', (d) => {
+    buf += d;
+    const nl = buf.indexOf('\n');
+    if (nl >= 0) resolve(JSON.parse(buf.slice(0, nl)));
+  });
+  server.on('exit', (code) => reject(new Error(`live_server exited ${code}`)));
+});
+console.log(`broadcast ${urls.broadcast}, page ${urls.page}`);
+
+let browser;
+try {
+  browser = await puppeteer.launch({
+    executablePath: chromium,
+    headless: true,
+    args: ['--headless=new', '--no-sandbox', '--disable-gpu', '--use-gl=angle', '--use-angle=swiftshader',
+      '--enable-unsafe-swiftshader', '--autoplay-policy=no-user-gesture-required', `--window-size=${W},${H}`],
+    defaultViewport: { width: W, height: H, deviceScaleFactor: 1 },
+    timeout: 30000,
+  });
+} catch (e) {
+  console.log(`SKIP: Chromium cannot start (${chromium}): ${e.message.split('\n')[0]}`);
+  server.kill();
+  process.exit(77);
+}
+
+const requests = [];
+let exitCode = 1;
+try {
+  const page = await browser.newPage();
+  page.on('console', (m) => { if (m.type() === 'error') console.log(`page console: ${m.text()}`); });
+  page.on('pageerror', (e) => { console.log(`page error: ${e.message}`); failures++; });
+  page.on('request', (r) => requests.push(r.url()));
+  const q = new URLSearchParams({
+    src: urls.broadcast, color, hfov: String(HFOV), cam: [...EYE, ...TARGET].join(','),
+    overlay: mode === 'playback' ? '0' : '1', stall_ms: '1500', voice: '1',
+  });
+  const t0 = Date.now();
+  await page.goto(`${urls.page}?${q}`, { waitUntil: 'load' });
+  check(await waitFor(page, () => window.holoport && window.holoport.state.framesShown > 0, 15000, 'the first frame'),
+    'the page shows a frame from the live edge');
+  const firstShownMs = Date.now() - t0;
+  const s0 = await page.evaluate(() => ({ ...window.holoport.state }));
+
+  if (mode === 'playback') {
+    await sleep(5000);
+    const s1 = await page.evaluate(() => ({ ...window.holoport.state }));
+    check(s1.framesShown - s0.framesShown >= 30, `played 5 s: ${s1.framesShown - s0.framesShown} frames shown (frame ${s0.frameIndex} → ${s1.frameIndex})`);
+    check(!s1.problem, `no problem shown while playing (${s1.problem || 'none'})`);
+    check(s1.audioChunks > 100, `voice: ${s1.audioChunks} AudioPose messages played`);
+    const k = s1.frameIndex + 6;
+    await page.evaluate((kk) => window.holoport.freezeAt(kk), k);
+    check(await waitFor(page, () => window.holoport.state.frozen, 5000, 'the frozen frame'), `froze at frame ≥ ${k}`);
+    await sleep(color === 'projective' ? 1500 : 500);  // its colour images decoded, a few renders
+    const s2 = await page.evaluate(() => ({ ...window.holoport.state }));
+    const frame = s2.frozenFrame;
+    const shot = join(outDir, `web_frame${frame}_${color}.png`);
+    await page.screenshot({ path: shot, clip: { x: 0, y: 0, width: W, height: H } });
+    const native = join(outDir, `native_frame${frame}_${color}.png`);
+    execFileSync(opt('--fixture'), ['render', '--recording', recording, '--frame', String(frame), '--out', native,
+      '--eye', EYE.join(','), '--target', TARGET.join(','), '--hfov', String(HFOV), '--width', String(W),
+      '--height', String(H), '--color', color], { stdio: 'inherit' });
+    // PSNR over all pixels (RGB), both PNGs decoded by the browser.
+    const toData = (p) => `data:image/png;base64,${readFileSync(p).toString('base64')}`;
+    const psnr = await page.evaluate(async (a, b) => {
+      const pixels = async (url) => {
+        const bmp = await createImageBitmap(await (await fetch(url)).blob(), { colorSpaceConversion: 'none' });
+        const c = new OffscreenCanvas(bmp.width, bmp.height);
+        const g = c.getContext('2d');
+        g.drawImage(bmp, 0, 0);
+        return g.getImageData(0, 0, bmp.width, bmp.height);
+      };
+      const x = await pixels(a), y = await pixels(b);
+      if (x.width !== y.width || x.height !== y.height) return { error: `sizes ${x.width}x${x.height} vs ${y.width}x${y.height}` };
+      let se = 0, n = 0, fgSe = 0, fgN = 0;
+      for (let i = 0; i < x.data.length; i += 4) {
+        let px = 0;
+        for (let c = 0; c < 3; ++c) {
+          const d = x.data[i + c] - y.data[i + c];
+          px += d * d;
+        }
+        se += px;
+        n += 3;
+        const bg = (v, j) => v[j] === 24 && v[j + 1] === 26 && v[j + 2] === 30;
+        if (!bg(x.data, i) || !bg(y.data, i)) {
+          fgSe += px;
+          fgN += 3;
+        }
+      }
+      const db = (e, k) => (e === 0 ? 99 : 10 * Math.log10((255 * 255 * k) / e));
+      return { psnr: db(se, n), psnr_person: db(fgSe, fgN), person_pixels: fgN / 3 };
+    }, toData(shot), toData(native));
+    console.log(`screenshot ${shot}, native ${native}`);
+    const geoMs = [...s2.geometryMs].sort((a, b) => a - b), colMs = [...s2.colorMs].sort((a, b) => a - b);
+    const pageBytes = statSync(join(dist, 'index.html')).size + statSync(join(dist, 'viewer.js')).size;
+    console.log(JSON.stringify({
+      figure: 'web_vs_native', content: 'truth', frame, color, width: W, height: H, psnr_db: psnr.psnr,
+      psnr_person_db: psnr.psnr_person, person_pixels: psnr.person_pixels, first_frame_ms: firstShownMs,
+      latency_ms: s2.latencyMs, geometry_decode_ms_median: geoMs[geoMs.length >> 1] ?? null,
+      color_decode_ms_median: colMs[colMs.length >> 1] ?? null, triangles: s2.triangles, page_bytes: pageBytes,
+      received_bytes: s2.bytes, parts: s2.parts,
+    }));
+    check(psnr.psnr >= 30, `PSNR vs native ${psnr.psnr?.toFixed(2)} dB (person pixels: ${psnr.psnr_person?.toFixed(2)} dB) ≥ 30 dB`);
+  } else {
+    // A damaged part: a message naming it, then recovery at the next segment.
+    await fetch(`${urls.control}corrupt`);
+    check(await waitFor(page, () => /damaged/.test(document.getElementById('status').textContent), 8000, 'the damaged-part message'),
+      'a damaged part shows a message');
+    const msg1 = await page.evaluate(() => document.getElementById('status').textContent);
+    console.log(`  message: "${msg1}"`);
+    const fBefore = await page.evaluate(() => window.holoport.state.framesShown);
+    check(await waitFor(page, (f) => !document.getElementById('status').classList.contains('visible') &&
+      window.holoport.state.framesShown > f + 10, 8000, 'recovery after the damaged part', fBefore), 'recovers after the damaged part');
+    // A stalled edge: nothing answers for 5 s.
+    await fetch(`${urls.control}stall?ms=5000`);
+    const rBefore = await page.evaluate(() => window.holoport.state.renders);
+    check(await waitFor(page, () => /No new data/.test(document.getElementById('status').textContent), 6000, 'the stall message'),
+      'a stalled edge shows a message');
+    const msg2 = await page.evaluate(() => document.getElementById('status').textContent);
+    console.log(`  message: "${msg2}"`);
+    const rDuring = await page.evaluate(() => window.holoport.state.renders);
+    check(rDuring > rBefore + 5, `the page keeps rendering while stalled (${rDuring - rBefore} renders)`);
+    await page.screenshot({ path: join(outDir, 'web_stalled.png') });
+    const f2 = await page.evaluate(() => window.holoport.state.framesShown);
+    check(await waitFor(page, (f) => !document.getElementById('status').classList.contains('visible') &&
+      window.holoport.state.framesShown > f + 10, 12000, 'recovery after the stall', f2), 'recovers after the stall');
+    await page.screenshot({ path: join(outDir, 'web_recovered.png') });
+  }
+  // Only the page's origin and the broadcast's edge were contacted.
+  const origins = new Set(requests.filter((u) => u.startsWith('http')).map((u) => new URL(u).origin));
+  const allowed = new Set([new URL(urls.page).origin, new URL(urls.broadcast).origin]);
+  check([...origins].every((o) => allowed.has(o)), `requests only to the page and the edge (${[...origins].join(', ')})`);
+  exitCode = failures ? 1 : 0;
+} catch (e) {
+  console.log(`FAIL: ${e.stack || e}`);
+  exitCode = 1;
+} finally {
+  await browser.close();
+  server.kill();
+}
+console.log(exitCode ? `${mode}: FAILED` : `${mode}: passed`);
+writeFileSync(join(outDir, `${mode}.done`), String(exitCode));
+process.exit(exitCode);
