@@ -71,6 +71,7 @@ const controls = new OrbitControls(camera, canvas);
 controls.target.set(cam[3], cam[4], cam[5]);
 controls.update();
 const person = new PersonRenderer(content, params.get('color') || 'projective');
+window.holoport.view = { renderer, scene, camera, person, controls };
 state.mode = person.mode;
 
 function resize() {
@@ -113,6 +114,7 @@ function nowUnixUs() {
 }
 
 function onMessages(messages, info) {
+  if (state.frozen) return;  // a still: keep what is shown
   availStartUs = info.availabilityStartUs;
   state.bytes += info.bytes;
   state.parts++;

@@ -42,7 +42,7 @@ const outDir = opt('--out', '/tmp/holoport-web-test');
 const color = opt('--color', 'vertex');
 const chromium = opt('--chromium', '/usr/bin/chromium');
 mkdirSync(outDir, { recursive: true });
-const W = 640, H = 360, HFOV = 50, EYE = [2.2, -1.6, 1.6], TARGET = [0, 0, 1.0];
+const W = 640, H = 360, HFOV = 50, EYE = [3.3, -2.4, 1.5], TARGET = [0, 0, 0.9];
 
 let failures = 0;
 function check(cond, what) {
