@@ -157,13 +157,15 @@ async function handle(m) {
       if (cf0.frameIndex !== state.frozenFrame) return;
     }
     const cf = parseColorFrame(m.payload);
-    if (!rig || colorBusy.n > 1) return;  // falling behind: drop colour, never geometry
+    // Falling behind: drop colour, never geometry (the still's colour is never dropped).
+    if (!rig || (colorBusy.n > 1 && cf.frameIndex !== state.frozenFrame)) return;
     colorBusy.n++;
     const t0 = performance.now();
     try {
       const images = await Promise.all(cf.images.map((im) => decodeColor(im.data, decodeJpeg)));
       state.colorMs.push(performance.now() - t0);
       person.setPodImages(cf.frameIndex, cf.images.map((im) => im.podId), images);
+      state.colorFrame = person.imagesFrame;
     } finally {
       colorBusy.n--;
     }

@@ -380,6 +380,7 @@ export class PersonRenderer {
     this.visibilityDirty = true;
     // Colour images of this frame that came first.
     if (this.pendingImages && this.pendingImages.frameIndex === frameIndex) this.applyImages(this.pendingImages);
+    else if (this.pendingImages && this.pendingImages.frameIndex < frameIndex) this.pendingImages = null;
   }
 
   // Decoded colour images of frame `frameIndex` (one per pod id).
@@ -415,6 +416,7 @@ export class PersonRenderer {
     }
     this.colorTex.needsUpdate = true;
     this.haveImages = true;
+    this.imagesFrame = this.frameIndex;
     this.pendingImages = null;
   }
 

@@ -118,7 +118,11 @@ try {
     const k = s1.frameIndex + 6;
     await page.evaluate((kk) => window.holoport.freezeAt(kk), k);
     check(await waitFor(page, () => window.holoport.state.frozen, 5000, 'the frozen frame'), `froze at frame ≥ ${k}`);
-    await sleep(color === 'projective' ? 1500 : 500);  // its colour images decoded, a few renders
+    if (color === 'projective') {
+      check(await waitFor(page, () => window.holoport.state.colorFrame === window.holoport.state.frozenFrame, 8000,
+        'the frozen frame\'s colour images'), 'the frozen frame\'s colour images are shown');
+    }
+    await sleep(500);  // a few renders
     const s2 = await page.evaluate(() => ({ ...window.holoport.state }));
     const frame = s2.frozenFrame;
     const shot = join(outDir, `web_frame${frame}_${color}.png`);
