@@ -3,11 +3,12 @@
 // its own origin and the broadcast's edge).
 import { build } from 'esbuild';
 import { copyFileSync, mkdirSync, statSync } from 'node:fs';
-import { dirname, join } from 'node:path';
+import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
 const here = dirname(fileURLToPath(import.meta.url));
-const out = join(here, 'dist');
+// Output directory: the first argument, else web/dist.
+const out = process.argv[2] ? resolve(process.argv[2]) : join(here, 'dist');
 mkdirSync(out, { recursive: true });
 await build({
   entryPoints: [join(here, 'src/main.js')],
@@ -21,4 +22,4 @@ await build({
 });
 copyFileSync(join(here, 'index.html'), join(out, 'index.html'));
 const js = statSync(join(out, 'viewer.js')).size, html = statSync(join(out, 'index.html')).size;
-console.log(`web/dist: viewer.js ${(js / 1024).toFixed(0)} KiB, index.html ${(html / 1024).toFixed(1)} KiB`);
+console.log(`${out}: viewer.js ${(js / 1024).toFixed(0)} KiB, index.html ${(html / 1024).toFixed(1)} KiB`);

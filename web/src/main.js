@@ -45,9 +45,22 @@ const overlayEl = document.getElementById('overlay');
 const statusEl = document.getElementById('status');
 if (params.get('overlay') === '0') overlayEl.style.display = 'none';
 
+// A message stays up at least 3 s, so that a viewer can read it even when
+// the player recovers at once.
+let shownAt = 0, clearTimer = null;
 function showStatus(level, text) {
+  clearTimeout(clearTimer);
+  if (!text) {
+    const left = 3000 - (performance.now() - shownAt);
+    if (left > 0 && state.problem) {
+      clearTimer = setTimeout(() => showStatus(level, ''), left);
+      return;
+    }
+  } else {
+    shownAt = performance.now();
+    state.problems.push({ t: shownAt, level, text });
+  }
   state.problem = text;
-  if (text) state.problems.push({ t: performance.now(), level, text });
   statusEl.textContent = text;
   statusEl.className = text ? `visible ${level}` : '';
 }

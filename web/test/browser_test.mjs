@@ -177,7 +177,7 @@ try {
     await fetch(`${urls.control}corrupt`);
     check(await waitFor(page, () => /damaged/.test(document.getElementById('status').textContent), 8000, 'the damaged-part message'),
       'a damaged part shows a message');
-    const msg1 = await page.evaluate(() => document.getElementById('status').textContent);
+    const msg1 = await page.evaluate(() => window.holoport.state.problems.map((p) => p.text).find((t) => /damaged/.test(t)));
     console.log(`  message: "${msg1}"`);
     const fBefore = await page.evaluate(() => window.holoport.state.framesShown);
     check(await waitFor(page, (f) => !document.getElementById('status').classList.contains('visible') &&
@@ -187,11 +187,11 @@ try {
     const rBefore = await page.evaluate(() => window.holoport.state.renders);
     check(await waitFor(page, () => /No new data/.test(document.getElementById('status').textContent), 6000, 'the stall message'),
       'a stalled edge shows a message');
-    const msg2 = await page.evaluate(() => document.getElementById('status').textContent);
+    const msg2 = await page.evaluate(() => window.holoport.state.problems.map((p) => p.text).find((t) => /No new data/.test(t)));
+    await page.screenshot({ path: join(outDir, 'web_stalled.png') });
     console.log(`  message: "${msg2}"`);
     const rDuring = await page.evaluate(() => window.holoport.state.renders);
     check(rDuring > rBefore + 5, `the page keeps rendering while stalled (${rDuring - rBefore} renders)`);
-    await page.screenshot({ path: join(outDir, 'web_stalled.png') });
     const f2 = await page.evaluate(() => window.holoport.state.framesShown);
     check(await waitFor(page, (f) => !document.getElementById('status').classList.contains('visible') &&
       window.holoport.state.framesShown > f + 10, 12000, 'recovery after the stall', f2), 'recovers after the stall');

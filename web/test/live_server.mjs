@@ -7,8 +7,9 @@
 // again (a `discontinuity` segment), so the broadcast never ends.
 //
 // Faults for tests (POST or GET):
-//   /control/corrupt   the next part to become available is served damaged
-//                      (one byte of a record body flipped: CRC mismatch)
+//   /control/corrupt   the next part requested is served damaged (one byte
+//                      of a record body flipped: CRC mismatch), and so is
+//                      every later request for that part
 //   /control/stall?ms=N    for N ms the manifest stops advancing and every
 //                      request waits until the stall is over
 //
@@ -106,7 +107,6 @@ let stallUntilMs = 0;
 let frozenNowUs = null;  // broadcast time frozen during a stall
 let corruptNext = false;
 const corrupted = new Set();
-let lastAvailableCount = 0;
 
 function broadcastNowUs() {
   const real = Date.now() * 1000 - availabilityStartUs;
@@ -153,14 +153,6 @@ function available(nowUs) {
 function manifest() {
   const now = broadcastNowUs();
   const av = available(now);
-  if (av.length > lastAvailableCount) {
-    if (corruptNext && lastAvailableCount > 0) {
-      const { n, p } = av[lastAvailableCount];
-      corrupted.add(name(n, p));
-      corruptNext = false;
-    }
-    lastAvailableCount = av.length;
-  }
   const bySeg = new Map();
   for (const { n, p } of av) {
     if (!bySeg.has(n)) bySeg.set(n, []);
@@ -234,6 +226,10 @@ const server = createServer(async (req, res) => {
       return res.end();
     }
     let bytes = partBytes(n, p);
+    if (corruptNext) {
+      corrupted.add(name(n, p));
+      corruptNext = false;
+    }
     if (corrupted.has(name(n, p))) {
       bytes = bytes.slice();
       bytes[Math.min(bytes.length - 1, 24 + 40)] ^= 0x5a;
