@@ -11,15 +11,16 @@ const here = dirname(fileURLToPath(import.meta.url));
 const out = process.argv[2] ? resolve(process.argv[2]) : join(here, 'dist');
 mkdirSync(out, { recursive: true });
 await build({
-  entryPoints: [join(here, 'src/main.js')],
+  entryPoints: { viewer: join(here, 'src/main.js'), worker: join(here, 'src/worker.js') },
   bundle: true,
   minify: true,
   format: 'esm',
   target: ['chrome110', 'firefox115', 'safari16'],
-  outfile: join(out, 'viewer.js'),
+  outdir: out,
   legalComments: 'eof',
   logLevel: 'warning',
 });
 copyFileSync(join(here, 'index.html'), join(out, 'index.html'));
-const js = statSync(join(out, 'viewer.js')).size, html = statSync(join(out, 'index.html')).size;
-console.log(`${out}: viewer.js ${(js / 1024).toFixed(0)} KiB, index.html ${(html / 1024).toFixed(1)} KiB`);
+const size = (f) => statSync(join(out, f)).size;
+console.log(`${out}: viewer.js ${(size('viewer.js') / 1024).toFixed(0)} KiB, worker.js ${(size('worker.js') / 1024).toFixed(0)} KiB, ` +
+  `index.html ${(size('index.html') / 1024).toFixed(1)} KiB`);

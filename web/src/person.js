@@ -358,6 +358,7 @@ export class PersonRenderer {
     this.frameIndex = -1;
     this.mesh.visible = false;
     this.haveImages = false;
+    this.onChange();
   }
 
   setMesh(frameIndex, m) {
@@ -378,6 +379,7 @@ export class PersonRenderer {
     this.frameIndex = frameIndex;
     this.mesh.visible = true;
     this.visibilityDirty = true;
+    this.onChange();
     // Colour images of this frame that came first.
     if (this.pendingImages && this.pendingImages.frameIndex === frameIndex) this.applyImages(this.pendingImages);
     else if (this.pendingImages && this.pendingImages.frameIndex < frameIndex) this.pendingImages = null;
@@ -417,6 +419,7 @@ export class PersonRenderer {
     this.colorTex.needsUpdate = true;
     this.haveImages = true;
     this.imagesFrame = this.frameIndex;
+    this.onChange();
     this.pendingImages = null;
   }
 
