@@ -166,6 +166,7 @@ let delayUs = null;      // playhead = (now − availability start) − delayUs
 let availStartUs = 0;
 let newestShownUs = null;
 const voice = new SpatialVoice();
+window.holoport.voice = voice;
 const colorBusy = { n: 0 };
 
 function nowUnixUs() {
@@ -235,6 +236,7 @@ async function handle(m) {
   } else if (t === MSG.AUDIO) {
     const a = parseAudioPose(m.payload);
     state.audioChunks++;
+    state.lastPose = a.pose;
     voice.push(a, m.timeUs - (nowUnixUs() - availStartUs - delayUs));
   }
 }

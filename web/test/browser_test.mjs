@@ -118,6 +118,15 @@ try {
     check(s1.mediaUs - s0.mediaUs >= 3e6, `broadcast time advanced ${((s1.mediaUs - s0.mediaUs) / 1e6).toFixed(2)} s in 5 s`);
     check(s1.problems.length === 0, `no problem shown while playing (${s1.problems.map((p) => p.text).join('; ') || 'none'})`);
     check(s1.audioChunks >= 100, `voice: ${s1.audioChunks} AudioPose messages played`);
+    const v = await page.evaluate(() => {
+      const vo = window.holoport.voice, p = window.holoport.state.lastPose;
+      return vo.enabled ? { ctx: vo.ctx.state, model: vo.panner.panningModel, x: vo.panner.positionX.value,
+        y: vo.panner.positionY.value, z: vo.panner.positionZ.value, pose: p } : null;
+    });
+    check(v && v.ctx === 'running' && v.model === 'HRTF', `voice through an HRTF PannerNode (${JSON.stringify(v && { ctx: v.ctx, model: v.model })})`);
+    // The panner sits at the speaker's head (room Z up → Web Audio Y up), within the 20 ms steps since the last pose.
+    check(v && Math.hypot(v.x - v.pose.x, v.y - v.pose.z, v.z + v.pose.y) < 0.1,
+      `panner at the speaker's head: (${v && [v.x, v.y, v.z].map((q) => q.toFixed(2))}) for pose (${v && [v.pose.x, v.pose.y, v.pose.z].map((q) => q.toFixed(2))})`);
     const k = s1.frameIndex + 6;
     await page.evaluate((kk) => window.holoport.freezeAt(kk), k);
     check(await waitFor(page, () => window.holoport.state.frozen, 5000, 'the frozen frame'), `froze at frame ≥ ${k}`);
@@ -166,7 +175,7 @@ try {
     }, toData(shot), toData(native));
     console.log(`screenshot ${shot}, native ${native}`);
     const geoMs = [...s2.geometryMs].sort((a, b) => a - b), colMs = [...s2.colorMs].sort((a, b) => a - b);
-    const pageBytes = statSync(join(dist, 'index.html')).size + statSync(join(dist, 'viewer.js')).size;
+    const pageBytes = ['index.html', 'viewer.js', 'worker.js'].reduce((a, f) => a + statSync(join(dist, f)).size, 0);
     console.log(JSON.stringify({
       figure: 'web_vs_native', content: 'truth', frame, color, width: W, height: H, psnr_db: psnr.psnr,
       psnr_person_db: psnr.psnr_person, person_pixels: psnr.person_pixels, first_frame_ms: firstShownMs,
