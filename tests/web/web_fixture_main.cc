@@ -246,7 +246,7 @@ Status Render(const std::string& recording, int64_t frame, const std::vector<flo
 
 int main(int argc, char** argv) {
   CLI::App app{"holoport-web-fixture: recordings, golden decodes and native renders for the browser viewer's tests"};
-  app.require_subcommand(1);
+  app.require_subcommand(0, 1);
   std::string out, recording, dir, workload = "S8-QVGA", mode = "vertex";
   double seconds = 8, hfov = 50;
   int count = 3, width = 640, height = 360;
@@ -271,6 +271,10 @@ int main(int argc, char** argv) {
   ren->add_option("--height", height, "image height")->check(CLI::Range(16, 4096));
   ren->add_option("--color", mode, "vertex or projective")->check(CLI::IsMember({"vertex", "projective"}));
   CLI11_PARSE(app, argc, argv);
+  if (app.get_subcommands().empty()) {
+    std::fprintf(stderr, "holoport-web-fixture: give a subcommand (record, golden or render); --help lists them\n");
+    return 2;
+  }
   holo::Status s;
   if (*rec) s = holo::Record(out, workload, seconds);
   if (*gold) s = holo::Golden(recording, dir, count);
