@@ -2,12 +2,13 @@
 # The browser viewer's tests (web/), run by CTest:
 #   web_test.sh fixture  BUILD_DIR SOURCE_DIR   recording + golden decodes (once per build)
 #   web_test.sh decoders BUILD_DIR SOURCE_DIR   JS decoders vs the C++ decoders (node)
+#   web_test.sh live     BUILD_DIR SOURCE_DIR   the player's part sequencing against a scripted edge (node)
 #   web_test.sh playback BUILD_DIR SOURCE_DIR   headless Chromium vs the native renderer, PSNR ≥ 30 dB
 #   web_test.sh faults   BUILD_DIR SOURCE_DIR   damaged part, stalled edge: message, then recovery
 # Exit 77 (CTest skip) only when Chromium cannot start; a missing node or
 # npm packages is a failure (scripts/setup.sh installs both).
 set -uo pipefail
-what=${1:?usage: web_test.sh fixture|decoders|playback|faults BUILD_DIR SOURCE_DIR}
+what=${1:?usage: web_test.sh fixture|decoders|live|playback|faults BUILD_DIR SOURCE_DIR}
 build=$(cd "${2:?build dir}" && pwd)
 src=$(cd "${3:?source dir}" && pwd)
 fx="$build/web-fixture"
@@ -29,6 +30,9 @@ case "$what" in
     ;;
   decoders)
     node "$src/web/test/decoders_test.mjs" "$fx/rec.hrec" "$fx/golden"
+    ;;
+  live)
+    node "$src/web/test/live_test.mjs"
     ;;
   playback|faults)
     chromium=${HOLO_CHROMIUM:-/usr/bin/chromium}

@@ -67,17 +67,14 @@ export class LiveSource {
     return m.segments.find((s) => s.number === n) || null;
   }
 
-  // What follows {segment, part} by the manifest (docs/broadcast.md §4.3), or
-  // null when it is not known yet.
+  // What follows {segment, part} by the manifest (docs/broadcast.md §4.3):
+  // the next part of an open segment (or one it lists), else the first part
+  // of the next listed segment; null when that is not listed yet.
   following(m, pos) {
     const seg = this.segmentOf(m, pos.segment);
-    if (seg && (!seg.complete || pos.part + 1 < seg.parts.length)) {
-      if (pos.part + 1 < seg.parts.length || !seg.complete) return { segment: pos.segment, part: pos.part + 1 };
-    }
-    const later = m.segments.filter((s) => s.number > pos.segment && s.parts.length > 0);
-    if (later.length) return { segment: later[0].number, part: 0 };
-    if (seg && seg.complete) return null;  // the next segment is not listed yet
-    return null;
+    if (seg && (pos.part + 1 < seg.parts.length || !seg.complete)) return { segment: pos.segment, part: pos.part + 1 };
+    const later = m.segments.find((s) => s.number > pos.segment && s.parts.length > 0);
+    return later ? { segment: later.number, part: 0 } : null;
   }
 
   listed(m, pos) {
@@ -212,10 +209,7 @@ export class LiveSource {
         discontinuity: pos.part === 0 && !!(seg && seg.discontinuity),
         availabilityStartUs: m.availability_start_unix_us,
       });
-      this.next = this.following(m, pos) || { segment: pos.segment, part: pos.part + 1 };
-      if (seg && seg.complete && pos.part + 1 >= seg.parts.length && !this.following(m, pos)) {
-        this.next = { segment: pos.segment + 1, part: 0 };
-      }
+      this.next = this.following(m, pos) || { segment: pos.segment + 1, part: 0 };
     }
   }
 
