@@ -77,6 +77,13 @@ export class LiveSource {
     return later ? { segment: later.number, part: 0 } : null;
   }
 
+  // Broadcast time of the newest listed message (the end of the newest part).
+  liveEdgeUs(m) {
+    let edge = 0;
+    for (const seg of m.segments) for (const p of seg.parts) if (Number.isFinite(p.end_us)) edge = Math.max(edge, p.end_us);
+    return edge;
+  }
+
   listed(m, pos) {
     const seg = this.segmentOf(m, pos.segment);
     return !!(seg && pos.part < seg.parts.length);
@@ -208,6 +215,7 @@ export class LiveSource {
         segment: pos.segment, part: pos.part, bytes: bytes.length,
         discontinuity: pos.part === 0 && !!(seg && seg.discontinuity),
         availabilityStartUs: m.availability_start_unix_us,
+        liveEdgeUs: this.liveEdgeUs(m), targetPartUs: m.target_part_us || 250000,
       });
       this.next = this.following(m, pos) || { segment: pos.segment + 1, part: 0 };
     }

@@ -182,13 +182,29 @@ function onMessages(messages, info) {
   const first = messages.length ? messages[0].timeUs : 0;
   if (!messages.length) return;
   const broadcastNow = nowUnixUs() - availStartUs;
-  // Join, a jump (catch-up, a skipped segment) or a restart: re-anchor so
-  // that this part starts playing now.
+  // Join, a jump (catch-up, a skipped segment) or a restart: re-anchor the
+  // playhead one part plus 250 ms behind the live edge. A join starts at a
+  // segment's first part (its key frame), so the parts up to the edge come
+  // due at once: their frames are shown in a burst and their voice, already
+  // late, is skipped — the viewer starts at the live edge, not a segment ago.
   if (delayUs === null || first > broadcastNow - delayUs + 1e6 || info.discontinuity) {
-    delayUs = broadcastNow - first;
+    const edge = Math.max(first, info.liveEdgeUs || first);
+    delayUs = broadcastNow - edge + (info.targetPartUs || 250000) + 250000;
     pending.length = 0;
   }
-  for (const m of messages) pending.push(m);
+  for (const m of messages) {
+    // Voice is scheduled on the audio clock as soon as it arrives (ahead of
+    // its time by the buffer), so that drawing never delays it.
+    if (m.type === MSG.AUDIO) {
+      try {
+        playVoice(m);
+      } catch (e) {
+        state.errors++;
+      }
+    } else {
+      pending.push(m);
+    }
+  }
 }
 
 async function handle(m) {
@@ -233,12 +249,15 @@ async function handle(m) {
     } finally {
       colorBusy.n--;
     }
-  } else if (t === MSG.AUDIO) {
-    const a = parseAudioPose(m.payload);
-    state.audioChunks++;
-    state.lastPose = a.pose;
-    voice.push(a, m.timeUs - (nowUnixUs() - availStartUs - delayUs));
   }
+}
+
+function playVoice(m) {
+  const a = parseAudioPose(m.payload);
+  state.audioChunks++;
+  state.lastPose = a.pose;
+  const aheadUs = m.timeUs - (nowUnixUs() - availStartUs - delayUs);
+  if (aheadUs > -100000) voice.push(a, aheadUs);  // late voice is skipped, never stacked
 }
 
 function pump() {

@@ -36,12 +36,15 @@ export class SpatialVoice {
   // playhead now.
   push(a, aheadUs) {
     if (!this.enabled || this.ctx.state === 'closed') return;
-    const when = this.ctx.currentTime + Math.max(0, aheadUs) / 1e6 + 0.05;
+    const when = this.ctx.currentTime + Math.max(0, aheadUs) / 1e6 + 0.02;
     const [px, py, pz] = SpatialVoice.toAudio(a.pose.x, a.pose.y, a.pose.z);
     const fx = Math.cos(a.pose.yaw) * Math.cos(a.pose.pitch), fy = Math.sin(a.pose.yaw) * Math.cos(a.pose.pitch);
     const fz = Math.sin(a.pose.pitch);
     const [ox, oy, oz] = SpatialVoice.toAudio(fx, fy, fz);
     const p = this.panner;
+    // What was scheduled (for tests and the overlay): the last few positions.
+    this.scheduled = (this.scheduled || []).slice(-200);
+    this.scheduled.push({ when, pos: [px, py, pz], pose: a.pose });
     p.positionX.setValueAtTime(px, when);
     p.positionY.setValueAtTime(py, when);
     p.positionZ.setValueAtTime(pz, when);
