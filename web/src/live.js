@@ -131,7 +131,11 @@ export class LiveSource {
     let skipAfter = -1;  // a damaged/missing part in this segment: resume at the next one
     while (!this.stopped) {
       const now = performance.now();
-      if (!this.manifest || now - lastManifestMs >= poll()) {
+      // The manifest is refreshed when the next part is not listed yet (every
+      // update interval), and at least every 2 s; parts already listed are
+      // fetched back to back, so a player that is behind catches up.
+      const waiting = !this.manifest || !this.next || skipAfter >= 0 || !this.listed(this.manifest, this.next);
+      if (!this.manifest || (waiting && now - lastManifestMs >= poll()) || now - lastManifestMs >= 2000) {
         try {
           await this.fetchManifest();
           lastManifestMs = performance.now();
@@ -166,13 +170,14 @@ export class LiveSource {
       if (edge && edge.segment - this.next.segment > 2) this.next = edge;
       // A segment that fell out of the window: go to the oldest listed one.
       if (m.segments.length && this.next.segment < m.segments[0].number) this.next = this.joinPoint(m);
-      const pos = this.next;
-      if (!this.listed(m, pos) && pos.part === 0) {
+      if (!this.listed(m, this.next) && this.next.part === 0) {
         // The segment we wait for is absent but a later one is listed: go there.
-        const later = m.segments.find((s) => s.number > pos.segment && s.parts.length > 0);
+        const after = this.next.segment;
+        const later = m.segments.find((s) => s.number > after && s.parts.length > 0);
         if (later) this.next = { segment: later.number, part: 0 };
       }
-      if (!this.listed(m, this.next)) {
+      const pos = this.next;
+      if (!this.listed(m, pos)) {
         if (m.ended && !this.following(m, pos)) this.setProblem('The broadcast has ended.');
         // Not listed yet: the edge may be stalled if nothing came for a while.
         await sleep(poll());
