@@ -31,6 +31,7 @@ export class LiveSource {
     this.bytes = 0;
     this.parts = 0;
     this.errors = 0;
+    this.prefetch = null;      // {url, promise} of the part fetched ahead
   }
 
   objectUrl(name) {
@@ -186,7 +187,18 @@ export class LiveSource {
       const seg = this.segmentOf(m, pos.segment);
       let res;
       try {
-        res = await this.fetchWithTimeout(this.objectUrl(partName(pos.segment, pos.part)), 10000);
+        const url = this.objectUrl(partName(pos.segment, pos.part));
+        const pre = this.prefetch && this.prefetch.url === url ? this.prefetch.promise : null;
+        this.prefetch = null;
+        res = await (pre || this.fetchWithTimeout(url, 10000));
+        // The part after it, if listed, is fetched while this one is checked and decoded.
+        const after = this.following(m, pos);
+        if (after && this.listed(m, after)) {
+          const u = this.objectUrl(partName(after.segment, after.part));
+          const promise = this.fetchWithTimeout(u, 10000);
+          promise.catch(() => {});  // its error is handled when it is awaited
+          this.prefetch = { url: u, promise };
+        }
       } catch (e) {
         this.errors++;
         this.setProblem(`Network error fetching ${partName(pos.segment, pos.part)} (${e.message}); retrying…`, 'error');
