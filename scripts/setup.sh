@@ -16,7 +16,21 @@ PACKAGES=(
   libjpeg62-turbo-dev
   libwebrtc-audio-processing-dev libspeexdsp-dev libmysofa-dev
   libavcodec-dev libavutil-dev
+  chromium
 )
+# The browser viewer (web/) builds and tests with Node.js and npm: Debian's
+# when the machine has none of its own.
+if ! command -v npm >/dev/null 2>&1; then PACKAGES+=(nodejs npm); fi
+
+# npm packages of the browser viewer, pinned by web/package-lock.json.
+web_npm() {
+  local web
+  web="$(cd "$(dirname "$0")/.." && pwd)/web"
+  if [[ ! -d "$web/node_modules" || "$web/package-lock.json" -nt "$web/node_modules" ]]; then
+    echo "setup: npm ci in web/"
+    (cd "$web" && npm ci --no-audit --no-fund --loglevel=error && touch node_modules)
+  fi
+}
 
 missing=()
 for p in "${PACKAGES[@]}"; do
@@ -27,6 +41,7 @@ done
 
 if ((${#missing[@]} == 0)); then
   echo "setup: all ${#PACKAGES[@]} packages already installed"
+  web_npm
   exit 0
 fi
 
@@ -36,4 +51,5 @@ if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+web_npm
 echo "setup: done"
