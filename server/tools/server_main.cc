@@ -16,6 +16,7 @@
 #include <thread>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "common/file_util.h"
 #include "common/image_io.h"
@@ -369,14 +370,21 @@ int main(int argc, char** argv) {
     if (!server) return;
     const NetSummary n = Summarize(*server);
     const holo::net::ServerCounters c = server->counters();
-    std::fprintf(stats_out,
-                 "{\"net\":true,\"frame\":%lld,\"viewers\":%zu,\"frames_sent\":%llu,\"frames_dropped\":%llu,"
-                 "\"bytes_sent\":%llu,\"max_queue\":%zu,\"rtt_ms_max\":%.3f,\"refused\":%llu,\"violations\":%llu,"
-                 "\"audio_relayed\":%llu,\"io_cpu_ms\":%.1f}\n",
-                 static_cast<long long>(frame), n.viewers, static_cast<unsigned long long>(n.sent),
-                 static_cast<unsigned long long>(n.dropped), static_cast<unsigned long long>(n.bytes), n.max_queue,
-                 n.rtt_ms_max, static_cast<unsigned long long>(c.refused), static_cast<unsigned long long>(c.violations),
-                 static_cast<unsigned long long>(c.audio_relayed), server->IoCpuMs());
+    nlohmann::ordered_json j;
+    j["net"] = true;
+    j["frame"] = frame;
+    j["viewers"] = n.viewers;
+    j["frames_sent"] = n.sent;
+    j["frames_dropped"] = n.dropped;
+    j["bytes_sent"] = n.bytes;
+    j["max_queue"] = n.max_queue;
+    j["rtt_ms_max"] = n.rtt_ms_max;
+    j["refused"] = c.refused;
+    j["violations"] = c.violations;
+    j["audio_relayed"] = c.audio_relayed;
+    j["keyframe_requests"] = c.keyframe_requests;
+    j["io_cpu_ms"] = server->IoCpuMs();
+    std::fprintf(stats_out, "%s\n", j.dump().c_str());
     std::fflush(stats_out);
   };
 
@@ -452,12 +460,18 @@ int main(int argc, char** argv) {
       geom_ms.push_back(pt.geometry_ms);
       color_ms.push_back(pt.color_ms);
       pub_ms.push_back(pt.publish_ms);
-      std::fprintf(stats_out,
-                   "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"truth_render_ms\":%.3f,"
-                   "\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
-                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
-                   static_cast<long long>(i), mesh.num_vertices(), mesh.num_triangles(), r_ms, pt.geometry_ms,
-                   pt.color_ms, pt.publish_ms, pt.geometry_bytes, pt.color_bytes, pt.viewers);
+      nlohmann::ordered_json j;
+      j["frame"] = i;
+      j["vertices"] = mesh.num_vertices();
+      j["triangles"] = mesh.num_triangles();
+      j["truth_render_ms"] = r_ms;
+      j["encode_geometry_ms"] = pt.geometry_ms;
+      j["encode_color_ms"] = pt.color_ms;
+      j["publish_ms"] = pt.publish_ms;
+      j["geometry_bytes"] = pt.geometry_bytes;
+      j["color_bytes"] = pt.color_bytes;
+      j["viewers"] = pt.viewers;
+      std::fprintf(stats_out, "%s\n", j.dump().c_str());
       if ((i + 1) % 30 == 0) {
         net_line(i);
         if (!quiet)
@@ -527,26 +541,41 @@ int main(int argc, char** argv) {
       publisher->PublishEncoded(e);
       pt = e->timings;
     }
-    std::fprintf(stats_out,
-                 "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"full_triangles\":%zu,\"acquire_ms\":%.3f,"
-                 "\"segment_ms\":%.3f,\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"simplify_ms\":%.3f,\"texture_ms\":%.3f,"
-                 "\"encode_ms\":%.3f,\"latency_ms\":%.3f,\"encoded_latency_ms\":%.3f%s",
-                 static_cast<long long>(w.frames.frame_index), w.mesh.num_vertices(), w.mesh.num_triangles(),
-                 w.full_mesh.num_triangles(), t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.simplify_ms,
-                 t.texture_ms, t.encode_ms, t.latency_ms(), t.encoded_latency_ms(), publisher || serial ? "" : "}\n");
-    if (serial)  // CPU of each stage (one at a time: the process's CPU while it ran)
-      std::fprintf(stats_out,
-                   ",\"acquire_cpu_ms\":%.3f,\"segment_cpu_ms\":%.3f,\"fuse_cpu_ms\":%.3f,\"mesh_cpu_ms\":%.3f,"
-                   "\"simplify_cpu_ms\":%.3f,\"texture_cpu_ms\":%.3f,\"encode_cpu_ms\":%.3f%s",
-                   t.acquire_cpu_ms, t.segment_cpu_ms, t.fuse_cpu_ms, t.mesh_cpu_ms, t.simplify_cpu_ms, t.texture_cpu_ms,
-                   t.encode_cpu_ms, publisher ? "" : "}\n");
-    if (publisher)
-      std::fprintf(stats_out,
-                   ",\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"encode_geometry_cpu_ms\":%.3f,"
-                   "\"encode_color_cpu_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
-                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
-                   pt.geometry_ms, pt.color_ms, pt.geometry_cpu_ms, pt.color_cpu_ms, pt.publish_ms, pt.geometry_bytes,
-                   pt.color_bytes, pt.viewers);
+    nlohmann::ordered_json j;
+    j["frame"] = w.frames.frame_index;
+    j["vertices"] = w.mesh.num_vertices();
+    j["triangles"] = w.mesh.num_triangles();
+    j["full_triangles"] = w.full_mesh.num_triangles();
+    j["acquire_ms"] = t.acquire_ms;
+    j["segment_ms"] = t.segment_ms;
+    j["fuse_ms"] = t.fuse_ms;
+    j["mesh_ms"] = t.mesh_ms;
+    j["simplify_ms"] = t.simplify_ms;
+    j["texture_ms"] = t.texture_ms;
+    j["encode_ms"] = t.encode_ms;
+    j["latency_ms"] = t.latency_ms();
+    j["encoded_latency_ms"] = t.encoded_latency_ms();
+    if (serial) {  // CPU of each stage (one at a time: the process's CPU while it ran)
+      j["acquire_cpu_ms"] = t.acquire_cpu_ms;
+      j["segment_cpu_ms"] = t.segment_cpu_ms;
+      j["fuse_cpu_ms"] = t.fuse_cpu_ms;
+      j["mesh_cpu_ms"] = t.mesh_cpu_ms;
+      j["simplify_cpu_ms"] = t.simplify_cpu_ms;
+      j["texture_cpu_ms"] = t.texture_cpu_ms;
+      j["encode_cpu_ms"] = t.encode_cpu_ms;
+    }
+    if (publisher) {
+      j["encode_geometry_ms"] = pt.geometry_ms;
+      j["encode_color_ms"] = pt.color_ms;
+      j["encode_geometry_cpu_ms"] = pt.geometry_cpu_ms;
+      j["encode_color_cpu_ms"] = pt.color_cpu_ms;
+      j["publish_ms"] = pt.publish_ms;
+      j["geometry_bytes"] = pt.geometry_bytes;
+      j["color_bytes"] = pt.color_bytes;
+      j["color_keyframe"] = pt.color_keyframe;
+      j["viewers"] = pt.viewers;
+    }
+    std::fprintf(stats_out, "%s\n", j.dump().c_str());
     if (!export_dir.empty()) {
       char path[4096];
       FrameFileName(path, sizeof(path), export_dir, w.frames.frame_index);
@@ -557,8 +586,11 @@ int main(int argc, char** argv) {
       net_line(w.frames.frame_index);
       // Whole-process CPU per frame over the last 30 frames (all stages, encode and network).
       const double now_cpu = holo::ProcessCpuTimeMs();
-      std::fprintf(stats_out, "{\"site\":true,\"frame\":%lld,\"cpu_ms_per_frame\":%.2f}\n",
-                   static_cast<long long>(w.frames.frame_index), (now_cpu - cpu_window) / 30.0);
+      nlohmann::ordered_json site_line;
+      site_line["site"] = true;
+      site_line["frame"] = w.frames.frame_index;
+      site_line["cpu_ms_per_frame"] = (now_cpu - cpu_window) / 30.0;
+      std::fprintf(stats_out, "%s\n", site_line.dump().c_str());
       std::fflush(stats_out);
       if (!quiet)
         std::fprintf(stderr,
