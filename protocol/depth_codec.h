@@ -1,7 +1,10 @@
 // Lossless depth codec of PodFrame (PROTOCOL.md §8.1):
-//   D1 — 16-bit depth (mm, 0 = invalid), each row coded as its first sample
-//        followed by the differences to the left neighbour (mod 2^16, little
-//        endian), the whole image through one zstd frame.
+//   D1 — 16-bit depth (mm, 0 = invalid). Each pixel is predicted from its
+//        left (a), upper (b) and upper-left (c) neighbours by LOCO-I's median
+//        edge detector (c ≥ max(a,b): min(a,b); c ≤ min(a,b): max(a,b); else
+//        a + b − c; first row: a, first column: b, pixel 0: 0); the residual
+//        (mod 2^16, as int16) is zigzag coded; the high bytes of all pixels
+//        (row-major) then their low bytes go through one zstd frame.
 // Blob layout: `u8 codec` (1) · `u16 width` · `u16 height` · `u32 n` ·
 // `n` bytes: one zstd frame whose declared content size is width × height × 2.
 #pragma once

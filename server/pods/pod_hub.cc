@@ -270,7 +270,6 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
   int64_t next_ping = 0;  // steady ms
   int64_t last_heard = RealClock::Instance().NowUs() / 1000;
   std::string why;
-  double cpu_ms = 0;
   while (!stop_ && !conn->closing) {
     const int64_t now_ms = RealClock::Instance().NowUs() / 1000;
     if (now_ms >= next_ping) {
@@ -304,9 +303,7 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
     const int64_t arrival = net::WallUs();
     last_heard = RealClock::Instance().NowUs() / 1000;
     if (m.header.type == MessageType::kPodFrame) {
-      const double c0 = ThreadCpuTimeMs();
       s = HandleFrame(pod, std::get<protocol::PodFrame>(m.payload), arrival);
-      cpu_ms += ThreadCpuTimeMs() - c0;
       if (!s.ok()) {
         std::lock_guard<std::mutex> l(mu_);
         counters_.violations++;
@@ -346,7 +343,6 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
   {
     std::lock_guard<std::mutex> l(mu_);
     PodState& ps = *pods_[static_cast<size_t>(pod)];
-    ps.c.decode_cpu_ms += cpu_ms;
     if (ps.conn_id == conn->id) {
       ps.conn_id = 0;
       ps.c.connected = false;
@@ -364,6 +360,7 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
 
 Status PodHub::HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival_us) {
   const PodCalibration& cal = rig_.pods[static_cast<size_t>(pod)];
+  const double cpu0 = ThreadCpuTimeMs();
   if (f.pod_id != cal.id)
     return DataLoss("frame of pod " + std::to_string(f.pod_id) + " on the connection of pod " + std::to_string(cal.id));
   auto frame = std::make_shared<RgbdFrame>();
@@ -384,6 +381,7 @@ Status PodHub::HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival
   {
     std::lock_guard<std::mutex> l(mu_);
     PodState& ps = *pods_[static_cast<size_t>(pod)];
+    ps.c.decode_cpu_ms += ThreadCpuTimeMs() - cpu0;
     ps.c.received++;
     ps.c.bytes += f.depth.size() + f.color.size() + 32;
     if (!ps.clock.has_estimate()) {

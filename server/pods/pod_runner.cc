@@ -45,24 +45,27 @@ class PodFrames {
 
 class StudioFrames final : public PodFrames {
  public:
-  StudioFrames(std::unique_ptr<SyntheticStudio> studio, std::unique_ptr<PrerenderedSource> pre)
-      : studio_(std::move(studio)), pre_(std::move(pre)) {}
+  StudioFrames(std::unique_ptr<SyntheticStudio> studio, int pod_index, int prerender)
+      : studio_(std::move(studio)), pod_index_(pod_index) {
+    for (int k = 0; k < prerender; ++k) {
+      loop_.emplace_back();
+      studio_->RenderPod(k, pod_index_, &loop_.back());
+    }
+  }
   Status Get(int64_t slot, RgbdFrame* out) override {
-    if (pre_) {
-      const auto& frames = pre_->frames();
-      *out = frames[static_cast<size_t>(LoopContent(slot, static_cast<int64_t>(frames.size())))].frames[0];
+    if (!loop_.empty()) {
+      *out = loop_[static_cast<size_t>(LoopContent(slot, static_cast<int64_t>(loop_.size())))];
       return OkStatus();
     }
     // Live rendering: the studio's animation repeats every 2 minutes of slots.
-    studio_->RenderFrame(slot % 3600, &set_, nullptr);
-    *out = std::move(set_.frames[0]);
+    studio_->RenderPod(slot % 3600, pod_index_, out);
     return OkStatus();
   }
 
  private:
   std::unique_ptr<SyntheticStudio> studio_;
-  std::unique_ptr<PrerenderedSource> pre_;
-  RgbdFrameSet set_;
+  int pod_index_;
+  std::vector<RgbdFrame> loop_;
 };
 
 class DatasetFrames final : public PodFrames {
@@ -118,17 +121,11 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
     size_t index = 0;
     HOLO_RETURN_IF_ERROR(find_pod(rig, &index));
     calibration = rig.pods[index];
-    Rig mine = rig;
-    mine.pods = {calibration};
     StudioOptions so = w.studio;
     so.threads = 1;  // one pod per process: eight of them share the machine
-    HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(mine, so));
-    std::unique_ptr<PrerenderedSource> pre;
-    if (o.prerender > 0) {
-      say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name);
-      HOLO_ASSIGN_OR_RETURN(pre, PrerenderedSource::Render(*studio, o.prerender, /*loop=*/true));
-    }
-    frames = std::make_unique<StudioFrames>(std::move(studio), std::move(pre));
+    HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(rig, so));
+    if (o.prerender > 0) say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name);
+    frames = std::make_unique<StudioFrames>(std::move(studio), static_cast<int>(index), o.prerender);
   }
 
   // The pod's clock: the system clock plus the simulated offset and drift.
@@ -167,6 +164,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
   int64_t slot = static_cast<int64_t>(std::ceil(static_cast<double>(net::WallUs()) / period_us));
   int64_t number = 0, skipped = 0, done = 0;
   double encode_cpu_ms = 0, produce_cpu_ms = 0;
+  uint64_t depth_bytes = 0, color_bytes = 0;
   int64_t next_stats = net::WallUs() + 1000000;
   RgbdFrame frame;
   say("streaming pod " + std::to_string(o.pod_id) + " to " + o.site + " at " + std::to_string(o.fps) + " fps");
@@ -200,6 +198,8 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
     HOLO_RETURN_IF_ERROR(protocol::EncodeDepth(frame.depth, dopt, &pf.depth));
     HOLO_RETURN_IF_ERROR(color_encoder.Encode(frame.color, no_mask, &pf.color));
     encode_cpu_ms += ThreadCpuTimeMs() - c1;
+    depth_bytes += pf.depth.size();
+    color_bytes += pf.color.size();
     produce_cpu_ms += c1 - c0;
     client.Offer(std::move(pf));
     ++done;
@@ -211,13 +211,15 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
         std::fprintf(stats,
                      "{\"pod\":%d,\"frames\":%lld,\"skipped\":%lld,\"sent\":%llu,\"bytes_sent\":%llu,"
                      "\"dropped_queue_full\":%llu,\"dropped_disconnected\":%llu,\"connects\":%llu,"
-                     "\"connected\":%s,\"encode_cpu_ms\":%.1f,\"produce_cpu_ms\":%.1f}\n",
+                     "\"connected\":%s,\"encode_cpu_ms\":%.1f,\"produce_cpu_ms\":%.1f,\"depth_bytes\":%llu,"
+                     "\"color_bytes\":%llu}\n",
                      o.pod_id, static_cast<long long>(done), static_cast<long long>(skipped),
                      static_cast<unsigned long long>(c.sent), static_cast<unsigned long long>(c.bytes_sent),
                      static_cast<unsigned long long>(c.dropped_queue_full),
                      static_cast<unsigned long long>(c.dropped_disconnected),
                      static_cast<unsigned long long>(c.connects), c.connected ? "true" : "false", encode_cpu_ms,
-                     produce_cpu_ms);
+                     produce_cpu_ms, static_cast<unsigned long long>(depth_bytes),
+                     static_cast<unsigned long long>(color_bytes));
         std::fflush(stats);
       }
     }
