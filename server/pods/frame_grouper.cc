@@ -32,7 +32,7 @@ bool FrameGrouper::Complete(const GroupedSet& s) const {
   return true;
 }
 
-AddResult FrameGrouper::Add(PodSample sample) {
+AddResult FrameGrouper::Add(PodSample sample, int64_t now_us) {
   HOLO_CHECK(sample.pod >= 0 && sample.pod < num_pods_);
   const int64_t t = sample.site_time_us;
   if (released_any_ && t <= last_released_us_ + options_.tolerance_us) return AddResult::kLate;
@@ -49,6 +49,7 @@ AddResult FrameGrouper::Add(PodSample sample) {
   if (!best) {
     GroupedSet s;
     s.time_us = t;
+    s.opened_us = now_us;
     s.pods.resize(static_cast<size_t>(num_pods_));
     for (int p = 0; p < num_pods_; ++p) {
       s.pods[static_cast<size_t>(p)].pod = p;
@@ -88,7 +89,7 @@ void FrameGrouper::Release(std::vector<GroupedSet>* out) {
 void FrameGrouper::Poll(int64_t now_us, std::vector<GroupedSet>* out) {
   while (!pending_.empty()) {
     const GroupedSet& s = pending_.front();
-    if (Complete(s) || now_us >= s.time_us + options_.timeout_us || pending_.size() > options_.max_pending) {
+    if (Complete(s) || now_us >= s.opened_us + options_.timeout_us || pending_.size() > options_.max_pending) {
       Release(out);
     } else {
       break;
@@ -97,7 +98,10 @@ void FrameGrouper::Poll(int64_t now_us, std::vector<GroupedSet>* out) {
 }
 
 int64_t FrameGrouper::NextDeadlineUs() const {
-  return pending_.empty() ? INT64_MAX : pending_.front().time_us + options_.timeout_us;
+  if (pending_.empty()) return INT64_MAX;
+  int64_t d = INT64_MAX;  // the front set leaves first, but any may time out before it
+  for (const GroupedSet& s : pending_) d = std::min(d, s.opened_us + options_.timeout_us);
+  return d;
 }
 
 }  // namespace holo::pods

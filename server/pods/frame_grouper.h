@@ -5,8 +5,11 @@
 // A frame joins the pending set whose time is within `tolerance_us` of its
 // own (the nearest, if several), or opens a new one. Sets leave in time
 // order: the oldest pending set is released when every expected pod is in
-// it (complete), when the site clock passes its time + `timeout_us` (the
-// pods that are missing are late or gone: fusion runs without them), or
+// it (complete), when `timeout_us` has passed since its first frame arrived
+// (the pods that are missing are late or gone: fusion runs without them;
+// counting from the first arrival rather than from the capture time keeps
+// sets whole when every pod's frames are delayed alike, e.g. on a loaded
+// site or a slow link), or
 // when more than `max_pending` sets are pending. A frame for a time at or
 // before the last released set (within the tolerance) is late; a second
 // frame of a pod for the same set is a duplicate. Both are dropped and
@@ -29,8 +32,8 @@ struct GrouperOptions {
   // a shared trigger capture within microseconds; the offset estimate adds
   // its error (≤ 1 ms on a LAN), so 8 ms keeps sets apart at up to 60 fps.
   int64_t tolerance_us = 8000;
-  // An incomplete set is released this long after its capture time, µs:
-  // what a late pod may cost the site in latency. 60 ms ≈ two frames at 30 fps.
+  // An incomplete set is released this long after its first frame arrived,
+  // µs: what a late pod may cost the site in latency. 60 ms ≈ two frames at 30 fps.
   int64_t timeout_us = 60000;
   // Pending sets at most (older ones are released incomplete).
   size_t max_pending = 8;
@@ -47,6 +50,7 @@ struct PodSample {
 
 struct GroupedSet {
   int64_t time_us = 0;                 // the set's capture time (its first frame's), site clock
+  int64_t opened_us = 0;               // when its first frame arrived, site clock
   std::vector<PodSample> pods;         // one per rig pod; `frame` null where missing
   int present = 0;                     // pods with a frame
   bool complete = false;               // every expected pod was in it when released
@@ -62,7 +66,8 @@ class FrameGrouper {
   // is gone is not waited for).
   void SetExpected(int pod, bool expected);
   bool expected(int pod) const { return expected_[static_cast<size_t>(pod)]; }
-  AddResult Add(PodSample sample);
+  // Adds a frame that arrived at site time `now_us`.
+  AddResult Add(PodSample sample, int64_t now_us);
   // Moves the sets ready at site time `now_us` to `out` (appended, in time order).
   void Poll(int64_t now_us, std::vector<GroupedSet>* out);
   // Earliest site time at which Poll may release a set by timeout (INT64_MAX if none pending).

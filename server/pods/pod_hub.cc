@@ -397,7 +397,7 @@ Status PodHub::HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival
     ps.have_transit = true;
     ps.last_transit_us = transit;
     frame->timestamp_us = site_time;
-    const AddResult r = grouper_.Add(PodSample{pod, site_time, f.frame_number, std::move(frame)});
+    const AddResult r = grouper_.Add(PodSample{pod, site_time, f.frame_number, std::move(frame)}, arrival_us);
     if (r == AddResult::kLate) {
       ps.c.late++;
       ps.c.dropped++;

@@ -22,6 +22,7 @@ namespace holo::pods {
 
 Status PodRunOptions::Check() const {
   if (token.empty()) return InvalidArgument("--token is required (the site's pod token)");
+  if (pod_id < 0) return InvalidArgument("--pod is required (this pod's id in the rig, >= 0)");
   if (!(fps > 0 && fps <= 240)) return InvalidArgument("--fps must be in (0, 240], got " + std::to_string(fps));
   if (prerender < 0) return InvalidArgument("--prerender must be >= 0");
   if (jpeg_quality < 1 || jpeg_quality > 100) return InvalidArgument("--jpeg-quality must be in 1..100");

@@ -24,7 +24,7 @@ namespace holo::pods {
 struct PodRunOptions {
   std::string site = "127.0.0.1:7100";  // the site's pod port, HOST:PORT
   std::string token;
-  int pod_id = 0;                       // id in the rig
+  int pod_id = -1;                      // id in the rig (required)
   std::string workload = "S8-QVGA";     // synthetic source: content and rig
   std::string rig_path;                 // a rig file instead of the workload's
   std::string dataset;                  // a dataset folder instead of the studio

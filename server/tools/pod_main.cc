@@ -19,8 +19,8 @@ int main(int argc, char** argv) {
   holo::pods::PodRunOptions o;
   CLI::App app{"holoport-pod: one RGB-D pod streaming its frames to a site's pod port (holoport-server --pods)"};
   app.add_option("--site", o.site, "the site's pod port, HOST:PORT")->capture_default_str();
-  app.add_option("--token", o.token, "the site's pod token (holoport-server --pod-token)")->required();
-  app.add_option("--pod", o.pod_id, "this pod's id in the rig")->required();
+  app.add_option("--token", o.token, "the site's pod token (holoport-server --pod-token); required");
+  app.add_option("--pod", o.pod_id, "this pod's id in the rig; required");
   app.add_option("-w,--workload", o.workload, "synthetic source: S8-QVGA or S8-VGA (content and rig)")
       ->capture_default_str();
   app.add_option("--rig", o.rig_path, "synthetic source: this rig file instead of the workload's");

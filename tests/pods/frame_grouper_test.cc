@@ -33,6 +33,12 @@ void Exchange(ClockOffsetEstimator* e, const PodClockSim& pod, int64_t t0, int64
   e->Add(t0, t1, t2, t3);
 }
 
+// A frame arriving at its capture time (no transport delay).
+AddResult AddAt(FrameGrouper& g, PodSample s) {
+  const int64_t t = s.site_time_us;
+  return g.Add(std::move(s), t);
+}
+
 TEST(ClockOffsetEstimator, LowestRttSampleWinsOverQueueingAsymmetry) {
   const PodClockSim pod{100000, 0};
   ClockOffsetEstimator e(16);
@@ -93,7 +99,7 @@ TEST(FrameGrouper, GroupsPodsWithOffsetAndDriftingClocks) {
     }
     // The site maps the pod's stamp with its current estimate.
     a.s.site_time_us = est[a.s.pod].ToSite(a.s.site_time_us);
-    ASSERT_EQ(g.Add(a.s), AddResult::kAccepted);
+    ASSERT_EQ(g.Add(a.s, a.at), AddResult::kAccepted);
     g.Poll(a.at, &out);
   }
   g.Poll(INT64_MAX, &out);
@@ -114,8 +120,8 @@ TEST(FrameGrouper, ReleasesAnIncompleteSetAtTheTimeoutAndCountsTheLateFrame) {
   o.timeout_us = 50000;
   FrameGrouper g(3, o);
   std::vector<GroupedSet> out;
-  EXPECT_EQ(g.Add({0, 1000000, 0, nullptr}), AddResult::kAccepted);
-  EXPECT_EQ(g.Add({1, 1000400, 0, nullptr}), AddResult::kAccepted);
+  EXPECT_EQ(AddAt(g, {0, 1000000, 0, nullptr}), AddResult::kAccepted);
+  EXPECT_EQ(AddAt(g, {1, 1000400, 0, nullptr}), AddResult::kAccepted);
   g.Poll(1040000, &out);
   EXPECT_TRUE(out.empty());  // pod 2 may still come
   EXPECT_EQ(g.NextDeadlineUs(), 1050000);
@@ -126,15 +132,34 @@ TEST(FrameGrouper, ReleasesAnIncompleteSetAtTheTimeoutAndCountsTheLateFrame) {
   EXPECT_EQ(out[0].spread_us, 400);
   EXPECT_EQ(out[0].pods[2].frame, nullptr);
   // Pod 2's frame for that instant is late now; its next one is on time.
-  EXPECT_EQ(g.Add({2, 1000100, 0, nullptr}), AddResult::kLate);
-  EXPECT_EQ(g.Add({2, 1000000 + kPeriod, 1, nullptr}), AddResult::kAccepted);
+  EXPECT_EQ(AddAt(g, {2, 1000100, 0, nullptr}), AddResult::kLate);
+  EXPECT_EQ(AddAt(g, {2, 1000000 + kPeriod, 1, nullptr}), AddResult::kAccepted);
+}
+
+TEST(FrameGrouper, KeepsSetsWholeWhenEveryPodIsDelayedAlike) {
+  // A loaded site: every frame arrives 400 ms after capture, the pods within
+  // 20 ms of each other. The timeout counts from the first arrival.
+  GrouperOptions o;
+  o.timeout_us = 60000;
+  FrameGrouper g(3, o);
+  std::vector<GroupedSet> out;
+  for (int k = 0; k < 5; ++k) {
+    const int64_t t = 1000000 + k * kPeriod;
+    for (int p = 0; p < 3; ++p) {
+      const int64_t arrival = t + 400000 + p * 10000;
+      ASSERT_EQ(g.Add({p, t, k, nullptr}, arrival), AddResult::kAccepted);
+      g.Poll(arrival, &out);
+    }
+  }
+  ASSERT_EQ(out.size(), 5u);
+  for (const GroupedSet& s : out) EXPECT_TRUE(s.complete);
 }
 
 TEST(FrameGrouper, RefusesADuplicateFrameOfAPodInOneSet) {
   FrameGrouper g(2, GrouperOptions{});
-  EXPECT_EQ(g.Add({0, 500000, 7, nullptr}), AddResult::kAccepted);
-  EXPECT_EQ(g.Add({0, 501000, 7, nullptr}), AddResult::kDuplicate);
-  EXPECT_EQ(g.Add({1, 499000, 3, nullptr}), AddResult::kAccepted);
+  EXPECT_EQ(AddAt(g, {0, 500000, 7, nullptr}), AddResult::kAccepted);
+  EXPECT_EQ(AddAt(g, {0, 501000, 7, nullptr}), AddResult::kDuplicate);
+  EXPECT_EQ(AddAt(g, {1, 499000, 3, nullptr}), AddResult::kAccepted);
   std::vector<GroupedSet> out;
   g.Poll(500000, &out);
   ASSERT_EQ(out.size(), 1u);
@@ -146,18 +171,18 @@ TEST(FrameGrouper, DoesNotWaitForAPodThatIsGoneAndWaitsAgainWhenItReturns) {
   FrameGrouper g(3, GrouperOptions{});
   std::vector<GroupedSet> out;
   g.SetExpected(2, false);  // pod 2 disconnected
-  g.Add({0, 1000000, 0, nullptr});
-  g.Add({1, 1000000, 0, nullptr});
+  AddAt(g, {0, 1000000, 0, nullptr});
+  AddAt(g, {1, 1000000, 0, nullptr});
   g.Poll(1000000, &out);
   ASSERT_EQ(out.size(), 1u);
   EXPECT_TRUE(out[0].complete);  // complete: every expected pod is in it
   EXPECT_EQ(out[0].present, 2);
   g.SetExpected(2, true);  // pod 2 reconnected
-  g.Add({0, 1000000 + kPeriod, 1, nullptr});
-  g.Add({1, 1000000 + kPeriod, 1, nullptr});
+  AddAt(g, {0, 1000000 + kPeriod, 1, nullptr});
+  AddAt(g, {1, 1000000 + kPeriod, 1, nullptr});
   g.Poll(1000000 + kPeriod, &out);
   EXPECT_EQ(out.size(), 1u);  // waits for pod 2
-  g.Add({2, 1000000 + kPeriod + 200, 0, nullptr});  // a restarted pod numbers from 0 again
+  AddAt(g, {2, 1000000 + kPeriod + 200, 0, nullptr});  // a restarted pod numbers from 0 again
   g.Poll(1000000 + kPeriod, &out);
   ASSERT_EQ(out.size(), 2u);
   EXPECT_TRUE(out[1].complete);
@@ -167,12 +192,12 @@ TEST(FrameGrouper, DoesNotWaitForAPodThatIsGoneAndWaitsAgainWhenItReturns) {
 TEST(FrameGrouper, ReleasesInTimeOrderWhenFramesArriveOutOfOrder) {
   FrameGrouper g(2, GrouperOptions{});
   std::vector<GroupedSet> out;
-  g.Add({0, 2000000 + kPeriod, 1, nullptr});  // a newer frame first
-  g.Add({0, 2000000, 0, nullptr});
-  g.Add({1, 2000000 + kPeriod, 1, nullptr});
+  AddAt(g, {0, 2000000 + kPeriod, 1, nullptr});  // a newer frame first
+  AddAt(g, {0, 2000000, 0, nullptr});
+  AddAt(g, {1, 2000000 + kPeriod, 1, nullptr});
   g.Poll(2000000 + kPeriod, &out);
   EXPECT_TRUE(out.empty());  // the older set is still waiting for pod 1
-  g.Add({1, 2000000, 0, nullptr});
+  AddAt(g, {1, 2000000, 0, nullptr});
   g.Poll(2000000 + kPeriod, &out);
   ASSERT_EQ(out.size(), 2u);
   EXPECT_EQ(out[0].time_us, 2000000);
@@ -186,7 +211,7 @@ TEST(FrameGrouper, BoundsPendingSets) {
   FrameGrouper g(2, o);
   std::vector<GroupedSet> out;
   for (int k = 0; k < 10; ++k) {
-    g.Add({0, 1000000 + k * kPeriod, k, nullptr});
+    AddAt(g, {0, 1000000 + k * kPeriod, k, nullptr});
     g.Poll(1000000, &out);
   }
   EXPECT_EQ(g.pending(), 3u);
