@@ -294,19 +294,20 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     drifts[k] = o.drift_ppm * (2.0 * k / (kPods - 1.0) - 1.0);
     pods[k] = Child::Spawn(pod_argv(k), dir + "/pod" + std::to_string(k) + ".log");
   }
-  // Wait for the first set of all eight and for the site's pipeline to run.
+  // Wait for all eight pods to be connected and the site's pipeline to run.
   bool started = false;
   for (int i = 0; i < 1800 && !started; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    bool any_full = false, any_frame = false;
+    bool any_frame = false;
+    int accepted = 0;
     for (const auto& j : ReadJsonLines(site_stats)) {
-      if (j.contains("pod_set") && j["present"].get<int>() == kPods) any_full = true;
+      if (j.contains("pod_hub")) accepted = j["accepted"].get<int>();
       if (j.contains("pod_frame")) any_frame = true;
     }
-    started = any_full && any_frame;
+    started = accepted >= kPods && any_frame;
   }
   if (!started) {
-    std::fprintf(stderr, "pods: the site never fused a set of 8 pods (logs in %s)\n", dir.c_str());
+    std::fprintf(stderr, "pods: the site never fused a set from 8 connected pods (logs in %s)\n", dir.c_str());
     for (pid_t p : pods) Child::Stop(p);
     Child::Stop(site);
     if (ns.up) ns.Teardown();

@@ -68,6 +68,8 @@ class FrameGrouper {
   bool expected(int pod) const { return expected_[static_cast<size_t>(pod)]; }
   // Adds a frame that arrived at site time `now_us`.
   AddResult Add(PodSample sample, int64_t now_us);
+  // Whether a frame captured at site time `t` would be late (its set has left).
+  bool IsLate(int64_t t) const { return released_any_ && t <= last_released_us_ + options_.tolerance_us; }
   // Moves the sets ready at site time `now_us` to `out` (appended, in time order).
   void Poll(int64_t now_us, std::vector<GroupedSet>* out);
   // Earliest site time at which Poll may release a set by timeout (INT64_MAX if none pending).

@@ -115,6 +115,10 @@ void PodClient::Run() {
 Status PodClient::Session(bool* welcomed) {
   HOLO_ASSIGN_OR_RETURN(Socket sock, Connect(options_.host, options_.port, options_.connect_timeout_ms));
   const std::string site = options_.host + ":" + std::to_string(options_.port);
+  // About two frames in flight in the kernel: beyond that, frames wait (and
+  // are dropped, oldest first) in this client's queue instead of piling up
+  // latency in socket buffers.
+  SetBufferSizes(sock, 256 * 1024, 0);
   {
     protocol::Hello hello;
     hello.role = protocol::Role::kPod;

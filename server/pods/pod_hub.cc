@@ -174,6 +174,7 @@ void PodHub::AcceptLoop() {
     auto conn = std::make_shared<Conn>();
     conn->socket = std::move(*s);
     conn->peer = peer;
+    SetBufferSizes(conn->socket, 0, 256 * 1024);  // latency stays in the pod's queue, not in the kernel
     std::lock_guard<std::mutex> l(mu_);
     if (stop_) return;
     counters_.accepted++;
@@ -363,6 +364,20 @@ Status PodHub::HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival
   const double cpu0 = ThreadCpuTimeMs();
   if (f.pod_id != cal.id)
     return DataLoss("frame of pod " + std::to_string(f.pod_id) + " on the connection of pod " + std::to_string(cal.id));
+  {
+    // A frame whose set has already left is not worth decoding (a pod or
+    // link that fell behind catches up faster). Its blobs are still checked
+    // for their sizes below when it is decoded; a late one is counted only.
+    std::lock_guard<std::mutex> l(mu_);
+    PodState& ps = *pods_[static_cast<size_t>(pod)];
+    if (ps.clock.has_estimate() && grouper_.IsLate(ps.clock.ToSite(f.capture_time_us))) {
+      ps.c.received++;
+      ps.c.bytes += f.depth.size() + f.color.size() + 32;
+      ps.c.late++;
+      ps.c.dropped++;
+      return OkStatus();
+    }
+  }
   auto frame = std::make_shared<RgbdFrame>();
   HOLO_RETURN_IF_ERROR(protocol::DecodeDepth(f.depth, &frame->depth, options_.limits));
   if (frame->depth.width() != cal.depth.width || frame->depth.height() != cal.depth.height)

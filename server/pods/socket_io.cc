@@ -142,6 +142,11 @@ StatusOr<Socket> Connect(const std::string& host, uint16_t port, int timeout_ms)
   return s;
 }
 
+void SetBufferSizes(const Socket& s, int send_bytes, int receive_bytes) {
+  if (send_bytes > 0) setsockopt(s.fd(), SOL_SOCKET, SO_SNDBUF, &send_bytes, sizeof(send_bytes));
+  if (receive_bytes > 0) setsockopt(s.fd(), SOL_SOCKET, SO_RCVBUF, &receive_bytes, sizeof(receive_bytes));
+}
+
 Status SendAll(const Socket& s, const uint8_t* data, size_t size, int timeout_ms) {
   const int64_t deadline = SteadyMs() + timeout_ms;
   while (size > 0) {

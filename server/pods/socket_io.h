@@ -43,6 +43,11 @@ StatusOr<Socket> Accept(const Socket& listener, int timeout_ms, std::string* pee
 // Connects with a timeout; Unavailable naming the address on failure.
 StatusOr<Socket> Connect(const std::string& host, uint16_t port, int timeout_ms);
 
+// Caps the kernel's send / receive buffer of `s` (bytes; 0 leaves it). A
+// live stream keeps latency in its own bounded queue, not in megabytes of
+// socket buffer.
+void SetBufferSizes(const Socket& s, int send_bytes, int receive_bytes);
+
 // Writes all of `data`; Unavailable when the peer is gone or the write does
 // not complete within `timeout_ms`.
 Status SendAll(const Socket& s, const uint8_t* data, size_t size, int timeout_ms);
