@@ -51,6 +51,7 @@ struct PodsOptions {
   double offset_ms = 100;  // pods' clocks: ±offset (alternating sign)
   double drift_ppm = 50;   // ... and drift from −drift to +drift across pods
   int prerender = 20;
+  double pod_timeout_ms = 60;  // the site's --pod-timeout-ms
   bool peer = true;
   bool netns = false;
   std::string netem = "delay 1ms 0.2ms loss 0.1%";
@@ -272,7 +273,8 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   const std::string site_stats = dir + "/site.jsonl";
   if (!args.json) std::fprintf(stderr, "pods: site on port %u, 8 pods (%s)...\n", port, link.c_str());
   const pid_t site = Child::Spawn({server, "--workload", W, "--pods", (o.netns && ns.up ? "10.77.0.1:" : "127.0.0.1:") + std::to_string(port),
-                                   "--pod-token", kToken, "--pod-set-stats", "--stats", site_stats, "-n", "-1"},
+                                   "--pod-token", kToken, "--pod-set-stats", "--pod-timeout-ms", std::to_string(o.pod_timeout_ms),
+                                   "--stats", site_stats, "-n", "-1"},
                                   dir + "/site.log");
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   const int kPods = 8;
@@ -380,8 +382,10 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   std::snprintf(stated, sizeof stated, "±%.0f ms offset, −%.0f..+%.0f ppm drift", o.offset_ms, o.drift_ppm, o.drift_ppm);
   emit("sync_error_p50_ms", Pct(spread_ms, 50), "ms", {{"clocks", stated}, {"link", link}});
   emit("sync_error_p99_ms", Pct(spread_ms, 99), "ms", {{"clocks", stated}, {"link", link}});
+  char timeout_s[32];
+  std::snprintf(timeout_s, sizeof timeout_s, "%.0f", o.pod_timeout_ms);
   emit("sets_complete_fraction", sets_in > 0 ? static_cast<double>(full_in) / static_cast<double>(sets_in) : 0, "1",
-       {{"sets", std::to_string(sets_in)}, {"link", link}});
+       {{"sets", std::to_string(sets_in)}, {"link", link}, {"pod_timeout_ms", timeout_s}});
   emit("sets_per_s", static_cast<double>(sets_in) / window_s, "1/s", {{"link", link}});
   emit("site_fps", static_cast<double>(frames_in) / window_s, "1/s", {{"mode", "pods"}, {"link", link}});
   if (frames_in > 0)
@@ -417,6 +421,7 @@ BenchFn SetupPods(CLI::App& app) {
   app.add_option("--offset-ms", o->offset_ms, "pods' clock offsets: up to ±this")->check(CLI::Range(0.0, 10000.0));
   app.add_option("--drift-ppm", o->drift_ppm, "pods' clock drifts: −this..+this")->check(CLI::Range(0.0, 1000.0));
   app.add_option("--prerender", o->prerender, "frames each pod renders first and loops")->check(CLI::Range(2, 300));
+  app.add_option("--pod-timeout-ms", o->pod_timeout_ms, "the site's --pod-timeout-ms")->check(CLI::Range(0.0, 2000.0));
   app.add_flag("--no-peer", [o](int64_t) { o->peer = false; }, "skip the in-process peer run");
   app.add_flag("--netns", o->netns, "run the pods in their own network namespace (veth; tc netem where available)");
   app.add_option("--netem", o->netem, "netem arguments for --netns")->capture_default_str();

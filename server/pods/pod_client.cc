@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 
+#include "server/net/wire_message.h"
 #include "server/pods/socket_io.h"
 
 namespace holo::pods {
@@ -173,7 +174,8 @@ Status PodClient::Session(bool* welcomed) {
       s = reader.Read(sock, 0, &m);
       if (s.code() == StatusCode::kOutOfRange) break;
       if (!s.ok()) return s.WithContext("link to " + site);
-      const int64_t t1 = options_.clock();
+      // t1 when the Ping's bytes arrived (mapped onto the pod's clock).
+      const int64_t t1 = options_.clock() - (net::WallUs() - reader.arrival_us());
       if (m.header.type == MessageType::kPing) {
         const auto& p = std::get<protocol::Ping>(m.payload);
         protocol::Pong pong{p.nonce, p.send_time_us, t1, options_.clock()};

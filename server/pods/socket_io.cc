@@ -173,7 +173,10 @@ Status MessageReader::Read(const Socket& s, int timeout_ms, protocol::Message* o
     while (parser_.Next(&f)) {
       bool complete = false;
       HOLO_RETURN_IF_ERROR(assembler_.Add(std::move(f), &complete, out));
-      if (complete) return OkStatus();
+      if (complete) {
+        arrival_us_ = recv_us_;
+        return OkStatus();
+      }
     }
     const int64_t left = deadline - SteadyMs();
     if (left < 0) return OutOfRange("read: timeout");
@@ -185,6 +188,9 @@ Status MessageReader::Read(const Socket& s, int timeout_ms, protocol::Message* o
       return Unavailable("poll: " + Errno());
     }
     const ssize_t n = ::recv(s.fd(), buf_.data(), buf_.size(), 0);
+    recv_us_ = std::chrono::duration_cast<std::chrono::microseconds>(
+                   std::chrono::system_clock::now().time_since_epoch())
+                   .count();
     if (n == 0) return Unavailable("connection closed by peer");
     if (n < 0) {
       if (errno == EINTR || errno == EAGAIN) continue;

@@ -61,11 +61,17 @@ class MessageReader {
   // timeout; Unavailable when the peer closed; DataLoss / UnsupportedVersion
   // for a malformed stream (the connection must then be closed).
   Status Read(const Socket& s, int timeout_ms, protocol::Message* out);
+  // System-clock time (µs) when the recv() that delivered the last bytes of
+  // the message Read returned came back: the message's arrival, earlier
+  // than the return of Read when the thread was busy in between.
+  int64_t arrival_us() const { return arrival_us_; }
 
  private:
   protocol::FrameParser parser_;
   protocol::MessageAssembler assembler_;
   std::vector<uint8_t> buf_ = std::vector<uint8_t>(64 * 1024);
+  int64_t recv_us_ = 0;     // time of the latest recv()
+  int64_t arrival_us_ = 0;
 };
 
 }  // namespace holo::pods
