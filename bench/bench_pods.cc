@@ -52,6 +52,7 @@ struct PodsOptions {
   double drift_ppm = 50;   // ... and drift from −drift to +drift across pods
   int prerender = 20;
   double pod_timeout_ms = 60;  // the site's --pod-timeout-ms
+  double fps = 30;             // the pods' trigger rate
   bool peer = true;
   bool netns = false;
   std::string netem = "delay 1ms 0.2ms loss 0.1%";
@@ -248,6 +249,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   auto emit = [&](const std::string& metric, double v, const std::string& unit,
                   std::map<std::string, std::string> q = {}) {
     q.emplace("content", "fused");
+    if (o.fps != 30) q.emplace("fps", std::to_string(static_cast<int>(o.fps)));
     EmitFigure("pods", W, metric, v, unit, q);
   };
 
@@ -284,7 +286,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     std::vector<std::string> a;
     if (ns.up) a = {"/usr/sbin/ip", "netns", "exec", ns.name};
     const std::vector<std::string> rest = {pod_bin, "--site", site_host + ":" + std::to_string(port), "--token", kToken,
-                                           "--pod", std::to_string(k), "--workload", W, "--prerender",
+                                           "--pod", std::to_string(k), "--workload", W, "--fps", std::to_string(o.fps), "--prerender",
                                            std::to_string(o.prerender), "--clock-offset-ms", std::to_string(offsets[k]),
                                            "--clock-drift-ppm", std::to_string(drifts[k]), "--stats",
                                            dir + "/pod" + std::to_string(k) + ".jsonl", "-q"};
@@ -369,6 +371,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     if (!last_pod.count(k)) continue;
     const auto& j = last_pod[k];
     const double received = j["received"].get<double>();
+    // At 30 fps whatever the run's rate, as every bitrate of the project.
     const double mbps = received > 0 ? j["bytes"].get<double>() / received * 30.0 * 8.0 / 1e6 : 0;
     char off[32], dr[32];
     std::snprintf(off, sizeof off, "%.1f", offsets[k]);
@@ -421,6 +424,7 @@ BenchFn SetupPods(CLI::App& app) {
   app.add_option("--offset-ms", o->offset_ms, "pods' clock offsets: up to ±this")->check(CLI::Range(0.0, 10000.0));
   app.add_option("--drift-ppm", o->drift_ppm, "pods' clock drifts: −this..+this")->check(CLI::Range(0.0, 1000.0));
   app.add_option("--prerender", o->prerender, "frames each pod renders first and loops")->check(CLI::Range(2, 300));
+  app.add_option("--fps", o->fps, "the pods' trigger rate (30: the workloads' rate)")->check(CLI::Range(1.0, 60.0));
   app.add_option("--pod-timeout-ms", o->pod_timeout_ms, "the site's --pod-timeout-ms")->check(CLI::Range(0.0, 2000.0));
   app.add_flag("--no-peer", [o](int64_t) { o->peer = false; }, "skip the in-process peer run");
   app.add_flag("--netns", o->netns, "run the pods in their own network namespace (veth; tc netem where available)");

@@ -30,8 +30,11 @@ namespace holo::pods {
 struct GrouperOptions {
   // Frames whose site times differ by at most this are one set, µs. Pods on
   // a shared trigger capture within microseconds; the offset estimate adds
-  // its error (≤ 1 ms on a LAN), so 8 ms keeps sets apart at up to 60 fps.
-  int64_t tolerance_us = 8000;
+  // its error: < 1 ms on an idle link, but 2–4 ms in the first seconds on a
+  // loaded site (bench pods: RTTs of 3–20 ms until a quiet exchange comes),
+  // which split sets at 8 ms. 12 ms still keeps the instants of a 30 fps
+  // trigger (33 ms apart) apart.
+  int64_t tolerance_us = 12000;
   // An incomplete set is released this long after its first frame arrived,
   // µs: what a late pod may cost the site in latency. 60 ms ≈ two frames at 30 fps.
   int64_t timeout_us = 60000;

@@ -181,7 +181,7 @@ int main(int argc, char** argv) {
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
                "colours would cost ~8 bits per triangle and the texture stage ~8 CPU-ms per frame)");
   std::string pods_spec, pod_token;
-  double pod_tolerance_ms = 8, pod_timeout_ms = 60;
+  double pod_tolerance_ms = 12, pod_timeout_ms = 60;
   bool pod_set_stats = false;
   app.add_option("--pods", pods_spec,
                  "take the frames from pod processes (holoport-pod) connecting to [HOST:]PORT instead of the "
