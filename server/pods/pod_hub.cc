@@ -147,7 +147,7 @@ void PodHub::Stop() {
   if (stop_.exchange(true)) return;
   listener_.Shutdown();
   if (accept_thread_.joinable()) accept_thread_.join();
-  std::vector<std::thread> threads;
+  std::vector<std::pair<uint64_t, std::thread>> threads;
   {
     std::lock_guard<std::mutex> l(mu_);
     for (auto& c : conns_) {
@@ -156,14 +156,32 @@ void PodHub::Stop() {
     }
     threads = std::move(threads_);
   }
-  for (auto& t : threads)
+  for (auto& [id, t] : threads)
     if (t.joinable()) t.join();
   listener_.Close();
   cv_.notify_all();
 }
 
 void PodHub::AcceptLoop() {
+  const size_t max_conns = options_.max_connections > 0 ? options_.max_connections : 2 * rig_.pods.size() + 8;
   while (!stop_) {
+    {
+      // Join the threads of closed connections (reconnecting pods must not pile them up).
+      std::vector<std::thread> done;
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        for (uint64_t id : finished_)
+          for (auto it = threads_.begin(); it != threads_.end(); ++it)
+            if (it->first == id) {
+              done.push_back(std::move(it->second));
+              threads_.erase(it);
+              break;
+            }
+        finished_.clear();
+      }
+      for (auto& t : done)
+        if (t.joinable()) t.join();
+    }
     std::string peer;
     auto s = Accept(listener_, 200, &peer);
     if (!s.ok()) {
@@ -180,9 +198,15 @@ void PodHub::AcceptLoop() {
     std::lock_guard<std::mutex> l(mu_);
     if (stop_) return;
     counters_.accepted++;
+    if (conns_.size() >= max_conns) {
+      counters_.refused++;
+      Log("closed " + peer + " at accept: " + std::to_string(conns_.size()) + " connections already (at most " +
+          std::to_string(max_conns) + ")");
+      continue;  // `conn` closes its socket
+    }
     conn->id = next_conn_id_++;
     conns_.push_back(conn);
-    threads_.emplace_back([this, conn] { Serve(conn); });
+    threads_.emplace_back(conn->id, std::thread([this, conn] { Serve(conn); }));
   }
 }
 
@@ -240,7 +264,11 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
   Status s = Handshake(*conn, &pod);
   if (!s.ok()) {
     Log(s.message());
-    conn->socket.Close();
+    conn->socket.Shutdown();
+    std::lock_guard<std::mutex> l(mu_);
+    conns_.erase(std::remove_if(conns_.begin(), conns_.end(), [&](const auto& c) { return c->id == conn->id; }),
+                 conns_.end());
+    finished_.push_back(conn->id);
     return;
   }
   std::shared_ptr<Conn> replaced;
@@ -358,6 +386,7 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
     }
     conns_.erase(std::remove_if(conns_.begin(), conns_.end(), [&](const auto& c) { return c->id == conn->id; }),
                  conns_.end());
+    finished_.push_back(conn->id);
   }
   cv_.notify_all();
   if (!stop_) Log("pod " + std::to_string(rig_.pods[static_cast<size_t>(pod)].id) + " (" + conn->peer + ") closed: " + why);

@@ -54,6 +54,9 @@ struct PodHubOptions {
   // A pod silent this long is closed, ms (a pod sends frames at its rate
   // and answers pings).
   int idle_timeout_ms = 3000;
+  // Connections at once (handshakes included); more are closed at accept.
+  // 0: twice the rig's pods + 8.
+  size_t max_connections = 0;
   // Frame sets waiting for the pipeline; when it falls behind, the oldest
   // waiting set is dropped (a live site never queues up latency).
   size_t output_sets = 2;
@@ -166,7 +169,8 @@ class PodHub final : public FrameSource {
   std::condition_variable cv_;
   std::vector<std::unique_ptr<PodState>> pods_;
   std::vector<std::shared_ptr<Conn>> conns_;
-  std::vector<std::thread> threads_;
+  std::vector<std::pair<uint64_t, std::thread>> threads_;  // by connection id
+  std::vector<uint64_t> finished_;  // connections whose thread has ended (joined by the accept loop)
   FrameGrouper grouper_;
   std::deque<std::pair<SetInfo, GroupedSet>> ready_;
   std::vector<SetInfo> released_info_;  // released since the last callback round

@@ -289,5 +289,28 @@ TEST(PodHub, RefusesOtherRolesOnThePodPort) {
   EXPECT_EQ(std::get<protocol::Refuse>(m.payload).reason, protocol::RefuseReason::kRoleNotAllowed);
 }
 
+TEST(PodHub, BoundsConnectionsAndJoinsClosedOnes) {
+  const Rig rig = SmallRig(1);
+  PodHubOptions o = HubOptions();
+  o.max_connections = 1;
+  auto hub = PodHub::Start(rig, o, [](const std::string&) {});
+  ASSERT_TRUE(hub.ok()) << hub.status().ToString();
+  auto first = Connect("127.0.0.1", (*hub)->port(), 1000);  // holds the only slot (handshake pending)
+  ASSERT_TRUE(first.ok());
+  ASSERT_TRUE(WaitFor([&] { return (*hub)->counters().accepted == 1; }));
+  auto second = Connect("127.0.0.1", (*hub)->port(), 1000);
+  ASSERT_TRUE(second.ok());
+  MessageReader reader;
+  protocol::Message m;
+  EXPECT_EQ(reader.Read(*second, 2000, &m).code(), StatusCode::kUnavailable);  // closed at accept
+  EXPECT_EQ((*hub)->counters().refused, 1u);
+  // Once the first goes away its slot is free again: a pod can connect (it
+  // retries if it comes before the hub noticed).
+  first->Close();
+  TestPod a(rig.pods[0], (*hub)->port(), 0);
+  ASSERT_TRUE(a.Start().ok());
+  ASSERT_TRUE(WaitFor([&] { return (*hub)->Pods()[0].connected; }));
+}
+
 }  // namespace
 }  // namespace holo::pods
