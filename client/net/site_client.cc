@@ -45,6 +45,7 @@ const char* ReasonName(protocol::RefuseReason r) {
     case protocol::RefuseReason::kMalformed: return "MALFORMED";
     case protocol::RefuseReason::kOverloaded: return "OVERLOADED";
     case protocol::RefuseReason::kNoCommonCodec: return "NO_COMMON_CODEC";
+    case protocol::RefuseReason::kBadCalibration: return "BAD_CALIBRATION";
   }
   return "UNKNOWN";
 }

@@ -53,6 +53,7 @@ const char* RefuseReasonName(RefuseReason r) {
     case RefuseReason::kMalformed: return "MALFORMED";
     case RefuseReason::kOverloaded: return "OVERLOADED";
     case RefuseReason::kNoCommonCodec: return "NO_COMMON_CODEC";
+    case RefuseReason::kBadCalibration: return "BAD_CALIBRATION";
   }
   return "UNKNOWN";
 }

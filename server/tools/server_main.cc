@@ -28,6 +28,7 @@
 #include "server/net/session_server.h"
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
+#include "server/pods/pod_hub.h"
 #include "server/record/replay_command.h"
 #include "server/stereo/stereo_depth.h"
 #include "server/studio/studio.h"
@@ -190,6 +191,19 @@ int main(int argc, char** argv) {
                "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
                "colours would cost ~8 bits per triangle and the texture stage ~8 CPU-ms per frame)");
+  std::string pods_spec, pod_token;
+  double pod_tolerance_ms = 12, pod_timeout_ms = 60;
+  bool pod_set_stats = false;
+  app.add_option("--pods", pods_spec,
+                 "take the frames from pod processes (holoport-pod) connecting to [HOST:]PORT instead of the "
+                 "local source; the workload / --rig gives the rig they must match, its empty room the background");
+  app.add_option("--pod-token", pod_token, "--pods: the token pods must present");
+  app.add_option("--pod-tolerance-ms", pod_tolerance_ms, "--pods: frames within this of each other form one set")
+      ->capture_default_str();
+  app.add_option("--pod-timeout-ms", pod_timeout_ms,
+                 "--pods: a set missing a connected pod leaves this long after its capture time")
+      ->capture_default_str();
+  app.add_flag("--pod-set-stats", pod_set_stats, "--pods: one stats line per frame set the hub releases");
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -338,6 +352,33 @@ int main(int argc, char** argv) {
     stereo_source = std::move(*st);
     source = stereo_source.get();
   }
+  // Pods over the network replace the local source (the rig stays: pods must match it).
+  std::unique_ptr<holo::pods::PodHub> pod_hub;
+  FILE* pod_stats = nullptr;  // set below, with the stats output
+  if (!pods_spec.empty()) {
+    holo::pods::PodHubOptions ho;
+    holo::Status st = holo::pods::ParseHostPort(pods_spec, &ho.host, &ho.port);
+    if (!st.ok()) return Fail(st.WithContext("--pods"));
+    if (pod_token.empty()) return Fail(holo::InvalidArgument("--pods needs --pod-token (the token pods present)"));
+    if (truth_mesh) return Fail(holo::InvalidArgument("--pods cannot be combined with --truth-mesh"));
+    if (options.masks == holo::MaskSource::kTruth) return Fail(holo::InvalidArgument("--pods cannot use --masks truth"));
+    ho.pod_token = pod_token;
+    ho.grouping.tolerance_us = static_cast<int64_t>(pod_tolerance_ms * 1000);
+    ho.grouping.timeout_us = static_cast<int64_t>(pod_timeout_ms * 1000);
+    auto hub = holo::pods::PodHub::Start(source->rig(), ho, [quiet](const std::string& line) {
+      if (!quiet) std::fprintf(stderr, "holoport-server: pods: %s\n", line.c_str());
+    });
+    if (!hub.ok()) return Fail(hub.status());
+    pod_hub = std::move(*hub);
+    if (!quiet)
+      std::fprintf(stderr, "holoport-server: waiting for %zu pods on port %u\n", source->rig().pods.size(),
+                   pod_hub->port());
+    source = pod_hub.get();
+    source_name = "pods:" + std::to_string(pod_hub->port());
+    // The hub paces the site: sets leave when the pods deliver them.
+    options.pipeline.pace_fps = 0;
+    options.pipeline.drop_late_frames = false;
+  }
   if (!background_spec.empty()) {
     if (background_spec.rfind("dataset:", 0) != 0)
       return Fail(holo::InvalidArgument("--background must be dataset:PATH, got '" + background_spec + "'"));
@@ -364,6 +405,35 @@ int main(int argc, char** argv) {
   }
 
   if (server) server->SetRig(source->rig());
+  pod_stats = stats_out;
+  // Pod counters once a second (and per released set with --pod-set-stats).
+  std::atomic<bool> pod_stats_done{false};
+  std::thread pod_stats_thread;
+  auto pod_lines = [&] {
+    for (const auto& c : pod_hub->Pods()) std::fprintf(pod_stats, "%s\n", holo::pods::PodCountersJson(c).c_str());
+    std::fprintf(pod_stats, "%s\n", holo::pods::HubCountersJson(pod_hub->counters()).c_str());
+    std::fflush(pod_stats);
+  };
+  if (pod_hub) {
+    if (pod_set_stats)
+      pod_hub->SetOnSet([&](const holo::pods::SetInfo& i) {
+        std::fprintf(pod_stats, "%s\n", holo::pods::SetInfoJson(i).c_str());
+      });
+    pod_stats_thread = std::thread([&] {
+      while (!pod_stats_done) {
+        for (int i = 0; i < 20 && !pod_stats_done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        pod_lines();
+      }
+    });
+  }
+  struct PodStatsJoin {
+    std::atomic<bool>* done;
+    std::thread* t;
+    ~PodStatsJoin() {
+      *done = true;
+      if (t->joinable()) t->join();
+    }
+  } pod_stats_join{&pod_stats_done, &pod_stats_thread};
 
   // Network stats line every 30 frames and a summary at the end.
   auto net_line = [&](int64_t frame) {
@@ -576,6 +646,22 @@ int main(int argc, char** argv) {
       j["viewers"] = pt.viewers;
     }
     std::fprintf(stats_out, "%s\n", j.dump().c_str());
+    if (pod_hub) {
+      // Pod capture (site clock) → textured (and encoded) mesh.
+      int64_t capture = 0;
+      int present = 0;
+      for (const auto& f : w.frames.frames)
+        if (f.timestamp_us != 0) {
+          capture = capture == 0 ? f.timestamp_us : std::min(capture, f.timestamp_us);
+          ++present;
+        }
+      nlohmann::ordered_json pj;
+      pj["pod_frame"] = w.frames.frame_index;
+      pj["pods_present"] = present;
+      pj["capture_us"] = capture;
+      pj["capture_latency_ms"] = capture ? static_cast<double>(holo::net::WallUs() - capture) * 1e-3 : -1.0;
+      std::fprintf(stats_out, "%s\n", pj.dump().c_str());
+    }
     if (!export_dir.empty()) {
       char path[4096];
       FrameFileName(path, sizeof(path), export_dir, w.frames.frame_index);
@@ -608,12 +694,21 @@ int main(int argc, char** argv) {
   std::atomic<bool> run_done{false};
   std::thread watcher([&] {
     while (!run_done && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    if (g_stop) (*site)->Stop();
+    if (g_stop) {
+      (*site)->Stop();
+      if (pod_hub) pod_hub->Stop();  // wakes an acquire waiting for pods
+    }
   });
   auto stats = (*site)->Run(sink, encode);
   run_done = true;
   watcher.join();
   if (server) net_line(-1);
+  if (pod_hub) {
+    pod_stats_done = true;
+    if (pod_stats_thread.joinable()) pod_stats_thread.join();
+    pod_hub->Stop();
+    pod_lines();
+  }
   if (stats_out != stdout) std::fclose(stats_out);
   if (!stats.ok()) return Fail(stats.status());
   if (!snapshot_path.empty() && last_frame >= 0) {
