@@ -129,7 +129,8 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     total.push_back(t.acquire_ms + t.segment_ms + t.fuse_ms + t.mesh_ms + t.texture_ms);
   const StageTimings med = MedianTimings(*stats);
   auto q = [&](const char* stage) {
-    return std::map<std::string, std::string>{{"stage", stage}, {"mode", "pipeline"}, {"source", SourceName(src)}};
+    return std::map<std::string, std::string>{{"stage", stage}, {"mode", "pipeline"}, {"source", SourceName(src)},
+                                              {"content", "fused"}};
   };
   EmitFigure("fusion", wl, "ms", med.acquire_ms, "ms", q("acquire"));
   EmitFigure("fusion", wl, "ms", med.segment_ms, "ms", q("segment"));

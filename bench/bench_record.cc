@@ -71,7 +71,7 @@ int RunRecordBench(const BenchArgs& args) {
   const std::string dir = std::filesystem::temp_directory_path() / ("holo_bench_record_" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
   const std::string path = dir + "/bench.hrec";
-  const std::map<std::string, std::string> q = {{"codec", "g1"}};
+  const std::map<std::string, std::string> q = {{"codec", "g1"}, {"content", "truth"}};
   auto qual = [&](std::map<std::string, std::string> extra) {
     extra.insert(q.begin(), q.end());
     return extra;
@@ -248,6 +248,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
   }
   auto qual = [&](std::map<std::string, std::string> q) {
     q["viewers"] = std::to_string(viewers);
+    q["content"] = "truth";
     return q;
   };
   RealClock& clock = RealClock::Instance();

@@ -45,7 +45,7 @@ int RunStudioBench(const holo::bench::BenchArgs& args) {
       std::fprintf(stderr, "studio %s run %d: %d frames of %zu pods in %.3f s: %.1f fps\n", workload->name.c_str(), r + 1,
                    frames, set.frames.size(), s, fps.back());
   }
-  const std::map<std::string, std::string> q = {{"threads", std::to_string(threads)}, {"ground_truth", "1"}};
+  const std::map<std::string, std::string> q = {{"threads", std::to_string(threads)}, {"ground_truth", "1"}, {"content", "truth"}};
   holo::bench::EmitFigure("studio", workload->name, "fps", holo::bench::Median(fps), "1/s", q);
   holo::bench::EmitFigure("studio", workload->name, "ms", holo::bench::Median(ms), "ms", q);
   holo::bench::EmitFigure("studio", workload->name, "cpu_ms", holo::bench::Median(cpu_ms), "ms", q);

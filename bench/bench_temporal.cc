@@ -601,6 +601,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
     Run& run = runs[r];
     auto qm = q;
     qm["mode"] = run.mode;
+    qm["content"] = r % 2 == 1 ? "temporal" : "fused";
     auto stage = [&](const char* name, const std::vector<double>& v) {
       auto qs = qm;
       qs["stage"] = name;

@@ -218,6 +218,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
                                             {"color_variation", "0"}};
     if (offset_mm != 0.0f) q["geometry_offset_mm"] = std::to_string(offset_mm);
     if (fused) q["mesh"] = "fused";
+    q["content"] = fused ? "fused" : "truth";
     if (mode.options.cluster_size_m > 0) q["cluster_mm"] = std::to_string(1e3f * mode.options.cluster_size_m);
     holo::bench::EmitFigure("texture", workload->name, "ms", holo::bench::Median(ms[mode.name]), "ms", q);
     // CPU time of all threads per frame: what other load on the machine barely changes.

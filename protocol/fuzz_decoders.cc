@@ -4,6 +4,7 @@
 
 #include "common/status.h"
 #include "protocol/color_codec.h"
+#include "protocol/depth_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
 
@@ -66,6 +67,23 @@ int FuzzColor(std::span<const uint8_t> body) {
   HOLO_CHECK(stream.Decode(body, limits).ok() == ok);
   if (ok) HOLO_CHECK_MSG(stream.image() == image && stream.mask() == mask, "stream decode differs from a fresh one");
   return ok ? 1 : 0;
+}
+
+int FuzzPodFrame(std::span<const uint8_t> body) {
+  const Limits limits = FuzzLimits();
+  auto p = DecodePayload(MessageType::kPodFrame, body, limits);
+  if (!p.ok()) return 0;
+  const auto& f = std::get<PodFrame>(*p);
+  int decoded = 1;
+  ImageDepth16 depth;
+  if (DecodeDepth(f.depth, &depth, limits).ok()) {
+    HOLO_CHECK(depth.width() > 0 && depth.height() > 0);
+    ++decoded;
+  }
+  ImageRgb8 image;
+  ImageGray8 mask;
+  if (DecodeColor(f.color, &image, &mask, limits).ok()) ++decoded;
+  return decoded;
 }
 
 int FuzzDecoders(const uint8_t* data, size_t size) {

@@ -133,13 +133,13 @@ void Write(ByteWriter& w, const Hello& m) {
 Status Read(ByteReader& r, const Limits& l, Hello* m) {
   uint8_t role = 0;
   HOLO_RETURN_IF_ERROR(r.U8("hello.role", &role));
-  if (role < 1 || role > 5) return DataLoss("hello.role: unknown role " + Str(role));
+  if (role < 1 || role > 6) return DataLoss("hello.role: unknown role " + Str(role));
   m->role = static_cast<Role>(role);
   HOLO_RETURN_IF_ERROR(r.U16("hello.min_version", &m->min_version));
   HOLO_RETURN_IF_ERROR(r.U16("hello.max_version", &m->max_version));
   if (m->min_version > m->max_version) return DataLoss("hello.min_version: greater than max_version");
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.geometry_codecs", 2, &m->capabilities.geometry));
-  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 3, &m->capabilities.color));
+  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 4, &m->capabilities.color));
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.audio_codecs", 2, &m->capabilities.audio));
   HOLO_RETURN_IF_ERROR(r.String16("hello.access_token", l.max_token, &m->access_token));
   HOLO_RETURN_IF_ERROR(r.String16("hello.client_name", l.max_string, &m->client_name));
@@ -163,7 +163,7 @@ Status Read(ByteReader& r, const Limits& l, Welcome* m) {
   HOLO_RETURN_IF_ERROR(r.U8("welcome.color_codec", &c));
   HOLO_RETURN_IF_ERROR(r.U8("welcome.audio_codec", &a));
   if (g < 1 || g > 2) return DataLoss("welcome.geometry_codec: unknown codec " + Str(g));
-  if (c < 1 || c > 3) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
+  if (c < 1 || c > 4) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
   if (a < 1 || a > 2) return DataLoss("welcome.audio_codec: unknown codec " + Str(a));
   m->geometry_codec = static_cast<GeometryCodec>(g);
   m->color_codec = static_cast<ColorCodec>(c);
@@ -182,7 +182,7 @@ void Write(ByteWriter& w, const Refuse& m) {
 Status Read(ByteReader& r, const Limits& l, Refuse* m) {
   uint16_t reason = 0;
   HOLO_RETURN_IF_ERROR(r.U16("refuse.reason", &reason));
-  if (reason < 1 || reason > 6) return DataLoss("refuse.reason: unknown reason " + Str(reason));
+  if (reason < 1 || reason > 7) return DataLoss("refuse.reason: unknown reason " + Str(reason));
   m->reason = static_cast<RefuseReason>(reason);
   HOLO_RETURN_IF_ERROR(r.U16("refuse.server_min_version", &m->server_min_version));
   HOLO_RETURN_IF_ERROR(r.U16("refuse.server_max_version", &m->server_max_version));
@@ -252,7 +252,7 @@ Status Read(ByteReader& r, const Limits& l, ColorFrame* m) {
   HOLO_RETURN_IF_ERROR(r.I64("color_frame.frame_index", &m->frame_index));
   uint8_t c = 0, n = 0;
   HOLO_RETURN_IF_ERROR(r.U8("color_frame.codec", &c));
-  if (c < 1 || c > 3) return DataLoss("color_frame.codec: unknown color codec " + Str(c));
+  if (c < 1 || c > 4) return DataLoss("color_frame.codec: unknown color codec " + Str(c));
   m->codec = static_cast<ColorCodec>(c);
   HOLO_RETURN_IF_ERROR(r.U8("color_frame.num_images", &n));
   if (n > l.max_pods) return DataLoss("color_frame.num_images: " + Str(n) + " exceeds limit " + Str(l.max_pods));
@@ -430,6 +430,34 @@ Status Read(ByteReader& r, const Limits& l, Stats* m) {
   return OkStatus();
 }
 
+void Write(ByteWriter& w, const PodFrame& m) {
+  w.U16(m.pod_id);
+  w.I64(m.frame_number);
+  w.I64(m.capture_time_us);
+  w.U8(static_cast<uint8_t>(m.depth_codec));
+  WriteBytes32(w, m.depth);
+  w.U8(static_cast<uint8_t>(m.color_codec));
+  WriteBytes32(w, m.color);
+}
+Status Read(ByteReader& r, const Limits& l, PodFrame* m) {
+  HOLO_RETURN_IF_ERROR(r.U16("pod_frame.pod_id", &m->pod_id));
+  HOLO_RETURN_IF_ERROR(r.I64("pod_frame.frame_number", &m->frame_number));
+  if (m->frame_number < 0) return DataLoss("pod_frame.frame_number: must be >= 0, got " + std::to_string(m->frame_number));
+  HOLO_RETURN_IF_ERROR(r.I64("pod_frame.capture_time_us", &m->capture_time_us));
+  uint8_t d = 0, c = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("pod_frame.depth_codec", &d));
+  if (d != 1) return DataLoss("pod_frame.depth_codec: unknown depth codec " + Str(d));
+  m->depth_codec = static_cast<DepthCodec>(d);
+  HOLO_RETURN_IF_ERROR(ReadBytes32(r, "pod_frame.depth", l.max_message_bytes, &m->depth));
+  if (m->depth.empty()) return DataLoss("pod_frame.depth: empty");
+  HOLO_RETURN_IF_ERROR(r.U8("pod_frame.color_codec", &c));
+  if (c < 1 || c > 2) return DataLoss("pod_frame.color_codec: unknown or unsupported colour codec " + Str(c));
+  m->color_codec = static_cast<ColorCodec>(c);
+  HOLO_RETURN_IF_ERROR(ReadBytes32(r, "pod_frame.color", l.max_message_bytes, &m->color));
+  if (m->color.empty()) return DataLoss("pod_frame.color: empty");
+  return OkStatus();
+}
+
 template <typename T>
 StatusOr<Payload> ReadAs(ByteReader& r, const Limits& l, const char* name) {
   T m;
@@ -473,11 +501,12 @@ const char* MessageTypeName(MessageType t) {
     case MessageType::kPing: return "ping";
     case MessageType::kPong: return "pong";
     case MessageType::kStats: return "stats";
+    case MessageType::kPodFrame: return "pod_frame";
   }
   return "unknown";
 }
 
-bool IsKnownMessageType(uint16_t t) { return t >= 1 && t <= 13; }
+bool IsKnownMessageType(uint16_t t) { return t >= 1 && t <= 14; }
 
 const char* RoleName(Role r) {
   switch (r) {
@@ -486,6 +515,7 @@ const char* RoleName(Role r) {
     case Role::kRenderHost: return "render-host";
     case Role::kThinClient: return "thin-client";
     case Role::kRecorder: return "recorder";
+    case Role::kPod: return "pod";
   }
   return "unknown";
 }
@@ -542,7 +572,7 @@ MessageType TypeOf(const Payload& p) {
       MessageType::kHello,      MessageType::kWelcome,   MessageType::kRefuse,        MessageType::kRig,
       MessageType::kMeshFrame,  MessageType::kColorFrame, MessageType::kAudioPose,    MessageType::kClientPose,
       MessageType::kRenderedFrame, MessageType::kControl, MessageType::kPing,         MessageType::kPong,
-      MessageType::kStats};
+      MessageType::kStats,      MessageType::kPodFrame};
   return kTypes[p.index()];
 }
 
@@ -569,6 +599,7 @@ StatusOr<Payload> DecodePayload(MessageType type, std::span<const uint8_t> bytes
     case MessageType::kPing: return ReadAs<Ping>(r, l, "ping");
     case MessageType::kPong: return ReadAs<Pong>(r, l, "pong");
     case MessageType::kStats: return ReadAs<Stats>(r, l, "stats");
+    case MessageType::kPodFrame: return ReadAs<PodFrame>(r, l, "pod_frame");
   }
   return DataLoss("unknown message type " + Str(static_cast<uint16_t>(type)));
 }

@@ -41,6 +41,7 @@ enum class MessageType : uint16_t {
   kPing = 11,
   kPong = 12,
   kStats = 13,
+  kPodFrame = 14,
 };
 const char* MessageTypeName(MessageType t);
 bool IsKnownMessageType(uint16_t t);
@@ -52,8 +53,12 @@ inline constexpr uint16_t kKnownFlags = kFlagMoreFragments | kFlagKeyFrame;
 
 // Codec identifiers (one byte on the wire; 0 is never valid).
 enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2 };
-enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */ };
+// kV1: per-pod inter-frame video (protocol/video_codec.h); its blobs need a
+// VideoDecoder per pod stream, not DecodeColor.
+enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */, kV1 = 4 };
 enum class AudioCodec : uint8_t { kPcm16 = 1, kOpus = 2 };
+// Depth codecs of PodFrame (protocol/depth_codec.h): D1 = zstd of row deltas.
+enum class DepthCodec : uint8_t { kD1 = 1 };
 
 // Limits every decoder enforces. The defaults are the protocol's hard limits;
 // a deployment may lower them (never raise them above the defaults).
@@ -97,7 +102,8 @@ StatusOr<Header> DecodeHeader(const uint8_t* data, size_t size, const Limits& li
 
 // ---------------------------------------------------------------- payloads
 
-enum class Role : uint8_t { kPublisher = 1, kViewer = 2, kRenderHost = 3, kThinClient = 4, kRecorder = 5 };
+// kPod: one RGB-D pod streaming its frames to a site's pod port (§3.1).
+enum class Role : uint8_t { kPublisher = 1, kViewer = 2, kRenderHost = 3, kThinClient = 4, kRecorder = 5, kPod = 6 };
 const char* RoleName(Role r);
 
 struct Capabilities {
@@ -135,6 +141,7 @@ enum class RefuseReason : uint16_t {
   kMalformed = 4,
   kOverloaded = 5,
   kNoCommonCodec = 6,
+  kBadCalibration = 7,  // a pod whose calibration disagrees with the site's rig
 };
 
 // Frozen across protocol versions (see PROTOCOL.md) so that a peer of any
@@ -259,8 +266,22 @@ struct Stats {
   bool operator==(const Stats&) const = default;
 };
 
+// One pod's RGB-D frame, pod → site (PROTOCOL.md §4 PodFrame). The capture
+// time is on the POD's clock; the site maps it onto its own clock with the
+// offset its pings measure.
+struct PodFrame {
+  uint16_t pod_id = 0;
+  int64_t frame_number = 0;     // the pod's own count (0, 1, 2, ...; gaps = frames the pod dropped)
+  int64_t capture_time_us = 0;  // exposure time, µs on the pod's clock
+  DepthCodec depth_codec = DepthCodec::kD1;
+  std::vector<uint8_t> depth;   // depth blob (depth_codec.h)
+  ColorCodec color_codec = ColorCodec::kC1;
+  std::vector<uint8_t> color;   // colour blob (color_codec.h)
+  bool operator==(const PodFrame&) const = default;
+};
+
 using Payload = std::variant<Hello, Welcome, Refuse, RigMessage, MeshFrame, ColorFrame, AudioPose, ClientPose,
-                             RenderedFrame, Control, Ping, Pong, Stats>;
+                             RenderedFrame, Control, Ping, Pong, Stats, PodFrame>;
 
 MessageType TypeOf(const Payload& p);
 

@@ -297,7 +297,7 @@ int main(int argc, char** argv) {
   app.add_flag("--mic", mic, "record from a microphone (OpenAL capture) first; falls back to --audio-in / --say");
   app.add_option("--mic-device", mic_device, "OpenAL capture device name (default device if empty)");
   app.add_option("--mic-seconds", mic_seconds, "seconds to record from the microphone")->capture_default_str()->check(CLI::Range(0.1, 600.0));
-  app.add_option("-o,--out", out, "stereo WAV to write (48 kHz, 16-bit)")->required();
+  app.add_option("-o,--out", out, "stereo WAV to write (48 kHz, 16-bit); required");
   app.add_option("--path", po.path, "speaker path: circle, walk-past or fixed")
       ->capture_default_str()->check(CLI::IsMember({"circle", "walk-past", "fixed"}));
   app.add_option("--facing", po.facing, "speaker faces: listener, away, path (direction of walking), spin (turns in place) or fixed")
@@ -334,6 +334,11 @@ int main(int argc, char** argv) {
   app.add_flag("--play", play, "also play the result on the default output device (if there is one)");
   app.add_flag("-q,--quiet", quiet, "no progress output");
   CLI11_PARSE(app, argc, argv);
+  // Checked after parsing so that an unknown option is named first.
+  if (out.empty()) {
+    std::fprintf(stderr, "holoport-voice: --out FILE.wav is required (see --help)\n");
+    return 2;
+  }
 
   auto fail = [](const std::string& m) {
     std::fprintf(stderr, "holoport-voice: %s\n", m.c_str());

@@ -20,6 +20,7 @@
 
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/video_codec.h"
 
 namespace holo::net {
 
@@ -44,6 +45,7 @@ const char* ReasonName(protocol::RefuseReason r) {
     case protocol::RefuseReason::kMalformed: return "MALFORMED";
     case protocol::RefuseReason::kOverloaded: return "OVERLOADED";
     case protocol::RefuseReason::kNoCommonCodec: return "NO_COMMON_CODEC";
+    case protocol::RefuseReason::kBadCalibration: return "BAD_CALIBRATION";
   }
   return "UNKNOWN";
 }
@@ -409,6 +411,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       }
       welcomed = true;
       backoff_step = 0;
+      video_decoders.clear();  // a new connection starts each stream afresh
       timer.cancel();
       {
         std::lock_guard<std::mutex> l(mu);
@@ -494,6 +497,20 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     }
   }
 
+  // Asks the site for a colour keyframe (V1), at most once per 250 ms: the
+  // site's answer takes a frame or two to arrive, and every pod stream that
+  // waits would ask again.
+  void RequestKeyframe() {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_keyframe_request < std::chrono::milliseconds(250)) return;
+    last_keyframe_request = now;
+    protocol::Control c;
+    c.command = protocol::ControlCommand::kRequestKeyFrame;
+    Queue(Encode(Header{}, c), false);
+    std::lock_guard<std::mutex> l(mu);
+    ++stats.keyframe_requests;
+  }
+
   void BadPayload(MessageType t, const Status& s) {
     std::lock_guard<std::mutex> l(mu);
     ++stats.decode_errors;
@@ -551,14 +568,37 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       const auto& c = std::get<protocol::ColorFrame>(*p);
       fi = c.frame_index;
       const auto t0 = std::chrono::steady_clock::now();
+      uint64_t waiting = 0;
       for (const auto& img : c.images) {
         DecodedImage d;
         d.pod_id = img.pod_id;
-        const Status s = protocol::DecodeColor(img.data, &d.image, &d.mask, limits);
-        if (!s.ok()) return BadPayload(MessageType::kColorFrame, s);
+        if (c.codec == protocol::ColorCodec::kV1) {
+          // V1: one decoder per pod stream; a delta frame without its
+          // predecessor (joined mid-stream, a frame dropped on the way) waits
+          // for a keyframe, which this client asks the site for.
+          auto& dec = video_decoders[img.pod_id];
+          if (dec == nullptr) dec = std::make_unique<protocol::VideoDecoder>();
+          const Status s = dec->Decode(img.data, limits);
+          if (s.code() == StatusCode::kUnavailable) {
+            ++waiting;
+            continue;
+          }
+          if (!s.ok()) {
+            BadPayload(MessageType::kColorFrame, s);
+            ++waiting;  // the decoder now waits for a keyframe too
+            continue;
+          }
+          d.image = dec->image();
+          d.mask = dec->mask();
+        } else {
+          const Status s = protocol::DecodeColor(img.data, &d.image, &d.mask, limits);
+          if (!s.ok()) return BadPayload(MessageType::kColorFrame, s);
+        }
         images.push_back(std::move(d));
       }
+      if (waiting > 0) RequestKeyframe();
       std::lock_guard<std::mutex> l(mu);
+      stats.color_images_waiting += waiting;
       stats.color_decode_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     } else if (!PeekFrameIndex(raw.payload, &fi)) {
       return BadPayload(MessageType::kColorFrame, DataLoss("color_frame: truncated"));
@@ -699,6 +739,8 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   uint64_t ping_count = 0;
   std::atomic<uint32_t> subscription{0};
   std::optional<ReceivedFrame> pending;
+  std::map<uint16_t, std::unique_ptr<protocol::VideoDecoder>> video_decoders;  // V1, per pod (strand)
+  std::chrono::steady_clock::time_point last_keyframe_request{};
   std::atomic<bool> stopped{false};
 
   mutable std::mutex mu;

@@ -73,7 +73,7 @@ struct ClientOptions {
   size_t max_send_queue = 1024;    // messages waiting to be sent; newer ones are dropped beyond
   uint32_t max_message_bytes = 64u << 20;
   protocol::Capabilities capabilities{{protocol::GeometryCodec::kG1, protocol::GeometryCodec::kG0},
-                                      {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0},
+                                      {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0, protocol::ColorCodec::kV1},
                                       {protocol::AudioCodec::kOpus, protocol::AudioCodec::kPcm16}};
   TlsClientConfig tls;
   // No connection: content messages come from Feed() (an HTTP broadcast
@@ -129,6 +129,8 @@ struct ClientStats {
   uint64_t messages_received = 0;
   uint64_t bytes_received = 0;
   uint64_t decode_errors = 0;
+  uint64_t color_images_waiting = 0;  // V1 pod images skipped while a stream waited for a keyframe
+  uint64_t keyframe_requests = 0;     // Control kRequestKeyFrame sent (V1)
   uint64_t sends_dropped = 0;     // not connected or send queue full
   int64_t last_frame_index = -1;
   double rtt_ms = -1;

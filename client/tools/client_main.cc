@@ -111,6 +111,16 @@ int main(int argc, char** argv) {
   app.add_option("--name", o.name, "participant / client name (shown in the site's log)")->capture_default_str();
   app.add_option("--audio-in", o.audio_in, "--call: own voice, a WAV file (looped; default: a 440 Hz tone)");
   app.add_option("--audio-out", o.audio_out, "--call: write the spatialized remote voices to this stereo WAV");
+  std::string aec = "off";
+  app.add_option("--aec", aec,
+                 "--call: echo cancellation and noise suppression of the own voice against the played remote "
+                 "voices: on (loudspeakers) or off (headphones)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
+  app.add_option("--hrtf", o.hrtf_sofa,
+                 "--call: a personal HRTF, SOFA file (SimpleFreeFieldHRIR), for the spatialized voices; default: "
+                 "OpenAL Soft's built-in set")
+      ->check(CLI::ExistingFile);
   app.add_option("--seconds", o.seconds, "--connect/--call: stop after this many seconds (0: --frames decides)")
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--png-every", o.png_every, "headless network run: write every K-th new frame as PNG")
@@ -129,8 +139,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "holoport-client: give one of --connect, --call and --http\n");
     return 2;
   }
-  if ((!o.audio_in.empty() || !o.audio_out.empty()) && o.call.empty()) {
-    std::fprintf(stderr, "holoport-client: --audio-in/--audio-out need --call\n");
+  o.aec = aec == "on";
+  if ((!o.audio_in.empty() || !o.audio_out.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
+    std::fprintf(stderr, "holoport-client: --audio-in/--audio-out/--aec/--hrtf need --call\n");
     return 2;
   }
 

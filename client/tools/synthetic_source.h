@@ -28,6 +28,9 @@ struct StreamFrame {
   double produce_ms = 0;   // studio render + texturing
   Mesh mesh;
   std::vector<ImageRgb8> pod_images;  // one per pod of the rig, colour camera
+  // Their foreground masks (same sizes, 255 = foreground), as the colour
+  // codecs decode them; empty: none (every pixel usable).
+  std::vector<ImageGray8> pod_masks;
 };
 
 class SyntheticSource {

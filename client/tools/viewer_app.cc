@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -249,6 +250,8 @@ class Viewer {
       po.name = o_.name;
       po.audio_in = o_.audio_in;
       po.audio_out = o_.audio_out;
+      po.aec = o_.aec;
+      po.hrtf_sofa = o_.hrtf_sofa;
       po.view_template = co;
       if (o_.head_placed) {
         // The default head's sway and glances around the given place and heading.
@@ -366,9 +369,12 @@ class Viewer {
     HOLO_RETURN_IF_ERROR(renderer_->SetRemoteMesh(frame.mesh));
     std::vector<const ImageRgb8*> images;
     for (const auto& im : frame.pod_images) images.push_back(&im);
+    std::vector<const ImageGray8*> masks;
+    if (frame.pod_masks.size() == frame.pod_images.size())
+      for (const auto& m : frame.pod_masks) masks.push_back(&m);
     frame_has_images_ = !images.empty();
     if (frame_has_images_) {
-      Status st = renderer_->SetPodImages(CurrentRig(), images);
+      Status st = renderer_->SetPodImages(CurrentRig(), images, masks);
       if (!st.ok()) {
         // E.g. images of another rig than the one announced: vertex colour for this frame.
         if (!image_error_reported_) {
@@ -487,14 +493,17 @@ class Viewer {
     out->index = f.frame_index;
     out->mesh = std::move(f.mesh);
     out->pod_images.clear();
+    out->pod_masks.clear();
     const Rig& rig = net_rig_;
     if (!f.has_color || rig.pods.empty()) return;
+    // A pod whose picture is missing from this frame (V1: its stream waits
+    // for a key frame) shows its last picture, as the codec's rules say.
+    for (auto& im : f.images) last_images_[im.pod_id] = std::move(im);
     std::vector<ImageRgb8> ordered;
+    std::vector<ImageGray8> masks;
     for (const auto& pod : rig.pods) {
-      const net::DecodedImage* found = nullptr;
-      for (const auto& im : f.images) {
-        if (im.pod_id == pod.id) found = &im;
-      }
+      auto it = last_images_.find(static_cast<uint16_t>(pod.id));
+      const net::DecodedImage* found = it == last_images_.end() ? nullptr : &it->second;
       if (found == nullptr || found->image.width() != pod.color.width || found->image.height() != pod.color.height) {
         if (!image_error_reported_) {
           std::printf("holoport-client: frame %lld: pod %d image %s; showing vertex colour until images match the "
@@ -505,9 +514,11 @@ class Viewer {
         }
         return;
       }
-      ordered.push_back(std::move(const_cast<net::DecodedImage*>(found)->image));
+      ordered.push_back(found->image);
+      masks.push_back(found->mask);
     }
     out->pod_images = std::move(ordered);
+    out->pod_masks = std::move(masks);
     image_error_reported_ = false;
   }
 
@@ -906,6 +917,8 @@ class Viewer {
       j["connects"] = cs.connects;
       j["connect_failures"] = cs.connect_failures;
       j["decode_errors"] = cs.decode_errors;
+      j["color_images_waiting"] = cs.color_images_waiting;
+      j["keyframe_requests"] = cs.keyframe_requests;
       j["bad_frames"] = bad_frames_;
       j["stale_renders"] = stale_renders_;
       j["rig_changes"] = rig_changes_;
@@ -947,6 +960,8 @@ class Viewer {
                       {"output_seconds", ps.output_seconds},
                       {"output_rms", ps.output_rms},
                       {"hrtf", ps.hrtf_status},
+                      {"aec", o_.aec},
+                      {"aec_delay_ms", ps.aec_delay_ms},
                       {"remote_voice_position_m", {ps.remote_x, ps.remote_y, ps.remote_z}},
                       {"remote_voice_azimuth_deg", ps.remote_azimuth_deg},
                       {"wav", o_.audio_out}};
@@ -1010,6 +1025,7 @@ class Viewer {
   bool showing_stale_ = false;
   bool frame_has_images_ = true;
   bool image_error_reported_ = false;
+  std::map<uint16_t, net::DecodedImage> last_images_;  // per pod: the last picture received
   std::vector<ImageRgb8> sheet_tiles_;
   StreamFrame local_frame_;
   std::unique_ptr<render::GlContext> context_;

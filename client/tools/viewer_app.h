@@ -53,6 +53,8 @@ struct ViewerOptions {
   float head_yaw_deg = 0.0f;
   std::string audio_in;   // --call: own voice (WAV); empty: a tone
   std::string audio_out;  // --call: spatialized stereo WAV of the remote voices
+  bool aec = false;       // --call: echo cancellation + noise suppression of the own voice
+  std::string hrtf_sofa;  // --call: personal HRTF (SOFA); empty: OpenAL Soft's
   double seconds = 0;     // network: stop after this long (0: --frames decides)
   int png_every = 1;      // headless: write every K-th displayed frame
   double png_interval_s = 0;  // headless network run: a PNG every S seconds instead (0: png_every)

@@ -6,23 +6,31 @@
 #include <sstream>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "common/clock.h"
 #include "common/visualize.h"
 
 namespace holo {
 
 std::string StudioExportSummary::ToJson() const {
-  std::ostringstream o;
-  o.precision(6);
-  o << "{\"frames\":" << frames << ",\"pods\":" << pods << ",\"width\":" << width << ",\"height\":" << height
-    << ",\"render_fps\":" << render_fps << ",\"total_seconds\":" << total_seconds
-    << ",\"foreground_fraction\":" << foreground_fraction << ",\"depth_valid_fraction\":" << depth_valid_fraction
-    << ",\"depth_abs_error_mm\":" << depth_abs_error_mm
-    << ",\"depth_median_abs_error_mm\":" << depth_median_abs_error_mm
-    << ",\"fg_depth_valid_fraction\":" << fg_depth_valid_fraction << ",\"fg_depth_abs_error_mm\":" << fg_depth_abs_error_mm
-    << ",\"fg_depth_median_abs_error_mm\":" << fg_depth_median_abs_error_mm << ",\"mesh_vertices\":" << mesh_vertices
-    << ",\"mesh_triangles\":" << mesh_triangles << "}";
-  return o.str();
+  nlohmann::ordered_json j;
+  j["frames"] = frames;
+  j["pods"] = pods;
+  j["width"] = width;
+  j["height"] = height;
+  j["render_fps"] = render_fps;
+  j["total_seconds"] = total_seconds;
+  j["foreground_fraction"] = foreground_fraction;
+  j["depth_valid_fraction"] = depth_valid_fraction;
+  j["depth_abs_error_mm"] = depth_abs_error_mm;
+  j["depth_median_abs_error_mm"] = depth_median_abs_error_mm;
+  j["fg_depth_valid_fraction"] = fg_depth_valid_fraction;
+  j["fg_depth_abs_error_mm"] = fg_depth_abs_error_mm;
+  j["fg_depth_median_abs_error_mm"] = fg_depth_median_abs_error_mm;
+  j["mesh_vertices"] = mesh_vertices;
+  j["mesh_triangles"] = mesh_triangles;
+  return j.dump();
 }
 
 StatusOr<StudioExportSummary> ExportStudio(SyntheticStudio& studio, const StudioExportOptions& options,

@@ -53,6 +53,7 @@ const char* RefuseReasonName(RefuseReason r) {
     case RefuseReason::kMalformed: return "MALFORMED";
     case RefuseReason::kOverloaded: return "OVERLOADED";
     case RefuseReason::kNoCommonCodec: return "NO_COMMON_CODEC";
+    case RefuseReason::kBadCalibration: return "BAD_CALIBRATION";
   }
   return "UNKNOWN";
 }
@@ -119,7 +120,7 @@ class Server::Impl {
   struct Atomics {
     std::atomic<uint64_t> accepted{0}, welcomed{0}, refused{0}, rejected_pending{0}, violations{0},
         handshake_timeouts{0}, idle_timeouts{0}, priority_overflows{0}, video_frames_published{0},
-        audio_published{0}, audio_relayed{0}, controls_forwarded{0};
+        audio_published{0}, audio_relayed{0}, controls_forwarded{0}, keyframe_requests{0};
   } n;
 };
 
@@ -406,6 +407,9 @@ class Session : public std::enable_shared_from_this<Session> {
           return;
         }
         break;
+      case ControlCommand::kRequestKeyFrame:
+        srv_->n.keyframe_requests++;
+        break;
       case ControlCommand::kSeek:
         if (c.value < 0) {
           Violation("control.value: seek time must be >= 0");
@@ -472,9 +476,12 @@ class Session : public std::enable_shared_from_this<Session> {
         return;
       }
       if (!has(h.capabilities.color, w.color_codec)) {
-        Refuse(RefuseReason::kNoCommonCodec, "this site publishes colour codec C" +
-                                                 std::to_string(static_cast<int>(w.color_codec) - 1) +
-                                                 ", which the client does not list");
+        Refuse(RefuseReason::kNoCommonCodec,
+               std::string("this site publishes colour codec ") +
+                   (w.color_codec == protocol::ColorCodec::kV1
+                        ? std::string("V1")
+                        : "C" + std::to_string(static_cast<int>(w.color_codec) - 1)) +
+                   ", which the client does not list");
         return;
       }
     }
@@ -485,6 +492,7 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     registered_ = true;
     srv_->n.welcomed++;
+    if (IsViewerRole(h.role)) srv_->n.keyframe_requests++;  // a new viewer starts at a key frame
     Header hdr;
     EnqueuePriority(MakeWireMessage(hdr, w, srv_->cfg.fragment_bytes));
     if (IsViewerRole(h.role)) {
@@ -949,6 +957,7 @@ ServerCounters Server::counters() const {
   c.audio_published = a.audio_published;
   c.audio_relayed = a.audio_relayed;
   c.controls_forwarded = a.controls_forwarded;
+  c.keyframe_requests = a.keyframe_requests;
   return c;
 }
 

@@ -74,6 +74,9 @@ struct ServerCounters {
   uint64_t audio_published = 0;       // AudioPose messages published (in-process + relayed)
   uint64_t audio_relayed = 0;         // AudioPose messages received from publisher connections
   uint64_t controls_forwarded = 0;
+  // Viewers welcomed plus Control kRequestKeyFrame received: a publisher of
+  // inter-frame colour (V1) sends a key frame when this count grows.
+  uint64_t keyframe_requests = 0;
 };
 
 struct ServerHooks {

@@ -48,6 +48,19 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
   if (options_.color) {
     t0 = std::chrono::steady_clock::now();
     cpu0 = holo::ThreadCpuTimeMs();
+    const bool video = options_.color_options.codec == protocol::ColorCodec::kV1;
+    bool force_keyframe = false;
+    if (video) {
+      // A viewer joined or lost a frame: key frames on every pod, but not
+      // more often than every 250 ms (a burst of requests costs one).
+      const uint64_t requests = server_->counters().keyframe_requests;
+      if (requests != keyframe_requests_seen_ && t0 - last_forced_keyframe_ >= std::chrono::milliseconds(250)) {
+        keyframe_requests_seen_ = requests;
+        last_forced_keyframe_ = t0;
+        force_keyframe = true;
+      }
+    }
+    bool all_keyframes = video;
     for (const PodColor& p : pods) {
       if (p.image == nullptr || p.mask == nullptr || p.mask->width() != p.image->width() ||
           p.mask->height() != p.image->height() || p.image->width() == 0)
@@ -56,10 +69,22 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
       protocol::PodImage& pi = color.images[used++];
       pi.pod_id = p.pod_id;
       pi.data.clear();
-      auto enc = color_encoders_.try_emplace(p.pod_id, options_.color_options).first;
-      HOLO_RETURN_IF_ERROR(enc->second.Encode(*p.image, *p.mask, &pi.data));
+      if (video) {
+        auto& enc = video_encoders_[p.pod_id];
+        if (enc == nullptr) {
+          HOLO_ASSIGN_OR_RETURN(enc, protocol::VideoEncoder::Create(options_.video));
+        }
+        if (force_keyframe) enc->RequestKeyframe();
+        const int64_t keys = enc->keyframes();
+        HOLO_RETURN_IF_ERROR(enc->Encode(*p.image, *p.mask, &pi.data).WithContext("pod " + std::to_string(p.pod_id)));
+        all_keyframes = all_keyframes && enc->keyframes() > keys;
+      } else {
+        auto enc = color_encoders_.try_emplace(p.pod_id, options_.color_options).first;
+        HOLO_RETURN_IF_ERROR(enc->second.Encode(*p.image, *p.mask, &pi.data));
+      }
       t->color_bytes += pi.data.size();
     }
+    t->color_keyframe = all_keyframes && used > 0;
     t->color_ms = MsSince(t0);
     t->color_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   }

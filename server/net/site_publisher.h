@@ -1,11 +1,16 @@
 // Encodes a capture site's output once per frame — the mesh with the
 // geometry codec (G1 + colours by default) and, when the pods' colour images
-// come with foreground masks, one ColorFrame of C1 images — and publishes it
-// to the session server's fan-out. Times every step.
+// come with foreground masks, one ColorFrame of C1 images or of V1 video
+// frames — and publishes it to the session server's fan-out. Times every step.
+// With V1 each pod is one inter-frame stream: the publisher sends a key frame
+// on every pod when a viewer joins or asks for one (Server's
+// keyframe_requests), at most one forced key frame per 250 ms.
 #pragma once
 
 #include <cstdint>
+#include <chrono>
 #include <map>
+#include <memory>
 #include <vector>
 
 #include "common/image.h"
@@ -13,6 +18,7 @@
 #include "common/status.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/video_codec.h"
 #include "server/net/session_server.h"
 
 namespace holo::net {
@@ -20,7 +26,8 @@ namespace holo::net {
 struct SitePublisherOptions {
   protocol::GeometryEncodeOptions geometry;  // default G1, 1 mm, normals recomputed, colours
   bool color = true;                         // send C1 images of the pods (when masks exist)
-  protocol::ColorEncodeOptions color_options;
+  protocol::ColorEncodeOptions color_options;  // codec kC1 (default), kC0 or kV1
+  protocol::VideoEncodeOptions video;          // when color_options.codec is kV1
 };
 
 struct PublishTimings {
@@ -31,6 +38,7 @@ struct PublishTimings {
   size_t geometry_bytes = 0;
   size_t color_bytes = 0;
   size_t viewers = 0;       // viewers the frame was offered to
+  bool color_keyframe = false;  // V1: this frame's colour is a key frame on every pod
 };
 
 // One pod's colour image and its foreground mask (same size, 255 = foreground).
@@ -72,6 +80,10 @@ class SitePublisher {
   EncodedFrame scratch_;  // Publish's
   // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
   std::map<uint16_t, protocol::ColorEncoder> color_encoders_;
+  // V1: one video encoder per pod stream.
+  std::map<uint16_t, std::unique_ptr<protocol::VideoEncoder>> video_encoders_;
+  uint64_t keyframe_requests_seen_ = 0;
+  std::chrono::steady_clock::time_point last_forced_keyframe_{};
 };
 
 }  // namespace holo::net

@@ -9,6 +9,8 @@
 #include <mutex>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "common/clock.h"
 #include "common/file_util.h"
 #include "common/mesh.h"
@@ -102,12 +104,16 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
       std::lock_guard<std::mutex> l(late_mu);
       if (lateness_ms.size() < (1u << 20)) lateness_ms.push_back(late);  // ≈ 9.7 h at 30 fps, 8 MB
     }
-    if (stats != nullptr)
-      std::fprintf(stats,
-                   "{\"type\":\"%s\",\"stream\":%u,\"sequence\":%u,\"capture_time_us\":%lld,\"bytes\":%u,"
-                   "\"late_ms\":%.3f}\n",
-                   protocol::MessageTypeName(h.type), h.stream_id, h.sequence,
-                   static_cast<long long>(h.capture_time_us), h.payload_length + 32u, late);
+    if (stats != nullptr) {
+      nlohmann::ordered_json j;
+      j["type"] = protocol::MessageTypeName(h.type);
+      j["stream"] = h.stream_id;
+      j["sequence"] = h.sequence;
+      j["capture_time_us"] = h.capture_time_us;
+      j["bytes"] = h.payload_length + 32u;
+      j["late_ms"] = late;
+      std::fprintf(stats, "%s\n", j.dump().c_str());
+    }
   };
   const RecordingSummary& sum = reader->summary();
   auto rs = ReplayServer::Start(reader, &clock, so);
@@ -236,13 +242,18 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
         if (!s.ok() && sink_error.ok()) sink_error = s;
       }
     }
-    if (stats != nullptr)
-      std::fprintf(stats,
-                   "{\"wall_ms\":%.3f,\"type\":\"%s\",\"stream\":%u,\"sequence\":%u,\"capture_time_us\":%lld,"
-                   "\"bytes\":%zu,\"frame\":%lld,\"late_ms\":%.3f}\n",
-                   static_cast<double>(now - start) * 1e-3, protocol::MessageTypeName(h.type), h.stream_id,
-                   h.sequence, static_cast<long long>(h.capture_time_us), frame->size(),
-                   static_cast<long long>(frame_index), late);
+    if (stats != nullptr) {
+      nlohmann::ordered_json j;
+      j["wall_ms"] = static_cast<double>(now - start) * 1e-3;
+      j["type"] = protocol::MessageTypeName(h.type);
+      j["stream"] = h.stream_id;
+      j["sequence"] = h.sequence;
+      j["capture_time_us"] = h.capture_time_us;
+      j["bytes"] = frame->size();
+      j["frame"] = frame_index;
+      j["late_ms"] = late;
+      std::fprintf(stats, "%s\n", j.dump().c_str());
+    }
   };
 
   int64_t next_progress = start + 2000000;

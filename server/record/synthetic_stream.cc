@@ -48,9 +48,10 @@ Status SyntheticStream::Next(StreamMessage* out) {
     a.sequence = audio_seq_;
     a.capture_time_us = audio_t;
     const double t = static_cast<double>(audio_t) * 1e-6;
+    // The room frame is Z up (docs/audio.md): a head 1.6 m high circling the centre.
     a.pose.x = static_cast<float>(0.5 * std::cos(0.5 * t));
-    a.pose.y = 1.6f;
-    a.pose.z = static_cast<float>(0.5 * std::sin(0.5 * t));
+    a.pose.y = static_cast<float>(0.5 * std::sin(0.5 * t));
+    a.pose.z = 1.6f;
     a.pose.yaw = static_cast<float>(std::remainder(0.5 * t, 2 * std::numbers::pi));
     const uint32_t n = a.sample_rate / 50;
     a.audio.resize(static_cast<size_t>(n) * 2);

@@ -121,24 +121,8 @@ void SyntheticStudio::RenderFrame(int64_t frame_index, RgbdFrameSet* frames, Stu
   }
   const studio::SceneTemplate& tmpl = im.scene.tmpl();
   im.pool.Run(num_pods, [&](int i, int worker) {
-    Impl::PodViews& v = im.pods[i];
-    studio::RenderScratch& s = im.scratch[worker];
-    RgbdFrame& f = frames->frames[i];
-    f.pod_id = rig_.pods[i].id;
-    f.timestamp_us = ts;
-    f.mask = ImageGray8();
-    studio::RenderViewCore(v.depth, tmpl, im.frame, v.registered, &s);
-    if (options_.depth_noise) {
-      const uint64_t stream = studio::HashOf(options_.seed, static_cast<uint64_t>(frame_index),
-                                             static_cast<uint64_t>(rig_.pods[i].id), 0xDE9ULL);
-      studio::WriteNoisyDepth(v.depth, s, options_.noise, stream, &f.depth);
-    } else {
-      studio::WriteTruth(v.depth, s, &f.depth, nullptr);
-    }
-    if (gt) studio::WriteTruth(v.depth, s, &gt->depth[i], &gt->mask[i]);
-    if (!v.registered) studio::RenderViewCore(v.color, tmpl, im.frame, true, &s);
-    studio::WriteColor(v.registered ? v.depth : v.color, s, options_.color_variation ? &v.variation : nullptr,
-                       &f.color);
+    RenderPodInto(i, worker, frame_index, &frames->frames[i], gt ? &gt->depth[i] : nullptr,
+                  gt ? &gt->mask[i] : nullptr);
   });
   if (gt) {
     Mesh& m = gt->foreground_mesh;
@@ -147,6 +131,36 @@ void SyntheticStudio::RenderFrame(int64_t frame_index, RgbdFrameSet* frames, Stu
     m.colors.assign(tmpl.vertex_albedo.begin(), tmpl.vertex_albedo.end());
     m.triangles.assign(tmpl.triangles.begin(), tmpl.triangles.end());
   }
+}
+
+void SyntheticStudio::RenderPodInto(int i, int worker, int64_t frame_index, RgbdFrame* out, ImageDepth16* gt_depth,
+                                    ImageGray8* gt_mask) {
+  Impl& im = *impl_;
+  Impl::PodViews& v = im.pods[i];
+  studio::RenderScratch& s = im.scratch[worker];
+  const studio::SceneTemplate& tmpl = im.scene.tmpl();
+  RgbdFrame& f = *out;
+  f.pod_id = rig_.pods[i].id;
+  f.timestamp_us = TimestampUs(frame_index);
+  f.mask = ImageGray8();
+  studio::RenderViewCore(v.depth, tmpl, im.frame, v.registered, &s);
+  if (options_.depth_noise) {
+    const uint64_t stream = studio::HashOf(options_.seed, static_cast<uint64_t>(frame_index),
+                                           static_cast<uint64_t>(rig_.pods[i].id), 0xDE9ULL);
+    studio::WriteNoisyDepth(v.depth, s, options_.noise, stream, &f.depth);
+  } else {
+    studio::WriteTruth(v.depth, s, &f.depth, nullptr);
+  }
+  if (gt_depth) studio::WriteTruth(v.depth, s, gt_depth, gt_mask);
+  if (!v.registered) studio::RenderViewCore(v.color, tmpl, im.frame, true, &s);
+  studio::WriteColor(v.registered ? v.depth : v.color, s, options_.color_variation ? &v.variation : nullptr, &f.color);
+}
+
+void SyntheticStudio::RenderPod(int64_t frame_index, int pod_index, RgbdFrame* out) {
+  HOLO_CHECK(pod_index >= 0 && pod_index < static_cast<int>(rig_.pods.size()));
+  Impl& im = *impl_;
+  im.PoseFrame(frame_index, options_.fps, &im.frame, &im.pool);
+  RenderPodInto(pod_index, 0, frame_index, out, nullptr, nullptr);
 }
 
 Mesh SyntheticStudio::ForegroundMesh(int64_t frame_index) const {

@@ -91,6 +91,11 @@ class SyntheticStudio final : public FrameSource {
   // buffers) and, if `gt` is not null, its ground truth.
   void RenderFrame(int64_t frame_index, RgbdFrameSet* frames, StudioGroundTruth* gt);
 
+  // Renders frame `frame_index` of the pod at `pod_index` alone (what a pod
+  // process captures): the same pixels RenderFrame gives that pod, at 1/N
+  // of the cost.
+  void RenderPod(int64_t frame_index, int pod_index, RgbdFrame* out);
+
   // The foreground mesh (world coordinates, per-vertex colour) at `frame_index`.
   Mesh ForegroundMesh(int64_t frame_index) const;
   // Ground-truth render of the whole scene from any camera: noise-free colour
@@ -119,6 +124,8 @@ class SyntheticStudio final : public FrameSource {
 
  private:
   struct Impl;
+  void RenderPodInto(int i, int worker, int64_t frame_index, RgbdFrame* out, ImageDepth16* gt_depth,
+                     ImageGray8* gt_mask);
   Rig rig_;
   StudioOptions options_;
   std::unique_ptr<Impl> impl_;

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "common/file_util.h"
 #include "common/image_io.h"
@@ -27,6 +28,7 @@
 #include "server/net/session_server.h"
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
+#include "server/pods/pod_hub.h"
 #include "server/record/replay_command.h"
 #include "server/stereo/stereo_depth.h"
 #include "server/studio/studio.h"
@@ -150,6 +152,8 @@ int main(int argc, char** argv) {
   bool truth_mesh = false, no_color_stream = false, mesh_colors = false;
   double position_step_mm = 2.0;
   int jpeg_quality = 55;
+  std::string color_codec = "c1";
+  int video_crf = -1;
   int truth_loop = 0;
   app.add_option("--listen", listen_spec,
                  "stream to viewers: listen on HOST:PORT (default: off, no networking; overrides the "
@@ -175,10 +179,31 @@ int main(int argc, char** argv) {
   app.add_option("--jpeg-quality", jpeg_quality, "C1 JPEG quality of the streamed pod images, 1..100")
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
+  app.add_option("--color-codec", color_codec,
+                 "codec of the streamed pod images: c1 (per-frame JPEG, every frame decodes alone) or v1 (per-pod "
+                 "inter-frame video, x264 4:4:4: fewer bytes; key frames every 2 s and when a viewer joins or asks)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"c1", "v1"}));
+  app.add_option("--video-crf", video_crf, "v1: x264 constant-quality factor 0..51 (-1: the codec's default, 24)")
+      ->capture_default_str()
+      ->check(CLI::Range(-1, 51));
   app.add_flag("--mesh-colors", mesh_colors,
                "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
                "colours would cost ~8 bits per triangle and the texture stage ~8 CPU-ms per frame)");
+  std::string pods_spec, pod_token;
+  double pod_tolerance_ms = 12, pod_timeout_ms = 60;
+  bool pod_set_stats = false;
+  app.add_option("--pods", pods_spec,
+                 "take the frames from pod processes (holoport-pod) connecting to [HOST:]PORT instead of the "
+                 "local source; the workload / --rig gives the rig they must match, its empty room the background");
+  app.add_option("--pod-token", pod_token, "--pods: the token pods must present");
+  app.add_option("--pod-tolerance-ms", pod_tolerance_ms, "--pods: frames within this of each other form one set")
+      ->capture_default_str();
+  app.add_option("--pod-timeout-ms", pod_timeout_ms,
+                 "--pods: a set missing a connected pod leaves this long after its capture time")
+      ->capture_default_str();
+  app.add_flag("--pod-set-stats", pod_set_stats, "--pods: one stats line per frame set the hub releases");
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -229,6 +254,11 @@ int main(int argc, char** argv) {
   publish_options.color = !no_color_stream;
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
   publish_options.color_options.jpeg_quality = jpeg_quality;
+  if (color_codec == "v1") {
+    publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
+    publish_options.video.crf = video_crf;
+    if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
+  }
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
@@ -322,6 +352,33 @@ int main(int argc, char** argv) {
     stereo_source = std::move(*st);
     source = stereo_source.get();
   }
+  // Pods over the network replace the local source (the rig stays: pods must match it).
+  std::unique_ptr<holo::pods::PodHub> pod_hub;
+  FILE* pod_stats = nullptr;  // set below, with the stats output
+  if (!pods_spec.empty()) {
+    holo::pods::PodHubOptions ho;
+    holo::Status st = holo::pods::ParseHostPort(pods_spec, &ho.host, &ho.port);
+    if (!st.ok()) return Fail(st.WithContext("--pods"));
+    if (pod_token.empty()) return Fail(holo::InvalidArgument("--pods needs --pod-token (the token pods present)"));
+    if (truth_mesh) return Fail(holo::InvalidArgument("--pods cannot be combined with --truth-mesh"));
+    if (options.masks == holo::MaskSource::kTruth) return Fail(holo::InvalidArgument("--pods cannot use --masks truth"));
+    ho.pod_token = pod_token;
+    ho.grouping.tolerance_us = static_cast<int64_t>(pod_tolerance_ms * 1000);
+    ho.grouping.timeout_us = static_cast<int64_t>(pod_timeout_ms * 1000);
+    auto hub = holo::pods::PodHub::Start(source->rig(), ho, [quiet](const std::string& line) {
+      if (!quiet) std::fprintf(stderr, "holoport-server: pods: %s\n", line.c_str());
+    });
+    if (!hub.ok()) return Fail(hub.status());
+    pod_hub = std::move(*hub);
+    if (!quiet)
+      std::fprintf(stderr, "holoport-server: waiting for %zu pods on port %u\n", source->rig().pods.size(),
+                   pod_hub->port());
+    source = pod_hub.get();
+    source_name = "pods:" + std::to_string(pod_hub->port());
+    // The hub paces the site: sets leave when the pods deliver them.
+    options.pipeline.pace_fps = 0;
+    options.pipeline.drop_late_frames = false;
+  }
   if (!background_spec.empty()) {
     if (background_spec.rfind("dataset:", 0) != 0)
       return Fail(holo::InvalidArgument("--background must be dataset:PATH, got '" + background_spec + "'"));
@@ -348,20 +405,56 @@ int main(int argc, char** argv) {
   }
 
   if (server) server->SetRig(source->rig());
+  pod_stats = stats_out;
+  // Pod counters once a second (and per released set with --pod-set-stats).
+  std::atomic<bool> pod_stats_done{false};
+  std::thread pod_stats_thread;
+  auto pod_lines = [&] {
+    for (const auto& c : pod_hub->Pods()) std::fprintf(pod_stats, "%s\n", holo::pods::PodCountersJson(c).c_str());
+    std::fprintf(pod_stats, "%s\n", holo::pods::HubCountersJson(pod_hub->counters()).c_str());
+    std::fflush(pod_stats);
+  };
+  if (pod_hub) {
+    if (pod_set_stats)
+      pod_hub->SetOnSet([&](const holo::pods::SetInfo& i) {
+        std::fprintf(pod_stats, "%s\n", holo::pods::SetInfoJson(i).c_str());
+      });
+    pod_stats_thread = std::thread([&] {
+      while (!pod_stats_done) {
+        for (int i = 0; i < 20 && !pod_stats_done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        pod_lines();
+      }
+    });
+  }
+  struct PodStatsJoin {
+    std::atomic<bool>* done;
+    std::thread* t;
+    ~PodStatsJoin() {
+      *done = true;
+      if (t->joinable()) t->join();
+    }
+  } pod_stats_join{&pod_stats_done, &pod_stats_thread};
 
   // Network stats line every 30 frames and a summary at the end.
   auto net_line = [&](int64_t frame) {
     if (!server) return;
     const NetSummary n = Summarize(*server);
     const holo::net::ServerCounters c = server->counters();
-    std::fprintf(stats_out,
-                 "{\"net\":true,\"frame\":%lld,\"viewers\":%zu,\"frames_sent\":%llu,\"frames_dropped\":%llu,"
-                 "\"bytes_sent\":%llu,\"max_queue\":%zu,\"rtt_ms_max\":%.3f,\"refused\":%llu,\"violations\":%llu,"
-                 "\"audio_relayed\":%llu,\"io_cpu_ms\":%.1f}\n",
-                 static_cast<long long>(frame), n.viewers, static_cast<unsigned long long>(n.sent),
-                 static_cast<unsigned long long>(n.dropped), static_cast<unsigned long long>(n.bytes), n.max_queue,
-                 n.rtt_ms_max, static_cast<unsigned long long>(c.refused), static_cast<unsigned long long>(c.violations),
-                 static_cast<unsigned long long>(c.audio_relayed), server->IoCpuMs());
+    nlohmann::ordered_json j;
+    j["net"] = true;
+    j["frame"] = frame;
+    j["viewers"] = n.viewers;
+    j["frames_sent"] = n.sent;
+    j["frames_dropped"] = n.dropped;
+    j["bytes_sent"] = n.bytes;
+    j["max_queue"] = n.max_queue;
+    j["rtt_ms_max"] = n.rtt_ms_max;
+    j["refused"] = c.refused;
+    j["violations"] = c.violations;
+    j["audio_relayed"] = c.audio_relayed;
+    j["keyframe_requests"] = c.keyframe_requests;
+    j["io_cpu_ms"] = server->IoCpuMs();
+    std::fprintf(stats_out, "%s\n", j.dump().c_str());
     std::fflush(stats_out);
   };
 
@@ -437,12 +530,18 @@ int main(int argc, char** argv) {
       geom_ms.push_back(pt.geometry_ms);
       color_ms.push_back(pt.color_ms);
       pub_ms.push_back(pt.publish_ms);
-      std::fprintf(stats_out,
-                   "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"truth_render_ms\":%.3f,"
-                   "\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
-                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
-                   static_cast<long long>(i), mesh.num_vertices(), mesh.num_triangles(), r_ms, pt.geometry_ms,
-                   pt.color_ms, pt.publish_ms, pt.geometry_bytes, pt.color_bytes, pt.viewers);
+      nlohmann::ordered_json j;
+      j["frame"] = i;
+      j["vertices"] = mesh.num_vertices();
+      j["triangles"] = mesh.num_triangles();
+      j["truth_render_ms"] = r_ms;
+      j["encode_geometry_ms"] = pt.geometry_ms;
+      j["encode_color_ms"] = pt.color_ms;
+      j["publish_ms"] = pt.publish_ms;
+      j["geometry_bytes"] = pt.geometry_bytes;
+      j["color_bytes"] = pt.color_bytes;
+      j["viewers"] = pt.viewers;
+      std::fprintf(stats_out, "%s\n", j.dump().c_str());
       if ((i + 1) % 30 == 0) {
         net_line(i);
         if (!quiet)
@@ -512,26 +611,57 @@ int main(int argc, char** argv) {
       publisher->PublishEncoded(e);
       pt = e->timings;
     }
-    std::fprintf(stats_out,
-                 "{\"frame\":%lld,\"vertices\":%zu,\"triangles\":%zu,\"full_triangles\":%zu,\"acquire_ms\":%.3f,"
-                 "\"segment_ms\":%.3f,\"fuse_ms\":%.3f,\"mesh_ms\":%.3f,\"simplify_ms\":%.3f,\"texture_ms\":%.3f,"
-                 "\"encode_ms\":%.3f,\"latency_ms\":%.3f,\"encoded_latency_ms\":%.3f%s",
-                 static_cast<long long>(w.frames.frame_index), w.mesh.num_vertices(), w.mesh.num_triangles(),
-                 w.full_mesh.num_triangles(), t.acquire_ms, t.segment_ms, t.fuse_ms, t.mesh_ms, t.simplify_ms,
-                 t.texture_ms, t.encode_ms, t.latency_ms(), t.encoded_latency_ms(), publisher || serial ? "" : "}\n");
-    if (serial)  // CPU of each stage (one at a time: the process's CPU while it ran)
-      std::fprintf(stats_out,
-                   ",\"acquire_cpu_ms\":%.3f,\"segment_cpu_ms\":%.3f,\"fuse_cpu_ms\":%.3f,\"mesh_cpu_ms\":%.3f,"
-                   "\"simplify_cpu_ms\":%.3f,\"texture_cpu_ms\":%.3f,\"encode_cpu_ms\":%.3f%s",
-                   t.acquire_cpu_ms, t.segment_cpu_ms, t.fuse_cpu_ms, t.mesh_cpu_ms, t.simplify_cpu_ms, t.texture_cpu_ms,
-                   t.encode_cpu_ms, publisher ? "" : "}\n");
-    if (publisher)
-      std::fprintf(stats_out,
-                   ",\"encode_geometry_ms\":%.3f,\"encode_color_ms\":%.3f,\"encode_geometry_cpu_ms\":%.3f,"
-                   "\"encode_color_cpu_ms\":%.3f,\"publish_ms\":%.3f,\"geometry_bytes\":%zu,"
-                   "\"color_bytes\":%zu,\"viewers\":%zu}\n",
-                   pt.geometry_ms, pt.color_ms, pt.geometry_cpu_ms, pt.color_cpu_ms, pt.publish_ms, pt.geometry_bytes,
-                   pt.color_bytes, pt.viewers);
+    nlohmann::ordered_json j;
+    j["frame"] = w.frames.frame_index;
+    j["vertices"] = w.mesh.num_vertices();
+    j["triangles"] = w.mesh.num_triangles();
+    j["full_triangles"] = w.full_mesh.num_triangles();
+    j["acquire_ms"] = t.acquire_ms;
+    j["segment_ms"] = t.segment_ms;
+    j["fuse_ms"] = t.fuse_ms;
+    j["mesh_ms"] = t.mesh_ms;
+    j["simplify_ms"] = t.simplify_ms;
+    j["texture_ms"] = t.texture_ms;
+    j["encode_ms"] = t.encode_ms;
+    j["latency_ms"] = t.latency_ms();
+    j["encoded_latency_ms"] = t.encoded_latency_ms();
+    if (serial) {  // CPU of each stage (one at a time: the process's CPU while it ran)
+      j["acquire_cpu_ms"] = t.acquire_cpu_ms;
+      j["segment_cpu_ms"] = t.segment_cpu_ms;
+      j["fuse_cpu_ms"] = t.fuse_cpu_ms;
+      j["mesh_cpu_ms"] = t.mesh_cpu_ms;
+      j["simplify_cpu_ms"] = t.simplify_cpu_ms;
+      j["texture_cpu_ms"] = t.texture_cpu_ms;
+      j["encode_cpu_ms"] = t.encode_cpu_ms;
+    }
+    if (publisher) {
+      j["encode_geometry_ms"] = pt.geometry_ms;
+      j["encode_color_ms"] = pt.color_ms;
+      j["encode_geometry_cpu_ms"] = pt.geometry_cpu_ms;
+      j["encode_color_cpu_ms"] = pt.color_cpu_ms;
+      j["publish_ms"] = pt.publish_ms;
+      j["geometry_bytes"] = pt.geometry_bytes;
+      j["color_bytes"] = pt.color_bytes;
+      j["color_keyframe"] = pt.color_keyframe;
+      j["viewers"] = pt.viewers;
+    }
+    std::fprintf(stats_out, "%s\n", j.dump().c_str());
+    if (pod_hub) {
+      // Pod capture (site clock) → textured (and encoded) mesh.
+      int64_t capture = 0;
+      int present = 0;
+      for (const auto& f : w.frames.frames)
+        if (f.timestamp_us != 0) {
+          capture = capture == 0 ? f.timestamp_us : std::min(capture, f.timestamp_us);
+          ++present;
+        }
+      nlohmann::ordered_json pj;
+      pj["pod_frame"] = w.frames.frame_index;
+      pj["pods_present"] = present;
+      pj["capture_us"] = capture;
+      pj["capture_latency_ms"] = capture ? static_cast<double>(holo::net::WallUs() - capture) * 1e-3 : -1.0;
+      std::fprintf(stats_out, "%s\n", pj.dump().c_str());
+    }
     if (!export_dir.empty()) {
       char path[4096];
       FrameFileName(path, sizeof(path), export_dir, w.frames.frame_index);
@@ -542,8 +672,11 @@ int main(int argc, char** argv) {
       net_line(w.frames.frame_index);
       // Whole-process CPU per frame over the last 30 frames (all stages, encode and network).
       const double now_cpu = holo::ProcessCpuTimeMs();
-      std::fprintf(stats_out, "{\"site\":true,\"frame\":%lld,\"cpu_ms_per_frame\":%.2f}\n",
-                   static_cast<long long>(w.frames.frame_index), (now_cpu - cpu_window) / 30.0);
+      nlohmann::ordered_json site_line;
+      site_line["site"] = true;
+      site_line["frame"] = w.frames.frame_index;
+      site_line["cpu_ms_per_frame"] = (now_cpu - cpu_window) / 30.0;
+      std::fprintf(stats_out, "%s\n", site_line.dump().c_str());
       std::fflush(stats_out);
       if (!quiet)
         std::fprintf(stderr,
@@ -561,12 +694,21 @@ int main(int argc, char** argv) {
   std::atomic<bool> run_done{false};
   std::thread watcher([&] {
     while (!run_done && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    if (g_stop) (*site)->Stop();
+    if (g_stop) {
+      (*site)->Stop();
+      if (pod_hub) pod_hub->Stop();  // wakes an acquire waiting for pods
+    }
   });
   auto stats = (*site)->Run(sink, encode);
   run_done = true;
   watcher.join();
   if (server) net_line(-1);
+  if (pod_hub) {
+    pod_stats_done = true;
+    if (pod_stats_thread.joinable()) pod_stats_thread.join();
+    pod_hub->Stop();
+    pod_lines();
+  }
   if (stats_out != stdout) std::fclose(stats_out);
   if (!stats.ok()) return Fail(stats.status());
   if (!snapshot_path.empty() && last_frame >= 0) {

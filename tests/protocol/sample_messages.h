@@ -8,6 +8,7 @@
 
 #include "common/rig.h"
 #include "protocol/color_codec.h"
+#include "protocol/depth_codec.h"
 #include "protocol/fuzz_decoders.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
@@ -101,6 +102,16 @@ inline std::vector<protocol::Payload> SamplePayloads() {
   Stats s;
   s.values = {{"fps", 30.0}, {"encode_ms", 4.5}};
   v.push_back(s);
+  PodFrame pf;
+  pf.pod_id = 3;
+  pf.frame_number = 17;
+  pf.capture_time_us = 1700000123;
+  ImageDepth16 depth(24, 16);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 24; ++x) depth.at(x, y) = static_cast<uint16_t>(x * y % 5 == 0 ? 0 : 1000 + 3 * x + y);
+  (void)EncodeDepth(depth, {}, &pf.depth);
+  pf.color = cf.images[0].data;
+  v.push_back(pf);
   return v;
 }
 

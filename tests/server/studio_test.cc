@@ -69,6 +69,23 @@ TEST(StudioTest, SameSeedGivesIdenticalFramesForAnyThreadCount) {
   }
 }
 
+TEST(StudioTest, RenderPodGivesThatPodsFrameOfRenderFrame) {
+  StudioOptions o;
+  o.threads = 2;
+  auto a = Make(SmallRig(), o);
+  auto b = Make(SmallRig(), o);
+  RgbdFrameSet all;
+  a->RenderFrame(5, &all, nullptr);
+  for (int p : {0, 3, 7}) {
+    RgbdFrame one;
+    b->RenderPod(5, p, &one);
+    EXPECT_TRUE(one.color == all.frames[static_cast<size_t>(p)].color) << p;
+    EXPECT_TRUE(one.depth == all.frames[static_cast<size_t>(p)].depth) << p;
+    EXPECT_EQ(one.pod_id, p);
+    EXPECT_EQ(one.timestamp_us, all.frames[static_cast<size_t>(p)].timestamp_us);
+  }
+}
+
 TEST(StudioTest, DifferentSeedGivesDifferentNoise) {
   StudioOptions o;
   auto a = Make(SmallRig(), o);

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "audio/room.h"
 #include "client/net/call_config.h"
@@ -157,12 +158,17 @@ int main(int argc, char** argv) {
     }
     if (!st.ok()) return Fail(st);
   }
-  std::printf("{\"frames\":%lld,\"connects\":%llu,\"decode_errors\":%llu,\"mean_latency_ms\":%.3f,\"rtt_min_ms\":%.3f,"
-              "\"audio_heard\":%lld,\"voice_sent\":%lld,\"audio_delay_ms\":%.1f,\"bytes\":%llu}\n",
-              static_cast<long long>(frames), static_cast<unsigned long long>(s.connects),
-              static_cast<unsigned long long>(s.decode_errors), frames ? latency_sum / frames : 0.0, s.rtt_min_ms,
-              static_cast<long long>(audio_heard), static_cast<long long>(voice_sent), audio_delay,
-              static_cast<unsigned long long>(s.bytes_received));
+  nlohmann::ordered_json j;
+  j["frames"] = frames;
+  j["connects"] = s.connects;
+  j["decode_errors"] = s.decode_errors;
+  j["mean_latency_ms"] = frames ? latency_sum / static_cast<double>(frames) : 0.0;
+  j["rtt_min_ms"] = s.rtt_min_ms;
+  j["audio_heard"] = audio_heard;
+  j["voice_sent"] = voice_sent;
+  j["audio_delay_ms"] = audio_delay;
+  j["bytes"] = s.bytes_received;
+  std::printf("%s\n", j.dump().c_str());
   if (!ply_path.empty()) {
     if (last_mesh.positions.empty()) return Fail(holo::NotFound("no mesh received; nothing written to " + ply_path));
     holo::Status st = holo::WritePly(ply_path, last_mesh);

@@ -1,0 +1,240 @@
+#include "server/pods/pod_runner.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "common/clock.h"
+#include "protocol/color_codec.h"
+#include "protocol/depth_codec.h"
+#include "server/capture/dataset.h"
+#include "server/capture/prerendered.h"
+#include "server/net/wire_message.h"
+#include "server/pods/pod_client.h"
+#include "server/pods/socket_io.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+
+namespace holo::pods {
+
+Status PodRunOptions::Check() const {
+  if (token.empty()) return InvalidArgument("--token is required (the site's pod token)");
+  if (pod_id < 0) return InvalidArgument("--pod is required (this pod's id in the rig, >= 0)");
+  if (!(fps > 0 && fps <= 240)) return InvalidArgument("--fps must be in (0, 240], got " + std::to_string(fps));
+  if (prerender < 0) return InvalidArgument("--prerender must be >= 0");
+  if (jpeg_quality < 1 || jpeg_quality > 100) return InvalidArgument("--jpeg-quality must be in 1..100");
+  if (queue_frames < 1) return InvalidArgument("--queue must be >= 1");
+  if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
+  std::string host;
+  uint16_t port = 0;
+  HOLO_RETURN_IF_ERROR(ParseHostPort(site, &host, &port).WithContext("--site"));
+  if (port == 0) return InvalidArgument("--site: port must be 1..65535");
+  return OkStatus();
+}
+
+namespace {
+
+// This pod's frames, by slot.
+class PodFrames {
+ public:
+  virtual ~PodFrames() = default;
+  virtual Status Get(int64_t slot, RgbdFrame* out) = 0;
+};
+
+class StudioFrames final : public PodFrames {
+ public:
+  StudioFrames(std::unique_ptr<SyntheticStudio> studio, int pod_index, int prerender)
+      : studio_(std::move(studio)), pod_index_(pod_index) {
+    for (int k = 0; k < prerender; ++k) {
+      loop_.emplace_back();
+      studio_->RenderPod(k, pod_index_, &loop_.back());
+    }
+  }
+  Status Get(int64_t slot, RgbdFrame* out) override {
+    if (!loop_.empty()) {
+      *out = loop_[static_cast<size_t>(LoopContent(slot, static_cast<int64_t>(loop_.size())))];
+      return OkStatus();
+    }
+    // Live rendering: the studio's animation repeats every 2 minutes of slots.
+    studio_->RenderPod(slot % 3600, pod_index_, out);
+    return OkStatus();
+  }
+
+ private:
+  std::unique_ptr<SyntheticStudio> studio_;
+  int pod_index_;
+  std::vector<RgbdFrame> loop_;
+};
+
+class DatasetFrames final : public PodFrames {
+ public:
+  DatasetFrames(std::unique_ptr<DatasetReader> reader, size_t index) : reader_(std::move(reader)), index_(index) {}
+  Status Get(int64_t, RgbdFrame* out) override {
+    Status s = reader_->Next(&set_);
+    if (s.code() == StatusCode::kOutOfRange) {  // loop the recording
+      HOLO_RETURN_IF_ERROR(reader_->Seek(0));
+      s = reader_->Next(&set_);
+    }
+    HOLO_RETURN_IF_ERROR(s);
+    *out = std::move(set_.frames[index_]);
+    return OkStatus();
+  }
+
+ private:
+  std::unique_ptr<DatasetReader> reader_;
+  size_t index_;
+  RgbdFrameSet set_;
+};
+
+}  // namespace
+
+Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
+  HOLO_RETURN_IF_ERROR(o.Check());
+  auto say = [&](const std::string& s) {
+    if (!o.quiet) std::fprintf(stderr, "holoport-pod %d: %s\n", o.pod_id, s.c_str());
+  };
+  // This pod's calibration and frame producer.
+  PodCalibration calibration;
+  std::unique_ptr<PodFrames> frames;
+  auto find_pod = [&](const Rig& rig, size_t* index) -> Status {
+    for (size_t i = 0; i < rig.pods.size(); ++i)
+      if (rig.pods[i].id == o.pod_id) {
+        *index = i;
+        return OkStatus();
+      }
+    return InvalidArgument("--pod " + std::to_string(o.pod_id) + " is not in rig '" + rig.name + "'");
+  };
+  if (!o.dataset.empty()) {
+    HOLO_ASSIGN_OR_RETURN(auto reader, DatasetReader::Open(o.dataset));
+    size_t index = 0;
+    HOLO_RETURN_IF_ERROR(find_pod(reader->rig(), &index));
+    calibration = reader->rig().pods[index];
+    frames = std::make_unique<DatasetFrames>(std::move(reader), index);
+  } else {
+    HOLO_ASSIGN_OR_RETURN(Workload w, GetWorkload(o.workload));
+    Rig rig = w.rig;
+    if (!o.rig_path.empty()) {
+      HOLO_ASSIGN_OR_RETURN(rig, LoadRig(o.rig_path));
+    }
+    size_t index = 0;
+    HOLO_RETURN_IF_ERROR(find_pod(rig, &index));
+    calibration = rig.pods[index];
+    StudioOptions so = w.studio;
+    so.threads = 1;  // one pod per process: eight of them share the machine
+    HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(rig, so));
+    if (o.prerender > 0) say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name);
+    frames = std::make_unique<StudioFrames>(std::move(studio), static_cast<int>(index), o.prerender);
+  }
+
+  // The pod's clock: the system clock plus the simulated offset and drift.
+  const int64_t t_start = net::WallUs();
+  const auto offset_us = static_cast<int64_t>(std::llround(o.clock_offset_ms * 1000.0));
+  const double drift = o.clock_drift_ppm * 1e-6;
+  auto pod_clock_at = [=](int64_t wall) {
+    return wall + offset_us + static_cast<int64_t>(std::llround(static_cast<double>(wall - t_start) * drift));
+  };
+
+  PodClientOptions co;
+  HOLO_RETURN_IF_ERROR(ParseHostPort(o.site, &co.host, &co.port));
+  if (co.host.empty()) co.host = "127.0.0.1";
+  co.token = o.token;
+  co.name = "pod-" + std::to_string(o.pod_id);
+  co.calibration = calibration;
+  co.queue_frames = static_cast<size_t>(o.queue_frames);
+  co.clock = [=] { return pod_clock_at(net::WallUs()); };
+  co.log = [&](const std::string& s) { say(s); };
+  PodClient client(co);
+  HOLO_RETURN_IF_ERROR(client.Start());
+
+  FILE* stats = nullptr;
+  if (!o.stats_path.empty()) {
+    stats = o.stats_path == "-" ? stdout : std::fopen(o.stats_path.c_str(), "w");
+    if (!stats) return Unavailable(o.stats_path + ": cannot open for writing");
+  }
+  protocol::ColorEncodeOptions copt;
+  copt.jpeg_quality = o.jpeg_quality;
+  protocol::ColorEncoder color_encoder(copt);
+  protocol::DepthEncodeOptions dopt;
+  dopt.zstd_level = o.zstd_level;
+  const ImageGray8 no_mask;  // the whole image: the site segments
+
+  const double period_us = 1e6 / o.fps;
+  int64_t slot = static_cast<int64_t>(std::ceil(static_cast<double>(net::WallUs()) / period_us));
+  int64_t number = 0, skipped = 0, done = 0;
+  double encode_cpu_ms = 0, produce_cpu_ms = 0;
+  uint64_t depth_bytes = 0, color_bytes = 0;
+  int64_t next_stats = net::WallUs() + 1000000;
+  RgbdFrame frame;
+  say("streaming pod " + std::to_string(o.pod_id) + " to " + o.site + " at " + std::to_string(o.fps) + " fps");
+  Status result;
+  while (!stop && (o.frames < 0 || done < o.frames)) {
+    const Status cs = client.status();
+    if (!cs.ok()) {
+      result = cs;
+      break;
+    }
+    const auto slot_wall = static_cast<int64_t>(std::llround(static_cast<double>(slot) * period_us));
+    const int64_t now = net::WallUs();
+    if (now < slot_wall) {
+      std::this_thread::sleep_for(std::chrono::microseconds(std::min<int64_t>(slot_wall - now, 50000)));
+      continue;
+    }
+    if (now > slot_wall + static_cast<int64_t>(period_us)) {
+      // Missed whole slots (the pod was too slow): take the current one, as a camera drops frames.
+      const auto current = static_cast<int64_t>(std::floor(static_cast<double>(now) / period_us));
+      skipped += current - slot;
+      slot = current;
+      continue;
+    }
+    double c0 = ThreadCpuTimeMs();
+    HOLO_RETURN_IF_ERROR(frames->Get(slot, &frame));
+    const double c1 = ThreadCpuTimeMs();
+    protocol::PodFrame pf;
+    pf.pod_id = static_cast<uint16_t>(o.pod_id);
+    pf.frame_number = number++;
+    pf.capture_time_us = pod_clock_at(slot_wall);  // the trigger instant on the pod's clock
+    HOLO_RETURN_IF_ERROR(protocol::EncodeDepth(frame.depth, dopt, &pf.depth));
+    HOLO_RETURN_IF_ERROR(color_encoder.Encode(frame.color, no_mask, &pf.color));
+    encode_cpu_ms += ThreadCpuTimeMs() - c1;
+    depth_bytes += pf.depth.size();
+    color_bytes += pf.color.size();
+    produce_cpu_ms += c1 - c0;
+    client.Offer(std::move(pf));
+    ++done;
+    ++slot;
+    if (net::WallUs() >= next_stats || (o.frames >= 0 && done == o.frames)) {
+      next_stats += 1000000;
+      const PodClientCounters c = client.counters();
+      if (stats) {
+        std::fprintf(stats,
+                     "{\"pod\":%d,\"frames\":%lld,\"skipped\":%lld,\"sent\":%llu,\"bytes_sent\":%llu,"
+                     "\"dropped_queue_full\":%llu,\"dropped_disconnected\":%llu,\"connects\":%llu,"
+                     "\"connected\":%s,\"encode_cpu_ms\":%.1f,\"produce_cpu_ms\":%.1f,\"depth_bytes\":%llu,"
+                     "\"color_bytes\":%llu}\n",
+                     o.pod_id, static_cast<long long>(done), static_cast<long long>(skipped),
+                     static_cast<unsigned long long>(c.sent), static_cast<unsigned long long>(c.bytes_sent),
+                     static_cast<unsigned long long>(c.dropped_queue_full),
+                     static_cast<unsigned long long>(c.dropped_disconnected),
+                     static_cast<unsigned long long>(c.connects), c.connected ? "true" : "false", encode_cpu_ms,
+                     produce_cpu_ms, static_cast<unsigned long long>(depth_bytes),
+                     static_cast<unsigned long long>(color_bytes));
+        std::fflush(stats);
+      }
+    }
+  }
+  // Let the last frames leave.
+  for (int i = 0; i < 50 && client.connected(); ++i) {
+    const PodClientCounters c = client.counters();
+    if (c.sent + c.dropped_queue_full + c.dropped_disconnected >= c.offered) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  client.Stop();
+  if (stats && stats != stdout) std::fclose(stats);
+  if (result.ok()) result = client.status();
+  return result;
+}
+
+}  // namespace holo::pods

@@ -1,0 +1,49 @@
+// holoport-pod's loop as a library (so tests and benchmarks run the same
+// code): produce this pod's frames at the camera rate, stamp them with the
+// pod's clock, compress them (depth D1, colour C1) and hand them to a
+// PodClient.
+//
+// Frames come from the synthetic studio rendering only this pod (a rig of
+// one pod: the studio's content, noise and colour variation depend on the
+// pod id, not on the other pods) or from a dataset folder (this pod's
+// images). The camera is triggered at wall-clock slots k / fps (as pods on a
+// shared trigger are); a slot the pod cannot make in time is skipped. The
+// pod's clock is the system clock plus a simulated offset and drift
+// (--clock-offset-ms, --clock-drift-ppm), to test the site's offset estimation.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "common/status.h"
+
+namespace holo::pods {
+
+struct PodRunOptions {
+  std::string site = "127.0.0.1:7100";  // the site's pod port, HOST:PORT
+  std::string token;
+  int pod_id = -1;                      // id in the rig (required)
+  std::string workload = "S8-QVGA";     // synthetic source: content and rig
+  std::string rig_path;                 // a rig file instead of the workload's
+  std::string dataset;                  // a dataset folder instead of the studio
+  double fps = 30;
+  int64_t frames = -1;                  // stop after this many slots (-1: until stopped)
+  int prerender = 0;                    // studio: render this many frames first and loop them (0: render live)
+  double clock_offset_ms = 0;           // simulated pod clock: offset against the system clock
+  double clock_drift_ppm = 0;           // ... and drift (parts per million)
+  int jpeg_quality = 60;                // colour C1 quality (60: ~26 KB per QVGA frame; depth is ~81 KB)
+  int zstd_level = 1;                   // depth D1 level
+  int queue_frames = 3;                 // frames waiting for the link
+  std::string stats_path;               // JSON lines of the pod's counters, once a second ("-": stdout)
+  bool quiet = false;
+  Status Check() const;
+};
+
+// Runs until `stop` becomes true, `frames` are done, or the site refuses the
+// pod. Returns the refusal (InvalidArgument with the site's reason) or a
+// set-up error; OK otherwise.
+Status RunPod(const PodRunOptions& options, const std::atomic<bool>& stop);
+
+}  // namespace holo::pods

@@ -1,0 +1,51 @@
+// holoport-pod: one RGB-D pod as its own process (docs/capture.md). It
+// renders its own view of the synthetic studio (or reads its images from a
+// dataset folder), stamps every frame with its own clock, compresses it and
+// streams it to a site started with `holoport-server --pods PORT`.
+#include <CLI/CLI.hpp>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+
+#include "server/pods/pod_runner.h"
+
+namespace {
+std::atomic<bool> g_stop{false};
+void OnSignal(int) { g_stop = true; }
+}  // namespace
+
+int main(int argc, char** argv) {
+  holo::pods::PodRunOptions o;
+  CLI::App app{"holoport-pod: one RGB-D pod streaming its frames to a site's pod port (holoport-server --pods)"};
+  app.add_option("--site", o.site, "the site's pod port, HOST:PORT")->capture_default_str();
+  app.add_option("--token", o.token, "the site's pod token (holoport-server --pod-token); required");
+  app.add_option("--pod", o.pod_id, "this pod's id in the rig; required");
+  app.add_option("-w,--workload", o.workload, "synthetic source: S8-QVGA or S8-VGA (content and rig)")
+      ->capture_default_str();
+  app.add_option("--rig", o.rig_path, "synthetic source: this rig file instead of the workload's");
+  app.add_option("--dataset", o.dataset, "read this pod's frames from a dataset folder (looped) instead of the studio");
+  app.add_option("--fps", o.fps, "camera rate; frames are triggered at wall-clock slots k/fps")->capture_default_str();
+  app.add_option("-n,--frames", o.frames, "stop after this many frames (-1: until interrupted)")->capture_default_str();
+  app.add_option("--prerender", o.prerender, "studio: render this many frames first and loop them (0: render live)")
+      ->capture_default_str();
+  app.add_option("--clock-offset-ms", o.clock_offset_ms, "simulate a pod clock offset from the system clock, ms")
+      ->capture_default_str();
+  app.add_option("--clock-drift-ppm", o.clock_drift_ppm, "simulate a pod clock drift, parts per million")
+      ->capture_default_str();
+  app.add_option("--jpeg-quality", o.jpeg_quality, "colour (C1 JPEG) quality 1..100")->capture_default_str();
+  app.add_option("--zstd-level", o.zstd_level, "depth (D1) zstd level 1..19")->capture_default_str();
+  app.add_option("--queue", o.queue_frames, "frames waiting for the link; when full the oldest is dropped")
+      ->capture_default_str();
+  app.add_option("--stats", o.stats_path, "write the pod's counters as JSON lines once a second to this file (- = stdout)");
+  app.add_flag("-q,--quiet", o.quiet, "no progress output");
+  CLI11_PARSE(app, argc, argv);
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  const holo::Status s = holo::pods::RunPod(o, g_stop);
+  if (!s.ok()) {
+    std::fprintf(stderr, "holoport-pod: %s\n", s.ToString().c_str());
+    return s.code() == holo::StatusCode::kInvalidArgument ? 2 : 1;
+  }
+  return 0;
+}

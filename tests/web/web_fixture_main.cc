@@ -1,0 +1,287 @@
+// holoport-web-fixture: test fixtures for the browser viewer (web/).
+//
+//   record  — a recording of the synthetic studio with everything a live site
+//             sends: Rig, G1 MeshFrames (ground-truth mesh, per-vertex
+//             colour), C1 ColorFrames (every pod's colour image and
+//             foreground mask, through ColorEncoder) and PCM AudioPose.
+//   golden  — decodes the first N MeshFrames and ColorFrames of a recording
+//             with the C++ decoders and writes what they decode to, for the
+//             JavaScript decoders' test (tests/web/decoders_test.mjs).
+//   render  — the native renderer's image (client/render, as holoport-client
+//             draws) of one frame of a recording from a fixed camera, PNG.
+#include <cmath>
+#include <cstring>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <epoxy/gl.h>
+
+#include "client/render/gl_context.h"
+#include "client/render/renderer.h"
+#include "common/image_io.h"
+#include "common/pose.h"
+#include "protocol/color_codec.h"
+#include "protocol/geometry_codec.h"
+#include "protocol/messages.h"
+#include "server/record/recording_reader.h"
+#include "server/record/recording_writer.h"
+#include "server/record/synthetic_stream.h"
+#include "server/studio/studio.h"
+#include "server/studio/workloads.h"
+
+namespace holo {
+namespace {
+
+Status Record(const std::string& out, const std::string& workload, double seconds) {
+  record::SyntheticStreamOptions so;
+  so.workload = workload;
+  HOLO_ASSIGN_OR_RETURN(auto stream, record::SyntheticStream::Create(so));
+  HOLO_ASSIGN_OR_RETURN(Workload w, GetWorkload(workload));
+  StudioOptions studio_options = w.studio;
+  studio_options.threads = 2;
+  studio_options.color_variation = false;  // a site calibrates its pods' colours
+  HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(w.rig, studio_options));
+  record::RecordingWriterOptions wo;
+  wo.source = "synthetic:" + workload;
+  HOLO_ASSIGN_OR_RETURN(auto writer, record::RecordingWriter::Create(out, wo, true));
+  std::vector<protocol::ColorEncoder> encoders(w.rig.pods.size());
+  uint32_t color_seq = 0;
+  const auto end_us = static_cast<int64_t>(seconds * 1e6);
+  for (;;) {
+    record::StreamMessage m;
+    HOLO_RETURN_IF_ERROR(stream->Next(&m));
+    if (m.time_us > end_us) break;
+    HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, m.frame));
+    if (m.type != protocol::MessageType::kMeshFrame) continue;
+    // The frame's colour: every pod's noise-free image and exact mask in its colour camera.
+    HOLO_ASSIGN_OR_RETURN(protocol::Header mh, protocol::DecodeHeader(m.frame.data(), 32));
+    HOLO_ASSIGN_OR_RETURN(protocol::Payload mp, protocol::DecodePayload(mh.type, std::span<const uint8_t>(m.frame).subspan(32)));
+    const auto& mf = std::get<protocol::MeshFrame>(mp);
+    protocol::ColorFrame cf;
+    cf.frame_index = mf.frame_index;
+    cf.codec = protocol::ColorCodec::kC1;
+    for (size_t i = 0; i < w.rig.pods.size(); ++i) {
+      ImageRgb8 color;
+      ImageGray8 mask;
+      studio->RenderView(mf.frame_index, w.rig.pods[i].ColorCamera(), &color, nullptr, &mask);
+      protocol::PodImage pi;
+      pi.pod_id = static_cast<uint16_t>(w.rig.pods[i].id);
+      HOLO_RETURN_IF_ERROR(encoders[i].Encode(color, mask, &pi.data));
+      cf.images.push_back(std::move(pi));
+    }
+    protocol::Header ch;
+    ch.stream_id = so.video_stream_id;
+    ch.sequence = color_seq++;
+    ch.capture_time_us = mh.capture_time_us;
+    HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, protocol::EncodeMessage(ch, cf)));
+  }
+  HOLO_RETURN_IF_ERROR(writer->Close());
+  std::printf("wrote %s: %llu messages, %.1f s\n", out.c_str(),
+              static_cast<unsigned long long>(writer->stats().messages), writer->stats().duration_us * 1e-6);
+  return OkStatus();
+}
+
+template <typename T>
+StatusOr<T> DecodeAs(const protocol::Header& h, const std::vector<uint8_t>& payload) {
+  HOLO_ASSIGN_OR_RETURN(protocol::Payload p, protocol::DecodePayload(h.type, payload));
+  if (!std::holds_alternative<T>(p)) return DataLoss("unexpected payload type");
+  return std::get<T>(std::move(p));
+}
+
+Status WriteFile(const std::filesystem::path& path, const void* data, size_t size) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+  if (!f) return Unavailable("cannot write " + path.string());
+  return OkStatus();
+}
+
+// Every message of a recording, in order.
+StatusOr<std::vector<std::pair<protocol::Header, std::vector<uint8_t>>>> ReadAll(const std::string& path) {
+  HOLO_ASSIGN_OR_RETURN(auto reader, record::RecordingReader::Open(path));
+  std::vector<std::pair<protocol::Header, std::vector<uint8_t>>> out;
+  for (uint64_t off = reader->summary().data_begin; off < reader->summary().data_end;) {
+    HOLO_ASSIGN_OR_RETURN(record::RecordedMessage m, reader->ReadAt(off));
+    out.emplace_back(m.header, std::vector<uint8_t>(m.bytes->begin() + 32, m.bytes->end()));
+    off = m.next_offset;
+  }
+  return out;
+}
+
+// Golden files: mesh_K.bin = u32 nv, u32 nt, positions (f32), normals (f32,
+// nv×3 or none: u32 flag first), colours (u8), indices (u32); color_K_P.bin =
+// u32 w, u32 h, RGBA8 (alpha = mask).
+Status Golden(const std::string& recording, const std::string& dir, int count) {
+  std::filesystem::create_directories(dir);
+  HOLO_ASSIGN_OR_RETURN(auto messages, ReadAll(recording));
+  int meshes = 0, colors = 0;
+  for (const auto& [h, payload] : messages) {
+    if (h.type == protocol::MessageType::kMeshFrame && meshes < count) {
+      HOLO_ASSIGN_OR_RETURN(protocol::MeshFrame mf, DecodeAs<protocol::MeshFrame>(h, payload));
+      Mesh mesh;
+      HOLO_RETURN_IF_ERROR(protocol::DecodeGeometry(mf.data, &mesh));
+      std::vector<uint8_t> b;
+      auto put = [&b](const void* p, size_t n) {
+        b.insert(b.end(), static_cast<const uint8_t*>(p), static_cast<const uint8_t*>(p) + n);
+      };
+      const auto nv = static_cast<uint32_t>(mesh.num_vertices()), nt = static_cast<uint32_t>(mesh.triangles.size());
+      const uint32_t has_normals = mesh.normals.empty() ? 0 : 1, has_colors = mesh.colors.empty() ? 0 : 1;
+      put(&nv, 4);
+      put(&nt, 4);
+      put(&has_normals, 4);
+      put(&has_colors, 4);
+      for (const auto& p : mesh.positions) put(p.data(), 12);
+      for (const auto& n : mesh.normals) put(n.data(), 12);
+      for (const auto& c : mesh.colors) put(c.data(), 3);
+      for (const auto& t : mesh.triangles) put(t.data(), 12);
+      HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("mesh_" + std::to_string(mf.frame_index) + ".bin"),
+                                     b.data(), b.size()));
+      ++meshes;
+    } else if (h.type == protocol::MessageType::kColorFrame && colors < count) {
+      HOLO_ASSIGN_OR_RETURN(protocol::ColorFrame cf, DecodeAs<protocol::ColorFrame>(h, payload));
+      for (const auto& im : cf.images) {
+        ImageRgb8 image;
+        ImageGray8 mask;
+        HOLO_RETURN_IF_ERROR(protocol::DecodeColor(im.data, &image, &mask));
+        std::vector<uint8_t> b(8 + size_t(image.width()) * image.height() * 4);
+        const auto w = static_cast<uint32_t>(image.width()), hh = static_cast<uint32_t>(image.height());
+        std::memcpy(b.data(), &w, 4);
+        std::memcpy(b.data() + 4, &hh, 4);
+        for (int y = 0; y < image.height(); ++y)
+          for (int x = 0; x < image.width(); ++x) {
+            uint8_t* d = &b[8 + (size_t(y) * image.width() + x) * 4];
+            for (int c = 0; c < 3; ++c) d[c] = image.at(x, y, c);
+            d[3] = mask.at(x, y);
+          }
+        HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("color_" + std::to_string(cf.frame_index) + "_" +
+                                                                      std::to_string(im.pod_id) + ".bin"),
+                                       b.data(), b.size()));
+      }
+      ++colors;
+    }
+  }
+  std::printf("golden: %d meshes, %d colour frames in %s\n", meshes, colors, dir.c_str());
+  return OkStatus();
+}
+
+// The camera of the comparison (web/src/view.js builds the same one):
+// eye, target (world, Z up), horizontal field of view, image size.
+CameraModel FixedCamera(const std::vector<float>& eye, const std::vector<float>& target, double hfov, int w, int h) {
+  CameraModel c;
+  c.intrinsics = Intrinsics::FromFov(w, h, hfov);
+  c.world_from_camera = LookAt(Eigen::Vector3f(eye[0], eye[1], eye[2]), Eigen::Vector3f(target[0], target[1], target[2]));
+  return c;
+}
+
+Status Render(const std::string& recording, int64_t frame, const std::vector<float>& eye,
+              const std::vector<float>& target, double hfov, int w, int h, const std::string& mode,
+              const std::string& out) {
+  HOLO_ASSIGN_OR_RETURN(auto messages, ReadAll(recording));
+  protocol::RigMessage rig;
+  bool have_rig = false, have_mesh = false, have_color = false;
+  Mesh mesh;
+  std::vector<ImageRgb8> images;
+  std::vector<ImageGray8> masks;
+  for (const auto& [hd, payload] : messages) {
+    if (hd.type == protocol::MessageType::kRig && !have_rig) {
+      HOLO_ASSIGN_OR_RETURN(rig, DecodeAs<protocol::RigMessage>(hd, payload));
+      have_rig = true;
+    } else if (hd.type == protocol::MessageType::kMeshFrame) {
+      HOLO_ASSIGN_OR_RETURN(protocol::MeshFrame mf, DecodeAs<protocol::MeshFrame>(hd, payload));
+      if (mf.frame_index != frame) continue;
+      HOLO_RETURN_IF_ERROR(protocol::DecodeGeometry(mf.data, &mesh));
+      have_mesh = true;
+    } else if (hd.type == protocol::MessageType::kColorFrame) {
+      HOLO_ASSIGN_OR_RETURN(protocol::ColorFrame cf, DecodeAs<protocol::ColorFrame>(hd, payload));
+      if (cf.frame_index != frame) continue;
+      for (const auto& im : cf.images) {
+        images.emplace_back();
+        masks.emplace_back();
+        HOLO_RETURN_IF_ERROR(protocol::DecodeColor(im.data, &images.back(), &masks.back()));
+      }
+      have_color = true;
+    }
+  }
+  if (!have_rig || !have_mesh) return NotFound("frame " + std::to_string(frame) + " is not in " + recording);
+  HOLO_ASSIGN_OR_RETURN(auto context, render::CreateHeadlessContext());
+  HOLO_RETURN_IF_ERROR(context->MakeCurrent());
+  HOLO_ASSIGN_OR_RETURN(auto renderer, render::Renderer::Create());
+  HOLO_ASSIGN_OR_RETURN(auto target_fb, render::OffscreenTarget::Create(w, h));
+  HOLO_RETURN_IF_ERROR(renderer->SetRemoteMesh(mesh));
+  render::RenderSettings settings;
+  settings.mode = render::ColorMode::kVertexColor;
+  if (mode == "projective") {
+    if (!have_color) return NotFound("frame " + std::to_string(frame) + " has no colour images");
+    std::vector<const ImageRgb8*> ip;
+    std::vector<const ImageGray8*> mp;
+    for (size_t i = 0; i < images.size(); ++i) {
+      ip.push_back(&images[i]);
+      mp.push_back(&masks[i]);
+    }
+    HOLO_RETURN_IF_ERROR(renderer->SetPodImages(rig.rig, ip, mp));
+    HOLO_RETURN_IF_ERROR(renderer->UpdateVisibility());
+    settings.mode = render::ColorMode::kProjective;
+  }
+  target_fb->Bind();
+  glViewport(0, 0, w, h);
+  glClearColor(0, 0, 0, 1);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  HOLO_RETURN_IF_ERROR(renderer->Render(FixedCamera(eye, target, hfov, w, h), settings, render::Viewport{0, 0, w, h}));
+  ImageRgb8 image;
+  HOLO_RETURN_IF_ERROR(target_fb->ReadRgb(&image));
+  HOLO_RETURN_IF_ERROR(WriteImageRgb8(out, image));
+  std::printf("rendered frame %lld (%zu triangles, %s) to %s\n", static_cast<long long>(frame), mesh.triangles.size(),
+              mode.c_str(), out.c_str());
+  return OkStatus();
+}
+
+}  // namespace
+}  // namespace holo
+
+int main(int argc, char** argv) {
+  CLI::App app{"holoport-web-fixture: recordings, golden decodes and native renders for the browser viewer's tests"};
+  app.require_subcommand(0, 1);
+  std::string out, recording, dir, workload = "S8-QVGA", mode = "vertex";
+  double seconds = 8, hfov = 50;
+  int count = 3, width = 640, height = 360;
+  int64_t frame = 0;
+  std::vector<float> eye{2.2f, -1.6f, 1.6f}, target{0.0f, 0.0f, 1.0f};
+  auto* rec = app.add_subcommand("record", "write a recording of the synthetic studio with colour");
+  rec->add_option("--out", out, "recording file to write")->required();
+  rec->add_option("--workload", workload, "studio workload (S8-QVGA, S8-VGA, S4-QVGA)");
+  rec->add_option("--seconds", seconds, "length, seconds")->check(CLI::Range(0.1, 600.0));
+  auto* gold = app.add_subcommand("golden", "decode the first frames of a recording with the C++ decoders");
+  gold->add_option("--recording", recording, "recording file")->required();
+  gold->add_option("--out-dir", dir, "directory for the golden files")->required();
+  gold->add_option("--count", count, "mesh and colour frames to write")->check(CLI::Range(1, 1000));
+  auto* ren = app.add_subcommand("render", "render one frame of a recording with the native renderer, PNG");
+  ren->add_option("--recording", recording, "recording file")->required();
+  ren->add_option("--frame", frame, "frame index (MeshFrame.frame_index)")->required();
+  ren->add_option("--out", out, "PNG to write")->required();
+  ren->add_option("--eye", eye, "camera position x,y,z (metres, Z up)")->expected(3)->delimiter(',');
+  ren->add_option("--target", target, "point the camera looks at x,y,z")->expected(3)->delimiter(',');
+  ren->add_option("--hfov", hfov, "horizontal field of view, degrees")->check(CLI::Range(5.0, 170.0));
+  ren->add_option("--width", width, "image width")->check(CLI::Range(16, 4096));
+  ren->add_option("--height", height, "image height")->check(CLI::Range(16, 4096));
+  ren->add_option("--color", mode, "vertex or projective")->check(CLI::IsMember({"vertex", "projective"}));
+  CLI11_PARSE(app, argc, argv);
+  if (app.get_subcommands().empty()) {
+    std::fprintf(stderr, "holoport-web-fixture: give a subcommand (record, golden or render); --help lists them\n");
+    return 2;
+  }
+  holo::Status s;
+  if (*rec) s = holo::Record(out, workload, seconds);
+  if (*gold) s = holo::Golden(recording, dir, count);
+  if (*ren) s = holo::Render(recording, frame, eye, target, hfov, width, height, mode, out);
+  if (!s.ok()) {
+    std::fprintf(stderr, "holoport-web-fixture: %s\n", s.ToString().c_str());
+    return 1;
+  }
+  return 0;
+}

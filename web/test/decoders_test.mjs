@@ -1,0 +1,209 @@
+// The JavaScript decoders against the C++ ones: a recording written by the
+// C++ encoders (holoport-web-fixture record) is parsed by web/src, its first
+// MeshFrames and ColorFrames decoded, and the results compared with what
+// the C++ decoders wrote (holoport-web-fixture golden): geometry exactly
+// (positions, colours, triangles; recomputed normals within 1e-6), colour
+// images within a JPEG-decoder tolerance (the page uses the browser's
+// decoder; node uses jpeg-js) and masks exactly. Then truncated prefixes and
+// bit flips of every decoder's input must give a DecodeError (or, for a
+// flip, a valid result), never another exception or a hang.
+//
+// Usage: node decoders_test.mjs RECORDING GOLDEN_DIR
+
+import { readFileSync, readdirSync } from 'node:fs';
+import { join } from 'node:path';
+import jpeg from 'jpeg-js';
+import { DecodeError } from '../src/bytes.js';
+import { parseRecording, parseRecords, parseMeshFrame, parseColorFrame, parseRig, parseAudioPose, MSG } from '../src/protocol.js';
+import { decodeGeometry } from '../src/geometry.js';
+import { decodeColor } from '../src/color.js';
+
+const [recordingPath, goldenDir] = process.argv.slice(2);
+if (!recordingPath || !goldenDir) {
+  console.error('usage: node decoders_test.mjs RECORDING GOLDEN_DIR');
+  process.exit(2);
+}
+let failures = 0;
+function check(cond, what) {
+  if (!cond) {
+    failures++;
+    console.log(`FAIL: ${what}`);
+  }
+}
+const decodeJpeg = async (bytes) => {
+  const img = jpeg.decode(bytes, { useTArray: true, formatAsRGBA: true });
+  return { width: img.width, height: img.height, data: img.data };
+};
+
+const file = new Uint8Array(readFileSync(recordingPath));
+const messages = parseRecording(file);
+check(messages.length > 0 && messages[0].header.type === MSG.RIG, 'the recording starts with the Rig');
+const rig = parseRig(messages[0].payload);
+console.log(`recording: ${messages.length} messages, rig "${rig.name}" with ${rig.pods.length} pods`);
+
+const golden = readdirSync(goldenDir);
+const meshes = new Map(), colors = new Map();
+for (const m of messages) {
+  if (m.header.type === MSG.MESH) meshes.set(parseMeshFrame(m.payload).frameIndex, m);
+  if (m.header.type === MSG.COLOR) colors.set(parseColorFrame(m.payload).frameIndex, m);
+  if (m.header.type === MSG.AUDIO) parseAudioPose(m.payload);
+}
+
+// ---- geometry, exactly
+let meshChecked = 0;
+const geometryMs = [];
+for (const g of golden.filter((f) => f.startsWith('mesh_'))) {
+  const k = Number(g.slice(5, -4));
+  const b = readFileSync(join(goldenDir, g));
+  const dv = new DataView(b.buffer, b.byteOffset, b.byteLength);
+  const nv = dv.getUint32(0, true), nt = dv.getUint32(4, true), hasN = dv.getUint32(8, true), hasC = dv.getUint32(12, true);
+  let o = 16;
+  const pos = new Float32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 12));
+  o += nv * 12;
+  const nrm = hasN ? new Float32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 12)) : null;
+  o += hasN ? nv * 12 : 0;
+  const col = hasC ? new Uint8Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 3)) : null;
+  o += hasC ? nv * 3 : 0;
+  const idx = new Uint32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nt * 12));
+  const mf = parseMeshFrame(meshes.get(k).payload);
+  const t0 = performance.now();
+  const mesh = decodeGeometry(mf.data);
+  geometryMs.push(performance.now() - t0);
+  check(mesh.positions.length === nv * 3 && mesh.indices.length === nt * 3, `frame ${k}: counts ${nv}/${nt}`);
+  let posDiff = 0, idxDiff = 0, colDiff = 0, nrmMax = 0;
+  for (let i = 0; i < nv * 3; ++i) if (mesh.positions[i] !== pos[i]) posDiff++;
+  for (let i = 0; i < nt * 3; ++i) if (mesh.indices[i] !== idx[i]) idxDiff++;
+  if (col) for (let i = 0; i < nv * 3; ++i) if (mesh.colors[i] !== col[i]) colDiff++;
+  if (nrm) for (let i = 0; i < nv * 3; ++i) nrmMax = Math.max(nrmMax, Math.abs(mesh.normals[i] - nrm[i]));
+  check(posDiff === 0, `frame ${k}: ${posDiff} position components differ`);
+  check(idxDiff === 0, `frame ${k}: ${idxDiff} indices differ`);
+  check(colDiff === 0, `frame ${k}: ${colDiff} colour components differ`);
+  check(!!nrm === !!mesh.normals && nrmMax <= 1e-6, `frame ${k}: normals differ by ${nrmMax}`);
+  console.log(`geometry frame ${k}: ${nv} vertices, ${nt} triangles; positions/indices/colours identical, normals max diff ${nrmMax.toExponential(1)}`);
+  meshChecked++;
+}
+check(meshChecked >= 1, 'golden meshes were found');
+
+// ---- colour, within tolerance; masks exactly
+let colorChecked = 0, worst = 0, sumAbs = 0, count = 0;
+for (const g of golden.filter((f) => f.startsWith('color_'))) {
+  const [, k, pod] = g.slice(0, -4).split('_').map(Number);
+  const b = readFileSync(join(goldenDir, g));
+  const w = b.readUInt32LE(0), h = b.readUInt32LE(4);
+  const cf = parseColorFrame(colors.get(k).payload);
+  const im = cf.images.find((x) => x.podId === pod);
+  const img = await decodeColor(im.data, decodeJpeg);
+  check(img.width === w && img.height === h, `colour ${k}/${pod}: size`);
+  let maskDiff = 0;
+  for (let i = 0; i < w * h; ++i) {
+    const a = img.rgba[4 * i + 3], e = b[8 + 4 * i + 3];
+    if (a !== e) maskDiff++;
+    if (e) {
+      for (let c = 0; c < 3; ++c) {
+        const d = Math.abs(img.rgba[4 * i + c] - b[8 + 4 * i + c]);
+        worst = Math.max(worst, d);
+        sumAbs += d;
+        count++;
+      }
+    } else {
+      for (let c = 0; c < 3; ++c) if (img.rgba[4 * i + c] !== 0) maskDiff++;
+    }
+  }
+  check(maskDiff === 0, `colour ${k}/${pod}: ${maskDiff} mask or background pixels differ`);
+  colorChecked++;
+}
+const meanAbs = count ? sumAbs / count : 0;
+console.log(`colour: ${colorChecked} pod images; masks identical; foreground |diff| mean ${meanAbs.toFixed(3)}, max ${worst}`);
+check(colorChecked >= 1, 'golden colour images were found');
+check(meanAbs <= 1.0 && worst <= 8, `colour differs from libjpeg's decode by mean ${meanAbs}, max ${worst}`);
+
+// ---- malformed input: truncations and bit flips give DecodeError, nothing else
+function expectDecodeError(fn, what) {
+  try {
+    fn();
+  } catch (e) {
+    if (e instanceof DecodeError) return true;
+    check(false, `${what}: threw ${e.name}: ${e.message}`);
+    return false;
+  }
+  return false;
+}
+async function expectDecodeErrorAsync(fn, what) {
+  try {
+    await fn();
+  } catch (e) {
+    if (e instanceof DecodeError) return true;
+    check(false, `${what}: threw ${e.name}: ${e.message}`);
+    return false;
+  }
+  return false;
+}
+function validMesh(m) {
+  const nv = m.positions.length / 3;
+  for (const i of m.indices) if (i >= nv) return false;
+  for (const p of m.positions) if (!Number.isFinite(p)) return false;
+  return true;
+}
+let rng = 12345;
+const rand = (n) => {
+  rng = (rng * 1103515245 + 12345) % 2147483648;
+  return rng % n;
+};
+const firstMesh = parseMeshFrame(meshes.values().next().value.payload).data;
+// Prefixes: all of the first 512 bytes, then 300 spread over the rest.
+const prefixes = new Set();
+for (let n = 0; n < Math.min(512, firstMesh.length); ++n) prefixes.add(n);
+for (let i = 0; i < 300; ++i) prefixes.add(Math.floor((firstMesh.length * i) / 300));
+let refused = 0;
+for (const n of prefixes) {
+  if (n >= firstMesh.length) continue;
+  const blob = firstMesh.slice(0, n);
+  if (expectDecodeError(() => decodeGeometry(blob), `geometry prefix ${n}`)) refused++;
+  else check(false, `geometry prefix ${n} of ${firstMesh.length} bytes was accepted`);
+}
+let flipsOk = 0;
+for (let i = 0; i < 300; ++i) {
+  const blob = firstMesh.slice();
+  blob[rand(blob.length)] ^= 1 << rand(8);
+  let m = null;
+  if (!expectDecodeError(() => { m = decodeGeometry(blob); }, `geometry flip ${i}`) && m) {
+    check(validMesh(m), `geometry flip ${i}: decoded an invalid mesh`);
+    flipsOk++;
+  }
+}
+console.log(`geometry: ${refused} truncated prefixes refused; 300 bit flips: ${300 - flipsOk} refused, ${flipsOk} decoded to valid meshes`);
+
+const firstColor = parseColorFrame(colors.values().next().value.payload).images[0].data;
+let cRefused = 0;
+for (let n = 0; n < firstColor.length; n += Math.max(1, Math.floor(firstColor.length / 400))) {
+  const blob = firstColor.slice(0, n);
+  if (await expectDecodeErrorAsync(() => decodeColor(blob, decodeJpeg), `colour prefix ${n}`)) cRefused++;
+  else check(false, `colour prefix ${n} of ${firstColor.length} bytes was accepted`);
+}
+for (let i = 0; i < 200; ++i) {
+  const blob = firstColor.slice();
+  // Flip in the header, box and mask (the JPEG's own bytes go to the browser's decoder).
+  blob[rand(Math.min(blob.length, 64))] ^= 1 << rand(8);
+  try {
+    await decodeColor(blob, decodeJpeg);
+  } catch (e) {
+    if (!(e instanceof DecodeError)) check(false, `colour flip ${i}: threw ${e.name}: ${e.message}`);
+  }
+}
+console.log(`colour: ${cRefused} truncated prefixes refused; 200 bit flips in the header and mask handled`);
+
+// Records: every prefix of the first part-sized run of records is refused or parses whole records.
+const recs = file.subarray(64, 64 + Math.min(file.length - 64, 4096));
+let recRefused = 0;
+for (let n = 1; n < recs.length; n += 7) {
+  if (expectDecodeError(() => parseRecords(recs.subarray(0, n)), `records prefix ${n}`)) recRefused++;
+}
+console.log(`records: ${recRefused} truncated runs refused`);
+geometryMs.sort((a, b) => a - b);
+console.log(JSON.stringify({ figure: 'web_decode_node', geometry_ms_median: geometryMs[geometryMs.length >> 1] }));
+
+if (failures) {
+  console.log(`${failures} failure(s)`);
+  process.exit(1);
+}
+console.log('decoders: all checks passed');
