@@ -324,6 +324,11 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     co.token = token;
     co.name = "holoport-record --live-dir";
     co.decode = false;
+    // Segments must start with colour every player can decode alone: the
+    // intra-only codecs. A site publishing V1 video refuses the packager
+    // with "no common codec" (V1 packaging would need colour key frames at
+    // every segment start).
+    co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0};
     co.subscribe = holo::net::kSubscribeAll;
     co.tls.enabled = tls;
     co.tls.ca_file = ca_file;
