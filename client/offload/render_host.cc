@@ -386,7 +386,7 @@ struct RenderHost::Impl {
         const auto t0 = Clock::now();
         reproject::SceneRenderFn scene = reproject::MeshSceneRenderer(*mesh);
         if (gl) {
-          scene = [&gl, &mesh, frame_index](const CameraModel& cam, ImageRgb8* c, ImageDepth16* d, ImageGray8* m) {
+          scene = [&gl, mesh = mesh, frame_index = frame_index](const CameraModel& cam, ImageRgb8* c, ImageDepth16* d, ImageGray8* m) {
             return gl->Render(*mesh, frame_index, cam, c, d, m);
           };
         }
