@@ -20,7 +20,7 @@ ImageDepth16 SampleDepth(int w, int h, uint32_t seed) {
       d.at(x, y) = hole ? 0 : static_cast<uint16_t>(1500 + 2 * x - y + static_cast<int>(rng() % 9));
     }
   d.at(0, 0) = 65535;  // extremes survive the mod-2^16 deltas
-  d.at(1, 0) = 0;
+  if (w > 1) d.at(1, 0) = 0;
   return d;
 }
 
