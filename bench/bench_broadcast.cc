@@ -49,6 +49,7 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
+#include "bench_process.h"
 #include "client/net/broadcast_player.h"
 #include "common/status.h"
 
@@ -86,19 +87,8 @@ double WallS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-double CpuMsOf(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
-  std::string line;
-  if (!std::getline(f, line)) return 0;
-  const size_t close = line.rfind(')');
-  if (close == std::string::npos) return 0;
-  std::istringstream in(line.substr(close + 2));
-  std::vector<std::string> fields;
-  std::string field;
-  while (in >> field) fields.push_back(field);
-  if (fields.size() < 13) return 0;
-  return 1e3 * (std::stod(fields[11]) + std::stod(fields[12])) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
+// 0 for a process that is gone (its CPU no longer counts).
+double CpuMsOf(pid_t pid) { return std::max(0.0, ProcessCpuMsOf(pid)); }
 
 // CPU of an nginx instance: its master and the master's children (workers).
 double NginxCpuMs(pid_t master) {
@@ -109,56 +99,11 @@ double NginxCpuMs(pid_t master) {
   return ms;
 }
 
-uint16_t FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  uint16_t port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  close(fd);
-  return port;
-}
+uint16_t FreePort() { return FreeTcpPort(); }
 
-std::string SelfDir() {
-  char buf[4096];
-  const ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
-  if (n <= 0) return ".";
-  std::string p(buf, static_cast<size_t>(n));
-  return p.substr(0, p.rfind('/'));
-}
+pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) { return SpawnLogged(argv, log_path); }
 
-pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
-  std::vector<char*> cargv;
-  for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
-  cargv.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid == 0) {
-    FILE* log = std::fopen(log_path.c_str(), "w");
-    if (log) {
-      dup2(fileno(log), 1);
-      dup2(fileno(log), 2);
-    }
-    execv(cargv[0], cargv.data());
-    _exit(127);
-  }
-  return pid;
-}
-
-void StopChild(pid_t pid) {
-  if (pid <= 0) return;
-  kill(pid, SIGTERM);
-  for (int i = 0; i < 250; ++i) {
-    int st = 0;
-    if (waitpid(pid, &st, WNOHANG) == pid) return;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  kill(pid, SIGKILL);
-  waitpid(pid, nullptr, 0);
-}
+void StopChild(pid_t pid) { StopProcess(pid, SIGTERM, 5.0); }
 
 double Pct(std::vector<double> v, double p) {
   if (v.empty()) return 0;

@@ -50,6 +50,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench.h"
+#include "bench_process.h"
 #include "common/clock.h"
 #include "client/net/site_client.h"
 #include "client/render/gl_context.h"
@@ -85,66 +86,14 @@ struct LiveOptions {
 };
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
-double ProcessCpuMsOf(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
-  std::string line;
-  if (!std::getline(f, line)) return -1;
-  // Fields after the command name (which may hold spaces) start after ")".
-  const size_t close = line.rfind(')');
-  if (close == std::string::npos) return -1;
-  std::istringstream in(line.substr(close + 2));
-  std::string field;
-  std::vector<std::string> fields;
-  while (in >> field) fields.push_back(field);
-  // fields[0] is field 3 (state); utime and stime are fields 14 and 15.
-  if (fields.size() < 13) return -1;
-  const double ticks = std::stod(fields[11]) + std::stod(fields[12]);
-  return 1e3 * ticks / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
-
-uint16_t FreeLoopbackPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return 0;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = 0;
-  socklen_t len = sizeof a;
-  uint16_t port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  close(fd);
-  return port;
-}
-
-std::string SelfDir() {
-  char buf[4096];
-  const ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
-  if (n <= 0) return ".";
-  std::string p(buf, static_cast<size_t>(n));
-  return p.substr(0, p.rfind('/'));
-}
+uint16_t FreeLoopbackPort() { return FreeTcpPort(); }
 
 // A child process with stdout and stderr sent to files.
 struct Child {
   pid_t pid = -1;
   static StatusOr<Child> Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
-    std::vector<char*> cargv;
-    for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
-    cargv.push_back(nullptr);
-    const pid_t pid = fork();
+    const pid_t pid = SpawnLogged(argv, log_path);
     if (pid < 0) return Unavailable("fork failed");
-    if (pid == 0) {
-      FILE* log = std::fopen(log_path.c_str(), "w");
-      if (log) {
-        dup2(fileno(log), 1);
-        dup2(fileno(log), 2);
-      }
-      execv(cargv[0], cargv.data());
-      std::fprintf(stderr, "exec %s failed\n", cargv[0]);
-      _exit(127);
-    }
     Child c;
     c.pid = pid;
     return c;
@@ -156,19 +105,7 @@ struct Child {
   }
   // SIGTERM, then SIGKILL after `grace_s`; returns the exit status.
   int Stop(double grace_s = 10) {
-    if (pid <= 0) return -1;
-    kill(pid, SIGTERM);
-    int status = 0;
-    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace_s);
-    while (std::chrono::steady_clock::now() < until) {
-      if (waitpid(pid, &status, WNOHANG) == pid) {
-        pid = -1;
-        return status;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    kill(pid, SIGKILL);
-    waitpid(pid, &status, 0);
+    const int status = StopProcess(pid, SIGTERM, grace_s);
     pid = -1;
     return status;
   }

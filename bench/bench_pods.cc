@@ -35,6 +35,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench.h"
+#include "bench_process.h"
 #include "common/status.h"
 #include "server/net/wire_message.h"
 
@@ -59,75 +60,14 @@ struct PodsOptions {
   std::string keep_dir;
 };
 
-double ProcessCpuMsOf(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
-  std::string line;
-  if (!std::getline(f, line)) return -1;
-  const size_t close = line.rfind(')');
-  if (close == std::string::npos) return -1;
-  std::istringstream in(line.substr(close + 2));
-  std::string field;
-  std::vector<std::string> fields;
-  while (in >> field) fields.push_back(field);
-  if (fields.size() < 13) return -1;
-  return 1e3 * (std::stod(fields[11]) + std::stod(fields[12])) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
-
-uint16_t FreePort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return 0;
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_ANY);
-  socklen_t len = sizeof a;
-  uint16_t port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
-    port = ntohs(a.sin_port);
-  close(fd);
-  return port;
-}
-
-std::string SelfDir() {
-  char buf[4096];
-  const ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
-  if (n <= 0) return ".";
-  std::string p(buf, static_cast<size_t>(n));
-  return p.substr(0, p.rfind('/'));
-}
+uint16_t FreePort() { return FreeTcpPort(); }
 
 struct Child {
   pid_t pid = -1;
   static pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
-    std::vector<char*> cargv;
-    for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
-    cargv.push_back(nullptr);
-    const pid_t pid = fork();
-    if (pid == 0) {
-      FILE* log = std::fopen(log_path.c_str(), "w");
-      if (log) {
-        dup2(fileno(log), 1);
-        dup2(fileno(log), 2);
-      }
-      execv(cargv[0], cargv.data());
-      std::fprintf(stderr, "exec %s failed\n", cargv[0]);
-      _exit(127);
-    }
-    return pid;
+    return SpawnLogged(argv, log_path);
   }
-  static int Stop(pid_t pid, int sig = SIGTERM, double grace_s = 10) {
-    if (pid <= 0) return -1;
-    kill(pid, sig);
-    int status = 0;
-    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(grace_s);
-    while (std::chrono::steady_clock::now() < until) {
-      if (waitpid(pid, &status, WNOHANG) == pid) return status;
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    kill(pid, SIGKILL);
-    waitpid(pid, &status, 0);
-    return status;
-  }
+  static int Stop(pid_t pid, int sig = SIGTERM, double grace_s = 10) { return StopProcess(pid, sig, grace_s); }
 };
 
 std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
