@@ -450,6 +450,7 @@ void Renderer::Draw(const GpuMesh& gpu) const {
 
 Status Renderer::SetRemoteMesh(const Mesh& mesh) {
   HOLO_RETURN_IF_ERROR(Upload(mesh, &remote_));
+  remote_has_colors_ = !mesh.colors.empty() && mesh.colors.size() == mesh.positions.size();
   remote_min_ = Eigen::Vector3f::Constant(1e30f);
   remote_max_ = Eigen::Vector3f::Constant(-1e30f);
   for (const auto& p : mesh.positions) {
@@ -888,7 +889,7 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
     glUniform1f(Loc(draw_program_, "u_edge_weight"), po.discontinuity_weight);
     glUniform1f(Loc(draw_program_, "u_min_confidence"),
-                po.use_masks && !pod_masks_.empty() ? po.min_mask_confidence : 0.0f);
+                po.use_masks && !pod_masks_.empty() && remote_has_colors_ ? po.min_mask_confidence : 0.0f);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
     glActiveTexture(GL_TEXTURE1);

@@ -195,6 +195,10 @@ class Renderer {
   unsigned draw_program_ = 0, depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
   GpuMesh remote_, local_;
   Eigen::Vector3f remote_min_ = Eigen::Vector3f::Constant(1e30f), remote_max_ = Eigen::Vector3f::Constant(-1e30f);
+  // The remote mesh carries per-vertex colours (a live site streaming pod
+  // images sends none: then the images' colour is used even where only mask
+  // edges saw a point, rather than a colourless fallback).
+  bool remote_has_colors_ = true;
   // Pods: colour and depth texture arrays (one layer per pod, max size).
   // pod_raw_tex_: camera z per texel; pod_depth_tex_: the same, negated
   // near discontinuities.
