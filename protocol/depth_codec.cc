@@ -79,14 +79,21 @@ Status EncodeDepth(const ImageDepth16& depth, const DepthEncodeOptions& options,
   return OkStatus();
 }
 
-Status PeekDepthSize(std::span<const uint8_t> blob, int* width, int* height) {
-  ByteReader r(blob);
+namespace {
+// The blob's codec byte (must be D1), width and height.
+Status ReadDepthHeader(ByteReader& r, uint16_t* w, uint16_t* h) {
   uint8_t codec = 0;
-  uint16_t w = 0, h = 0;
   HOLO_RETURN_IF_ERROR(r.U8("depth.codec", &codec));
   if (codec != kD1) return DataLoss("depth.codec: unknown depth codec " + std::to_string(codec));
-  HOLO_RETURN_IF_ERROR(r.U16("depth.width", &w));
-  HOLO_RETURN_IF_ERROR(r.U16("depth.height", &h));
+  HOLO_RETURN_IF_ERROR(r.U16("depth.width", w));
+  return r.U16("depth.height", h);
+}
+}  // namespace
+
+Status PeekDepthSize(std::span<const uint8_t> blob, int* width, int* height) {
+  ByteReader r(blob);
+  uint16_t w = 0, h = 0;
+  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &w, &h));
   *width = w;
   *height = h;
   return OkStatus();
@@ -94,12 +101,8 @@ Status PeekDepthSize(std::span<const uint8_t> blob, int* width, int* height) {
 
 Status DecodeDepth(std::span<const uint8_t> blob, ImageDepth16* depth, const Limits& limits) {
   ByteReader r(blob);
-  uint8_t codec = 0;
   uint16_t w = 0, h = 0;
-  HOLO_RETURN_IF_ERROR(r.U8("depth.codec", &codec));
-  if (codec != kD1) return DataLoss("depth.codec: unknown depth codec " + std::to_string(codec));
-  HOLO_RETURN_IF_ERROR(r.U16("depth.width", &w));
-  HOLO_RETURN_IF_ERROR(r.U16("depth.height", &h));
+  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &w, &h));
   if (w == 0 || h == 0 || w > limits.max_image_dim || h > limits.max_image_dim)
     return DataLoss("depth.width: image size " + std::to_string(w) + "x" + std::to_string(h) + " outside 1.." +
                     std::to_string(limits.max_image_dim));

@@ -143,27 +143,39 @@ int Record(const std::string& out, const std::string& source_spec, double durati
   return code;
 }
 
+// Client options of a recorder connection to a live site (role recorder,
+// raw messages, everything subscribed); the token falls back to env
+// HOLO_VIEWER_TOKEN. Shared by --connect and --live-dir.
+holo::StatusOr<holo::net::ClientOptions> RecorderClientOptions(const std::string& connect, std::string token,
+                                                               const std::string& name, bool tls,
+                                                               const std::string& ca_file, double connect_timeout_s) {
+  holo::net::ClientOptions co;
+  HOLO_RETURN_IF_ERROR(holo::net::ParseHostPort(connect, &co.host, &co.port).WithContext("--connect"));
+  if (co.host == "0.0.0.0") co.host = "127.0.0.1";
+  if (token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) token = std::getenv("HOLO_VIEWER_TOKEN");
+  if (token.empty())
+    return holo::InvalidArgument("--connect needs the site's viewer token: --token or env HOLO_VIEWER_TOKEN");
+  co.role = holo::protocol::Role::kRecorder;
+  co.token = token;
+  co.name = name;
+  co.decode = false;
+  co.subscribe = holo::net::kSubscribeAll;
+  co.tls.enabled = tls;
+  co.tls.ca_file = ca_file;
+  co.connect_timeout_s = connect_timeout_s;
+  return co;
+}
+
 // Records a live site: subscribes like a viewer (role recorder) through
 // SiteClient and writes every message it receives (raw, exactly as sent)
 // through RecordingSink. Exit codes as Record().
 int RecordLive(const std::string& out, const std::string& connect, std::string token, double duration_s,
                uint64_t max_bytes, bool overwrite, double sync_mb, bool tls, const std::string& ca_file,
                double connect_timeout_s, bool quiet) {
-  holo::net::ClientOptions co;
-  holo::Status st = holo::net::ParseHostPort(connect, &co.host, &co.port);
-  if (!st.ok()) return Fail(st.WithContext("--connect"));
-  if (co.host == "0.0.0.0") co.host = "127.0.0.1";
-  if (token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) token = std::getenv("HOLO_VIEWER_TOKEN");
-  if (token.empty()) return Fail(holo::InvalidArgument("--connect needs the site's viewer token: --token or env HOLO_VIEWER_TOKEN"));
+  auto options = RecorderClientOptions(connect, token, "holoport-record", tls, ca_file, connect_timeout_s);
+  if (!options.ok()) return Fail(options.status());
   if (!(duration_s >= 0)) return Fail(holo::InvalidArgument("--duration must be ≥ 0"));
-  co.role = holo::protocol::Role::kRecorder;
-  co.token = token;
-  co.name = "holoport-record";
-  co.decode = false;
-  co.subscribe = holo::net::kSubscribeAll;
-  co.tls.enabled = tls;
-  co.tls.ca_file = ca_file;
-  co.connect_timeout_s = connect_timeout_s;
+  holo::net::ClientOptions co = *options;
   holo::Status check = co.Check();
   if (!check.ok()) return Fail(check);
 
@@ -313,26 +325,14 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
   std::unique_ptr<holo::net::SiteClient> client;
   std::unique_ptr<holo::record::SyntheticStream> synthetic;
   if (!connect.empty()) {
-    holo::net::ClientOptions co;
-    holo::Status st = holo::net::ParseHostPort(connect, &co.host, &co.port);
-    if (!st.ok()) return Fail(st.WithContext("--connect"));
-    if (co.host == "0.0.0.0") co.host = "127.0.0.1";
-    if (token.empty() && std::getenv("HOLO_VIEWER_TOKEN")) token = std::getenv("HOLO_VIEWER_TOKEN");
-    if (token.empty())
-      return Fail(holo::InvalidArgument("--connect needs the site's viewer token: --token or env HOLO_VIEWER_TOKEN"));
-    co.role = holo::protocol::Role::kRecorder;
-    co.token = token;
-    co.name = "holoport-record --live-dir";
-    co.decode = false;
+    auto options = RecorderClientOptions(connect, token, "holoport-record --live-dir", tls, ca_file, connect_timeout_s);
+    if (!options.ok()) return Fail(options.status());
+    holo::net::ClientOptions co = *options;
     // Segments must start with colour every player can decode alone: the
     // intra-only codecs. A site publishing V1 video refuses the packager
     // with "no common codec" (V1 packaging would need colour key frames at
     // every segment start).
     co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0};
-    co.subscribe = holo::net::kSubscribeAll;
-    co.tls.enabled = tls;
-    co.tls.ca_file = ca_file;
-    co.connect_timeout_s = connect_timeout_s;
     holo::Status check = co.Check();
     if (!check.ok()) return Fail(check);
     holo::net::ClientCallbacks cb;
