@@ -29,7 +29,7 @@ const params = new URLSearchParams(location.search);
 const state = {
   status: 'starting', problem: '', framesShown: 0, frameIndex: -1, frozen: false,
   latencyMs: null, bufferMs: 0, fps: 0, geometryMs: [], colorMs: [], triangles: 0,
-  bytes: 0, parts: 0, errors: 0, problems: [], audioChunks: 0, mode: '',
+  bytes: 0, parts: 0, errors: 0, bufferGrowths: 0, problems: [], audioChunks: 0, mode: '',
 };
 window.holoport = {
   state,
@@ -191,6 +191,15 @@ function onMessages(messages, info) {
     const edge = Math.max(first, info.liveEdgeUs || first);
     delayUs = broadcastNow - edge + (info.targetPartUs || 250000) + 250000;
     pending.length = 0;
+  }
+  // Parts arriving later than the playhead (a slow network or a busy
+  // machine): the buffer grows by the lateness plus 100 ms, so that voice
+  // plays (late voice is skipped) and frames are not shown in bursts. The
+  // catch-up in pump() bounds the buffer at 4 s.
+  const lateUs = broadcastNow - delayUs - messages[messages.length - 1].timeUs;
+  if (lateUs > 50000) {
+    delayUs += lateUs + 100000;
+    state.bufferGrowths++;
   }
   for (const m of messages) {
     // Voice is scheduled on the audio clock as soon as it arrives (ahead of

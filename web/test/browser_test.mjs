@@ -114,7 +114,7 @@ try {
     const s1 = await page.evaluate(() => ({ ...window.holoport.state }));
     // Functional, not a speed test (the machine may be loaded): frames and
     // broadcast time advance, voice plays, no trouble reported.
-    check(s1.framesShown - s0.framesShown >= 10, `played 5 s: ${s1.framesShown - s0.framesShown} frames shown (frame ${s0.frameIndex} → ${s1.frameIndex})`);
+    check(s1.framesShown - s0.framesShown >= 10, `played 5 s: ${s1.framesShown - s0.framesShown} frames shown (frame ${s0.frameIndex} → ${s1.frameIndex}; buffer grown ${s1.bufferGrowths}×, now ${(s1.bufferMs / 1000).toFixed(2)} s)`);
     check(s1.mediaUs - s0.mediaUs >= 3e6, `broadcast time advanced ${((s1.mediaUs - s0.mediaUs) / 1e6).toFixed(2)} s in 5 s`);
     check(s1.problems.length === 0, `no problem shown while playing (${s1.problems.map((p) => p.text).join('; ') || 'none'})`);
     check(s1.audioChunks >= 100, `voice: ${s1.audioChunks} AudioPose messages played`);
