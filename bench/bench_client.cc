@@ -24,16 +24,16 @@
 #include "client/render/renderer.h"
 #include "client/render/view.h"
 #include "common/clock.h"
-#include "common/metrics/image_metrics.h"
-#include "common/pose.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
 #include "common/file_util.h"
 #include "common/image_io.h"
+#include "common/metrics/image_metrics.h"
+#include "common/pose.h"
 #include "protocol/color_codec.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/pipeline/capture_site.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/texturer.h"
 
 namespace {
 

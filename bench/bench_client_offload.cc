@@ -33,11 +33,11 @@
 #include "client/pose/trace.h"
 #include "client/reproject/offload_sim.h"
 #include "common/metrics/image_metrics.h"
-#include "server/net/session_server.h"
+#include "net/session_server.h"
+#include "net/wire_message.h"
 #include "server/net/site_publisher.h"
-#include "server/net/wire_message.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace {
 

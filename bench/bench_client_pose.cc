@@ -32,8 +32,8 @@
 #include "client/pose/predictor.h"
 #include "client/pose/trace.h"
 #include "client/reproject/offload_sim.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace {
 

@@ -63,11 +63,11 @@
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
 
-#if __has_include("server/studio/workloads.h") && __has_include("server/studio/studio.cc")
+#if __has_include("studio/workloads.h") && __has_include("studio/studio.cc")
 #define HOLO_BENCH_HAVE_STUDIO 1
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 #else
 #define HOLO_BENCH_HAVE_STUDIO 0
 #endif

@@ -31,14 +31,14 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
-#include "fusion_pipeline.h"
 #include "common/image_io.h"
 #include "common/metrics/mesh_distance.h"
+#include "fusion_pipeline.h"
 #include "server/capture/importers.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

@@ -5,15 +5,15 @@
 #include <vector>
 
 #include "common/file_util.h"
-#include "server/capture/dataset.h"
-#include "server/capture/prerendered.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "fusion_pipeline.h"
+#include "server/capture/dataset.h"
+#include "server/capture/prerendered.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/novel_view.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/novel_view.h"
 
 namespace holo::bench {
 namespace {

@@ -51,18 +51,18 @@
 
 #include "bench.h"
 #include "bench_process.h"
-#include "common/clock.h"
-#include "client/net/site_client.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
+#include "common/clock.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/pose.h"
+#include "net/site_client.h"
+#include "net/wire_message.h"
 #include "server/capture/prerendered.h"
-#include "server/net/wire_message.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/novel_view.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/novel_view.h"
 
 namespace holo::bench {
 namespace {

@@ -11,8 +11,8 @@
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/metrics/triangle_index.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

@@ -37,7 +37,7 @@
 #include "bench.h"
 #include "bench_process.h"
 #include "common/status.h"
-#include "server/net/wire_message.h"
+#include "net/wire_message.h"
 
 namespace holo::bench {
 namespace {

@@ -30,14 +30,14 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
-#include "client/net/site_client.h"
 #include "common/clock.h"
-#include "server/net/session_server.h"
-#include "server/record/recording_sink.h"
-#include "server/record/replay_net.h"
+#include "net/session_server.h"
+#include "net/site_client.h"
 #include "server/record/recording_reader.h"
+#include "server/record/recording_sink.h"
 #include "server/record/recording_writer.h"
 #include "server/record/replay.h"
+#include "server/record/replay_net.h"
 #include "server/record/synthetic_stream.h"
 
 namespace holo::bench {

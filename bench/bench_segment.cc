@@ -31,8 +31,8 @@
 #include "server/segment/color_calibration.h"
 #include "server/segment/mog2_baseline.h"
 #include "server/segment/segmenter.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

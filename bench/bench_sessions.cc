@@ -34,15 +34,15 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
-#include "common/clock.h"
 #include "client/net/raw_peer.h"
-#include "client/net/site_client.h"
+#include "common/clock.h"
+#include "net/session_server.h"
+#include "net/site_client.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
-#include "server/net/session_server.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

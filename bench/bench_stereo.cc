@@ -33,8 +33,8 @@
 #include "server/fusion/tsdf.h"
 #include "server/stereo/patchmatch.h"
 #include "server/stereo/stereo_depth.h"
-#include "server/studio/stereo_render.h"
-#include "server/studio/workloads.h"
+#include "studio/stereo_render.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

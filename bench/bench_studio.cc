@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "bench.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace {
 

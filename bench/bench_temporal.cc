@@ -36,9 +36,9 @@
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/surface_sampling.h"
 #include "common/metrics/triangle_index.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
 #include "server/temporal/temporal_fusion.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::bench {
 namespace {

@@ -23,10 +23,10 @@
 #include "bench.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/novel_view.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/novel_view.h"
+#include "texture/texturer.h"
 
 namespace {
 

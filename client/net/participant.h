@@ -18,8 +18,8 @@
 #include <string>
 
 #include "client/net/call_config.h"
-#include "client/net/site_client.h"
 #include "common/status.h"
+#include "net/site_client.h"
 #include "protocol/messages.h"
 
 namespace holo::net {

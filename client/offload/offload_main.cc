@@ -14,7 +14,7 @@
 #include "client/offload/thin_client.h"
 #include "client/pose/head_motion.h"
 #include "client/pose/trace.h"
-#include "server/net/server_config.h"
+#include "net/server_config.h"
 
 namespace holo::offload {
 namespace {

@@ -15,8 +15,8 @@
 #include "client/offload/gl_scene.h"
 #include "client/offload/message_link.h"
 #include "client/reproject/fov.h"
-#include "server/net/session_server.h"
-#include "server/net/wire_message.h"
+#include "net/session_server.h"
+#include "net/wire_message.h"
 
 namespace holo::offload {
 namespace {

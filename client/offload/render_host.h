@@ -17,11 +17,11 @@
 #include <thread>
 #include <vector>
 
-#include "client/net/site_client.h"
 #include "client/pose/predictor.h"
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 #include "common/mesh.h"
 #include "common/status.h"
+#include "net/site_client.h"
 
 namespace holo::offload {
 

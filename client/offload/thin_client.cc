@@ -16,9 +16,9 @@
 
 #include "client/offload/message_link.h"
 #include "client/reproject/fov.h"
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 #include "common/image_io.h"
-#include "server/net/wire_message.h"
+#include "net/wire_message.h"
 
 namespace holo::offload {
 namespace {

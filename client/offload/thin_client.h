@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "client/pose/head_pose.h"
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 #include "client/reproject/reproject.h"
 #include "common/image.h"
 #include "common/status.h"

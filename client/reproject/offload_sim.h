@@ -13,7 +13,7 @@
 
 #include "client/pose/head_pose.h"
 #include "client/pose/predictor.h"
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 #include "client/reproject/reproject.h"
 
 namespace holo::reproject {

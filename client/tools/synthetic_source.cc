@@ -2,9 +2,9 @@
 
 #include "common/clock.h"
 #include "common/rgbd.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/texturer.h"
 
 namespace holo::client {
 

@@ -1,7 +1,7 @@
 // The stand-in stream for the viewer: what a site server would send per
 // frame — the foreground mesh with the server texturer's per-vertex colours,
 // and the pods' (colour-calibrated) images for projective texturing — taken
-// from the synthetic studio's exact ground truth (server/studio).
+// from the synthetic studio's exact ground truth (studio/).
 #pragma once
 
 #include <cstdint>

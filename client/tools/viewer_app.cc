@@ -24,7 +24,6 @@
 #include "audio/room.h"
 #include "client/net/broadcast_player.h"
 #include "client/net/participant.h"
-#include "client/net/site_client.h"
 #include "client/render/gl_context.h"
 #include "client/render/overlay.h"
 #include "client/render/renderer.h"
@@ -34,6 +33,7 @@
 #include "common/image_io.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/pose.h"
+#include "net/site_client.h"
 // Recorded head traces come from the pose library when it is part of the
 // build (client/pose, the prediction work); without it --pose-trace is refused.
 #if __has_include("client/pose/trace.h")

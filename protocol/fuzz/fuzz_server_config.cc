@@ -1,9 +1,9 @@
-// libFuzzer target: the session server YAML (server/net/server_config.h).
+// libFuzzer target: the session server YAML (net/server_config.h).
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
-#include "server/net/server_config.h"
+#include "net/server_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   (void)holo::net::ParseServerConfig(std::string(reinterpret_cast<const char*>(data), size));

@@ -17,11 +17,11 @@
 #include <string>
 #include <vector>
 
+#include "common/frame_source.h"
 #include "common/mesh.h"
 #include "common/rgbd.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/capture/frame_source.h"
 
 namespace holo {
 

@@ -18,10 +18,10 @@
 #include <vector>
 
 #include "common/camera.h"
+#include "common/frame_source.h"
 #include "common/rgbd.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/capture/frame_source.h"
 
 namespace holo {
 

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <string>
 
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 namespace holo {
 

@@ -14,9 +14,9 @@
 #include <memory>
 #include <vector>
 
+#include "common/frame_source.h"
 #include "common/rgbd.h"
 #include "common/rig.h"
-#include "server/capture/frame_source.h"
 
 namespace holo {
 

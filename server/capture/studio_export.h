@@ -10,7 +10,7 @@
 #include "common/image.h"
 #include "common/status.h"
 #include "server/capture/dataset.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 namespace holo {
 

@@ -16,10 +16,10 @@
 #include "common/image.h"
 #include "common/mesh.h"
 #include "common/status.h"
+#include "net/session_server.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
-#include "server/net/session_server.h"
 
 namespace holo::net {
 

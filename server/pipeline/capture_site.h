@@ -18,18 +18,18 @@
 #include <memory>
 #include <string>
 
+#include "common/frame_source.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/capture/frame_source.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/stream_mesh.h"
 #include "server/fusion/tsdf.h"
 #include "server/pipeline/pipeline.h"
 #include "server/segment/color_calibration.h"
 #include "server/segment/segmenter.h"
-#include "server/studio/studio.h"
 #include "server/temporal/temporal_fusion.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "texture/texturer.h"
 
 namespace holo {
 

@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cstdio>
 
-#include "server/net/wire_message.h"
+#include "net/wire_message.h"
 #include "server/pods/socket_io.h"
 
 namespace holo::pods {

@@ -8,10 +8,10 @@
 #include <nlohmann/json.hpp>
 
 #include "common/clock.h"
+#include "net/session_server.h"
+#include "net/wire_message.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
-#include "server/net/session_server.h"
-#include "server/net/wire_message.h"
 
 namespace holo::pods {
 

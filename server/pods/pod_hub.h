@@ -30,10 +30,10 @@
 #include <thread>
 #include <vector>
 
+#include "common/frame_source.h"
 #include "common/rig.h"
 #include "common/status.h"
 #include "protocol/messages.h"
-#include "server/capture/frame_source.h"
 #include "server/pods/clock_sync.h"
 #include "server/pods/frame_grouper.h"
 #include "server/pods/socket_io.h"

@@ -8,15 +8,15 @@
 #include <vector>
 
 #include "common/clock.h"
+#include "net/wire_message.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 #include "server/capture/dataset.h"
 #include "server/capture/prerendered.h"
-#include "server/net/wire_message.h"
 #include "server/pods/pod_client.h"
 #include "server/pods/socket_io.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::pods {
 

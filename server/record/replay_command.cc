@@ -14,7 +14,7 @@
 #include "common/clock.h"
 #include "common/file_util.h"
 #include "common/mesh.h"
-#include "server/net/server_config.h"
+#include "net/server_config.h"
 #include "protocol/geometry_codec.h"
 #include "server/record/recording_reader.h"
 #include "server/record/replay.h"

@@ -5,7 +5,7 @@
 #include <span>
 #include <utility>
 
-#include "server/net/wire_message.h"
+#include "net/wire_message.h"
 
 namespace holo::record {
 

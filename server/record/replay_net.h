@@ -25,8 +25,8 @@
 
 #include "common/clock.h"
 #include "common/status.h"
-#include "server/net/server_config.h"
-#include "server/net/session_server.h"
+#include "net/server_config.h"
+#include "net/session_server.h"
 #include "server/record/recording_reader.h"
 #include "server/record/replay.h"
 

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <numbers>
 
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::record {
 

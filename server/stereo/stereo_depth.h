@@ -7,13 +7,13 @@
 #include <memory>
 #include <vector>
 
+#include "common/frame_source.h"
 #include "common/image.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/capture/frame_source.h"
 #include "server/stereo/patchmatch.h"
-#include "server/studio/stereo_render.h"
-#include "server/studio/studio.h"
+#include "studio/stereo_render.h"
+#include "studio/studio.h"
 
 namespace holo {
 

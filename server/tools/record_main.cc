@@ -16,9 +16,9 @@
 
 #include <CLI/CLI.hpp>
 
-#include "client/net/site_client.h"
 #include "common/clock.h"
-#include "server/net/server_config.h"
+#include "net/server_config.h"
+#include "net/site_client.h"
 #include "server/record/inspect.h"
 #include "server/record/live_packager.h"
 #include "server/record/recording_reader.h"

@@ -18,23 +18,23 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "common/clock.h"
 #include "common/file_util.h"
 #include "common/image_io.h"
 #include "common/visualize.h"
-#include "common/clock.h"
+#include "net/server_config.h"
+#include "net/session_server.h"
 #include "server/capture/dataset.h"
 #include "server/capture/prerendered.h"
-#include "server/net/server_config.h"
-#include "server/net/session_server.h"
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
 #include "server/pods/pod_hub.h"
 #include "server/record/replay_command.h"
 #include "server/stereo/stereo_depth.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/mesh_renderer.h"
-#include "server/texture/novel_view.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
+#include "texture/novel_view.h"
 
 namespace {
 

@@ -8,8 +8,8 @@
 #include "common/file_util.h"
 #include "common/image_io.h"
 #include "server/capture/studio_export.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 int main(int argc, char** argv) {
   CLI::App app{

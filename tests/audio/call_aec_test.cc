@@ -8,8 +8,8 @@
 
 #include "audio/wav.h"
 #include "client/net/participant.h"
-#include "server/net/session_server.h"
 #include "net/net_fixtures.h"
+#include "net/session_server.h"
 #include "test_util.h"
 
 namespace holo {

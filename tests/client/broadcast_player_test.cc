@@ -20,8 +20,8 @@
 #include <gtest/gtest.h>
 
 #include "client/net/broadcast_player.h"
-#include "client/net/site_client.h"
 #include "common/file_util.h"
+#include "net/site_client.h"
 #include "record/record_test_util.h"
 #include "server/record/live_packager.h"
 #include "test_util.h"

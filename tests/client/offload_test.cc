@@ -18,12 +18,12 @@
 #include "client/offload/render_host.h"
 #include "client/offload/thin_client.h"
 #include "common/metrics/image_metrics.h"
-#include "server/net/session_server.h"
-#include "server/net/site_publisher.h"
-#include "server/net/wire_message.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
 #include "net/net_fixtures.h"
+#include "net/session_server.h"
+#include "net/wire_message.h"
+#include "server/net/site_publisher.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::offload {
 namespace {

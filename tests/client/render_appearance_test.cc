@@ -22,10 +22,10 @@
 #include "common/pose.h"
 #include "protocol/color_codec.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 #include "test_util.h"
+#include "texture/texturer.h"
 
 namespace holo::render {
 namespace {

@@ -17,11 +17,11 @@
 #include "common/image_io.h"
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/mesh_renderer.h"
-#include "server/texture/texturer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 #include "test_util.h"
+#include "texture/mesh_renderer.h"
+#include "texture/texturer.h"
 
 namespace holo::render {
 namespace {

@@ -10,8 +10,8 @@
 
 #include "client/pose/head_pose.h"
 #include "client/reproject/offload_sim.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::reproject {
 namespace {

@@ -8,12 +8,12 @@
 
 #include "client/pose/head_pose.h"
 #include "client/reproject/fov.h"
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 #include "client/reproject/reproject.h"
 #include "common/metrics/image_metrics.h"
 #include "protocol/messages.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo::reproject {
 namespace {

@@ -10,9 +10,9 @@
 #include <memory>
 #include <vector>
 
-#include "client/net/site_client.h"
 #include "common/image.h"
 #include "net/net_fixtures.h"
+#include "net/site_client.h"
 #include "protocol/messages.h"
 #include "protocol/test_meshes.h"
 #include "protocol/video_codec.h"

@@ -12,14 +12,14 @@
 
 #include <gtest/gtest.h>
 
-#include "client/net/site_client.h"
 #include "common/metrics/mesh_distance.h"
+#include "net/site_client.h"
 #include "net_fixtures.h"
 #include "server/capture/prerendered.h"
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

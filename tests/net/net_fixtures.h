@@ -12,10 +12,10 @@
 #include <thread>
 #include <vector>
 
+#include "net/session_server.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/test_meshes.h"
-#include "server/net/session_server.h"
 
 namespace holo::test {
 

@@ -7,8 +7,8 @@
 #include <thread>
 
 #include "client/net/raw_peer.h"
-#include "client/net/site_client.h"
 #include "net/net_fixtures.h"
+#include "net/site_client.h"
 
 namespace holo::net {
 namespace {

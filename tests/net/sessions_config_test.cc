@@ -5,7 +5,7 @@
 
 #include "client/net/call_config.h"
 #include "common/file_util.h"
-#include "server/net/server_config.h"
+#include "net/server_config.h"
 #include "test_util.h"
 
 namespace holo::net {

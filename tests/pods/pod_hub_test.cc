@@ -7,9 +7,9 @@
 #include <chrono>
 #include <thread>
 
+#include "net/wire_message.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
-#include "server/net/wire_message.h"
 #include "server/pods/pod_client.h"
 #include "server/pods/pod_hub.h"
 #include "server/pods/socket_io.h"

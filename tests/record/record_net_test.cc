@@ -21,11 +21,11 @@
 #include <thread>
 #include <vector>
 
-#include "client/net/site_client.h"
 #include "common/clock.h"
 #include "net/net_fixtures.h"
+#include "net/session_server.h"
+#include "net/site_client.h"
 #include "record_test_util.h"
-#include "server/net/session_server.h"
 #include "server/record/recording_reader.h"
 #include "server/record/recording_sink.h"
 #include "server/record/recording_writer.h"

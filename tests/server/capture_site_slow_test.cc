@@ -4,8 +4,8 @@
 #include <gtest/gtest.h>
 
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

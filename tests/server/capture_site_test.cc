@@ -8,7 +8,7 @@
 #include "server/capture/dataset.h"
 #include "server/capture/studio_export.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 #include "test_util.h"
 
 namespace holo {

@@ -6,9 +6,9 @@
 
 #include <gtest/gtest.h>
 
-#include "server/studio/render.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/render.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

@@ -14,8 +14,8 @@
 #include "protocol/geometry_codec.h"
 #include "server/capture/prerendered.h"
 #include "server/pipeline/capture_site.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

@@ -12,12 +12,12 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "analytic_scenes.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
 #include "server/fusion/marching_cubes.h"
 #include "server/fusion/mesh_cleanup.h"
-#include "server/studio/studio.h"
-#include "analytic_scenes.h"
+#include "studio/studio.h"
 
 namespace holo {
 namespace {

@@ -13,8 +13,8 @@
 #include "common/metrics/image_metrics.h"
 #include "common/visualize.h"
 #include "server/segment/mog2_baseline.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

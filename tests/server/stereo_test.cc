@@ -9,8 +9,8 @@
 #include "common/rig.h"
 #include "server/stereo/patchmatch.h"
 #include "server/stereo/stereo_depth.h"
-#include "server/studio/stereo_render.h"
-#include "server/studio/studio.h"
+#include "studio/stereo_render.h"
+#include "studio/studio.h"
 
 namespace holo {
 namespace {

@@ -13,8 +13,8 @@
 #include "common/metrics/mesh_distance.h"
 #include "server/capture/prerendered.h"
 #include "server/fusion/tsdf.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

@@ -7,7 +7,7 @@
 #include "common/visualize.h"
 #include "server/capture/dataset.h"
 #include "server/capture/studio_export.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 #include "test_util.h"
 
 namespace holo {

@@ -1,4 +1,4 @@
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
-#include "server/studio/workloads.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

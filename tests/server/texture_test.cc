@@ -1,4 +1,4 @@
-#include "server/texture/texturer.h"
+#include "texture/texturer.h"
 
 #include <atomic>
 #include <cmath>
@@ -11,10 +11,10 @@
 #include <gtest/gtest.h>
 
 #include "common/metrics/mesh_shapes.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/mesh_renderer.h"
-#include "server/texture/novel_view.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
+#include "texture/novel_view.h"
 
 namespace holo {
 // Counts heap allocations in this test binary (steady-state check below).

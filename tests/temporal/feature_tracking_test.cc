@@ -11,12 +11,12 @@
 
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
-#include "server/studio/workloads.h"
 #include "server/temporal/deformation_graph.h"
 #include "server/temporal/feature_matcher.h"
 #include "server/temporal/nonrigid_tracker.h"
 #include "server/temporal/temporal_fusion.h"
-#include "server/texture/mesh_renderer.h"
+#include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo {
 namespace {

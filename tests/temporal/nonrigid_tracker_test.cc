@@ -13,10 +13,10 @@
 #include "common/metrics/triangle_index.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
 #include "server/temporal/deformation_graph.h"
-#include "server/texture/mesh_renderer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo {
 namespace {

@@ -14,9 +14,9 @@
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/metrics/triangle_index.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
-#include "server/texture/mesh_renderer.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo {
 namespace {

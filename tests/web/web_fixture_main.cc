@@ -33,8 +33,8 @@
 #include "server/record/recording_reader.h"
 #include "server/record/recording_writer.h"
 #include "server/record/synthetic_stream.h"
-#include "server/studio/studio.h"
-#include "server/studio/workloads.h"
+#include "studio/studio.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

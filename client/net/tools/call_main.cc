@@ -24,8 +24,8 @@
 #include "audio/room.h"
 #include "client/net/call_config.h"
 #include "client/net/participant.h"
-#include "client/net/site_client.h"
 #include "common/mesh.h"
+#include "net/site_client.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-#include "client/net/site_client.h"
+#include "net/site_client.h"
 
 #include <pthread.h>
 #include <time.h>

@@ -1,4 +1,4 @@
-#include "server/studio/render.h"
+#include "studio/render.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,10 +1,10 @@
-#include "server/studio/stereo_render.h"
+#include "studio/stereo_render.h"
 
 #include <algorithm>
 #include <cmath>
 
 #include "common/worker_pool.h"
-#include "server/studio/render.h"
+#include "studio/render.h"
 
 namespace holo {
 

@@ -12,12 +12,12 @@
 #include <vector>
 
 #include "common/camera.h"
+#include "common/frame_source.h"
 #include "common/image.h"
 #include "common/mesh.h"
 #include "common/rgbd.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/capture/frame_source.h"
 
 namespace holo {
 
@@ -115,7 +115,7 @@ class SyntheticStudio final : public FrameSource {
 
   const StudioOptions& options() const { return options_; }
 
-  // For renderers built on the studio (server/studio/stereo_render.h): poses
+  // For renderers built on the studio (studio/stereo_render.h): poses
   // frame `frame_index` (cached between calls) and calls `fn` with the posed
   // scene and the studio's worker pool, on the calling thread.
   using PosedFrameFn =

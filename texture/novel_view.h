@@ -13,7 +13,7 @@
 #include "common/image.h"
 #include "common/mesh.h"
 #include "common/status.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 namespace holo {
 

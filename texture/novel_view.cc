@@ -1,4 +1,4 @@
-#include "server/texture/novel_view.h"
+#include "texture/novel_view.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include "common/image_io.h"
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
-#include "server/texture/mesh_renderer.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo {
 

@@ -6,7 +6,7 @@
 
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 namespace holo {
 

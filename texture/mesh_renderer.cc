@@ -1,4 +1,4 @@
-#include "server/texture/mesh_renderer.h"
+#include "texture/mesh_renderer.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "server/texture/texturer.h"
+#include "texture/texturer.h"
 
 #include <algorithm>
 #include <chrono>

@@ -19,9 +19,9 @@
 
 #include "common/rig.h"
 #include "common/status.h"
+#include "net/server_config.h"
+#include "net/wire_message.h"
 #include "protocol/messages.h"
-#include "server/net/server_config.h"
-#include "server/net/wire_message.h"
 
 namespace holo::net {
 

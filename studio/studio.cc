@@ -1,4 +1,4 @@
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 #include "common/worker_pool.h"
 
@@ -9,8 +9,8 @@
 #include <mutex>
 #include <thread>
 
-#include "server/studio/render.h"
-#include "server/studio/scene.h"
+#include "studio/render.h"
+#include "studio/scene.h"
 
 namespace holo {
 Status DepthNoiseOptions::Check() const {

@@ -19,7 +19,7 @@
 #include "common/image.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/studio/studio.h"
+#include "studio/studio.h"
 
 namespace holo {
 

@@ -1,4 +1,4 @@
-#include "server/studio/scene.h"
+#include "studio/scene.h"
 
 #include <algorithm>
 #include <cmath>

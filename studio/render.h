@@ -10,8 +10,8 @@
 #include <Eigen/Geometry>
 
 #include "common/camera.h"
-#include "server/studio/scene.h"
-#include "server/studio/studio.h"
+#include "studio/scene.h"
+#include "studio/studio.h"
 
 namespace holo::studio {
 

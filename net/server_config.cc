@@ -1,4 +1,4 @@
-#include "server/net/server_config.h"
+#include "net/server_config.h"
 
 #include <cmath>
 

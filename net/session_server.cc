@@ -1,4 +1,4 @@
-#include "server/net/session_server.h"
+#include "net/session_server.h"
 
 #include <fcntl.h>
 #include <pthread.h>

@@ -1,4 +1,4 @@
-#include "server/net/wire_message.h"
+#include "net/wire_message.h"
 
 #include <algorithm>
 #include <chrono>

@@ -1,4 +1,4 @@
-#include "server/studio/workloads.h"
+#include "studio/workloads.h"
 
 namespace holo {
 namespace {

@@ -1,4 +1,4 @@
-#include "client/reproject/render_host.h"
+#include "client/reproject/rendered_view.h"
 
 #include <cmath>
 #include <cstring>
@@ -7,7 +7,7 @@
 #include <lz4.h>
 
 #include "protocol/color_codec.h"
-#include "server/texture/mesh_renderer.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo::reproject {
 

@@ -37,7 +37,7 @@
 #include "common/rgbd.h"
 #include "common/rig.h"
 #include "common/status.h"
-#include "server/texture/mesh_renderer.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo {
 

@@ -35,7 +35,7 @@ struct RenderedView {
 // output may be null.
 using SceneRenderFn = std::function<Status(const CameraModel&, ImageRgb8*, ImageDepth16*, ImageGray8*)>;
 // A SceneRenderFn drawing `mesh` (borrowed: must outlive the function) with
-// the CPU mesh renderer (server/texture/mesh_renderer.h), black background.
+// the CPU mesh renderer (texture/mesh_renderer.h), black background.
 SceneRenderFn MeshSceneRenderer(const Mesh& mesh);
 
 // Renders at `world_from_camera` with field of view `fov` at `width` ×
