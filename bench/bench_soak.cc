@@ -20,7 +20,9 @@
 // lines (one per published frame, CPU per frame every 30 frames, session
 // counters), holoport-call's --stats lines (one per second: frames and their
 // latencies, the client's and the call's counters), and their logs. RSS
-// (/proc/PID/status VmRSS) and CPU of every process are sampled every second.
+// (/proc/PID/status VmRSS) and CPU of every process are sampled every second
+// (samples.jsonl in the run's directory: t_s from the measured run's start,
+// load, rss_mb and cpu_ms per process).
 //
 // The run: sites start, then the clients; once every client receives frames
 // (and each participant hears the other) and --warmup seconds have passed,
@@ -269,6 +271,7 @@ class Soak {
   std::string dir_, bin_;
   std::vector<std::unique_ptr<Proc>> procs_;
   std::vector<Sample> load_;
+  std::unique_ptr<FILE, int (*)(FILE*)> samples_{nullptr, &std::fclose};
   bool shutting_down_ = false;
   double t0_ = 0;  // start of the measured run (wall s)
   std::string recording_;
@@ -318,12 +321,17 @@ void Soak::Read(Proc* p) {
 void Soak::SampleAll() {
   const double now = WallS();
   load_.push_back({now, LoadAvg1()});
+  nlohmann::ordered_json line;  // samples.jsonl: the series behind the figures, for a closer look
+  line["t_s"] = t0_ > 0 ? now - t0_ : 0.0;
+  line["load"] = load_.back().value;
   for (auto& up : procs_) {
     Proc* p = up.get();
     if (p->running) {
       const double rss = RssMbOf(p->pid), cpu = ProcessCpuMsOf(p->pid);
       if (rss > 0) p->rss_mb.push_back({now, rss});
       if (cpu >= 0) p->cpu_ms.push_back({now, cpu});
+      line["rss_mb"][p->name] = rss;
+      line["cpu_ms"][p->name] = cpu;
       int status = 0;
       if (waitpid(p->pid, &status, WNOHANG) == p->pid) {
         p->running = false;
@@ -332,6 +340,11 @@ void Soak::SampleAll() {
       }
     }
     Read(p);
+  }
+  if (!samples_) samples_.reset(std::fopen((dir_ + "/samples.jsonl").c_str(), "w"));
+  if (samples_) {
+    std::fprintf(samples_.get(), "%s\n", line.dump().c_str());
+    std::fflush(samples_.get());
   }
 }
 
