@@ -7,6 +7,7 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -66,13 +67,23 @@ inline std::string SelfDir() {
 }
 
 // Starts argv[0] (a path) with stdout and stderr in `log_path`; the pid, or
-// -1 when fork failed.
-inline pid_t SpawnLogged(const std::vector<std::string>& argv, const std::string& log_path) {
+// -1 when fork failed. `tied`: the child runs in its own process group (a
+// Ctrl-C in the terminal reaches only holoport-bench, which stops its children
+// in order) and gets SIGTERM if the calling thread dies (PR_SET_PDEATHSIG), so
+// nothing is left running after a crash; spawn tied children from the thread
+// that lives as long as they should.
+inline pid_t SpawnLogged(const std::vector<std::string>& argv, const std::string& log_path, bool tied = false) {
   std::vector<char*> cargv;
   for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
   cargv.push_back(nullptr);
+  const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid == 0) {
+    if (tied) {
+      setpgid(0, 0);
+      prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (getppid() != parent) _exit(127);  // the parent died before prctl
+    }
     FILE* log = std::fopen(log_path.c_str(), "w");
     if (log) {
       dup2(fileno(log), 1);

@@ -41,6 +41,15 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// Appends `v`, keeping the newest 3000–6000 samples (1–2 minutes of 20 ms
+// frames): medians over the recent past, memory and the cost of a median
+// bounded however long the call lasts.
+void PushRecent(std::vector<double>* samples, double v) {
+  constexpr size_t kKeep = 3000;
+  if (samples->size() >= 2 * kKeep) samples->erase(samples->begin(), samples->begin() + kKeep);
+  samples->push_back(v);
+}
+
 }  // namespace
 
 protocol::HeadPose SyntheticHead(double t_s, float distance_m, float phase) {
@@ -85,6 +94,7 @@ struct Participant::Impl {
 
   mutable std::mutex mu;  // guards everything below
   ParticipantStats stats;
+  // The newest samples only (a call lasts hours; stats() sorts a copy).
   std::vector<double> network_ms, jb_ms;
   std::vector<float> output;  // interleaved stereo
   double sum_sq = 0;
@@ -167,7 +177,7 @@ struct Participant::Impl {
         const Status ins = sp.jb->Insert(a);
         std::lock_guard<std::mutex> l(mu);
         ++stats.remote_audio_frames;
-        if (ins.ok()) network_ms.push_back(net_ms);
+        if (ins.ok()) PushRecent(&network_ms, net_ms);
       }
       // One 20 ms block: listener = own head, each speaker at its head pose through the room link.
       const protocol::HeadPose me = Head(clock.NowUs());
@@ -177,7 +187,7 @@ struct Participant::Impl {
         if (sp.jb->playing()) {
           const audio::SpeakerPlacement place = audio::PlaceRemoteSpeaker(sp.jb->pose(), o.call.room);
           std::lock_guard<std::mutex> l(mu);
-          jb_ms.push_back(sp.jb->stats().current_delay_ms);
+          PushRecent(&jb_ms, sp.jb->stats().current_delay_ms);
           stats.remote_x = place.position.x();
           stats.remote_y = place.position.y();
           stats.remote_z = place.position.z();

@@ -58,6 +58,7 @@ struct ParticipantStats {
   int64_t voice_frames_sent = 0;
   int64_t remote_audio_frames = 0;  // AudioPose received from the remote site
   int64_t remote_speakers = 0;      // distinct participant streams heard
+  // Medians over the last 1–2 minutes of frames.
   double audio_network_ms_median = 0;  // remote capture → received (wall clocks)
   double jitter_buffer_ms_median = 0;  // playout delay in the jitter buffers
   double audio_delay_ms = 0;           // mouth → ear estimate: the two above + 20 ms frame

@@ -17,6 +17,8 @@ Status PipelineOptions::Check() const {
   if (max_frames < -1) return InvalidArgument("max_frames must be >= -1, got " + std::to_string(max_frames));
   if (max_in_flight < 0 || max_in_flight > 256)
     return InvalidArgument("max_in_flight must be in [0, 256], got " + std::to_string(max_in_flight));
+  if (keep_frame_timings < 0)
+    return InvalidArgument("keep_frame_timings must be >= 0, got " + std::to_string(keep_frame_timings));
   return OkStatus();
 }
 
@@ -37,6 +39,14 @@ double ProcessCpuTimeMs() {
 }
 
 namespace {
+
+// Appends `t` to `per_frame`; with `keep` > 0 drops the oldest `keep` entries
+// whenever 2·keep are held (amortized O(1), the order stays).
+void KeepTimings(const StageTimings& t, int64_t keep, std::vector<StageTimings>* per_frame) {
+  if (keep > 0 && per_frame->size() >= 2 * static_cast<size_t>(keep))
+    per_frame->erase(per_frame->begin(), per_frame->begin() + keep);
+  per_frame->push_back(t);
+}
 
 // Runs `fn` on `work` and stores its wall time in `*ms` (and, if `cpu_ms` is
 // set, the process CPU time meanwhile).
@@ -115,7 +125,7 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
     HOLO_RETURN_IF_ERROR(Timed(stages_.encode, work, &work.timings.encode_ms, &work.timings.encode_cpu_ms));
     work.timings.encoded_us = clock_.NowUs();
     if (stages_.sink) HOLO_RETURN_IF_ERROR(stages_.sink(work));
-    stats.per_frame.push_back(work.timings);
+    KeepTimings(work.timings, options_.keep_frame_timings, &stats.per_frame);
     ++stats.frames;
   }
   stats.cpu_ms = ProcessCpuTimeMs() - cpu0;
@@ -210,7 +220,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
           break;
         }
       }
-      stats.per_frame.push_back((*item)->timings);
+      KeepTimings((*item)->timings, options_.keep_frame_timings, &stats.per_frame);
       ++stats.frames;
       free_items.Push(*item);
     }

@@ -109,6 +109,11 @@ struct PipelineOptions {
   // 0 = as many as the queues hold. Fewer in flight = lower latency when a
   // stage is the bottleneck (each frame waits behind fewer others).
   int max_in_flight = 0;
+  // Per-frame timings kept in PipelineStats::per_frame: 0 = every frame;
+  // N > 0 = only the newest N to 2N frames (older ones are dropped N at a
+  // time). A site that runs for days must not grow by a StageTimings (136
+  // bytes) per frame: 15 MB an hour at 30 fps.
+  int64_t keep_frame_timings = 0;
   Status Check() const;
 };
 
@@ -121,7 +126,7 @@ struct PipelineStats {
   // CPU time of the whole process (all threads) during Run, ms: divided by
   // `frames`, the CPU cost of a frame with every stage and all overheads.
   double cpu_ms = 0;
-  std::vector<StageTimings> per_frame;  // in order
+  std::vector<StageTimings> per_frame;  // in order (the newest ones only with keep_frame_timings)
 };
 
 // Runs the stages until the source ends, `max_frames` are done, a stage

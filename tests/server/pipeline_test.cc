@@ -64,6 +64,26 @@ TEST(PipelineTest, ConcurrentRunKeepsOrderLosesNothingAndEqualsSerial) {
   EXPECT_EQ(c->per_frame.size(), 100u);
 }
 
+TEST(PipelineTest, KeepFrameTimingsBoundsPerFrameToTheNewest) {
+  for (bool serial : {true, false}) {
+    std::vector<std::pair<int64_t, uint32_t>> out;
+    PipelineOptions o;
+    o.serial = serial;
+    o.keep_frame_timings = 10;
+    auto r = Pipeline(FakeStages(95, &out), o).Run();
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_EQ(r->frames, 95);
+    EXPECT_EQ(out.size(), 95u);  // every frame still reaches the sink
+    // 95 frames with keep 10: the oldest 10 go whenever 20 are held → frames 80..94.
+    ASSERT_EQ(r->per_frame.size(), 15u) << "serial " << serial;
+    for (size_t i = 1; i < r->per_frame.size(); ++i)
+      EXPECT_GE(r->per_frame[i].acquired_us, r->per_frame[i - 1].acquired_us) << "order";
+  }
+  PipelineOptions bad;
+  bad.keep_frame_timings = -1;
+  EXPECT_FALSE(bad.Check().ok());
+}
+
 TEST(PipelineTest, MaxFramesStopsEarly) {
   std::vector<std::pair<int64_t, uint32_t>> out;
   PipelineOptions o;

@@ -10,13 +10,17 @@
 // WAV, or a tone) with a synthetic head pose to the local site, watches the
 // remote site, prints where the remote participant's voice sits in the local
 // room (the call config's room transform) and can write the spatialized
-// stereo WAV (--audio-out).
+// stereo WAV (--audio-out). --stats FILE writes one JSON line per second
+// (frames and their latencies that second, the client's counters) for long
+// runs such as holoport-bench soak.
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <memory>
 #include <thread>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -53,6 +57,10 @@ int main(int argc, char** argv) {
   app.add_flag("--tls", tls, "--watch over TLS");
   app.add_option("--ca", ca_file, "--watch: PEM file of the site's certificate (TLS)");
   app.add_flag("--no-decode", no_decode, "count frames without decoding them");
+  std::string stats_path;
+  app.add_option("--stats", stats_path,
+                 "write one JSON line per second to this file: frames received that second, their latencies "
+                 "(capture -> taken here, ms), the client's and the call's counters");
   std::string audio_in, audio_out;
   app.add_option("--audio-in", audio_in, "--config: own voice, a WAV file (looped; default: a 440 Hz tone)");
   app.add_option("--audio-out", audio_out, "--config: write the spatialized remote voices to this stereo WAV");
@@ -106,8 +114,46 @@ int main(int argc, char** argv) {
     participant = std::move(*p);
     viewer = &participant->viewer();
   }
+  std::unique_ptr<FILE, int (*)(FILE*)> stats_file(nullptr, &std::fclose);
+  if (!stats_path.empty()) {
+    stats_file.reset(std::fopen(stats_path.c_str(), "w"));
+    if (!stats_file) return Fail(holo::Unavailable("--stats " + stats_path + ": cannot open for writing"));
+  }
+  auto wall_us = [] {
+    return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  std::vector<double> second_latency_ms;  // frames taken since the last --stats line
+  // One --stats line: this second's frames and the counters so far.
+  auto write_stats_line = [&] {
+    if (!stats_file) return;
+    const holo::net::ClientStats s = viewer->stats();
+    nlohmann::ordered_json j;
+    j["wall_us"] = wall_us();
+    j["frames"] = second_latency_ms.size();
+    j["latency_ms"] = second_latency_ms;
+    j["state"] = holo::net::ClientStateName(viewer->state());
+    j["connects"] = s.connects;
+    j["connect_failures"] = s.connect_failures;
+    j["frames_received"] = s.frames_received;
+    j["frames_dropped_local"] = s.frames_dropped_local;
+    j["decode_errors"] = s.decode_errors;
+    j["bytes"] = s.bytes_received;
+    if (participant) {
+      const holo::net::ParticipantStats ps = participant->stats();
+      j["voice_sent"] = ps.voice_frames_sent;
+      j["audio_heard"] = ps.remote_audio_frames;
+      j["concealed"] = ps.concealed;
+      j["late"] = ps.late;
+      j["underflows"] = ps.underflows;
+    }
+    std::fprintf(stats_file.get(), "%s\n", j.dump().c_str());
+    std::fflush(stats_file.get());
+    second_latency_ms.clear();
+  };
   const auto start = std::chrono::steady_clock::now();
   auto last_report = start;
+  auto last_stats_line = start;
   int64_t frames = 0, frames_at_report = 0;
   holo::Mesh last_mesh;
   double latency_sum = 0;
@@ -119,7 +165,13 @@ int main(int argc, char** argv) {
     while (viewer->PollFrame(&f)) {
       ++frames;
       latency_sum += f.latency_ms;
+      if (stats_file)
+        second_latency_ms.push_back(f.latency_ms + static_cast<double>(wall_us() - f.received_us) * 1e-3);
       if (f.has_mesh && !f.mesh.positions.empty()) last_mesh = std::move(f.mesh);
+    }
+    if (now - last_stats_line >= std::chrono::seconds(1)) {
+      write_stats_line();
+      last_stats_line = now;
     }
     if (now - last_report >= std::chrono::seconds(2)) {
       const double dt = std::chrono::duration<double>(now - last_report).count();
@@ -142,6 +194,7 @@ int main(int argc, char** argv) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  write_stats_line();
   const holo::net::ClientStats s = viewer->stats();
   int64_t audio_heard = 0, voice_sent = 0;
   double audio_delay = 0;
