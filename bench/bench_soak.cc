@@ -667,7 +667,8 @@ int Soak::Report(double t_end, bool interrupted) {
     std::fprintf(stderr, "soak: the run lasted %.1f s: no figures\n", run_s);
     return 1;
   }
-  const double w = std::min(60.0, o_.minutes * 60.0 / 3.0);
+  // An interrupted run is cut into windows of its own length.
+  const double w = std::min(60.0, std::min(o_.minutes * 60.0, run_s) / 3.0);
   const int windows = std::max(1, static_cast<int>(std::floor(run_s / w + 1e-6)));
   const double first0 = t0_, first1 = t0_ + w, last0 = t_end - w, last1 = t_end;
   char fmt[64];
