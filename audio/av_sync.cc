@@ -33,6 +33,7 @@ Status AvSyncOptions::Check() const {
     return InvalidArgument("max_picture_delay_ms must be in 0..10000, got " + std::to_string(max_picture_delay_ms));
   if (!(window_s > 0 && window_s <= 60)) return InvalidArgument("window_s must be in (0, 60], got " + std::to_string(window_s));
   if (!(deadband_ms >= 0)) return InvalidArgument("deadband_ms must be >= 0");
+  if (!(update_interval_ms >= 0)) return InvalidArgument("update_interval_ms must be >= 0");
   if (!(early_limit_ms > 0 && late_limit_ms > 0)) return InvalidArgument("early_limit_ms and late_limit_ms must be > 0");
   if (!(voice_timeout_ms > 0)) return InvalidArgument("voice_timeout_ms must be > 0");
   return OkStatus();
@@ -103,8 +104,12 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   while (!picture_delays_.empty() && picture_delays_.front().first < now_us - window_us) picture_delays_.pop_front();
   if (!options_.enabled || picture_delays_.empty()) {
     voice_target_ms_ = 0;
+    updated_ = false;
     return;
   }
+  if (updated_ && now_us - last_update_us_ < static_cast<int64_t>(options_.update_interval_ms * 1000.0)) return;
+  updated_ = true;
+  last_update_us_ = now_us;
   std::vector<double> d;
   d.reserve(picture_delays_.size());
   for (const auto& [t, ms] : picture_delays_) d.push_back(ms);
@@ -138,7 +143,10 @@ double AvSync::VoiceTargetMs(int64_t now_us) {
   const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
   // No picture for a whole window (the site stopped sending them): the voice
   // goes back to its own delay instead of waiting for pictures that do not come.
-  if (picture_delays_.empty() || picture_delays_.back().first < now_us - window_us) voice_target_ms_ = 0;
+  if (picture_delays_.empty() || picture_delays_.back().first < now_us - window_us) {
+    voice_target_ms_ = 0;
+    updated_ = false;
+  }
   return options_.enabled ? voice_target_ms_ : 0.0;
 }
 

@@ -57,8 +57,11 @@ struct AvSyncOptions {
   double max_picture_delay_ms = 300.0;
   // Pictures' display delays the voice follows: this window, seconds.
   double window_s = 2.0;
-  // The voice delay moves only when the wanted delay differs by more, ms.
+  // The voice delay moves only when the wanted delay differs by more, ms,
+  // and at most every `update_interval_ms` (each move costs the voice a
+  // resampled stretch, a dropped or a concealed frame).
   double deadband_ms = 10.0;
+  double update_interval_ms = 250.0;
   // ITU-R BT.1359 detectability thresholds, ms: voice ahead of the picture
   // by more than `early_limit_ms`, or behind by more than `late_limit_ms`.
   double early_limit_ms = 45.0;
@@ -133,6 +136,8 @@ class AvSync {
   std::deque<double> render_ms_;                           // recent render durations
   std::map<int64_t, double> holds_;                        // capture → hold ms of pictures not yet displayed
   double voice_target_ms_ = 0;
+  int64_t last_update_us_ = 0;
+  bool updated_ = false;
   AvSyncStats n_;
   std::vector<float> offsets_, voice_sync_, picture_sync_, picture_delay_;
 };
