@@ -45,7 +45,8 @@ struct StageTimings {
   double simplify_cpu_ms = 0;
   double texture_cpu_ms = 0;
   double encode_cpu_ms = 0;
-  // Clock time when acquire started, when the texture stage finished and when
+  // Clock time of the frame's capture (paced: its camera slot; else when acquire
+  // started), when the texture stage finished and when
   // the encode stage finished (µs on the pipeline's clock; encoded_us =
   // ready_us without an encode stage): latency = ready - acquired.
   int64_t acquired_us = 0;
@@ -109,6 +110,10 @@ struct PipelineOptions {
   // 0 = as many as the queues hold. Fewer in flight = lower latency when a
   // stage is the bottleneck (each frame waits behind fewer others).
   int max_in_flight = 0;
+  // Called once when Run starts, with the pacing origin on the pipeline's
+  // clock: paced, frame `sequence` k is the camera frame of time start_us +
+  // k / pace_fps (what the site's voice lines up with).
+  std::function<void(int64_t start_us)> on_start;
   Status Check() const;
 };
 
