@@ -113,12 +113,26 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   std::vector<double> d;
   d.reserve(picture_delays_.size());
   for (const auto& [t, ms] : picture_delays_) d.push_back(ms);
-  const double median = Quantile(d, 0.5);
-  const double p95 = Quantile(d, 0.95);
-  // Late pictures see the voice early, which viewers notice sooner than a
-  // late voice: bias the voice towards the late pictures, keeping the median
-  // offset within 35 ms.
-  double want = median + std::clamp(p95 - median - (options_.early_limit_ms - 5.0), 0.0, 35.0);
+  // The voice delay that puts the most pictures within the detectability
+  // window (voice at most early_limit_ms ahead, late_limit_ms behind), among
+  // delays within 35 ms of the pictures' median so that the median offset
+  // stays small; ties go to the delay nearest the median. With pictures
+  // whose delays spread, this leans the voice late: voice ahead of the lips
+  // is noticed sooner than voice behind them.
+  std::sort(d.begin(), d.end());
+  const double median = d[d.size() / 2];
+  double want = median;
+  size_t best = 0;
+  for (double bias = -35.0; bias <= 35.0; bias += 5.0) {
+    const double v = median + bias;
+    const auto lo = std::lower_bound(d.begin(), d.end(), v - options_.late_limit_ms);
+    const auto hi = std::upper_bound(d.begin(), d.end(), v + options_.early_limit_ms);
+    const auto covered = static_cast<size_t>(hi - lo);
+    if (covered > best || (covered == best && std::abs(bias) < std::abs(want - median))) {
+      best = covered;
+      want = v;
+    }
+  }
   const double natural = VoiceNaturalLocked(now_us);
   if (natural >= 0 && want > natural + options_.max_voice_delay_ms) {
     want = natural + options_.max_voice_delay_ms;

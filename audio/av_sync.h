@@ -10,10 +10,10 @@
 // stream that arrives first waits for the other, within a bound:
 //  * picture later than voice (the usual case: fusion and rendering take
 //    hundreds of ms): the voice is delayed to the delay at which pictures
-//    are displayed — their median over the last `window_s`, biased later by
-//    up to 35 ms when the pictures' delays spread, so that late pictures do
-//    not see the voice early (viewers notice voice ahead of lips at 45 ms,
-//    voice behind at 125 ms: ITU-R BT.1359) — but never by more than
+//    are displayed — over the last `window_s`, the delay within 35 ms of
+//    their median that puts the most pictures within 45 ms of voice ahead
+//    and 125 ms of voice behind (what viewers notice: ITU-R BT.1359) — but
+//    never by more than
 //    `max_voice_delay_ms` over its natural delay; beyond it the voice plays
 //    at the bound and leads the picture (counted);
 //  * voice later than picture (a slow voice path): each picture is held
