@@ -93,6 +93,7 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
     if (offset < -options_.early_limit_ms) ++n_.offsets_early;
     if (offset > options_.late_limit_ms) ++n_.offsets_late;
     Keep(&offsets_, offset);
+    Keep(&unsynced_, v.natural_ms - (delay_ms - hold_ms));
   }
   UpdateVoiceTargetLocked(display_us);
   const double natural = VoiceNaturalLocked(display_us);
@@ -170,6 +171,7 @@ AvSyncStats AvSync::stats() const {
   s.av_offset_ms_p1 = Quantile(offsets_, 0.01);
   s.av_offset_ms_p50 = Quantile(offsets_, 0.50);
   s.av_offset_ms_p99 = Quantile(offsets_, 0.99);
+  s.unsynced_offset_ms_p50 = Quantile(unsynced_, 0.50);
   s.voice_sync_delay_ms = Quantile(voice_sync_, 0.5);
   s.picture_sync_delay_ms = Quantile(picture_sync_, 0.5);
   s.picture_delay_ms = Quantile(picture_delay_, 0.5);
@@ -191,6 +193,7 @@ void AvSync::ResetStats() {
   std::lock_guard<std::mutex> l(mu_);
   n_ = AvSyncStats{};
   offsets_.clear();
+  unsynced_.clear();
   voice_sync_.clear();
   picture_sync_.clear();
   picture_delay_.clear();

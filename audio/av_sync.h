@@ -81,6 +81,9 @@ struct AvSyncStats {
   int64_t offsets_late = 0;         // voice behind by more than late_limit_ms
   // Offsets over the measured pictures, ms (0 without samples).
   double av_offset_ms_p1 = 0, av_offset_ms_p50 = 0, av_offset_ms_p99 = 0;
+  // The offsets the same pictures would have had without sync: the voice's
+  // natural delay − the picture's delay without its hold (median, ms).
+  double unsynced_offset_ms_p50 = 0;
   // Now: capture → playout the voice has without sync, the delay asked of it
   // for sync (0: none), and what it has.
   double voice_natural_ms = 0, voice_target_ms = 0, voice_delay_ms = 0;
@@ -139,7 +142,7 @@ class AvSync {
   int64_t last_update_us_ = 0;
   bool updated_ = false;
   AvSyncStats n_;
-  std::vector<float> offsets_, voice_sync_, picture_sync_, picture_delay_;
+  std::vector<float> offsets_, unsynced_, voice_sync_, picture_sync_, picture_delay_;
 };
 
 }  // namespace holo::audio

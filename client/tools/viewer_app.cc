@@ -1006,6 +1006,7 @@ class Viewer {
                         {"av_offset_ms_p50", as.av_offset_ms_p50},
                         {"av_offset_ms_p99", as.av_offset_ms_p99},
                         {"av_offset_ms_p1", as.av_offset_ms_p1},
+                        {"unsynced_offset_ms_p50", as.unsynced_offset_ms_p50},
                         {"av_offset_definition",
                          "voice playout time minus picture display time for the same capture instant, over the "
                          "pictures displayed while a voice played; positive = voice late"},

@@ -100,6 +100,8 @@ TEST(AvSync, LatePictureDelaysTheVoice) {
   EXPECT_LT(r.stats.voice_sync_delay_ms, 420.0);
   EXPECT_EQ(r.stats.pictures_held, 0);
   EXPECT_EQ(r.max_hold_ms, 0.0);
+  // What the same pictures would have had without sync: the voice ≈ 360 ms early.
+  EXPECT_LT(r.stats.unsynced_offset_ms_p50, -300.0);
 }
 
 TEST(AvSync, LateVoiceHoldsThePicture) {
@@ -112,6 +114,7 @@ TEST(AvSync, LateVoiceHoldsThePicture) {
   EXPECT_GT(r.stats.pictures_held, r.stats.pictures / 2);
   EXPECT_GT(r.stats.picture_sync_delay_ms, 200.0);
   EXPECT_LT(r.stats.voice_sync_delay_ms, 15.0);  // the voice is not delayed further
+  EXPECT_GT(r.stats.unsynced_offset_ms_p50, 200.0);
 }
 
 TEST(AvSync, WithoutSyncTheDifferenceShows) {
@@ -121,6 +124,7 @@ TEST(AvSync, WithoutSyncTheDifferenceShows) {
   const Outcome a = Simulate(late_picture, off);
   // Voice at 80 ms, pictures at ≈ 440 ms: the voice is ≈ 360 ms early.
   EXPECT_LT(a.stats.av_offset_ms_p50, -300.0);
+  EXPECT_NEAR(a.stats.unsynced_offset_ms_p50, a.stats.av_offset_ms_p50, 1.0);
   EXPECT_EQ(a.stats.offsets_early, a.stats.offsets);
   Scenario late_voice;
   late_voice.voice_natural_ms = 280;
