@@ -553,6 +553,18 @@ int Run(const BenchArgs& args) {
     geometry_bytes.push_back(j.value("geometry_bytes", 0.0));
     color_bytes.push_back(j.value("color_bytes", 0.0));
   }
+  // The site's voice thread (synthesis, Opus, publishing): CPU per 20 ms frame.
+  {
+    double voice_cpu = 0, voice_frames = 0;
+    for (const auto& j : ReadJsonLines(stats_path)) {
+      if (!j.contains("voice_cpu_ms")) continue;
+      voice_cpu = j.value("voice_cpu_ms", 0.0);
+      voice_frames = j.value("voice_frames", 0.0);
+    }
+    if (voice_frames > 0)
+      emit("site_voice_cpu_ms", voice_cpu / voice_frames, "ms",
+           {{"per", "20 ms voice frame"}, {"frames", std::to_string(static_cast<int64_t>(voice_frames))}});
+  }
   emit("triangles", Median(tris), "count");
   emit("geometry_bytes", Median(geometry_bytes), "B");
   emit("color_bytes", Median(color_bytes), "B");

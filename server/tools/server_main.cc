@@ -507,7 +507,12 @@ int main(int argc, char** argv) {
     j["violations"] = c.violations;
     j["audio_relayed"] = c.audio_relayed;
     j["keyframe_requests"] = c.keyframe_requests;
-    if (site_voice) j["voice_frames"] = site_voice->stats().frames;
+    if (site_voice) {
+      const holo::voice::SiteVoiceStats vs = site_voice->stats();
+      j["voice_frames"] = vs.frames;
+      j["voice_cpu_ms"] = vs.cpu_ms;
+      j["voice_late_frames"] = vs.late_frames;
+    }
     j["io_cpu_ms"] = server->IoCpuMs();
     std::fprintf(stats_out, "%s\n", j.dump().c_str());
     std::fflush(stats_out);

@@ -117,8 +117,10 @@ struct SiteVoice::Impl {
     auto a = encoder->EncodeFrame(pcm, seq, ToWallUs(capture_steady_us), Head(capture_steady_us));
     if (!a.ok()) return;
     publish(*a);
+    const double cpu = ThreadCpuTimeMs();
     std::lock_guard<std::mutex> l(mu);
     ++stats.frames;
+    stats.cpu_ms = cpu;
   }
 
   void Loop() {
