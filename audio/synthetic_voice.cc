@@ -46,15 +46,10 @@ float SyntheticVoice::SyllableSample(Syllable& s, int64_t n) {
     s.phase -= 1.0;
     x = 1.0;
   }
-  // Two formant resonators in cascade (bandwidths 90 and 120 Hz).
+  // Two formant resonators in cascade.
   double y = x;
-  const double freqs[2] = {s.f1, s.f2};
-  const double bws[2] = {90.0, 120.0};
   for (int k = 0; k < 2; ++k) {
-    const double r = std::exp(-kPi * bws[k] / rate_);
-    const double a1 = 2.0 * r * std::cos(2.0 * kPi * freqs[k] / rate_);
-    const double a2 = -r * r;
-    const double out = (1.0 - r) * y + a1 * s.y1[k] + a2 * s.y2[k];
+    const double out = s.gain[k] * y + s.a1[k] * s.y1[k] + s.a2[k] * s.y2[k];
     s.y2[k] = s.y1[k];
     s.y1[k] = out;
     y = out;
@@ -92,6 +87,15 @@ void SyntheticVoice::Render(std::span<float> out) {
         const int vowel = std::clamp(static_cast<int>((0.5 + 0.5 * Noise()) * 5.0), 0, 4);
         s.f1 = kVowels[vowel][0];
         s.f2 = kVowels[vowel][1];
+        // Two-pole resonators at F1 and F2, bandwidths 90 and 120 Hz.
+        const double freqs[2] = {s.f1, s.f2};
+        const double bws[2] = {90.0, 120.0};
+        for (int k = 0; k < 2; ++k) {
+          const double r = std::exp(-kPi * bws[k] / rate_);
+          s.gain[k] = 1.0 - r;
+          s.a1[k] = 2.0 * r * std::cos(2.0 * kPi * freqs[k] / rate_);
+          s.a2[k] = -r * r;
+        }
         s.phase = 0.999;  // the first glottal pulse right at the onset
         syllable_ = s;
       } else {

@@ -41,7 +41,8 @@ class SyntheticVoice {
     int64_t length = 0;
     double f0 = 150, f1 = 700, f2 = 1200;
     double phase = 0;
-    double y1[2] = {0, 0}, y2[2] = {0, 0};  // resonator states
+    double gain[2] = {0, 0}, a1[2] = {0, 0}, a2[2] = {0, 0};  // resonator coefficients
+    double y1[2] = {0, 0}, y2[2] = {0, 0};                    // resonator states
   };
   struct Knock {
     bool active = false;

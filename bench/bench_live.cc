@@ -92,6 +92,7 @@ struct LiveOptions {
   std::string voice = "synthetic";     // the site's --voice
   bool av_sync = true;
   double delay_voice_ms = 0, delay_picture_ms = 0;  // injected at every viewer
+  audio::AvSyncOptions sync;                         // the viewers' lip sync bounds
 };
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
@@ -226,6 +227,14 @@ int Run(const BenchArgs& args) {
                      return true;
                    }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
         ->check(CLI::IsMember({"on", "off"}));
+    app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
+                   "lip sync: the voice waits at most this long for a later picture")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--max-picture-delay-ms", o.sync.max_picture_delay_ms,
+                   "lip sync: a picture waits at most this long for a later voice")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
     app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
         ->check(CLI::Range(0.0, 10000.0));
     app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")
@@ -340,6 +349,7 @@ int Run(const BenchArgs& args) {
   // its pictures in sync with it.
   auto sync_options = [&] {
     net::SiteAvSyncOptions so;
+    so.sync = o.sync;
     so.sync.enabled = o.av_sync;
     so.voice.inject_delay_ms = o.delay_voice_ms;
     so.inject_picture_delay_ms = o.delay_picture_ms;
@@ -611,7 +621,10 @@ int Run(const BenchArgs& args) {
       std::fprintf(stderr, "live: %s viewers measured no voice/picture offset (no voice played?)\n", viewer.c_str());
       return;
     }
-    const std::map<std::string, std::string> q = {{"viewer", viewer}, {"sync", sync_state}};
+    std::map<std::string, std::string> q = {{"viewer", viewer}, {"sync", sync_state}};
+    char bound[64];
+    std::snprintf(bound, sizeof bound, "%.0f", o.sync.max_voice_delay_ms);
+    q["max_voice_delay_ms"] = bound;
     auto with = [&](std::map<std::string, std::string> extra) {
       extra.insert(q.begin(), q.end());
       return extra;
