@@ -147,8 +147,11 @@ void SiteAvSync::VoiceLoop() {
     if (stop_) break;
     next += audio::kFrameUs;
     TickVoice();
-    // Far behind (the machine stalled): carry on from now instead of a burst.
-    if (clock.NowUs() - next > 500000) next = clock.NowUs();
+    // Behind by more than two steps (a loaded machine did not run this
+    // thread): the audio of that time is lost as on a sound card that ran
+    // dry; carry on from now instead of pulling a burst of steps back to
+    // back (each would see a wrong delay and drop or conceal frames).
+    if (clock.NowUs() - next > 2 * audio::kFrameUs) next = clock.NowUs();
   }
 }
 
