@@ -256,7 +256,7 @@ class Viewer {
       po.aec = o_.aec;
       po.hrtf_sofa = o_.hrtf_sofa;
       po.view_template = co;
-      po.av_sync = AvSyncOptions();
+      po.av_sync = SyncOptions();
       po.voice.inject_delay_ms = o_.delay_voice_ms;
       if (o_.head_placed) {
         // The default head's sway and glances around the given place and heading.
@@ -332,7 +332,7 @@ class Viewer {
     // (a call participant plays them itself), pictures come out of
     // NextFrame when they are due.
     net::SiteAvSyncOptions so;
-    so.sync = AvSyncOptions();
+    so.sync = SyncOptions();
     so.voice.inject_delay_ms = o_.delay_voice_ms;
     so.inject_picture_delay_ms = o_.delay_picture_ms;
     so.play_voice = participant_ == nullptr;
@@ -355,7 +355,7 @@ class Viewer {
     return OkStatus();
   }
 
-  audio::AvSyncOptions AvSyncOptions() const {
+  audio::AvSyncOptions SyncOptions() const {
     audio::AvSyncOptions a;
     a.enabled = o_.av_sync;
     a.max_voice_delay_ms = o_.max_voice_delay_ms;
