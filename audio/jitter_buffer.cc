@@ -24,6 +24,9 @@ Status JitterBufferOptions::Check() const {
   if (!(stretch_integral_per_ms >= 0)) return InvalidArgument("stretch_integral_per_ms must be >= 0");
   if (!(delay_filter > 0 && delay_filter <= 1)) return InvalidArgument("delay_filter must be in (0, 1]");
   if (!(drop_above_ms > 0)) return InvalidArgument("drop_above_ms must be > 0");
+  if (!(sync_jump_ms >= 20)) return InvalidArgument("sync_jump_ms must be >= 20 (one frame), got " + std::to_string(sync_jump_ms));
+  if (!(sync_rebuffer_ms >= sync_jump_ms))
+    return InvalidArgument("sync_rebuffer_ms must be >= sync_jump_ms, got " + std::to_string(sync_rebuffer_ms));
   return OkStatus();
 }
 
@@ -32,7 +35,7 @@ StatusOr<std::unique_ptr<JitterBuffer>> JitterBuffer::Create(AudioCodec codec, C
   HOLO_RETURN_IF_ERROR(options.Check());
   std::unique_ptr<JitterBuffer> jb(new JitterBuffer(clock, options));
   HOLO_ASSIGN_OR_RETURN(jb->decoder_, VoiceDecoder::Create(codec));
-  jb->stats_.target_delay_ms = options.initial_target_ms;
+  jb->stats_.target_delay_ms = jb->stats_.jitter_target_ms = options.initial_target_ms;
   return jb;
 }
 
@@ -96,17 +99,31 @@ void JitterBuffer::UpdateTarget() {
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
   double target = v[k] + options_.margin_ms;
   if (v.size() < 50) target = std::max(target, options_.initial_target_ms);
-  stats_.target_delay_ms = std::clamp(target, options_.min_target_ms, options_.max_target_ms);
+  stats_.jitter_target_ms = std::clamp(target, options_.min_target_ms, options_.max_target_ms);
+  stats_.transit_min_ms = static_cast<double>(*std::min_element(transit_us_.begin(), transit_us_.end())) / 1000.0;
+  RefreshTarget();
+}
+
+void JitterBuffer::RefreshTarget() {
+  // The controlled level is the delay of the first sample of the *next* pull
+  // above the fastest packet; the sync delay is from capture to the pull that
+  // plays a sample: level = sync − fastest transit − one frame.
+  double target = stats_.jitter_target_ms;
+  if (sync_delay_ms_ > 0 && !transit_us_.empty())
+    target = std::max(target, sync_delay_ms_ - stats_.transit_min_ms - static_cast<double>(kFrameUs) / 1000.0);
+  stats_.target_delay_ms = target;
+}
+
+double JitterBuffer::PlayCaptureUs() const {
+  const double play_seq =
+      static_cast<double>(next_seq_) - (static_cast<double>(fifo_.size()) - frac_) / kFrameSamples;
+  return static_cast<double>(anchor_capture_us_) + (play_seq - static_cast<double>(anchor_seq_)) * kFrameUs;
 }
 
 double JitterBuffer::DelayMs(int64_t now_us) const {
   if (transit_us_.empty()) return 0.0;
   const int64_t min_transit = *std::min_element(transit_us_.begin(), transit_us_.end());
-  const double play_seq =
-      static_cast<double>(next_seq_) - (static_cast<double>(fifo_.size()) - frac_) / kFrameSamples;
-  const double capture_us =
-      static_cast<double>(anchor_capture_us_) + (play_seq - static_cast<double>(anchor_seq_)) * kFrameUs;
-  return (static_cast<double>(now_us) - capture_us - static_cast<double>(min_transit)) / 1000.0;
+  return (static_cast<double>(now_us) - PlayCaptureUs() - static_cast<double>(min_transit)) / 1000.0;
 }
 
 void JitterBuffer::DecodeNext() {
@@ -139,22 +156,52 @@ void JitterBuffer::DecodeNext() {
 std::vector<float> JitterBuffer::Pull() {
   std::vector<float> out(kFrameSamples, 0.0f);
   const int64_t now = clock_.NowUs();
+  last_pull_capture_us_ = 0;
   if (!started_) return out;
+  RefreshTarget();
+  // Lip sync holds the delay above what the jitter needs.
+  const bool sync = stats_.target_delay_ms > stats_.jitter_target_ms;
+  const double frame_ms = static_cast<double>(kFrameUs) / 1000.0;
   if (!playing_) {
     if (packets_.empty()) return out;
     next_seq_ = std::max(next_seq_, packets_.begin()->first);
     fifo_.clear();
     frac_ = 0;
-    if (DelayMs(now) < stats_.target_delay_ms) return out;
+    // The first sample of this pull must be as late as the next pull's
+    // would be at the target (the controller's level is one frame later).
+    if (DelayMs(now) < stats_.target_delay_ms + (sync ? frame_ms : 0.0)) return out;
     playing_ = true;
     consecutive_underflows_ = 0;
   }
   double delay = DelayMs(now);
-  // Far too much delay (a burst after a stall): drop whole frames.
-  while (delay > stats_.target_delay_ms + options_.drop_above_ms && max_seq_ > next_seq_) {
+  if (sync && delay - frame_ms < stats_.target_delay_ms - options_.sync_rebuffer_ms) {
+    // Far below the sync delay: stop and start again when the delay is there
+    // (a silent gap; the frames wait in the buffer, none is skipped).
+    playing_ = false;
+    delay_filter_init_ = false;
+    ++stats_.sync_rebuffers;
+    stats_.current_delay_ms = 0;
+    return out;
+  }
+  if (sync && delay - frame_ms < stats_.target_delay_ms - options_.sync_jump_ms) {
+    // Below the sync delay: one concealment frame after what is decoded (the
+    // decoder continues from its last frame), without consuming a packet.
+    bool used_fec = false;
+    const std::vector<float> pcm = decoder_->Conceal({}, &used_fec);
+    fifo_.insert(fifo_.end(), pcm.begin(), pcm.end());
+    ++stats_.sync_expands;
+    delay = DelayMs(now);
+  }
+  // Far too much delay (a burst after a stall, or a lower sync delay): drop
+  // whole frames. Under lip sync (a sync delay is set, even one the jitter
+  // target exceeds) the delay follows the sync's moves by whole frames.
+  const bool sync_set = sync_delay_ms_ > 0;
+  const double drop_above = sync_set ? std::min(options_.drop_above_ms, options_.sync_jump_ms) : options_.drop_above_ms;
+  while (delay - (sync_set ? frame_ms : 0.0) > stats_.target_delay_ms + drop_above && max_seq_ > next_seq_) {
     packets_.erase(next_seq_);
     ++next_seq_;
     ++stats_.dropped_frames;
+    if (sync_set) ++stats_.sync_drops;
     delay = DelayMs(now);
   }
   // Drift controller. The controlled level is the delay of the first sample
@@ -199,6 +246,7 @@ std::vector<float> JitterBuffer::Pull() {
     const std::vector<float> pcm = decoder_->Conceal({}, &used_fec);
     fifo_.insert(fifo_.end(), pcm.begin(), pcm.end());
   }
+  last_pull_capture_us_ = static_cast<int64_t>(std::llround(PlayCaptureUs()));
   double pos = frac_;
   for (int i = 0; i < kFrameSamples; ++i) {
     const auto k = static_cast<size_t>(pos);

@@ -18,6 +18,13 @@
 //   ratio, so a sender clock 0.1% off is absorbed with no steady-state delay
 //   error and without pitch jumps; a delay more than `drop_above_ms` over
 //   target drops a whole frame.
+// - Lip sync (audio/av_sync.h): SetSyncDelayMs() asks for a longer delay from
+//   capture to playout than the jitter needs, to wait for a later picture.
+//   The target becomes the larger of the two. The buffer gets there by
+//   re-buffering (silence, when it must grow by more than `sync_rebuffer_ms`),
+//   by one concealment frame per pull (growing by more than `sync_jump_ms`),
+//   by dropping frames (shrinking by more than `sync_jump_ms`), and by the
+//   resampler below that.
 #pragma once
 
 #include <cstdint>
@@ -53,6 +60,12 @@ struct JitterBufferOptions {
   double delay_filter = 0.05;
   // Delay over target beyond which whole frames are dropped, ms.
   double drop_above_ms = 80.0;
+  // Lip sync: a sync delay further than this from the playout delay is
+  // reached by whole frames (concealment or drops) instead of resampling, ms.
+  double sync_jump_ms = 40.0;
+  // Lip sync: when the delay must grow by more than this, playout stops and
+  // restarts at the new delay (a silent gap instead of many concealed frames), ms.
+  double sync_rebuffer_ms = 100.0;
   Status Check() const;
 };
 
@@ -66,7 +79,12 @@ struct JitterBufferStats {
   int64_t duplicates = 0;
   int64_t dropped_frames = 0;  // frames dropped to cut excess delay
   double current_delay_ms = 0; // playout delay above the fastest packet
-  double target_delay_ms = 0;
+  double target_delay_ms = 0;  // what the controller aims at: max(jitter target, sync)
+  double jitter_target_ms = 0; // the target the jitter alone asks for
+  double transit_min_ms = 0;   // fastest packet of the window: arrival − capture (clock offset included)
+  int64_t sync_expands = 0;    // concealment frames inserted to grow the delay for lip sync
+  int64_t sync_drops = 0;      // frames dropped to shrink the delay for lip sync
+  int64_t sync_rebuffers = 0;  // playout restarts to grow the delay for lip sync
   double stretch = 1.0;        // current resampling ratio (input per output sample)
   double drift_estimate = 0.0; // integral term: estimated sender/receiver clock ratio − 1
 };
@@ -85,6 +103,15 @@ class JitterBuffer {
   // 20 ms (kFrameSamples) of output for the current instant; silence while
   // buffering. Never fails.
   std::vector<float> Pull();
+  // Lip sync: the delay from a sample's capture (sender clock) to the Pull()
+  // that returns it (this buffer's clock) is kept at least `ms`; 0 turns it
+  // off. Clock offsets between the two clocks are part of it, as in
+  // last_pull_capture_us().
+  void SetSyncDelayMs(double ms) { sync_delay_ms_ = ms > 0 ? ms : 0.0; }
+  double sync_delay_ms() const { return sync_delay_ms_; }
+  // Capture time (sender clock, µs) of the first sample the last Pull()
+  // returned; 0 if that pull played nothing. Codec delay not included.
+  int64_t last_pull_capture_us() const { return last_pull_capture_us_; }
   // Head pose of the frame playing now (the latest one played).
   const HeadPose& pose() const { return pose_; }
   bool playing() const { return playing_; }
@@ -95,7 +122,11 @@ class JitterBuffer {
   // Decodes frame `next_seq_` (or conceals it) into the FIFO and advances.
   void DecodeNext();
   double DelayMs(int64_t now_us) const;
+  // Capture time of the next sample to play (sender clock, µs).
+  double PlayCaptureUs() const;
   void UpdateTarget();
+  // target_delay_ms from the jitter target and the sync delay.
+  void RefreshTarget();
 
   Clock& clock_;
   JitterBufferOptions options_;
@@ -119,6 +150,8 @@ class JitterBuffer {
   int64_t anchor_capture_us_ = 0;
   int64_t last_seq32_ = 0;
   HeadPose pose_;
+  double sync_delay_ms_ = 0.0;
+  int64_t last_pull_capture_us_ = 0;
   JitterBufferStats stats_;
 };
 

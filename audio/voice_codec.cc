@@ -54,6 +54,15 @@ VoiceEncoder::~VoiceEncoder() {
   if (enc_ != nullptr) opus_encoder_destroy(enc_);
 }
 
+int CodecDelaySamples(AudioCodec codec) { return codec == AudioCodec::kOpus ? 312 : 0; }
+
+int VoiceEncoder::lookahead_samples() const {
+  if (enc_ == nullptr) return 0;
+  opus_int32 lookahead = 0;
+  if (opus_encoder_ctl(enc_, OPUS_GET_LOOKAHEAD(&lookahead)) != OPUS_OK) return 0;
+  return static_cast<int>(lookahead);
+}
+
 StatusOr<std::vector<uint8_t>> VoiceEncoder::Encode(std::span<const float> pcm) {
   if (pcm.size() != kFrameSamples) {
     return InvalidArgument("a voice frame is " + std::to_string(kFrameSamples) + " samples, got " +

@@ -26,6 +26,12 @@ inline constexpr int64_t kFrameUs = 20000;
 // Largest Opus packet we produce or accept (RFC 6716 allows 1275 per frame).
 inline constexpr int kMaxOpusPacket = 1275;
 
+// How much later a decoded sample comes out than it went in, samples at
+// 48 kHz: libopus's look-ahead for the VoIP and audio applications (2.5 ms
+// + 4 ms delay compensation = 312 samples, OPUS_GET_LOOKAHEAD); 0 for PCM.
+// Lip sync adds it to the voice's playout delay.
+int CodecDelaySamples(AudioCodec codec);
+
 struct VoiceEncoderOptions {
   AudioCodec codec = AudioCodec::kOpus;
   // Opus target bitrate, bit/s (6000..510000). Ignored for PCM.
@@ -55,6 +61,8 @@ class VoiceEncoder {
   StatusOr<AudioPose> EncodeFrame(std::span<const float> pcm, uint32_t sequence, int64_t capture_time_us,
                                   const HeadPose& pose);
   const VoiceEncoderOptions& options() const { return options_; }
+  // The encoder's look-ahead, samples (OPUS_GET_LOOKAHEAD; 0 for PCM).
+  int lookahead_samples() const;
 
  private:
   VoiceEncoder() = default;

@@ -24,7 +24,12 @@
 // displayed per second, not redraws), latency_p50_ms / latency_p99_ms
 // from the pods' acquisition to decoded and to displayed ("at"), mbps per
 // viewer, triangles, chamfer_mm and novel_view_psnr_db / novel_view_ssim at
-// the viewer.
+// the viewer. The site also publishes its person's voice (--voice synthetic:
+// syllables at footsteps, knocks at ball bounces, stamped on the pictures'
+// capture clock); every viewer plays it in sync with the pictures
+// (client/net/site_av_sync.h) and av_offset_ms (p1, p50, p99: voice playout
+// minus picture display for the same capture instant, positive = voice late)
+// is reported per viewer kind, with the sync delay given to each stream.
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
@@ -51,6 +56,7 @@
 
 #include "bench.h"
 #include "bench_process.h"
+#include "client/net/site_av_sync.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
 #include "common/clock.h"
@@ -83,6 +89,10 @@ struct LiveOptions {
   std::string site_binary;
   std::string keep_dir;  // keep the site's logs here
   std::vector<std::string> site_args;  // passed on to holoport-server
+  std::string voice = "synthetic";     // the site's --voice
+  bool av_sync = true;
+  double delay_voice_ms = 0, delay_picture_ms = 0;  // injected at every viewer
+  audio::AvSyncOptions sync;                         // the viewers' lip sync bounds
 };
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
@@ -135,6 +145,7 @@ std::vector<std::string> SiteArgs(const LiveOptions& o, const std::string& workl
                                 "127.0.0.1:" + std::to_string(port), "--publisher-token", kPublisherToken,
                                 "--viewer-token", kViewerToken, "--stats", stats, "--pace", "30"};
   a.insert(a.end(), o.site_args.begin(), o.site_args.end());
+  if (!serial) a.insert(a.end(), {"--voice", o.voice});
   if (o.content == "truth") {
     a.insert(a.end(), {"--truth-mesh", "--truth-loop", std::to_string(o.prerender), "-n", "-1"});
     return a;
@@ -175,7 +186,7 @@ StatusOr<std::unique_ptr<net::SiteClient>> StartViewer(uint16_t port, const std:
   o.port = port;
   o.token = kViewerToken;
   o.name = name;
-  o.subscribe = net::kSubscribeGeometry | net::kSubscribeColor;
+  o.subscribe = net::kSubscribeAll;
   o.decode = true;
   o.backoff_initial_s = 0.2;
   o.backoff_max_s = 1.0;
@@ -210,6 +221,24 @@ int Run(const BenchArgs& args) {
         ->check(CLI::Range(0, 600));
     app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
     app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
+    app.add_option("--voice", o.voice, "the site's voice: synthetic, off, or a WAV file (--voice of holoport-server)");
+    app.add_option("--av-sync", [&](const std::vector<std::string>& v) {
+                     o.av_sync = v.at(0) == "on";
+                     return true;
+                   }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
+        ->check(CLI::IsMember({"on", "off"}));
+    app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
+                   "lip sync: the voice waits at most this long for a later picture")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--max-picture-delay-ms", o.sync.max_picture_delay_ms,
+                   "lip sync: a picture waits at most this long for a later voice")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")
+        ->check(CLI::Range(0.0, 10000.0));
     app.add_option("--site-arg", o.site_args,
                    "an extra holoport-server argument (repeatable; e.g. --site-arg=--jpeg-quality --site-arg=70)");
     std::vector<std::string> argv_s = {"live"};
@@ -316,27 +345,59 @@ int Run(const BenchArgs& args) {
   } guard{&*site};
 
   std::atomic<bool> measuring{false}, stop{false};
+  // Every viewer plays the site's voice and shows (or, decoding only, takes)
+  // its pictures in sync with it.
+  auto sync_options = [&] {
+    net::SiteAvSyncOptions so;
+    so.sync = o.sync;
+    so.sync.enabled = o.av_sync;
+    so.voice.inject_delay_ms = o.delay_voice_ms;
+    so.inject_picture_delay_ms = o.delay_picture_ms;
+    return so;
+  };
   std::vector<std::unique_ptr<ViewerLog>> logs;
   std::vector<std::unique_ptr<net::SiteClient>> decoders;
+  std::vector<std::unique_ptr<net::SiteAvSync>> decoder_syncs;
+  std::vector<std::thread> decoder_threads;
+  struct Joiner {
+    std::atomic<bool>* stop;
+    std::vector<std::thread>* threads;
+    ~Joiner() {
+      *stop = true;
+      for (auto& t : *threads)
+        if (t.joinable()) t.join();
+    }
+  } decoder_joiner{&stop, &decoder_threads};
   for (int i = 0; i < o.decoders; ++i) {
     logs.push_back(std::make_unique<ViewerLog>());
-    ViewerLog* log = logs.back().get();
-    net::ClientCallbacks cb;
-    cb.on_frame = [log, &measuring](const net::ReceivedFrame& f) {
-      if (!measuring || !f.has_mesh) return;
-      FrameRecord r;
-      r.frame_index = f.frame_index;
-      r.at_us = net::WallUs();
-      r.latency_decoded_ms = f.latency_ms + static_cast<double>(r.at_us - f.received_us) * 1e-3;
-      std::lock_guard<std::mutex> l(log->mu);
-      log->frames.push_back(r);
-    };
-    auto c = StartViewer(port, "decoder-" + std::to_string(i), std::move(cb));
+    auto c = StartViewer(port, "decoder-" + std::to_string(i), {});
     if (!c.ok()) {
       std::fprintf(stderr, "live: %s\n", c.status().ToString().c_str());
       return 1;
     }
+    auto sy = net::SiteAvSync::Start(c->get(), sync_options());
+    if (!sy.ok()) {
+      std::fprintf(stderr, "live: %s\n", sy.status().ToString().c_str());
+      return 1;
+    }
     decoders.push_back(std::move(*c));
+    decoder_syncs.push_back(std::move(*sy));
+    // A decoding viewer shows a picture the moment it is decoded and due.
+    decoder_threads.emplace_back([log = logs.back().get(), sync = decoder_syncs.back().get(), &measuring, &stop] {
+      net::ReceivedFrame f;
+      while (!stop) {
+        if (!sync->NextFrame(&f, 0.1)) continue;
+        const int64_t now = net::WallUs();
+        sync->Displayed(f, now, now);
+        if (!measuring || !f.has_mesh) continue;
+        FrameRecord r;
+        r.frame_index = f.frame_index;
+        r.at_us = now;
+        r.latency_decoded_ms = f.latency_ms + static_cast<double>(r.at_us - f.received_us) * 1e-3;
+        std::lock_guard<std::mutex> l(log->mu);
+        log->frames.push_back(r);
+      }
+    });
   }
   ViewerLog render_log;
   std::unique_ptr<net::SiteClient> render_client;
@@ -348,6 +409,7 @@ int Run(const BenchArgs& args) {
   std::thread render_thread;
   // The GL objects live on the render thread; quality scoring happens there too, after the run.
   std::mutex kept_mu;
+  std::unique_ptr<net::SiteAvSync> render_sync;
   if (o.render) {
     auto c = StartViewer(port, "renderer", {});
     if (!c.ok()) {
@@ -355,6 +417,12 @@ int Run(const BenchArgs& args) {
       return 1;
     }
     render_client = std::move(*c);
+    auto sy = net::SiteAvSync::Start(render_client.get(), sync_options());
+    if (!sy.ok()) {
+      std::fprintf(stderr, "live: %s\n", sy.status().ToString().c_str());
+      return 1;
+    }
+    render_sync = std::move(*sy);
     render_thread = std::thread([&] {
       auto ctx = render::CreateHeadlessContext();
       if (!ctx.ok()) {
@@ -374,12 +442,12 @@ int Run(const BenchArgs& args) {
       int64_t kept_every = 0;
       net::ReceivedFrame rf;
       while (!stop) {
-        if (!render_client->WaitFrame(&rf, 0.1)) continue;
-        net::ReceivedFrame newer;
-        while (render_client->LatestFrame(&newer)) rf = std::move(newer);
+        // The newest picture due now (held while its voice is later).
+        if (!render_sync->NextFrame(&rf, 0.1)) continue;
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;
         const double cpu0 = holo::ThreadCpuTimeMs();
         const auto r0 = std::chrono::steady_clock::now();
+        const int64_t render_start = net::WallUs();
         auto rig = render_client->rig();
         Status s = (*renderer)->SetRemoteMesh(rf.mesh);
         if (s.ok() && rig && rf.has_color) {
@@ -403,6 +471,7 @@ int Run(const BenchArgs& args) {
         }
         render::FinishGl();
         const int64_t shown = net::WallUs();
+        render_sync->Displayed(rf, render_start, shown);
         ++render_frames_seen;
         if (!measuring) continue;
         render_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - r0).count());
@@ -463,9 +532,17 @@ int Run(const BenchArgs& args) {
   for (auto& d : decoders) bytes0.push_back(d->stats().bytes_received);
   const uint64_t render_bytes0 = render_client ? render_client->stats().bytes_received : 0;
   const auto w0 = std::chrono::steady_clock::now();
+  for (auto& sy : decoder_syncs) sy->sync().ResetStats();
+  if (render_sync) render_sync->sync().ResetStats();
   measuring = true;
   std::this_thread::sleep_for(std::chrono::duration<double>(o.seconds));
   measuring = false;
+  std::vector<audio::AvSyncStats> dec_av;
+  for (auto& sy : decoder_syncs) dec_av.push_back(sy->stats());
+  const audio::AvSyncStats render_av = render_sync ? render_sync->stats() : audio::AvSyncStats{};
+  std::vector<net::RemoteVoicesStats> voice_stats;
+  for (auto& sy : decoder_syncs) voice_stats.push_back(sy->voice_stats());
+  if (render_sync) voice_stats.push_back(render_sync->voice_stats());
   const double window_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
   const double site_cpu1 = ProcessCpuMsOf(site->pid);
   const double self_cpu1 = ProcessCpuMs();
@@ -485,6 +562,18 @@ int Run(const BenchArgs& args) {
     latency_site.push_back(j.value("encoded_latency_ms", j.value("latency_ms", 0.0)));
     geometry_bytes.push_back(j.value("geometry_bytes", 0.0));
     color_bytes.push_back(j.value("color_bytes", 0.0));
+  }
+  // The site's voice thread (synthesis, Opus, publishing): CPU per 20 ms frame.
+  {
+    double voice_cpu = 0, voice_frames = 0;
+    for (const auto& j : ReadJsonLines(stats_path)) {
+      if (!j.contains("voice_cpu_ms")) continue;
+      voice_cpu = j.value("voice_cpu_ms", 0.0);
+      voice_frames = j.value("voice_frames", 0.0);
+    }
+    if (voice_frames > 0)
+      emit("site_voice_cpu_ms", voice_cpu / voice_frames, "ms",
+           {{"per", "20 ms voice frame"}, {"frames", std::to_string(static_cast<int64_t>(voice_frames))}});
   }
   emit("triangles", Median(tris), "count");
   emit("geometry_bytes", Median(geometry_bytes), "B");
@@ -506,6 +595,72 @@ int Run(const BenchArgs& args) {
     emit("latency_p50_ms", metrics::Percentile(dec_lat, 50), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
     emit("latency_p99_ms", metrics::Percentile(dec_lat, 99), "ms", {{"at", "decoded"}, {"viewer", "decode"}});
     emit("mbps", Median(mbps), "Mbit/s", {{"viewer", "decode"}});
+  }
+  // Voice and picture in sync, per viewer kind.
+  const std::string sync_state = o.av_sync ? "on" : "off";
+  auto emit_av = [&](const std::string& viewer, const std::vector<audio::AvSyncStats>& v) {
+    int64_t offsets = 0, early = 0, late = 0, pictures = 0, held = 0, capped = 0;
+    std::vector<double> p50, voice_delay, picture_hold, unsynced;
+    double p99 = -1e9, p1 = 1e9;
+    for (const auto& a : v) {
+      if (a.offsets == 0) continue;
+      offsets += a.offsets;
+      early += a.offsets_early;
+      late += a.offsets_late;
+      pictures += a.pictures;
+      held += a.pictures_held;
+      capped += a.voice_delay_capped + a.pictures_hold_capped;
+      p50.push_back(a.av_offset_ms_p50);
+      p99 = std::max(p99, a.av_offset_ms_p99);  // the worst viewer's
+      p1 = std::min(p1, a.av_offset_ms_p1);
+      voice_delay.push_back(a.voice_sync_delay_ms);
+      unsynced.push_back(a.unsynced_offset_ms_p50);
+      picture_hold.push_back(a.picture_sync_delay_ms);
+    }
+    if (offsets == 0) {
+      std::fprintf(stderr, "live: %s viewers measured no voice/picture offset (no voice played?)\n", viewer.c_str());
+      return;
+    }
+    std::map<std::string, std::string> q = {{"viewer", viewer}, {"sync", sync_state}};
+    char bound[64];
+    std::snprintf(bound, sizeof bound, "%.0f", o.sync.max_voice_delay_ms);
+    q["max_voice_delay_ms"] = bound;
+    auto with = [&](std::map<std::string, std::string> extra) {
+      extra.insert(q.begin(), q.end());
+      return extra;
+    };
+    emit("av_offset_ms", Median(p50), "ms", with({{"stat", "p50"}}));
+    emit("av_offset_ms", p99, "ms", with({{"stat", "p99"}}));
+    emit("av_offset_ms", p1, "ms", with({{"stat", "p1"}}));
+    // Without sync (computed from the same pictures: the voice's own delay
+    // minus the picture's delay without its hold).
+    emit("av_offset_unsynced_ms", Median(unsynced), "ms",
+         with({{"stat", "p50"}, {"note", "voice natural delay - picture delay without hold"}}));
+    emit("av_offsets_outside_bt1359", static_cast<double>(early + late) / static_cast<double>(offsets), "fraction",
+         with({{"early_over_45ms", std::to_string(early)}, {"late_over_125ms", std::to_string(late)},
+               {"offsets", std::to_string(offsets)}}));
+    emit("av_sync_delay_ms", Median(voice_delay), "ms", with({{"stream", "voice"}}));
+    emit("av_sync_delay_ms", Median(picture_hold), "ms",
+         with({{"stream", "picture"}, {"pictures_held", std::to_string(held)}, {"of", std::to_string(pictures)},
+               {"capped", std::to_string(capped)}}));
+  };
+  if (!decoders.empty()) emit_av("decode", dec_av);
+  if (render_sync) emit_av("render", {render_av});
+  {
+    int64_t frames = 0, concealed = 0, underflows = 0, expands = 0, drops = 0, rebuffers = 0;
+    for (const auto& v : voice_stats) {
+      frames += v.frames;
+      concealed += v.concealed;
+      underflows += v.underflows;
+      expands += v.sync_expands;
+      drops += v.sync_drops;
+      rebuffers += v.sync_rebuffers;
+    }
+    if (!voice_stats.empty())
+      emit("voice_frames", static_cast<double>(frames) / static_cast<double>(voice_stats.size()), "count",
+           {{"note", "per viewer, whole run"}, {"concealed", std::to_string(concealed)},
+            {"underflows", std::to_string(underflows)}, {"sync_expands", std::to_string(expands)},
+            {"sync_drops", std::to_string(drops)}, {"sync_rebuffers", std::to_string(rebuffers)}});
   }
   stop = true;
   if (render_thread.joinable()) render_thread.join();

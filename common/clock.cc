@@ -26,6 +26,21 @@ RealClock& RealClock::Instance() {
   return clock;
 }
 
+int64_t WallClock::NowUs() const {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+void WallClock::SleepUntilUs(int64_t deadline_us) {
+  const int64_t now = NowUs();
+  if (deadline_us > now) std::this_thread::sleep_for(std::chrono::microseconds(deadline_us - now));
+}
+
+WallClock& WallClock::Instance() {
+  static WallClock clock;
+  return clock;
+}
+
 void SimulatedClock::SleepUntilUs(int64_t deadline_us) {
   int64_t now = now_us_.load();
   while (deadline_us > now && !now_us_.compare_exchange_weak(now, deadline_us)) {

@@ -24,6 +24,16 @@ class RealClock final : public Clock {
   static RealClock& Instance();
 };
 
+// system_clock based (µs since the Unix epoch): the clock capture times on
+// the wire use, so times compare across processes and machines (up to their
+// clock offset). Not monotonic if the system time is set.
+class WallClock final : public Clock {
+ public:
+  int64_t NowUs() const override;
+  void SleepUntilUs(int64_t deadline_us) override;
+  static WallClock& Instance();
+};
+
 // Time moves only when told to; SleepUntilUs jumps forward.
 class SimulatedClock final : public Clock {
  public:

@@ -19,8 +19,10 @@ inline constexpr uint32_t kContentAudio = 4;
 inline constexpr uint32_t kContentAll = 7;
 
 // Stream ids: 0 session control, 1 the site's capture (mesh + colour),
+// 2 the voice of the person the site captures (holoport-server --voice),
 // 256 + n the audio+pose of the site's n-th publisher connection.
 inline constexpr uint32_t kSiteStreamId = 1;
+inline constexpr uint32_t kSiteVoiceStreamId = 2;
 inline constexpr uint32_t kFirstParticipantStreamId = 256;
 
 // The content bit a message type needs (0: always delivered).

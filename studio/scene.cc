@@ -69,11 +69,16 @@ FigurePlacement Placement(int figure, int num_figures) {
   return {-0.05f, -0.55f, 200.0f * kDeg, 2.1f};
 }
 
+// One step cycle of walking in place (both feet), seconds; a foot lands every half cycle.
+constexpr float kStepPeriodS = 1.3f;
+// The ball touches the floor every this many seconds.
+constexpr float kBounceIntervalS = 1.05f;
+
 // Walk in place, turn slowly, wave with the right arm now and then.
 FigureAngles Animate(double t_seconds, float phase, float* root_yaw) {
   const float t = static_cast<float>(t_seconds);
   FigureAngles a;
-  const float ph = 2.0f * kPi * t / 1.3f + phase;
+  const float ph = 2.0f * kPi * t / kStepPeriodS + phase;
   auto lift = [](float x) {
     const float s = std::max(0.0f, std::sin(x));
     return 30.0f * kDeg * s * s;
@@ -265,7 +270,7 @@ void Scene::PartPoses(double t, std::vector<Isometry3f>* poses) const {
     if (k % 2 == 0) {
       // A ball bouncing around the figures, spinning.
       const float phi = 0.6f + 0.9f * k + 2.0f * kPi * tf / 9.0f;
-      const float z = 0.11f + 0.7f * std::abs(std::sin(kPi * tf / 1.05f));
+      const float z = 0.11f + 0.7f * std::abs(std::sin(kPi * tf / kBounceIntervalS));
       (*poses)[part] = T(orbit * std::cos(phi), orbit * std::sin(phi), z) *
                        Isometry3f(AngleAxisf(2.3f * tf, Vector3f(0.3f, 1.0f, 0.2f).normalized()));
     } else {
@@ -275,6 +280,35 @@ void Scene::PartPoses(double t, std::vector<Isometry3f>* poses) const {
       (*poses)[part] = T(orbit * std::cos(phi), orbit * std::sin(phi), z) * Rz(1.3f * tf);
     }
   }
+}
+
+void Scene::SoundEvents(double t0, double t1, std::vector<std::pair<double, int>>* events) const {
+  events->clear();
+  if (config_.empty_room || !(t1 > t0)) return;
+  // A foot lands when the step phase 2π t / kStepPeriodS + phase passes a
+  // multiple of π (lift() in Animate is zero from there on).
+  if (config_.num_figures > 0) {
+    const double half = kStepPeriodS / 2.0;
+    const double shift = -static_cast<double>(Placement(0, config_.num_figures).phase) * kStepPeriodS / (2.0 * kPi);
+    for (double k = std::ceil((t0 - shift) / half); shift + k * half < t1; k += 1.0) {
+      events->push_back({shift + k * half, 0});
+    }
+  }
+  // The ball (prop 0) touches the floor where |sin(π t / kBounceIntervalS)| = 0.
+  if (config_.num_props > 0) {
+    for (double k = std::ceil(t0 / kBounceIntervalS); k * kBounceIntervalS < t1; k += 1.0) {
+      events->push_back({k * kBounceIntervalS, 1});
+    }
+  }
+  std::sort(events->begin(), events->end());
+}
+
+Isometry3f Scene::HeadPose(double t, int figure) const {
+  if (figure < 0 || figure >= config_.num_figures || config_.empty_room) return Isometry3f::Identity();
+  std::vector<Isometry3f> poses;
+  PartPoses(t, &poses);
+  // The head ellipsoid is centred 0.11 m above the head joint, 1 cm forward.
+  return poses[static_cast<size_t>(figure * kFigureParts + kHeadPart)] * T(0.01f, 0.0f, 0.11f);
 }
 
 void Scene::Pose(double t, std::vector<Vector3f>* positions, std::vector<Vector3f>* normals,

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -51,6 +52,12 @@ class Scene {
   // Posed vertex positions and normals (world) at time `t`.
   void Pose(double t, std::vector<Eigen::Vector3f>* positions, std::vector<Eigen::Vector3f>* normals,
             std::vector<Eigen::Isometry3f>* scratch_poses) const;
+  // Moments of the animation in [t0, t1) that make a sound (a foot of the
+  // first figure landing, the ball touching the floor), in time order.
+  void SoundEvents(double t0, double t1, std::vector<std::pair<double, int>>* events) const;
+  // world_from_head of figure `figure` at time `t`: origin at the centre of
+  // the head, x forward (the face), y left, z up. Identity without figures.
+  Eigen::Isometry3f HeadPose(double t, int figure) const;
 
  private:
   SceneConfig config_;

@@ -106,6 +106,17 @@ int64_t SyntheticStudio::TimestampUs(int64_t frame_index) const {
   return static_cast<int64_t>(std::llround(static_cast<double>(frame_index) * 1e6 / options_.fps));
 }
 
+std::vector<StudioSoundEvent> SyntheticStudio::SoundEvents(double t0_s, double t1_s) const {
+  std::vector<std::pair<double, int>> raw;
+  impl_->scene.SoundEvents(t0_s, t1_s, &raw);
+  std::vector<StudioSoundEvent> out;
+  out.reserve(raw.size());
+  for (const auto& [t, kind] : raw) out.push_back({t, kind == 0 ? StudioSoundEvent::kFootfall : StudioSoundEvent::kBounce});
+  return out;
+}
+
+Pose SyntheticStudio::HeadPose(double t_s, int figure) const { return impl_->scene.HeadPose(t_s, figure); }
+
 void SyntheticStudio::RenderFrame(int64_t frame_index, RgbdFrameSet* frames, StudioGroundTruth* gt) {
   Impl& im = *impl_;
   im.PoseFrame(frame_index, options_.fps, &im.frame, &im.pool);

@@ -76,6 +76,17 @@ struct StudioGroundTruth {
   Mesh foreground_mesh;
 };
 
+// A moment of the studio's animation that a viewer could hear: a foot of the
+// first figure landing as it walks in place (every 0.65 s), or the ball
+// touching the floor (every 1.05 s). The site's synthetic voice starts a
+// syllable or a knock at each, so that voice and picture can be checked
+// against each other (holoport-server --voice synthetic).
+struct StudioSoundEvent {
+  enum Kind : int { kFootfall = 0, kBounce = 1 };
+  double time_s = 0;  // studio time (frame_index / fps)
+  Kind kind = kFootfall;
+};
+
 class SyntheticStudio final : public FrameSource {
  public:
   // `rig` must pass Rig::Check and `options` StudioOptions::Check (HOLO_CHECK otherwise;
@@ -106,6 +117,14 @@ class SyntheticStudio final : public FrameSource {
 
   // Capture timestamp of a frame, µs (frame_index / fps).
   int64_t TimestampUs(int64_t frame_index) const;
+
+  // Sound events with studio time in [t0_s, t1_s), in time order (none in
+  // the empty room).
+  std::vector<StudioSoundEvent> SoundEvents(double t0_s, double t1_s) const;
+  // Where the head of figure `figure` is at studio time `t_s` (world frame;
+  // origin at the head's centre, x forward through the face, y left, z up);
+  // identity if there is no such figure.
+  Pose HeadPose(double t_s, int figure = 0) const;
 
   // FrameSource: an endless live source starting at frame 0.
   const Rig& rig() const override { return rig_; }

@@ -20,21 +20,6 @@
 namespace holo::net {
 namespace {
 
-// Wall clock (system_clock), so capture times compare across processes and
-// with the site's clock offset estimate.
-class WallClock final : public Clock {
- public:
-  int64_t NowUs() const override {
-    return std::chrono::duration_cast<std::chrono::microseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
-  }
-  void SleepUntilUs(int64_t deadline_us) override {
-    const int64_t d = deadline_us - NowUs();
-    if (d > 0) std::this_thread::sleep_for(std::chrono::microseconds(d));
-  }
-};
-
 double Median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
@@ -78,7 +63,10 @@ bool ParseSiteAddress(const std::string& spec, std::string* host, uint16_t* port
 
 struct Participant::Impl {
   ParticipantOptions o;
+  // Wall clock, so capture times compare across processes and with the
+  // site's clock offset estimate.
   WallClock clock;
+  std::unique_ptr<audio::AvSync> sync;
   int64_t start_us = 0;
   std::unique_ptr<SiteClient> viewer, talker;
   std::unique_ptr<audio::VoiceEncoder> encoder;
@@ -129,7 +117,9 @@ struct Participant::Impl {
         std::lock_guard<std::mutex> l2(mu);
         stats.aec_delay_ms = aec->estimated_delay_ms();
       }
-      auto a = encoder->EncodeFrame(frame, seq, next_us, Head(next_us));
+      // Capture time on the local site's clock (the clock its pictures are
+      // stamped with), so that viewers can line this voice up with them.
+      auto a = encoder->EncodeFrame(frame, seq, next_us + talker->stats().clock_offset_us, Head(next_us));
       if (a.ok()) {
         talker->SendAudioPose(*a);
         std::lock_guard<std::mutex> l(mu);
@@ -142,13 +132,9 @@ struct Participant::Impl {
     }
   }
 
-  struct Speaker {
-    std::unique_ptr<audio::JitterBuffer> jb;
-    int id = -1;
-  };
-
   void AudioLoop() {
-    std::map<uint32_t, Speaker> speakers;
+    RemoteVoices voices(clock, o.voice, sync.get());
+    std::map<uint32_t, int> spatial_ids;  // stream → spatializer speaker
     int64_t next_us = clock.NowUs();
     const bool render = spatializer != nullptr;
     while (!stop) {
@@ -160,41 +146,37 @@ struct Participant::Impl {
       uint32_t sid = 0;
       while (viewer->PollAudio(&a, &sid)) {
         const double net_ms = (clock.NowUs() - a.capture_time_us) / 1000.0;
-        Speaker& sp = speakers[sid];
-        if (!sp.jb) {
-          auto jb = audio::JitterBuffer::Create(a.codec, clock);
-          if (!jb.ok()) continue;
-          sp.jb = std::move(*jb);
-          if (render) {
-            auto id = spatializer->AddSpeaker();
-            if (id.ok()) {
-              sp.id = *id;
-              const std::vector<float> silence(audio::kFrameSamples, 0.0f);
-              (void)spatializer->Push(sp.id, silence);  // one block of lead: the source never runs dry
-            }
-          }
-        }
-        const Status ins = sp.jb->Insert(a);
+        voices.Insert(sid, std::move(a));
         std::lock_guard<std::mutex> l(mu);
         ++stats.remote_audio_frames;
-        if (ins.ok()) PushRecent(&network_ms, net_ms);
+        PushRecent(&network_ms, net_ms);
       }
       // One 20 ms block: listener = own head, each speaker at its head pose through the room link.
+      const std::vector<RemoteVoices::Block> blocks = voices.Pull();
       const protocol::HeadPose me = Head(clock.NowUs());
       if (render) spatializer->SetListener(me);
-      for (auto& [id, sp] : speakers) {
-        std::vector<float> pcm = sp.jb->Pull();
-        if (sp.jb->playing()) {
-          const audio::SpeakerPlacement place = audio::PlaceRemoteSpeaker(sp.jb->pose(), o.call.room);
+      for (const RemoteVoices::Block& b : blocks) {
+        if (b.new_speaker && render) {
+          auto id = spatializer->AddSpeaker();
+          if (id.ok()) {
+            spatial_ids[b.stream] = *id;
+            const std::vector<float> silence(audio::kFrameSamples, 0.0f);
+            (void)spatializer->Push(*id, silence);  // one block of lead: the source never runs dry
+          }
+        }
+        const auto sp = spatial_ids.find(b.stream);
+        const int id = sp == spatial_ids.end() ? -1 : sp->second;
+        if (b.playing) {
+          const audio::SpeakerPlacement place = audio::PlaceRemoteSpeaker(b.pose, o.call.room);
           std::lock_guard<std::mutex> l(mu);
-          PushRecent(&jb_ms, sp.jb->stats().current_delay_ms);
+          PushRecent(&jb_ms, b.buffer_delay_ms);
           stats.remote_x = place.position.x();
           stats.remote_y = place.position.y();
           stats.remote_z = place.position.z();
           stats.remote_azimuth_deg = audio::AzimuthDeg(me, place.position);
-          if (render && sp.id >= 0) (void)spatializer->SetSpeaker(sp.id, place);
+          if (render && id >= 0) (void)spatializer->SetSpeaker(id, place);
         }
-        if (render && sp.id >= 0) (void)spatializer->Push(sp.id, pcm);
+        if (render && id >= 0) (void)spatializer->Push(id, b.pcm);
       }
       if (render) {
         std::vector<float> block = spatializer->Render(audio::kFrameSamples);
@@ -208,17 +190,12 @@ struct Participant::Impl {
         if (!o.audio_out.empty()) output.insert(output.end(), block.begin(), block.end());
       }
       {
+        const RemoteVoicesStats vs = voices.stats();
         std::lock_guard<std::mutex> l(mu);
-        stats.remote_speakers = static_cast<int64_t>(speakers.size());
-        int64_t c = 0, late = 0, u = 0;
-        for (auto& [id, sp] : speakers) {
-          c += sp.jb->stats().concealed;
-          late += sp.jb->stats().late;
-          u += sp.jb->stats().underflows;
-        }
-        stats.concealed = c;
-        stats.late = late;
-        stats.underflows = u;
+        stats.remote_speakers = vs.speakers;
+        stats.concealed = vs.concealed;
+        stats.late = vs.late;
+        stats.underflows = vs.underflows;
       }
       // Far behind (the machine stalled): skip ahead rather than render a burst.
       if (clock.NowUs() - next_us > 500000) next_us = clock.NowUs();
@@ -236,6 +213,9 @@ StatusOr<std::unique_ptr<Participant>> Participant::Start(ParticipantOptions opt
   Impl& m = *impl;
   m.start_us = m.clock.NowUs();
   const CallConfig& call = m.o.call;
+  HOLO_RETURN_IF_ERROR(m.o.av_sync.Check());
+  HOLO_RETURN_IF_ERROR(m.o.voice.Check());
+  m.sync = std::make_unique<audio::AvSync>(m.o.av_sync);
   if (!m.o.audio_in.empty()) {
     auto r = audio::ReadMonoWav(m.o.audio_in, audio::kSampleRate);
     if (!r.ok()) return r.status().WithContext("--audio-in " + m.o.audio_in);
@@ -288,6 +268,7 @@ StatusOr<std::unique_ptr<Participant>> Participant::Start(ParticipantOptions opt
 }
 
 SiteClient& Participant::viewer() { return *impl_->viewer; }
+audio::AvSync& Participant::av_sync() { return *impl_->sync; }
 protocol::HeadPose Participant::OwnHead() const { return impl_->Head(impl_->clock.NowUs()); }
 const CallConfig& Participant::call() const { return impl_->o.call; }
 

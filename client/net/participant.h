@@ -5,8 +5,10 @@
 //  * publishes the own voice (a WAV, looped; or a 440 Hz tone) as Opus
 //    20 ms AudioPose frames with the own head pose to the LOCAL site
 //    (publisher token);
-//  * optionally spatializes the remote voices: one jitter buffer per remote
-//    participant stream, listener = own head pose, source = remote head pose
+//  * plays the remote voices (one jitter buffer per remote stream,
+//    RemoteVoices) in sync with the remote picture (av_sync(): the viewer
+//    that shows the picture reports its display times there);
+//  * optionally spatializes them: listener = own head pose, source = remote head pose
 //    through the call config's room transform, HRTF through OpenAL Soft's
 //    loopback device; the stereo output is written as a WAV at Stop().
 // All times on the wire are wall-clock microseconds (system_clock).
@@ -17,7 +19,9 @@
 #include <memory>
 #include <string>
 
+#include "audio/av_sync.h"
 #include "client/net/call_config.h"
+#include "client/net/site_av_sync.h"
 #include "common/status.h"
 #include "net/site_client.h"
 #include "protocol/messages.h"
@@ -51,6 +55,10 @@ struct ParticipantOptions {
   // runs whenever this is on.
   bool aec = false;
   HeadPoseFn head;  // default: SyntheticHead(t)
+  // Lip sync of the remote voices with the remote picture (effective when
+  // the viewer reports displayed pictures to av_sync()).
+  audio::AvSyncOptions av_sync;
+  VoicePlayoutOptions voice;
   ClientOptions view_template;  // decode, reconnect, backoff, … (host/port/token/role come from `call`)
 };
 
@@ -81,6 +89,8 @@ class Participant {
 
   // The client watching the remote site (frames: PollFrame/LatestFrame).
   SiteClient& viewer();
+  // Lip sync of the remote voices with the remote site's picture.
+  audio::AvSync& av_sync();
   // Own head pose now (what is published with the voice).
   protocol::HeadPose OwnHead() const;
   const CallConfig& call() const;

@@ -110,7 +110,9 @@ int main(int argc, char** argv) {
                  "publishes the own voice and head pose to the local site, spatializes the remote voices");
   app.add_option("--name", o.name, "participant / client name (shown in the site's log)")->capture_default_str();
   app.add_option("--audio-in", o.audio_in, "--call: own voice, a WAV file (looped; default: a 440 Hz tone)");
-  app.add_option("--audio-out", o.audio_out, "--call: write the spatialized remote voices to this stereo WAV");
+  app.add_option("--audio-out", o.audio_out,
+                 "--call: write the spatialized remote voices to this stereo WAV; --connect/--http: the site's "
+                 "voices as played (mono, in step with the pictures)");
   std::string aec = "off";
   app.add_option("--aec", aec,
                  "--call: echo cancellation and noise suppression of the own voice against the played remote "
@@ -121,6 +123,27 @@ int main(int argc, char** argv) {
                  "--call: a personal HRTF, SOFA file (SimpleFreeFieldHRIR), for the spatialized voices; default: "
                  "OpenAL Soft's built-in set")
       ->check(CLI::ExistingFile);
+  std::string av_sync = "on";
+  app.add_option("--av-sync", av_sync,
+                 "--connect/--http/--call: play the site's voices and show its pictures so that what was captured "
+                 "at the same instant is heard and seen together (the stream that arrives first waits for the "
+                 "other): on, or off (each as soon as it can; the offset is still measured and reported)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
+  app.add_option("--max-voice-delay-ms", o.max_voice_delay_ms,
+                 "lip sync: the voice waits at most this long for a later picture (beyond, it leads the picture)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10000.0));
+  app.add_option("--max-picture-delay-ms", o.max_picture_delay_ms,
+                 "lip sync: a picture waits at most this long for a later voice (beyond, the voice lags)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10000.0));
+  app.add_option("--delay-voice-ms", o.delay_voice_ms,
+                 "test: hold every arriving voice frame this long (a slower voice path)")
+      ->check(CLI::Range(0.0, 10000.0));
+  app.add_option("--delay-picture-ms", o.delay_picture_ms,
+                 "test: hold every decoded picture this long (a slower picture path)")
+      ->check(CLI::Range(0.0, 10000.0));
   app.add_option("--seconds", o.seconds, "--connect/--call: stop after this many seconds (0: --frames decides)")
       ->check(CLI::Range(0.0, 1e6));
   app.add_option("--png-every", o.png_every, "headless network run: write every K-th new frame as PNG")
@@ -140,8 +163,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.aec = aec == "on";
-  if ((!o.audio_in.empty() || !o.audio_out.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
-    std::fprintf(stderr, "holoport-client: --audio-in/--audio-out/--aec/--hrtf need --call\n");
+  o.av_sync = av_sync == "on";
+  if ((!o.audio_in.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
+    std::fprintf(stderr, "holoport-client: --audio-in/--aec/--hrtf need --call\n");
+    return 2;
+  }
+  if (!o.audio_out.empty() && o.call.empty() && o.connect.empty() && o.http.empty()) {
+    std::fprintf(stderr, "holoport-client: --audio-out needs --connect, --http or --call\n");
     return 2;
   }
 

@@ -9,6 +9,7 @@
 #include <mutex>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -23,7 +24,9 @@
 
 #include "audio/room.h"
 #include "client/net/broadcast_player.h"
+#include "audio/wav.h"
 #include "client/net/participant.h"
+#include "client/net/site_av_sync.h"
 #include "client/render/gl_context.h"
 #include "client/render/overlay.h"
 #include "client/render/renderer.h"
@@ -253,6 +256,8 @@ class Viewer {
       po.aec = o_.aec;
       po.hrtf_sofa = o_.hrtf_sofa;
       po.view_template = co;
+      po.av_sync = SyncOptions();
+      po.voice.inject_delay_ms = o_.delay_voice_ms;
       if (o_.head_placed) {
         // The default head's sway and glances around the given place and heading.
         const Eigen::Vector3f at = o_.head_at;
@@ -323,8 +328,39 @@ class Viewer {
       std::lock_guard<std::mutex> l(rig_mu_);
       rig_pending_ = false;
     }
+    // Voice and picture in sync: the site's voices play on their own thread
+    // (a call participant plays them itself), pictures come out of
+    // NextFrame when they are due.
+    net::SiteAvSyncOptions so;
+    so.sync = SyncOptions();
+    so.voice.inject_delay_ms = o_.delay_voice_ms;
+    so.inject_picture_delay_ms = o_.delay_picture_ms;
+    so.play_voice = participant_ == nullptr;
+    if (so.play_voice && !o_.audio_out.empty()) {
+      so.on_voice = [this](const net::RemoteVoices::Block& b) {
+        std::lock_guard<std::mutex> l(voice_out_mu_);
+        // Blocks of one 20 ms step share their playout time: mix them.
+        if (b.playout_us != voice_out_last_us_ || voice_out_.size() < b.pcm.size()) {
+          voice_out_.insert(voice_out_.end(), b.pcm.begin(), b.pcm.end());
+          voice_out_last_us_ = b.playout_us;
+        } else {
+          float* mix = voice_out_.data() + voice_out_.size() - b.pcm.size();
+          for (size_t i = 0; i < b.pcm.size(); ++i) mix[i] += b.pcm[i];
+        }
+      };
+    }
+    HOLO_ASSIGN_OR_RETURN(av_sync_, net::SiteAvSync::Start(client_, so,
+                                                          participant_ ? &participant_->av_sync() : nullptr));
     net_start_us_ = WallNowUs();
     return OkStatus();
+  }
+
+  audio::AvSyncOptions SyncOptions() const {
+    audio::AvSyncOptions a;
+    a.enabled = o_.av_sync;
+    a.max_voice_delay_ms = o_.max_voice_delay_ms;
+    a.max_picture_delay_ms = o_.max_picture_delay_ms;
+    return a;
   }
 
   static int64_t WallNowUs() {
@@ -468,12 +504,22 @@ class Viewer {
       status = "WAITING FOR FRAMES - LAST FRAME SHOWN";
     }
     for (auto& c : status) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-    char audio[160] = "";
+    char audio[320] = "";
     if (participant_) {
       const net::ParticipantStats ps = participant_->stats();
       std::snprintf(audio, sizeof audio, "\nVOICE SENT %lld  HEARD %lld  AUDIO DELAY %.0f MS  AZIMUTH %.0f",
                     static_cast<long long>(ps.voice_frames_sent), static_cast<long long>(ps.remote_audio_frames),
                     ps.audio_delay_ms, ps.remote_audio_frames ? ps.remote_azimuth_deg : 0.0f);
+    }
+    if (av_sync_) {
+      const audio::AvSyncStats as = av_sync_->stats();
+      if (as.offsets > 0) {
+        char sync[160];
+        std::snprintf(sync, sizeof sync, "\nA/V OFFSET %+.0f MS (P50)  VOICE +%.0f MS  PICTURE +%.0f MS%s",
+                      as.av_offset_ms_p50, std::max(0.0, as.voice_target_ms - as.voice_natural_ms),
+                      as.picture_sync_delay_ms, o_.av_sync ? "" : "  (SYNC OFF)");
+        std::strncat(audio, sync, sizeof audio - std::strlen(audio) - 1);
+      }
     }
     std::string src = SourceName();
     for (auto& c : src) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -663,7 +709,8 @@ class Viewer {
       CheckRigChange();
       UpdateBitrate();
       bool fresh = false;
-      if (client_->LatestFrame(&rf)) {
+      const int64_t render_start_us = WallNowUs();
+      if (av_sync_->NextFrame(&rf)) {
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;  // nothing to show in it
         net::ReceivedFrame keep_times;  // times/index only are used below (no mesh/image copies)
         keep_times.frame_index = rf.frame_index;
@@ -717,6 +764,7 @@ class Viewer {
       const double loop_ms = loop.ElapsedMs();
       loop.Restart();
       if (fresh) {
+        av_sync_->Displayed(last_rf_, render_start_us, last_render_us);
         NoteNetDisplayed(last_rf_, loop_ms);
         ++displayed_new;
       } else {
@@ -750,7 +798,12 @@ class Viewer {
     }
     net_elapsed_s_ = (WallNowUs() - start) / 1e6;
     Status audio_status;
+    av_sync_->Stop();
     if (participant_) audio_status = participant_->Stop();
+    if (!participant_ && !o_.audio_out.empty()) {
+      std::lock_guard<std::mutex> l(voice_out_mu_);
+      audio_status = audio::WriteWav(o_.audio_out, voice_out_, 1, audio::kSampleRate);
+    }
     client_->Stop();
     if (Status s = WriteContactSheet(); !s.ok()) return Fail(s);
     const int rc = WriteStats();
@@ -946,6 +999,42 @@ class Viewer {
                            "packager receive time of a part's last message to the part's arrival here (Unix clocks)"},
                           {"last_error", bs.last_error}};
       }
+      {
+        const audio::AvSyncStats as = av_sync_->stats();
+        const net::RemoteVoicesStats vs = av_sync_->voice_stats();
+        j["av_sync"] = {{"enabled", o_.av_sync},
+                        {"av_offset_ms_p50", as.av_offset_ms_p50},
+                        {"av_offset_ms_p99", as.av_offset_ms_p99},
+                        {"av_offset_ms_p1", as.av_offset_ms_p1},
+                        {"unsynced_offset_ms_p50", as.unsynced_offset_ms_p50},
+                        {"av_offset_definition",
+                         "voice playout time minus picture display time for the same capture instant, over the "
+                         "pictures displayed while a voice played; positive = voice late"},
+                        {"offsets", as.offsets},
+                        {"offsets_voice_early_over_45ms", as.offsets_early},
+                        {"offsets_voice_late_over_125ms", as.offsets_late},
+                        {"voice_sync_delay_ms_median", as.voice_sync_delay_ms},
+                        {"picture_sync_delay_ms_median", as.picture_sync_delay_ms},
+                        {"picture_delay_ms_median", as.picture_delay_ms},
+                        {"voice_natural_delay_ms", as.voice_natural_ms},
+                        {"voice_delay_ms", as.voice_delay_ms},
+                        {"pictures_displayed", as.pictures},
+                        {"pictures_held", as.pictures_held},
+                        {"pictures_hold_capped", as.pictures_hold_capped},
+                        {"voice_delay_capped", as.voice_delay_capped},
+                        {"pictures_skipped", av_sync_->pictures_skipped()},
+                        {"max_voice_delay_ms", o_.max_voice_delay_ms},
+                        {"max_picture_delay_ms", o_.max_picture_delay_ms},
+                        {"injected_voice_delay_ms", o_.delay_voice_ms},
+                        {"injected_picture_delay_ms", o_.delay_picture_ms}};
+        if (!participant_) {
+          j["voice"] = {{"frames", vs.frames},      {"speakers", vs.speakers},
+                        {"concealed", vs.concealed}, {"late", vs.late},
+                        {"underflows", vs.underflows}, {"sync_expands", vs.sync_expands},
+                        {"sync_drops", vs.sync_drops}, {"sync_rebuffers", vs.sync_rebuffers},
+                        {"wav", o_.audio_out}};
+        }
+      }
       if (participant_) {
         const net::ParticipantStats ps = participant_->stats();
         j["audio"] = {{"voice_frames_sent", ps.voice_frames_sent},
@@ -1008,6 +1097,10 @@ class Viewer {
   std::unique_ptr<net::Participant> participant_;
   std::unique_ptr<net::SiteClient> own_client_;
   std::unique_ptr<net::BroadcastPlayer> player_;  // --http: feeds own_client_
+  std::unique_ptr<net::SiteAvSync> av_sync_;       // voice and picture in sync (network mode)
+  std::mutex voice_out_mu_;
+  std::vector<float> voice_out_;  // --audio-out without --call: the site's voices, mono
+  int64_t voice_out_last_us_ = -1;
   net::SiteClient* client_ = nullptr;
   Eigen::Matrix4f call_local_from_remote_ = Eigen::Matrix4f::Identity();
   std::atomic<int> net_state_{static_cast<int>(net::ClientState::kConnecting)};

@@ -52,10 +52,19 @@ struct ViewerOptions {
   Eigen::Vector3f head_at = Eigen::Vector3f::Zero();
   float head_yaw_deg = 0.0f;
   std::string audio_in;   // --call: own voice (WAV); empty: a tone
-  std::string audio_out;  // --call: spatialized stereo WAV of the remote voices
+  std::string audio_out;  // --call: spatialized stereo WAV of the remote voices; --connect/--http: the site's voices (mono)
   bool aec = false;       // --call: echo cancellation + noise suppression of the own voice
   std::string hrtf_sofa;  // --call: personal HRTF (SOFA); empty: OpenAL Soft's
   double seconds = 0;     // network: stop after this long (0: --frames decides)
+  // Network: voice and picture in sync (audio/av_sync.h): the stream that
+  // arrives first waits for the other, within these bounds (ms). Off: each
+  // plays as soon as it can (offsets are still measured).
+  bool av_sync = true;
+  double max_voice_delay_ms = 1000;
+  double max_picture_delay_ms = 300;
+  // Test hooks: every voice frame / picture waits this long on arrival (ms).
+  double delay_voice_ms = 0;
+  double delay_picture_ms = 0;
   int png_every = 1;      // headless: write every K-th displayed frame
   double png_interval_s = 0;  // headless network run: a PNG every S seconds instead (0: png_every)
   bool contact_sheet = false;  // headless: also a contact sheet of the written frames

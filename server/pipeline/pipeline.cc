@@ -79,8 +79,8 @@ Status RunFuseMesh(const std::function<Status(FrameWork&)>& fn, FrameWork& work,
 Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& clock, int64_t* seq_io, int64_t start_us,
                FrameWork& work, int64_t* late, int64_t* dropped, bool cpu = false) {
   int64_t& seq = *seq_io;
+  const int64_t period_us = opt.pace_fps > 0 ? static_cast<int64_t>(1e6 / opt.pace_fps) : 0;
   if (opt.pace_fps > 0) {
-    const int64_t period_us = static_cast<int64_t>(1e6 / opt.pace_fps);
     const int64_t now = clock.NowUs();
     if (now > start_us + seq * period_us + period_us) {
       ++*late;
@@ -100,7 +100,11 @@ Status Acquire(const PipelineStages& st, const PipelineOptions& opt, Clock& cloc
   }
   work.sequence = seq;
   work.timings = StageTimings{};
-  work.timings.acquired_us = clock.NowUs();
+  // A paced source is a camera: its frame was taken at its slot, even when
+  // the pipeline picks it up late (within a period; later slots are skipped
+  // or counted late). The capture time on the wire, which the voice is
+  // synchronised with, is this one.
+  work.timings.acquired_us = opt.pace_fps > 0 ? start_us + seq * period_us : clock.NowUs();
   return Timed(st.acquire, work, &work.timings.acquire_ms, cpu ? &work.timings.acquire_cpu_ms : nullptr);
 }
 
@@ -112,6 +116,7 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
   Stopwatch wall;
   const double cpu0 = ProcessCpuTimeMs();
   const int64_t start_us = clock_.NowUs();
+  if (options_.on_start) options_.on_start(start_us);
   for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {
     if (stop_) break;
     Status s = Acquire(stages_, options_, clock_, &seq, start_us, work, &stats.late_frames, &stats.dropped_frames,
@@ -159,6 +164,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
   Stopwatch wall;
   const double cpu0 = ProcessCpuTimeMs();
   const int64_t start_us = clock_.NowUs();
+  if (options_.on_start) options_.on_start(start_us);
   std::thread acquire_thread([&] {
     int64_t late = 0, dropped = 0;
     for (int64_t seq = 0; options_.max_frames < 0 || seq < options_.max_frames; ++seq) {

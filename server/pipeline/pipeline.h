@@ -45,7 +45,8 @@ struct StageTimings {
   double simplify_cpu_ms = 0;
   double texture_cpu_ms = 0;
   double encode_cpu_ms = 0;
-  // Clock time when acquire started, when the texture stage finished and when
+  // Clock time of the frame's capture (paced: its camera slot; else when acquire
+  // started), when the texture stage finished and when
   // the encode stage finished (µs on the pipeline's clock; encoded_us =
   // ready_us without an encode stage): latency = ready - acquired.
   int64_t acquired_us = 0;
@@ -114,6 +115,10 @@ struct PipelineOptions {
   // time). A site that runs for days must not grow by a StageTimings (136
   // bytes) per frame: 15 MB an hour at 30 fps.
   int64_t keep_frame_timings = 0;
+  // Called once when Run starts, with the pacing origin on the pipeline's
+  // clock: paced, frame `sequence` k is the camera frame of time start_us +
+  // k / pace_fps (what the site's voice lines up with).
+  std::function<void(int64_t start_us)> on_start;
   Status Check() const;
 };
 

@@ -7,10 +7,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <thread>
@@ -35,6 +37,7 @@
 #include "studio/workloads.h"
 #include "texture/mesh_renderer.h"
 #include "texture/novel_view.h"
+#include "server/voice/site_voice.h"
 
 namespace {
 
@@ -204,6 +207,13 @@ int main(int argc, char** argv) {
                  "--pods: a set missing a connected pod leaves this long after its capture time")
       ->capture_default_str();
   app.add_flag("--pod-set-stats", pod_set_stats, "--pods: one stats line per frame set the hub releases");
+  std::string voice_spec = "off";
+  app.add_option("--voice", voice_spec,
+                 "publish the voice of the person the pods capture, 20 ms Opus frames stamped on the pictures' "
+                 "capture clock with their head pose: off, synthetic (the studio's person says a syllable at each "
+                 "footstep and the ball knocks when it bounces, in step with the picture; needs the synthetic "
+                 "source and --pace or --truth-mesh), mic or mic:DEVICE, or a WAV file (looped)")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -408,6 +418,50 @@ int main(int argc, char** argv) {
   }
 
   if (server) server->SetRig(source->rig());
+
+  // The site's voice (--voice): published as stream 2, on the capture clock.
+  // The camera timeline (pacing origin, frame → studio frame) tells the
+  // synthetic voice what the cameras see at each instant.
+  std::atomic<int64_t> capture_start_us{0};  // pipeline clock (RealClock); 0: not capturing yet
+  double capture_period_us = pace > 0 ? 1e6 / pace : 1e6 / 30.0;
+  std::function<int64_t(int64_t)> content_frame = [&](int64_t k) {
+    if (truth_mesh) return truth_loop > 0 ? k % truth_loop : k;
+    return prerendered ? prerendered->ContentFrame(k) : k;
+  };
+  std::unique_ptr<holo::voice::SiteVoice> site_voice;
+  if (voice_spec != "off") {
+    if (!server) return Fail(holo::InvalidArgument("--voice needs --listen or --net-config (the voice goes to viewers)"));
+    holo::voice::SiteVoiceOptions vo;
+    vo.source = voice_spec;
+    holo::voice::StudioTimeFn studio_time;
+    const bool camera_timeline = studio && !pod_hub && stereo_source == nullptr && (truth_mesh || pace > 0);
+    if (voice_spec == "synthetic" && !camera_timeline)
+      return Fail(holo::InvalidArgument(
+          "--voice synthetic needs the synthetic studio as the frame source, paced like cameras (--pace FPS, or "
+          "--truth-mesh): the syllables follow what the cameras see"));
+    if (studio && !pod_hub && (truth_mesh || pace > 0)) {
+      const double studio_fps = studio->options().fps;
+      studio_time = [&, studio_fps](int64_t t_us) {
+        const int64_t start = capture_start_us.load();
+        if (start == 0 || t_us < start) return std::numeric_limits<double>::quiet_NaN();
+        const double x = static_cast<double>(t_us - start) / capture_period_us;
+        const auto k = static_cast<int64_t>(std::floor(x));
+        const double f = x - static_cast<double>(k);
+        const auto a = static_cast<double>(content_frame(k)), b = static_cast<double>(content_frame(k + 1));
+        // Between camera frames the motion goes on (a loop starting over jumps).
+        const double frame = std::abs(b - a) <= 1.0 ? a + f * (b - a) : a;
+        return frame / studio_fps;
+      };
+    }  // else no camera timeline (pods, datasets): the voice is published from the start
+    holo::net::Server* srv = server.get();
+    auto v = holo::voice::SiteVoice::Start(vo, studio.get(), studio_time, [srv](const holo::protocol::AudioPose& a) {
+      srv->PublishAudio(a, holo::net::kSiteVoiceStreamId);
+    });
+    if (!v.ok()) return Fail(v.status());
+    site_voice = std::move(*v);
+    if (!quiet) std::fprintf(stderr, "holoport-server: voice: %s\n", site_voice->stats().description.c_str());
+  }
+  options.pipeline.on_start = [&](int64_t start_us) { capture_start_us = start_us; };
   pod_stats = stats_out;
   // Pod counters once a second (and per released set with --pod-set-stats).
   std::atomic<bool> pod_stats_done{false};
@@ -456,6 +510,12 @@ int main(int argc, char** argv) {
     j["violations"] = c.violations;
     j["audio_relayed"] = c.audio_relayed;
     j["keyframe_requests"] = c.keyframe_requests;
+    if (site_voice) {
+      const holo::voice::SiteVoiceStats vs = site_voice->stats();
+      j["voice_frames"] = vs.frames;
+      j["voice_cpu_ms"] = vs.cpu_ms;
+      j["voice_late_frames"] = vs.late_frames;
+    }
     j["io_cpu_ms"] = server->IoCpuMs();
     std::fprintf(stats_out, "%s\n", j.dump().c_str());
     std::fflush(stats_out);
@@ -491,6 +551,8 @@ int main(int argc, char** argv) {
       if (!quiet && (k + 1) % 10 == 0) std::fprintf(stderr, "  pre-rendered %d/%d frames\n", k + 1, truth_loop);
     }
     const auto start = std::chrono::steady_clock::now();
+    capture_period_us = 1e6 / fps;
+    capture_start_us = holo::RealClock::Instance().NowUs();
     int64_t late = 0;
     std::vector<double> render_ms, geom_ms, color_ms, pub_ms;
     int64_t i = 0;
@@ -498,7 +560,10 @@ int main(int argc, char** argv) {
       const auto due = start + std::chrono::microseconds(static_cast<int64_t>(i * 1e6 / fps));
       if (std::chrono::steady_clock::now() > due + std::chrono::milliseconds(5)) ++late;
       std::this_thread::sleep_until(due);
-      const int64_t capture_us = holo::net::WallUs();
+      // The frame of this slot, even when taken late (what the voice is in step with).
+      const int64_t capture_us =
+          holo::net::WallUs() -
+          std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - due).count();
       holo::Stopwatch sw;
       std::vector<holo::net::PodColor> pods;
       holo::Mesh mesh;

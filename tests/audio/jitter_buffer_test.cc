@@ -175,6 +175,83 @@ void ExpectDriftAbsorbed(double drift) {
   EXPECT_EQ(st.dropped_frames, 0);
 }
 
+// Lip sync: SetSyncDelayMs holds the delay from a sample's capture to the
+// pull that plays it (network 10 ms + U(0, 10 ms)): up from the jitter's
+// own, down, and up a little; the delay is measured from last_pull_capture_us.
+TEST(JitterBuffer, SyncDelayIsReachedHeldAndLowered) {
+  SimulatedClock clock;
+  auto jb = JitterBuffer::Create(AudioCodec::kOpus, clock);
+  ASSERT_TRUE(jb.ok());
+  const auto pk = Packets(AudioCodec::kOpus);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0, 1);
+  struct Phase {
+    double sync_ms;
+    int64_t until_tick;
+  };
+  const Phase phases[] = {{0, 150}, {400, 450}, {300, 750}, {360, 1050}, {10, 1200}};
+  std::vector<std::pair<int64_t, AudioPose>> in_flight;
+  int64_t sent = 0;
+  size_t phase = 0;
+  std::vector<double> delays;  // of the last 2 s of the phase
+  int64_t silent_while_playing = 0;
+  for (int64_t tick = 0; tick < phases[4].until_tick; ++tick) {
+    const int64_t now = tick * kFrameUs + kFrameUs / 2;
+    while (sent * kFrameUs + kFrameUs <= now) {  // a frame leaves when complete
+      AudioPose f;
+      f.codec = AudioCodec::kOpus;
+      f.sequence = static_cast<uint32_t>(sent);
+      f.capture_time_us = sent * kFrameUs;
+      f.audio = pk[static_cast<size_t>(sent) % pk.size()];
+      in_flight.push_back({sent * kFrameUs + kFrameUs + 10000 + static_cast<int64_t>(u(rng) * 10000), f});
+      ++sent;
+    }
+    std::sort(in_flight.begin(), in_flight.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    size_t k = 0;
+    for (; k < in_flight.size() && in_flight[k].first <= now; ++k) {
+      clock.SetUs(std::max(clock.NowUs(), in_flight[k].first));
+      ASSERT_TRUE((*jb)->Insert(in_flight[k].second).ok());
+    }
+    in_flight.erase(in_flight.begin(), in_flight.begin() + static_cast<std::ptrdiff_t>(k));
+    clock.SetUs(now);
+    (*jb)->SetSyncDelayMs(phases[phase].sync_ms);
+    const std::vector<float> out = (*jb)->Pull();
+    const int64_t capture = (*jb)->last_pull_capture_us();
+    if (capture != 0) {
+      if (tick >= phases[phase].until_tick - 100) delays.push_back((now - capture) / 1000.0);
+      double e = 0;
+      for (float v : out) e += v * v;
+      if (e == 0.0) ++silent_while_playing;
+    }
+    if (tick + 1 == phases[phase].until_tick) {
+      ASSERT_FALSE(delays.empty());
+      double mean = 0;
+      for (double d : delays) mean += d;
+      mean /= static_cast<double>(delays.size());
+      const auto& st = (*jb)->stats();
+      std::printf("sync %.0f ms: capture -> pull %.1f ms (jitter target %.1f, fastest transit %.1f); expands %lld "
+                  "drops %lld rebuffers %lld\n",
+                  phases[phase].sync_ms, mean, st.jitter_target_ms, st.transit_min_ms,
+                  static_cast<long long>(st.sync_expands), static_cast<long long>(st.sync_drops),
+                  static_cast<long long>(st.sync_rebuffers));
+      if (phases[phase].sync_ms > 100) {
+        EXPECT_NEAR(mean, phases[phase].sync_ms, 25.0) << "phase " << phase;
+      } else if (phase == 0) {
+        EXPECT_LT(mean, 130.0) << "the jitter's own delay (initial target 60 ms + a frame + transit)";
+      } else {
+        EXPECT_LT(mean, 150.0) << "back down towards the jitter's own delay";
+      }
+      delays.clear();
+      ++phase;
+    }
+  }
+  const auto& st = (*jb)->stats();
+  EXPECT_EQ(st.sync_rebuffers, 1);  // 0 → 400 ms: one silent gap, no 300 ms of concealment
+  EXPECT_GE(st.sync_drops, 3);      // 400 → 300 ms: whole frames dropped
+  EXPECT_GE(st.sync_expands, 1);    // 300 → 360 ms: concealment frames
+  EXPECT_EQ(silent_while_playing, 0);
+}
+
 TEST(JitterBuffer, NoDriftBaseline) { ExpectDriftAbsorbed(0.0); }
 TEST(JitterBuffer, SenderClockFastIsAbsorbed) { ExpectDriftAbsorbed(0.001); }
 TEST(JitterBuffer, SenderClockSlowIsAbsorbed) { ExpectDriftAbsorbed(-0.001); }

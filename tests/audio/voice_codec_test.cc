@@ -172,5 +172,31 @@ TEST(VoiceCodec, ConcealmentFillsLostFrames) {
   EXPECT_EQ(rec.size(), static_cast<size_t>(kFrameSamples));
 }
 
+// Lip sync counts the codec's delay in the voice's playout time: the
+// constant is the encoder's own look-ahead, and a decoded click comes out
+// that many samples late.
+TEST(VoiceCodec, CodecDelayIsTheOpusLookAhead) {
+  auto enc = VoiceEncoder::Create({});
+  ASSERT_TRUE(enc.ok());
+  EXPECT_EQ((*enc)->lookahead_samples(), CodecDelaySamples(AudioCodec::kOpus));
+  EXPECT_EQ(CodecDelaySamples(AudioCodec::kPcm16), 0);
+  auto dec = VoiceDecoder::Create(AudioCodec::kOpus);
+  ASSERT_TRUE(dec.ok());
+  // A burst starting at sample 400 of frame 2: where does the decoded one start?
+  std::vector<float> in(kFrameSamples);
+  int first = -1;
+  for (int f = 0; f < 5 && first < 0; ++f) {
+    for (int i = 0; i < kFrameSamples; ++i) {
+      const int n = f * kFrameSamples + i - (2 * kFrameSamples + 400);
+      in[i] = n >= 0 && n < 480 ? 0.4f * static_cast<float>(std::sin(0.3 * n)) : 0.0f;
+    }
+    auto out = (*dec)->Decode(*(*enc)->Encode(in));
+    ASSERT_TRUE(out.ok());
+    for (int i = 0; i < kFrameSamples && first < 0; ++i)
+      if (std::abs((*out)[i]) > 0.05f) first = f * kFrameSamples + i;
+  }
+  EXPECT_NEAR(first - (2 * kFrameSamples + 400), CodecDelaySamples(AudioCodec::kOpus), 12);
+}
+
 }  // namespace
 }  // namespace holo::audio

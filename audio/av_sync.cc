@@ -1,0 +1,202 @@
+#include "audio/av_sync.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace holo::audio {
+namespace {
+
+// Nearest-rank quantile of `v` (copied), q in [0, 1]; 0 if empty.
+template <typename T>
+double Quantile(std::vector<T> v, double q) {
+  if (v.empty()) return 0.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::llround(q * static_cast<double>(v.size() - 1))));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return static_cast<double>(v[k]);
+}
+
+// Sample vectors for the run's statistics keep at most this many values
+// (9 hours of pictures at 30 fps).
+constexpr size_t kMaxSamples = 1000000;
+
+void Keep(std::vector<float>* v, double x) {
+  if (v->size() < kMaxSamples) v->push_back(static_cast<float>(x));
+}
+
+}  // namespace
+
+Status AvSyncOptions::Check() const {
+  if (!(max_voice_delay_ms >= 0 && max_voice_delay_ms <= 10000))
+    return InvalidArgument("max_voice_delay_ms must be in 0..10000, got " + std::to_string(max_voice_delay_ms));
+  if (!(max_picture_delay_ms >= 0 && max_picture_delay_ms <= 10000))
+    return InvalidArgument("max_picture_delay_ms must be in 0..10000, got " + std::to_string(max_picture_delay_ms));
+  if (!(window_s > 0 && window_s <= 60)) return InvalidArgument("window_s must be in (0, 60], got " + std::to_string(window_s));
+  if (!(deadband_ms >= 0)) return InvalidArgument("deadband_ms must be >= 0");
+  if (!(update_interval_ms >= 0)) return InvalidArgument("update_interval_ms must be >= 0");
+  if (!(early_limit_ms > 0 && late_limit_ms > 0)) return InvalidArgument("early_limit_ms and late_limit_ms must be > 0");
+  if (!(voice_timeout_ms > 0)) return InvalidArgument("voice_timeout_ms must be > 0");
+  return OkStatus();
+}
+
+AvSync::AvSync(AvSyncOptions options) : options_(options) {}
+
+double AvSync::VoiceNaturalLocked(int64_t now_us) const {
+  double natural = -1.0;
+  const auto timeout_us = static_cast<int64_t>(options_.voice_timeout_ms * 1000.0);
+  for (const auto& [id, v] : voices_)
+    if (v.last_playout_us >= now_us - timeout_us) natural = std::max(natural, v.natural_ms);
+  return natural;
+}
+
+int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
+  std::lock_guard<std::mutex> l(mu_);
+  int64_t show = ready_us;
+  const double voice = options_.enabled ? VoiceNaturalLocked(ready_us) : -1.0;
+  if (voice >= 0) {
+    // Rendering takes time: start it so that the picture is visible when
+    // its voice plays.
+    const double render_ms = Quantile(std::vector<double>(render_ms_.begin(), render_ms_.end()), 0.5);
+    const auto want = capture_us + static_cast<int64_t>(std::llround((voice - render_ms) * 1000.0));
+    if (want > ready_us) {
+      const auto limit = ready_us + static_cast<int64_t>(std::llround(options_.max_picture_delay_ms * 1000.0));
+      if (want > limit) ++n_.pictures_hold_capped;
+      show = std::min(want, limit);
+    }
+  }
+  holds_[capture_us] = static_cast<double>(show - ready_us) / 1000.0;
+  // Pictures never displayed (dropped for a newer one) leave their entry: keep 10 s.
+  while (!holds_.empty() && holds_.begin()->first < capture_us - 10000000) holds_.erase(holds_.begin());
+  return show;
+}
+
+void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64_t display_us) {
+  std::lock_guard<std::mutex> l(mu_);
+  const double delay_ms = static_cast<double>(display_us - capture_us) / 1000.0;
+  render_ms_.push_back(static_cast<double>(display_us - render_start_us) / 1000.0);
+  while (render_ms_.size() > 15) render_ms_.pop_front();
+  picture_delays_.emplace_back(display_us, delay_ms);
+  double hold_ms = 0;
+  if (auto it = holds_.find(capture_us); it != holds_.end()) {
+    hold_ms = it->second;
+    holds_.erase(it);
+  }
+  ++n_.pictures;
+  if (hold_ms > 0.5) ++n_.pictures_held;
+  Keep(&picture_sync_, hold_ms);
+  Keep(&picture_delay_, delay_ms);
+  const auto timeout_us = static_cast<int64_t>(options_.voice_timeout_ms * 1000.0);
+  for (const auto& [id, v] : voices_) {
+    if (v.last_playout_us < display_us - timeout_us) continue;
+    const double offset = v.delay_ms - delay_ms;
+    ++n_.offsets;
+    if (offset < -options_.early_limit_ms) ++n_.offsets_early;
+    if (offset > options_.late_limit_ms) ++n_.offsets_late;
+    Keep(&offsets_, offset);
+    Keep(&unsynced_, v.natural_ms - (delay_ms - hold_ms));
+  }
+  UpdateVoiceTargetLocked(display_us);
+  const double natural = VoiceNaturalLocked(display_us);
+  if (natural >= 0) Keep(&voice_sync_, std::max(0.0, voice_target_ms_ - natural));
+}
+
+void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
+  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
+  while (!picture_delays_.empty() && picture_delays_.front().first < now_us - window_us) picture_delays_.pop_front();
+  if (!options_.enabled || picture_delays_.empty()) {
+    voice_target_ms_ = 0;
+    updated_ = false;
+    return;
+  }
+  if (updated_ && now_us - last_update_us_ < static_cast<int64_t>(options_.update_interval_ms * 1000.0)) return;
+  updated_ = true;
+  last_update_us_ = now_us;
+  std::vector<double> d;
+  d.reserve(picture_delays_.size());
+  for (const auto& [t, ms] : picture_delays_) d.push_back(ms);
+  // The voice delay that puts the most pictures within the detectability
+  // window (voice at most early_limit_ms ahead, late_limit_ms behind), among
+  // delays within 35 ms of the pictures' median so that the median offset
+  // stays small; ties go to the delay nearest the median. With pictures
+  // whose delays spread, this leans the voice late: voice ahead of the lips
+  // is noticed sooner than voice behind them.
+  std::sort(d.begin(), d.end());
+  const double median = d[d.size() / 2];
+  double want = median;
+  size_t best = 0;
+  for (double bias = -35.0; bias <= 35.0; bias += 5.0) {
+    const double v = median + bias;
+    const auto lo = std::lower_bound(d.begin(), d.end(), v - options_.late_limit_ms);
+    const auto hi = std::upper_bound(d.begin(), d.end(), v + options_.early_limit_ms);
+    const auto covered = static_cast<size_t>(hi - lo);
+    if (covered > best || (covered == best && std::abs(bias) < std::abs(want - median))) {
+      best = covered;
+      want = v;
+    }
+  }
+  const double natural = VoiceNaturalLocked(now_us);
+  if (natural >= 0 && want > natural + options_.max_voice_delay_ms) {
+    want = natural + options_.max_voice_delay_ms;
+    ++n_.voice_delay_capped;
+  } else if (natural < 0) {
+    want = std::min(want, options_.max_voice_delay_ms);
+  }
+  const double base = std::max(natural, 0.0);
+  if (std::abs(std::max(want, base) - std::max(voice_target_ms_, base)) > options_.deadband_ms) voice_target_ms_ = want;
+}
+
+void AvSync::VoicePlayout(uint32_t stream, int64_t capture_us, int64_t playout_us, double natural_delay_ms) {
+  std::lock_guard<std::mutex> l(mu_);
+  Voice& v = voices_[stream];
+  v.last_playout_us = playout_us;
+  v.delay_ms = static_cast<double>(playout_us - capture_us) / 1000.0;
+  v.natural_ms = natural_delay_ms;
+}
+
+double AvSync::VoiceTargetMs(int64_t now_us) {
+  std::lock_guard<std::mutex> l(mu_);
+  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
+  // No picture for a whole window (the site stopped sending them): the voice
+  // goes back to its own delay instead of waiting for pictures that do not come.
+  if (picture_delays_.empty() || picture_delays_.back().first < now_us - window_us) {
+    voice_target_ms_ = 0;
+    updated_ = false;
+  }
+  return options_.enabled ? voice_target_ms_ : 0.0;
+}
+
+AvSyncStats AvSync::stats() const {
+  std::lock_guard<std::mutex> l(mu_);
+  AvSyncStats s = n_;
+  s.av_offset_ms_p1 = Quantile(offsets_, 0.01);
+  s.av_offset_ms_p50 = Quantile(offsets_, 0.50);
+  s.av_offset_ms_p99 = Quantile(offsets_, 0.99);
+  s.unsynced_offset_ms_p50 = Quantile(unsynced_, 0.50);
+  s.voice_sync_delay_ms = Quantile(voice_sync_, 0.5);
+  s.picture_sync_delay_ms = Quantile(picture_sync_, 0.5);
+  s.picture_delay_ms = Quantile(picture_delay_, 0.5);
+  s.voice_target_ms = options_.enabled ? voice_target_ms_ : 0.0;
+  double natural = -1, delay = 0;
+  int64_t last = 0;
+  for (const auto& [id, v] : voices_) {
+    if (v.last_playout_us < last) continue;
+    last = v.last_playout_us;
+    natural = v.natural_ms;
+    delay = v.delay_ms;
+  }
+  s.voice_natural_ms = std::max(natural, 0.0);
+  s.voice_delay_ms = delay;
+  return s;
+}
+
+void AvSync::ResetStats() {
+  std::lock_guard<std::mutex> l(mu_);
+  n_ = AvSyncStats{};
+  offsets_.clear();
+  unsynced_.clear();
+  voice_sync_.clear();
+  picture_sync_.clear();
+  picture_delay_.clear();
+}
+
+}  // namespace holo::audio
