@@ -40,10 +40,12 @@ target_compile_definitions(holo_asio INTERFACE ASIO_STANDALONE ASIO_NO_DEPRECATE
 target_link_libraries(holo_asio INTERFACE Threads::Threads)
 find_package(OpenSSL REQUIRED)
 
-# Rendering: GLFW window or EGL surfaceless context; GL functions via libepoxy.
+# Rendering: GLFW window or EGL surfaceless context; GL and EGL functions via
+# libepoxy, which loads libGL/libEGL itself at run time (nothing links them).
+# epoxy/egl.h includes the Khronos EGL/eglplatform.h (libegl-dev).
 find_package(glfw3 3.3 REQUIRED)
-find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
 pkg_check_modules(EPOXY REQUIRED IMPORTED_TARGET epoxy)
+find_path(EGL_PLATFORM_INCLUDE_DIR EGL/eglplatform.h REQUIRED)
 # Resampling of voice input to 48 kHz (audio/).
 pkg_check_modules(SOXR REQUIRED IMPORTED_TARGET soxr)
 # Capture-side echo cancellation and noise suppression (audio/echo_canceller):
