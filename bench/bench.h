@@ -17,7 +17,6 @@ struct BenchArgs {
   bool json = false;       // JSON lines only (no human-readable text)
   int frames = 0;          // 0 = the benchmark's default
   int repeats = 3;         // runs to take the median of
-  std::vector<std::string> extra;  // options of a benchmark without declared options (it parses them)
 };
 
 // Returns a process exit code (0 = success).
@@ -27,18 +26,18 @@ using BenchFn = std::function<int(const BenchArgs&)>;
 // on `app` (bound to state the function owns, e.g. a shared_ptr to an options
 // struct) and returns the function that runs the benchmark once
 // holoport-bench has parsed the command line. holoport-bench adds the common
-// options (--workload, --json, --frames, --repeats) and --help, prints the
-// benchmark's help for `holoport-bench NAME --help`, and refuses any option
-// the benchmark did not declare (an error naming it, exit 2).
+// options (--workload, --json, --frames, --repeats, --log-level) and --help,
+// prints the benchmark's help for `holoport-bench NAME --help`, and refuses
+// any option the benchmark did not declare (an error naming it, exit 2).
 using BenchSetup = std::function<BenchFn(CLI::App& app)>;
 
 struct BenchInfo {
   std::string description;
-  BenchFn fn;        // a benchmark registered without declared options (own parser of `extra`)
-  BenchSetup setup;  // a benchmark that declares its options
+  BenchSetup setup;  // declares the benchmark's options
 };
 
 std::map<std::string, BenchInfo>& Registry();
+// A benchmark with no options besides the common ones.
 bool Register(const std::string& name, const std::string& description, BenchFn fn);
 bool RegisterWithOptions(const std::string& name, const std::string& description, BenchSetup setup);
 // Setup of a benchmark with no options besides the common ones.
@@ -58,8 +57,8 @@ double Mean(const std::vector<double>& values);
 
 }  // namespace holo::bench
 
-// Prefer HOLO_REGISTER_BENCH_OPTIONS (CLI11-declared options); the plain form
-// leaves the benchmark's options in args.extra for its own parser.
+// HOLO_REGISTER_BENCH: a benchmark with only the common options;
+// HOLO_REGISTER_BENCH_OPTIONS: one that declares its own (BenchSetup).
 #define HOLO_REGISTER_BENCH(name, description, fn) \
   static const bool holo_bench_registered_##fn = ::holo::bench::Register(name, description, fn)
 #define HOLO_BENCH_CONCAT_(a, b) a##b

@@ -17,6 +17,7 @@
 #include "audio/wav.h"
 #include "bench.h"
 #include "common/clock.h"
+#include "common/log.h"
 
 namespace holo::bench {
 namespace {
@@ -141,7 +142,7 @@ int RunEchoAndHrtf() {
   for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex}) {
     auto f = MeasureAec(e, true);
     if (!f.ok()) {
-      std::fprintf(stderr, "%s\n", f.status().ToString().c_str());
+      spdlog::error("{}", f.status().ToString());
       return 1;
     }
     const std::string name = AecEngineName(e);
@@ -187,7 +188,7 @@ int RunEchoAndHrtf() {
     auto sp = Spatializer::Create(o);
     auto file = SofaFileCues(sofa, az);
     if (!sp.ok() || !file.ok()) {
-      std::fprintf(stderr, "%s\n", (!sp.ok() ? sp.status() : file.status()).ToString().c_str());
+      spdlog::error("{}", (!sp.ok() ? sp.status() : file.status()).ToString().c_str());
       return 1;
     }
     (*sp)->SetListener({0, 0, 1.6f, 0, 0, 0});
@@ -218,7 +219,7 @@ int RunAudio(const BenchArgs& args) {
   const std::string w = "speech_48k";
   auto speech = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", kSampleRate);
   if (!speech.ok()) {
-    std::fprintf(stderr, "%s\n", speech.status().ToString().c_str());
+    spdlog::error("{}", speech.status().ToString());
     return 1;
   }
   const size_t frames = speech->size() / kFrameSamples;
@@ -262,7 +263,7 @@ int RunAudio(const BenchArgs& args) {
   {
     auto es = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", kSampleRate);
     if (!es.ok()) {
-      std::fprintf(stderr, "%s\n", es.status().ToString().c_str());
+      spdlog::error("{}", es.status().ToString());
       return 1;
     }
     for (AudioCodec codec : {AudioCodec::kOpus, AudioCodec::kPcm16}) {
@@ -319,7 +320,8 @@ int RunAudio(const BenchArgs& args) {
   }
   for (AudioCodec codec : {AudioCodec::kOpus, AudioCodec::kPcm16}) {
     for (int jitter : {0, 20, 50}) {
-      if (!args.json) std::fprintf(stderr, "audio: mouth-to-ear, %s, jitter %d ms\n", codec == AudioCodec::kOpus ? "opus" : "pcm", jitter);
+      if (!args.json)
+        spdlog::info("audio: mouth-to-ear, {}, jitter {} ms", codec == AudioCodec::kOpus ? "opus" : "pcm", jitter);
       VoiceChainOptions o;
       o.encoder.codec = codec;
       o.network.jitter_ms = jitter;  // no base delay: propagation is not part of the figure
@@ -327,7 +329,7 @@ int RunAudio(const BenchArgs& args) {
       o.link = RoomLink{};
       auto l = MeasureMouthToEar(o, 30.0, 5.0);
       if (!l.ok()) {
-        std::fprintf(stderr, "%s\n", l.status().ToString().c_str());
+        spdlog::error("{}", l.status().ToString());
         return 1;
       }
       EmitFigure("audio", "bursts_30s", "mouth_to_ear_ms", l->median_ms, "ms",
@@ -354,6 +356,9 @@ int RunAudio(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("audio", "voice: kbps, encode/decode ms, speech quality, mouth-to-ear ms, ILD/ITD by azimuth, directivity", RunAudio);
+HOLO_REGISTER_BENCH_OPTIONS("audio",
+                            "voice: kbps, encode/decode ms, speech quality, mouth-to-ear ms, ILD/ITD by azimuth, "
+                            "directivity",
+                            NoOptions(RunAudio));
 
 }  // namespace holo::bench

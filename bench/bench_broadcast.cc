@@ -51,6 +51,7 @@
 #include "bench.h"
 #include "bench_process.h"
 #include "client/net/broadcast_player.h"
+#include "common/log.h"
 #include "common/status.h"
 
 namespace holo::bench {
@@ -345,7 +346,7 @@ LogCounts CountLog(const std::string& path, double t0, double t1) {
 
 int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   if (std::system("command -v nginx > /dev/null 2>&1") != 0) {
-    std::fprintf(stderr, "broadcast: nginx is not installed (scripts/setup.sh installs nginx-light)\n");
+    spdlog::error("broadcast: nginx is not installed (scripts/setup.sh installs nginx-light)");
     return 2;
   }
   const std::string bin = SelfDir();
@@ -358,7 +359,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   }
   if (std::system(("mkdir -p '" + dir + "/root'").c_str()) != 0) return 1;
   auto progress = [&](const std::string& s) {
-    if (!args.json) std::fprintf(stderr, "broadcast: %s\n", s.c_str());
+    if (!args.json) spdlog::info("broadcast: {}", s);
   };
   const std::string content = o.content;
   auto emit = [&](const std::string& metric, double value, const std::string& unit,
@@ -414,7 +415,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
     StopChild(site_pid);
   };
   if (rc != 0) {
-    std::fprintf(stderr, "broadcast: nginx did not start (see %s/nginx.log)\n", dir.c_str());
+    spdlog::error("broadcast: nginx did not start (see {}/nginx.log)", dir);
     stop_all();
     return 1;
   }
@@ -432,7 +433,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
       if (!live) std::this_thread::sleep_for(std::chrono::milliseconds(500));
     }
     if (!live) {
-      std::fprintf(stderr, "broadcast: no broadcast at the edge within 300 s (see %s)\n", dir.c_str());
+      spdlog::error("broadcast: no broadcast at the edge within 300 s (see {})", dir);
       stop_all();
       return 1;
     }
@@ -571,7 +572,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   emit("site_cpu_pct", site_cpu / (window_s * 10.0), "% of one core");
   emit("viewers_cpu_pct", self_cpu / (window_s * 10.0), "% of one core", {{"threads", std::to_string(o.threads)}});
   emit("segments_published", segments, "count", {{"seconds", std::to_string(window_s)}});
-  if (!args.json) std::fprintf(stderr, "broadcast: logs in %s\n", dir.c_str());
+  if (!args.json) spdlog::info("broadcast: logs in {}", dir);
   return 0;
 }
 

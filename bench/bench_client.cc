@@ -3,10 +3,11 @@
 //           (llvmpipe here), per-vertex colour and projective texturing,
 //           plus the per-stream-frame costs (upload, pod visibility maps) and
 //           the novel-view PSNR of both modes against the studio's truth.
-// Adding a part (pose prediction, reprojection): write a function
-//   int RunClientXxxPart(const holo::bench::BenchArgs& args, const std::vector<std::string>& options);
-// (in this file or in bench_client_xxx.cc, declared below) and add it to kParts with the
-// options it takes. `--parts render,xxx` runs a subset; by default all run.
+// Adding a part: write a function
+//   int RunClientXxxPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options);
+// add its options to ClientBenchOptions and SetupClient, and the part to Parts().
+// `--parts render,xxx` runs a subset; by default all run. (Pose prediction and
+// reprojection are benchmarks of their own: client-pose, client-offload.)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -19,6 +20,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include <CLI/CLI.hpp>
+
 #include "bench.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
@@ -26,6 +29,7 @@
 #include "common/clock.h"
 #include "common/file_util.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
 #include "protocol/color_codec.h"
@@ -41,13 +45,18 @@ using holo::bench::EmitFigure;
 using holo::bench::Median;
 using holo::bench::ProcessCpuMs;
 
-// Value of `--name V` in `options`, or `fallback`.
-std::string OptionValue(const std::vector<std::string>& options, const std::string& name, const std::string& fallback) {
-  for (size_t i = 0; i + 1 < options.size(); ++i) {
-    if (options[i] == name) return options[i + 1];
-  }
-  return fallback;
-}
+// The benchmark's own options (holoport-bench client --help).
+struct ClientBenchOptions {
+  std::string parts;                             // "render,...": a subset of the parts ("": all)
+  std::string resolutions = "960x540,1280x720";  // WxH[,WxH...]
+  std::string content = "fused";                 // fused | truth
+  std::string png_dir;                           // write the novel views as PNGs here
+  std::string legacy = "0";                      // 1: RenderSettings::Legacy(), no mask-edge texturing
+  int64_t frame = 40;                            // studio frame of the content
+  size_t reduce = 20000;                         // triangle budget of the reduced fused mesh
+  std::string cull = "1";                        // 0: no back-face culling
+  std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
+};
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
   const float a = azimuth_deg * static_cast<float>(M_PI) / 180.0f;
@@ -255,43 +264,34 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
 }
 
 int Fail(const holo::Status& s) {
-  std::fprintf(stderr, "client: %s\n", s.ToString().c_str());
+  spdlog::error("client: {}", s.ToString());
   return 1;
 }
 
-int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<std::string>& options) {
+int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options) {
   std::vector<std::pair<int, int>> resolutions;
   {
-    std::stringstream ss(OptionValue(options, "--resolutions", "960x540,1280x720"));
+    std::stringstream ss(options.resolutions);
     std::string item;
     while (std::getline(ss, item, ',')) {
       int w = 0, h = 0;
       if (std::sscanf(item.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 8192 || h > 8192) {
-        std::fprintf(stderr, "client: --resolutions wants WxH[,WxH...] with sides in 16..8192, got '%s'\n",
-                     item.c_str());
+        spdlog::error("client: --resolutions wants WxH[,WxH...] with sides in 16..8192, got '{}'", item);
         return 2;
       }
       resolutions.push_back({w, h});
     }
   }
-  const std::string content_opt = OptionValue(options, "--content", "fused");
-  if (content_opt != "fused" && content_opt != "truth") {
-    std::fprintf(stderr, "client: --content must be fused or truth, got '%s'\n", content_opt.c_str());
-    return 2;
-  }
-  const std::string png_dir = OptionValue(options, "--png-dir", "");
-  const bool legacy = OptionValue(options, "--legacy", "0") == "1";
+  const std::string& content_opt = options.content;
+  const std::string& png_dir = options.png_dir;
+  const bool legacy = options.legacy == "1";
   const int frames = args.frames > 0 ? args.frames : 30;
-  const int64_t studio_frame = std::atoi(OptionValue(options, "--frame", "40").c_str());
-  if (studio_frame < 1 || studio_frame > 10000) {
-    std::fprintf(stderr, "client: --frame must be in 1..10000\n");
-    return 2;
-  }
-  const size_t reduced_triangles = static_cast<size_t>(std::atoi(OptionValue(options, "--reduce", "20000").c_str()));
+  const int64_t studio_frame = options.frame;
+  const size_t reduced_triangles = options.reduce;
 
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "client: %s\n", workload.status().ToString().c_str());
+    spdlog::error("client: {}", workload.status().ToString());
     return 2;
   }
   holo::StudioOptions so = workload->studio;
@@ -309,8 +309,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
     if (holo::Status s = MakeTruthContent(*workload, tstudio->get(), studio_frame, &contents.back()); !s.ok())
       return Fail(s);
   } else {
-    if (!args.json) std::fprintf(stderr, "client render: running the capture site to frame %lld...\n",
-                                 static_cast<long long>(studio_frame));
+    if (!args.json) spdlog::info("client render: running the capture site to frame {}...", studio_frame);
     contents.resize(2);
     holo::Stopwatch sw;
     holo::TextureOptions to;
@@ -319,7 +318,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
             MakeFusedContent(*workload, studio_frame, reduced_triangles, to, &contents[0], &contents[1]);
         !s.ok())
       return Fail(s);
-    if (!args.json) std::fprintf(stderr, "client render: site done in %.1f s\n", sw.ElapsedMs() / 1000);
+    if (!args.json) spdlog::info("client render: site done in {:.1f} s", sw.ElapsedMs() / 1000);
   }
 
   auto ctx = holo::render::CreateHeadlessContext();
@@ -342,13 +341,13 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
     if (legacy) q["renderer_options"] = "legacy";
     holo::render::RenderSettings base;
     if (legacy) base = holo::render::RenderSettings::Legacy();
-    if (OptionValue(options, "--cull", "1") == "0") {
+    if (options.cull == "0") {
       base.cull_back_faces = false;
       base.projective.cull_back_faces = false;
       q["cull_back_faces"] = "false";
     }
-    if (OptionValue(options, "--prepass", "") != "") {
-      base.depth_prepass = OptionValue(options, "--prepass", "") == "1";
+    if (!options.prepass.empty()) {
+      base.depth_prepass = options.prepass == "1";
       q["depth_prepass"] = base.depth_prepass ? "true" : "false";
     }
     if (!(*renderer)->SetRemoteMesh(c.mesh).ok()) return 1;
@@ -435,46 +434,57 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const std::vector<st
 
 struct Part {
   const char* name;
-  std::vector<std::string> options;  // options with a value this part reads
-  int (*run)(const holo::bench::BenchArgs&, const std::vector<std::string>&);
+  int (*run)(const holo::bench::BenchArgs&, const ClientBenchOptions&);
 };
 
 const std::vector<Part>& Parts() {
-  static const std::vector<Part> parts = {
-      {"render", {"--resolutions", "--content", "--png-dir", "--legacy", "--frame", "--reduce", "--cull", "--prepass"}, RunClientRenderPart},
-  };
+  static const std::vector<Part> parts = {{"render", RunClientRenderPart}};
   return parts;
 }
 
-int RunClientBench(const holo::bench::BenchArgs& args) {
+int RunClientBench(const holo::bench::BenchArgs& args, const ClientBenchOptions& options) {
   std::set<std::string> selected;
-  std::set<std::string> known = {"--parts"};
-  for (const Part& p : Parts()) known.insert(p.options.begin(), p.options.end());
-  for (size_t i = 0; i < args.extra.size(); i += 2) {
-    if (!known.count(args.extra[i]) || i + 1 >= args.extra.size()) {
-      std::fprintf(stderr, "client: unknown option or missing value: %s\n", args.extra[i].c_str());
-      return 2;
-    }
-  }
   {
-    std::stringstream ss(OptionValue(args.extra, "--parts", ""));
+    std::stringstream ss(options.parts);
     std::string item;
     while (std::getline(ss, item, ',')) selected.insert(item);
   }
   for (const std::string& s : selected) {
     if (std::none_of(Parts().begin(), Parts().end(), [&](const Part& p) { return s == p.name; })) {
-      std::fprintf(stderr, "client: unknown part '%s'\n", s.c_str());
+      spdlog::error("client: unknown part '{}'", s);
       return 2;
     }
   }
   for (const Part& p : Parts()) {
     if (!selected.empty() && !selected.count(p.name)) continue;
-    if (int rc = p.run(args, args.extra); rc != 0) return rc;
+    if (int rc = p.run(args, options); rc != 0) return rc;
   }
   return 0;
 }
 
+holo::bench::BenchFn SetupClient(CLI::App& app) {
+  auto o = std::make_shared<ClientBenchOptions>();
+  app.add_option("--parts", o->parts, "run only these parts, comma-separated (render); default all");
+  app.add_option("--resolutions", o->resolutions, "render sizes WxH[,WxH...], sides 16..8192")->capture_default_str();
+  app.add_option("--content", o->content, "fused (the capture site's mesh and images) or truth (the studio's)")
+      ->check(CLI::IsMember({"fused", "truth"}))
+      ->capture_default_str();
+  app.add_option("--png-dir", o->png_dir, "write the novel views as PNGs to this directory");
+  app.add_option("--legacy", o->legacy, "1: the renderer's legacy settings, no mask-edge texturing")
+      ->check(CLI::IsMember({"0", "1"}))
+      ->capture_default_str();
+  app.add_option("--frame", o->frame, "studio frame of the content")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  app.add_option("--reduce", o->reduce, "triangle budget of the reduced fused mesh")->capture_default_str();
+  app.add_option("--cull", o->cull, "0: no back-face culling")->check(CLI::IsMember({"0", "1"}))->capture_default_str();
+  app.add_option("--prepass", o->prepass, "1 / 0: depth pre-pass on / off (default: the renderer's)")
+      ->check(CLI::IsMember({"0", "1"}));
+  return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
+}
+
 }  // namespace
 
-HOLO_REGISTER_BENCH("client", "viewer: render_ms at 1280x720 (per-vertex colour, projective texturing), novel-view PSNR",
-                    RunClientBench);
+HOLO_REGISTER_BENCH_OPTIONS("client",
+                            "viewer: render_ms at 1280x720 (per-vertex colour, projective texturing), novel-view PSNR",
+                            SetupClient);

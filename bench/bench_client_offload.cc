@@ -32,6 +32,7 @@
 #include "client/offload/thin_client.h"
 #include "client/pose/trace.h"
 #include "client/reproject/offload_sim.h"
+#include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "net/session_server.h"
 #include "net/wire_message.h"
@@ -77,37 +78,37 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
   const bool sim = o.sim;
   const std::string& trace_path = o.trace_path;
   if (std::sscanf(o.size.c_str(), "%dx%d", &width, &height) != 2) {
-    std::fprintf(stderr, "client-offload: --size must be WxH\n");
+    spdlog::error("client-offload: --size must be WxH");
     return 2;
   }
   auto parsed_renderer = offload::ParseHostRenderer(o.renderer);
   if (!parsed_renderer.ok()) {
-    std::fprintf(stderr, "client-offload: %s\n", parsed_renderer.status().ToString().c_str());
+    spdlog::error("client-offload: {}", parsed_renderer.status().ToString());
     return 2;
   }
   const offload::HostRenderer renderer = *parsed_renderer;
   for (int l : latencies) {
     if (l < 0 || l > 1000) {
-      std::fprintf(stderr, "client-offload: latencies must be 0..1000 ms\n");
+      spdlog::error("client-offload: latencies must be 0..1000 ms");
       return 2;
     }
   }
   auto trace = pose::ReadHeadTrace(trace_path);
   if (!trace.ok()) {
-    std::fprintf(stderr, "client-offload: %s\n", trace.status().ToString().c_str());
+    spdlog::error("client-offload: {}", trace.status().ToString());
     return 1;
   }
   for (pose::PoseSample& s : *trace) s.position += Eigen::Vector3d(-view_distance, 0, 0);
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "client-offload: %s\n", workload.status().ToString().c_str());
+    spdlog::error("client-offload: {}", workload.status().ToString());
     return 1;
   }
   StudioOptions so = workload->studio;
   so.threads = 2;
   auto studio = SyntheticStudio::Create(workload->rig, so);
   if (!studio.ok()) {
-    std::fprintf(stderr, "client-offload: %s\n", studio.status().ToString().c_str());
+    spdlog::error("client-offload: {}", studio.status().ToString());
     return 1;
   }
   const Mesh content = (*studio)->ForegroundMesh(0);
@@ -119,7 +120,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
   sc.ping_interval_s = 0.2;
   auto server = net::Server::Start(sc);
   if (!server.ok()) {
-    std::fprintf(stderr, "client-offload: site: %s\n", server.status().ToString().c_str());
+    spdlog::error("client-offload: site: {}", server.status().ToString());
     return 1;
   }
   std::atomic<bool> stop{false};
@@ -157,7 +158,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
       ho.log = [](const std::string&) {};
       auto host = offload::RenderHost::Start(ho);
       if (!host.ok() || !(*host)->site()->WaitConnected(5.0)) {
-        std::fprintf(stderr, "client-offload: render host did not start\n");
+        spdlog::error("client-offload: render host did not start");
         rc = 1;
         break;
       }
@@ -198,7 +199,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
         r.renderer = hs.clients[0].renderer.substr(0, hs.clients[0].renderer.find(' '));
       }
       if (!thin.ok()) {
-        std::fprintf(stderr, "client-offload: thin client: %s\n", thin.status().ToString().c_str());
+        spdlog::error("client-offload: thin client: {}", thin.status().ToString());
         rc = 1;
         break;
       }
@@ -231,7 +232,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
       if (base) results.push_back(stale);
       results.push_back(r);
       if (!args.json) {
-        std::fprintf(stderr, "client-offload: L=%d ms %s: %zu frames compared, pose->photon %.1f ms\n", latency, hc.name,
+        spdlog::info("client-offload: L={} ms {}: {} frames compared, pose->photon {:.1f} ms", latency, hc.name,
                      r.psnr.size(), thin->mean_pose_to_photon_ms);
       }
     }
@@ -271,10 +272,12 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
     }
     if (r.mode == "reprojected") measured_latency[r.latency] = r.thin.mean_pose_to_photon_ms;
     if (!args.json) {
-      std::fprintf(stderr, "network L=%3d %-11s PSNR %6.2f dB (content %6.2f) border %.4f  pose->photon %.1f ms  %d fps, %.1f images/s, %.1f KiB\n",
-                   r.latency, r.mode.c_str(), bench::Mean(r.psnr), bench::Mean(r.psnr_content), bench::Mean(r.border),
-                   r.thin.mean_pose_to_photon_ms, static_cast<int>(std::lround(r.thin.fps)), r.thin.received_fps,
-                   r.thin.mean_frame_bytes / 1024.0);
+      spdlog::info(
+          "network L={:3} {:<11} PSNR {:6.2f} dB (content {:6.2f}) border {:.4f}  pose->photon {:.1f} ms  {} fps, "
+          "{:.1f} images/s, {:.1f} KiB",
+          r.latency, r.mode, bench::Mean(r.psnr), bench::Mean(r.psnr_content), bench::Mean(r.border),
+          r.thin.mean_pose_to_photon_ms, static_cast<int>(std::lround(r.thin.fps)), r.thin.received_fps,
+          r.thin.mean_frame_bytes / 1024.0);
     }
   }
   bench::EmitFigure("client-offload", wl, "network_cpu_ms", net_cpu_ms, "ms", {{"path", "network"}});
@@ -299,7 +302,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
     auto sim_results = reproject::SimulateOffload(
         segment, [&](int64_t) { return reproject::MeshSceneRenderer(content); }, o);
     if (!sim_results.ok()) {
-      std::fprintf(stderr, "client-offload: simulation: %s\n", sim_results.status().ToString().c_str());
+      spdlog::error("client-offload: simulation: {}", sim_results.status().ToString());
       return 1;
     }
     for (size_t k = 0; k < sim_results->size(); ++k) {
@@ -316,8 +319,9 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
       q.erase("region");
       bench::EmitFigure("client-offload", wl, "black_border_fraction", r.black_border_fraction, "1", q);
       if (!args.json) {
-        std::fprintf(stderr, "simulation L=%3d (at %d ms) %-11s PSNR %6.2f dB (content %6.2f) border %.4f\n", net_latency,
-                     r.latency_ms, reproject::OffloadModeName(r.mode), r.psnr_db, r.psnr_content_db, r.black_border_fraction);
+        spdlog::info("simulation L={:3} (at {} ms) {:<11} PSNR {:6.2f} dB (content {:6.2f}) border {:.4f}", net_latency,
+                     r.latency_ms, reproject::OffloadModeName(r.mode), r.psnr_db, r.psnr_content_db,
+                     r.black_border_fraction);
       }
     }
   }

@@ -32,6 +32,7 @@
 #include "client/pose/predictor.h"
 #include "client/pose/trace.h"
 #include "client/reproject/offload_sim.h"
+#include "common/log.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 
@@ -53,14 +54,14 @@ int RunPrediction(const holo::bench::BenchArgs& args, const holo::pose::Predicto
     o.seed = 7;
     auto samples = holo::pose::GenerateHeadMotion(o);
     if (!samples.ok()) {
-      std::fprintf(stderr, "client-pose: %s\n", samples.status().ToString().c_str());
+      spdlog::error("client-pose: {}", samples.status().ToString());
       return 1;
     }
     traces.push_back({"synthetic", kind == holo::pose::HeadMotionKind::kWalk ? "walk" : "lookaround", *samples});
   }
   auto recorded = holo::pose::ReadHeadTrace(trace_path);
   if (!recorded.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", recorded.status().ToString().c_str());
+    spdlog::error("client-pose: {}", recorded.status().ToString());
     return 1;
   }
   traces.push_back({"recorded", "lookaround", *recorded});
@@ -71,7 +72,7 @@ int RunPrediction(const holo::bench::BenchArgs& args, const holo::pose::Predicto
         // recorded data must be.
         auto e = holo::pose::EvaluatePredictor(m, options, t.samples, t.samples, horizon_ms * 1e-3);
         if (!e.ok()) {
-          std::fprintf(stderr, "client-pose: %s\n", e.status().ToString().c_str());
+          spdlog::error("client-pose: {}", e.status().ToString());
           return 1;
         }
         const std::string model = holo::pose::PredictorModelName(m);
@@ -86,8 +87,8 @@ int RunPrediction(const holo::bench::BenchArgs& args, const holo::pose::Predicto
         holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_deg", e->p95_deg, "deg", q);
         holo::bench::EmitFigure("client-pose", "head-trace", "pred_err_mm", e->p95_mm, "mm", q);
         if (!args.json) {
-          std::fprintf(stderr, "%-9s %-10s %3d ms %-6s  %6.2f deg (p95 %6.2f)  %6.1f mm (p95 %6.1f)\n", t.name.c_str(),
-                       t.kind.c_str(), horizon_ms, model.c_str(), e->mean_deg, e->p95_deg, e->mean_mm, e->p95_mm);
+          spdlog::info("{:<9} {:<10} {:3} ms {:<6}  {:6.2f} deg (p95 {:6.2f})  {:6.1f} mm (p95 {:6.1f})", t.name,
+                       t.kind, horizon_ms, model, e->mean_deg, e->p95_deg, e->mean_mm, e->p95_mm);
         }
       }
     }
@@ -129,7 +130,7 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
   const int fg_frames = args.frames > 0 ? args.frames : 120;
   const int studio_frames = args.frames > 0 ? args.frames : 60;
   if (!r.size.empty() && std::sscanf(r.size.c_str(), "%dx%d", &o.width, &o.height) != 2) {
-    std::fprintf(stderr, "client-pose: --size must be WxH, got %s\n", r.size.c_str());
+    spdlog::error("client-pose: --size must be WxH, got {}", r.size);
     return 2;
   }
   o.filter = r.filter == "bilinear" ? ReprojectFilter::kBilinear : ReprojectFilter::kBicubic;
@@ -143,34 +144,34 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
     }
   }
   if (scenes != "foreground" && scenes != "studio" && scenes != "both") {
-    std::fprintf(stderr, "client-pose: --scene must be foreground, studio or both, got %s\n", scenes.c_str());
+    spdlog::error("client-pose: --scene must be foreground, studio or both, got {}", scenes);
     return 2;
   }
   auto method = ParseReprojectMethod(method_name);
   if (!method.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", method.status().ToString().c_str());
+    spdlog::error("client-pose: {}", method.status().ToString());
     return 2;
   }
   o.method = *method;
   if (auto s = o.Check(); !s.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", s.ToString().c_str());
+    spdlog::error("client-pose: {}", s.ToString());
     return 2;
   }
   auto trace = holo::pose::ReadHeadTrace(trace_path);
   if (!trace.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", trace.status().ToString().c_str());
+    spdlog::error("client-pose: {}", trace.status().ToString());
     return 1;
   }
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", workload.status().ToString().c_str());
+    spdlog::error("client-pose: {}", workload.status().ToString());
     return 1;
   }
   holo::StudioOptions studio_options = workload->studio;
   studio_options.threads = 2;
   auto studio = holo::SyntheticStudio::Create(workload->rig, studio_options);
   if (!studio.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", studio.status().ToString().c_str());
+    spdlog::error("client-pose: {}", studio.status().ToString());
     return 1;
   }
   o.content_fps = workload->studio.fps;
@@ -202,10 +203,10 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
     };
     const double cpu0 = holo::bench::ProcessCpuMs();
     auto results = SimulateOffload(samples, scene_at, o, [&](int done, int total) {
-      if (!args.json && done % 20 == 0) std::fprintf(stderr, "client-pose: %s: %d/%d display frames\n", scene.c_str(), done, total);
+      if (!args.json && done % 20 == 0) spdlog::info("client-pose: {}: {}/{} display frames", scene, done, total);
     });
     if (!results.ok()) {
-      std::fprintf(stderr, "client-pose: %s\n", results.status().ToString().c_str());
+      spdlog::error("client-pose: {}", results.status().ToString());
       return 1;
     }
     const std::string workload_name = args.workload + "/" + scene;
@@ -231,9 +232,11 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
       holo::bench::EmitFigure("client-pose", workload_name, "rendered_frame_kb", r.wire_bytes / 1024.0, "KiB", q);
       holo::bench::EmitFigure("client-pose", workload_name, "reproj_cpu_ms", r.reproject_cpu_ms, "ms", q);
       if (!args.json) {
-        std::fprintf(stderr, "%-10s L=%3d ms %-11s PSNR %6.2f dB (content %6.2f)  border %.4f  %6.1f KiB  reproject %.1f ms\n",
-                     scene.c_str(), r.latency_ms, OffloadModeName(r.mode), r.psnr_db, r.psnr_content_db,
-                     r.black_border_fraction, r.wire_bytes / 1024.0, r.reproject_cpu_ms);
+        spdlog::info(
+            "{:<10} L={:3} ms {:<11} PSNR {:6.2f} dB (content {:6.2f})  border {:.4f}  {:6.1f} KiB  reproject {:.1f} "
+            "ms",
+            scene, r.latency_ms, OffloadModeName(r.mode), r.psnr_db, r.psnr_content_db, r.black_border_fraction,
+            r.wire_bytes / 1024.0, r.reproject_cpu_ms);
       }
     }
     // Paired per-frame gains (same display frames): mean ± standard error.
@@ -263,8 +266,8 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
       holo::bench::EmitFigure("client-pose", workload_name, "reproj_gain_frames_better", static_cast<double>(better) / n,
                               "1", q);
       if (!args.json) {
-        std::fprintf(stderr, "%-10s L=%3d ms %s → %s: %+.2f ± %.2f dB (better in %d of %zu frames)\n", scene.c_str(),
-                     latency, OffloadModeName(from), OffloadModeName(to), mean, se, better, n);
+        spdlog::info("{:<10} L={:3} ms {} → {}: {:+.2f} ± {:.2f} dB (better in {} of {} frames)", scene, latency,
+                     OffloadModeName(from), OffloadModeName(to), mean, se, better, n);
       }
     };
     for (int latency : o.latencies_ms) {
@@ -273,7 +276,7 @@ int RunReprojectionBench(const holo::bench::BenchArgs& args, const holo::pose::P
       gain(latency, OffloadMode::kPredicted, OffloadMode::kEnlarged);
     }
     if (!args.json) {
-      std::fprintf(stderr, "client-pose: %s: %.1f s CPU for %d display frames\n", scene.c_str(),
+      spdlog::info("client-pose: {}: {:.1f} s CPU for {} display frames", scene,
                    (holo::bench::ProcessCpuMs() - cpu0) * 1e-3, o.display_frames);
     }
   }
@@ -292,11 +295,11 @@ int RunClientPoseBench(const holo::bench::BenchArgs& args, const ClientPoseArgs&
   const std::string& trace_path = c.trace_path;
   const holo::pose::PredictorOptions& options = c.options;
   if (part != "pred" && part != "reproj" && part != "all") {
-    std::fprintf(stderr, "client-pose: --part must be pred, reproj or all, got %s\n", part.c_str());
+    spdlog::error("client-pose: --part must be pred, reproj or all, got {}", part);
     return 2;
   }
   if (auto s = options.Check(); !s.ok()) {
-    std::fprintf(stderr, "client-pose: %s\n", s.ToString().c_str());
+    spdlog::error("client-pose: {}", s.ToString());
     return 2;
   }
   if (part != "reproj") {

@@ -1,10 +1,11 @@
 // holoport-bench codecs --workload S8-QVGA|S8-VGA [--json] [--frames N] [--repeats N] [--synthetic]
 //                       [--only=G0,G1,...] [--jpeg-quality=Q] [--chroma444|--chroma420] [--chroma-shift=S]
-//                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard] [--no-optimize-huffman] [--no-pack]
+//                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard]
+//                       [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
 //                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
-// Unknown options are refused (exit 2).
+// Unknown options are refused (exit 2); --name value and --name=value both work.
 //
 // --content truth (the default): the studio's ground-truth foreground mesh and
 // the pods' images with exact masks, frames 0, 1, 2, ... (consecutive, as a
@@ -46,17 +47,21 @@
 #include <cstring>
 #include <ctime>
 #include <cstdlib>
+#include <memory>
+#include <optional>
 #include <random>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include <CLI/CLI.hpp>
 #include <Eigen/Geometry>
 #include <turbojpeg.h>
 
 #include "bench.h"
 #include "common/clock.h"
 #include "common/image.h"
+#include "common/log.h"
 #include "common/mesh.h"
 #include "protocol/color_codec.h"
 #include "protocol/draco_peer.h"
@@ -82,53 +87,23 @@ double NowMs() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// CPU time of the calling thread: robust to other load on a shared machine
-// (wall time still counts the cache and frequency effects of that load).
-bool HasFlag(const BenchArgs& args, const std::string& flag) {
-  return std::find(args.extra.begin(), args.extra.end(), flag) != args.extra.end();
-}
-
-// The value of "--name=value" among the extra arguments, or `fallback`.
-int IntFlag(const BenchArgs& args, const std::string& name, int fallback) {
-  for (const std::string& e : args.extra)
-    if (e.rfind(name + "=", 0) == 0) return std::atoi(e.c_str() + name.size() + 1);
-  return fallback;
-}
-
-// The value of "--name=value" (or "--name value") among the extra arguments, or `fallback`.
-std::string StrFlag(const BenchArgs& args, const std::string& name, const std::string& fallback) {
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    const std::string& e = args.extra[i];
-    if (e.rfind(name + "=", 0) == 0) return e.substr(name.size() + 1);
-    if (e == name && i + 1 < args.extra.size()) return args.extra[i + 1];
-  }
-  return fallback;
-}
-
-// Empty if every extra argument is an option of this benchmark; else the first unknown one.
-std::string UnknownOption(const BenchArgs& args) {
-  static const char* kFlags[] = {"--synthetic", "--chroma444", "--chroma420", "--fill-pad", "--fill-push-pull",
-                                 "--fill-mean", "--fast-dct", "--quant-standard", "--no-optimize-huffman", "--no-pack",
-                                 "--hash"};
-  static const char* kValued[] = {"--only", "--jpeg-quality", "--chroma-shift", "--mask-zstd-level", "--huffman-refresh",
-                                  "--peer-jpeg-quality", "--content", "--video", "--video-crf", "--video-preset",
-                                  "--keyframe-interval"};
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    const std::string& e = args.extra[i];
-    bool known = false;
-    for (const char* f : kFlags) known = known || e == f;
-    for (const char* v : kValued) {
-      const std::string n(v);
-      if (e.rfind(n + "=", 0) == 0) known = true;
-      if (e == n && (n == "--content") && i + 1 < args.extra.size()) {
-        known = true;
-        ++i;  // its value
-      }
-    }
-    if (!known) return e;
-  }
-  return "";
-}
+// The benchmark's own options (see the comment at the top; CLI11 takes
+// "--name value" and "--name=value").
+struct CodecsOptions {
+  bool synthetic = false, hash = false;
+  std::string only;                         // "G1,C1": only these codecs
+  std::string content = "truth";            // truth | fused
+  std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
+  int video_crf = -1;                       // -1: the encoder's default
+  std::string video_preset;                 // "": the library's default
+  std::optional<int> keyframe_interval;     // unset: VideoEncodeOptions' default
+  std::optional<int> chroma_shift;          // unset: GeometryEncodeOptions' default
+  // C1 options (unset: ColorEncodeOptions' defaults).
+  std::optional<int> jpeg_quality, mask_zstd_level, huffman_refresh;
+  bool chroma444 = false, chroma420 = false, fill_pad = false, fill_push_pull = false, fill_mean = false;
+  bool fast_dct = false, quant_standard = false, no_optimize_huffman = false, no_pack = false;
+  int peer_jpeg_quality = 90;  // the jpeg-box peer's TurboJPEG quality
+};
 
 struct PodImageInput {
   ImageRgb8 color;
@@ -396,7 +371,7 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
   empty_options.empty_room = true;
   auto empty = SyntheticStudio::Create(wl.rig, empty_options);
   if (!studio.ok() || !empty.ok()) {
-    std::fprintf(stderr, "codecs: studio: %s %s\n", studio.status().ToString().c_str(), empty.status().ToString().c_str());
+    spdlog::error("codecs: studio: {} {}", studio.status().ToString(), empty.status().ToString());
     return -1;
   }
   CaptureSiteOptions o;
@@ -405,7 +380,7 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
   o.pipeline.max_frames = frames;
   auto site = CaptureSite::Create(studio->get(), empty->get(), studio->get(), o);
   if (!site.ok()) {
-    std::fprintf(stderr, "codecs: capture site: %s\n", site.status().ToString().c_str());
+    spdlog::error("codecs: capture site: {}", site.status().ToString());
     return -1;
   }
   int n = 0;
@@ -423,7 +398,7 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
     return OkStatus();
   });
   if (!run.ok()) {
-    std::fprintf(stderr, "codecs: capture site: %s\n", run.status().ToString().c_str());
+    spdlog::error("codecs: capture site: {}", run.status().ToString());
     return -1;
   }
   inputs->resize(n);
@@ -437,17 +412,8 @@ struct Figures {
   std::vector<double> vcol_psnr;                                 // vertex colour PSNR
 };
 
-int RunCodecs(const BenchArgs& args) {
-  if (const std::string bad = UnknownOption(args); !bad.empty()) {
-    std::fprintf(stderr, "codecs: unknown option '%s' (see the comment at the top of bench/bench_codecs.cc)\n",
-                 bad.c_str());
-    return 2;
-  }
-  const std::string content = StrFlag(args, "--content", "truth");
-  if (content != "truth" && content != "fused") {
-    std::fprintf(stderr, "codecs: --content must be 'truth' or 'fused', got '%s'\n", content.c_str());
-    return 2;
-  }
+int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
+  const std::string& content = co.content;
   // Video runs, checked before any work.
   struct VideoRun {
     std::string label;  // "x264-444"
@@ -455,7 +421,7 @@ int RunCodecs(const BenchArgs& args) {
   };
   std::vector<VideoRun> video_runs;
   {
-    const std::string list = StrFlag(args, "--video", "x264-444,x264-420");
+    const std::string list = co.video;
     size_t at = 0;
     while (at <= list.size()) {
       const size_t comma = std::min(list.find(',', at), list.size());
@@ -463,12 +429,12 @@ int RunCodecs(const BenchArgs& args) {
       at = comma + 1;
       if (label.empty()) continue;
       // "x264-444@22": this run's CRF (a rate–distortion sweep in one run).
-      int crf = IntFlag(args, "--video-crf", -1);
+      int crf = co.video_crf;
       if (const size_t amp = label.find('@'); amp != std::string::npos) {
         char* end = nullptr;
         crf = static_cast<int>(std::strtol(label.c_str() + amp + 1, &end, 10));
         if (end == label.c_str() + amp + 1 || *end != '\0') {
-          std::fprintf(stderr, "codecs: --video: bad CRF in '%s'\n", label.c_str());
+          spdlog::error("codecs: --video: bad CRF in '{}'", label);
           return 2;
         }
         label.resize(amp);
@@ -479,25 +445,24 @@ int RunCodecs(const BenchArgs& args) {
       } else if (label == "vpx-vp9-444" || label == "vpx-vp9-420") {
         r.o.library = protocol::VideoLibrary::kVp9;
       } else {
-        std::fprintf(stderr, "codecs: --video: unknown '%s' (x264-444, x264-420, vpx-vp9-444, vpx-vp9-420)\n",
-                     label.c_str());
+        spdlog::error("codecs: --video: unknown '{}' (x264-444, x264-420, vpx-vp9-444, vpx-vp9-420)", label);
         return 2;
       }
       r.o.chroma_444 = label.size() > 4 && label.substr(label.size() - 3) == "444";
       r.o.crf = crf;
       r.label.append(1, '@').append(std::to_string(crf));
-      r.o.preset = StrFlag(args, "--video-preset", "");
-      r.o.keyframe_interval = IntFlag(args, "--keyframe-interval", r.o.keyframe_interval);
+      r.o.preset = co.video_preset;
+      r.o.keyframe_interval = co.keyframe_interval.value_or(r.o.keyframe_interval);
       if (const Status st = r.o.Check(); !st.ok()) {
-        std::fprintf(stderr, "codecs: --video %s: %s\n", label.c_str(), st.ToString().c_str());
+        spdlog::error("codecs: --video {}: {}", label, st.ToString());
         return 2;
       }
       video_runs.push_back(r);
     }
   }
-  const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || HasFlag(args, "--synthetic");
+  const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || co.synthetic;
   if (synthetic && content == "fused") {
-    std::fprintf(stderr, "codecs: --content fused needs the studio (not --synthetic)\n");
+    spdlog::error("codecs: --content fused needs the studio (not --synthetic)");
     return 2;
   }
   const int frames = args.frames > 0 ? args.frames : (content == "fused" ? 60 : 4);
@@ -511,7 +476,7 @@ int RunCodecs(const BenchArgs& args) {
       w = 320;
       h = 240;
     } else if (args.workload != "S8-VGA") {
-      std::fprintf(stderr, "codecs: unknown workload '%s' (S8-QVGA or S8-VGA)\n", args.workload.c_str());
+      spdlog::error("codecs: unknown workload '{}' (S8-QVGA or S8-VGA)", args.workload);
       return 2;
     }
     workload = "synthetic-sphere";
@@ -525,7 +490,7 @@ int RunCodecs(const BenchArgs& args) {
 #if HOLO_BENCH_HAVE_STUDIO
     auto wl = GetWorkload(args.workload);
     if (!wl.ok()) {
-      std::fprintf(stderr, "codecs: %s\n", wl.status().ToString().c_str());
+      spdlog::error("codecs: {}", wl.status().ToString());
       return 2;
     }
     if (content == "fused") {
@@ -554,11 +519,11 @@ int RunCodecs(const BenchArgs& args) {
 #endif
   }
   if (inputs.empty()) {
-    std::fprintf(stderr, "codecs: no frames\n");
+    spdlog::error("codecs: no frames");
     return 1;
   }
   if (!args.json) {
-    std::fprintf(stderr, "codecs: %s, %d frames, mesh %zu vertices %zu triangles, %zu pods\n", workload.c_str(), frames,
+    spdlog::info("codecs: {}, {} frames, mesh {} vertices {} triangles, {} pods", workload, frames,
                  inputs[0].mesh.num_vertices(), inputs[0].mesh.num_triangles(), inputs[0].pods.size());
   }
   q0["vertices"] = std::to_string(inputs[0].mesh.num_vertices());
@@ -583,7 +548,7 @@ int RunCodecs(const BenchArgs& args) {
   std::vector<GeomRun> runs;
   runs.push_back({"G0", false, {}, {}});
   runs.back().g.codec = GeometryCodec::kG0;
-  const int chroma_shift = IntFlag(args, "--chroma-shift", protocol::GeometryEncodeOptions{}.chroma_shift);
+  const int chroma_shift = co.chroma_shift.value_or(protocol::GeometryEncodeOptions{}.chroma_shift);
   runs.push_back({"G1", false, {}, {}});
   runs.back().g.chroma_shift = chroma_shift;
   runs.push_back({"G1-normals", false, {}, {}});  // normals sent instead of recomputed
@@ -595,12 +560,10 @@ int RunCodecs(const BenchArgs& args) {
   runs.push_back({"draco-fast", true, {}, {}});
   runs.back().d.speed = 10;
   // --only=G1,C1 restricts the run to those codecs (for profiling).
-  std::string only;
-  for (const std::string& e : args.extra)
-    if (e.rfind("--only=", 0) == 0) only = "," + e.substr(7) + ",";
+  const std::string only = co.only.empty() ? "" : "," + co.only + ",";
   auto wanted = [&](const std::string& name) { return only.empty() || only.find("," + name + ",") != std::string::npos; };
   std::erase_if(runs, [&](const GeomRun& r) { return !wanted(r.name); });
-  const bool print_hash = HasFlag(args, "--hash");
+  const bool print_hash = co.hash;
   for (const GeomRun& run : runs) {
     Figures fig;
     // Buffers reused from frame to frame, as a sender and a receiver would.
@@ -629,13 +592,13 @@ int RunCodecs(const BenchArgs& args) {
         const double t2 = NowMs();
         const double c2 = holo::ThreadCpuTimeMs();
         if (!es.ok() || !ds.ok()) {
-          std::fprintf(stderr, "codecs: %s failed: %s %s\n", run.name.c_str(), es.ToString().c_str(),
-                       ds.ToString().c_str());
+          spdlog::error("codecs: {} failed: {} {}", run.name, es.ToString(), ds.ToString());
           return 1;
         }
         if (print_hash && rep == 0) {  // to check that a speed-up leaves the bytes identical
           uint64_t hsh = 1469598103934665603ull;
           for (uint8_t b : blob) hsh = (hsh ^ b) * 1099511628211ull;
+          // Raw lines (no log prefix) that two runs' outputs can be diffed on.
           std::fprintf(stderr, "HASH %s %zu %016llx\n", run.name.c_str(), blob.size(), static_cast<unsigned long long>(hsh));
         }
         fig.bytes.push_back(static_cast<double>(blob.size()));
@@ -723,18 +686,18 @@ int RunCodecs(const BenchArgs& args) {
     if (!wanted(name)) continue;
     protocol::ColorEncodeOptions o;
     o.codec = codec;
-    o.jpeg_quality = IntFlag(args, "--jpeg-quality", o.jpeg_quality);
-    if (HasFlag(args, "--chroma444")) o.chroma_420 = false;
-    if (HasFlag(args, "--chroma420")) o.chroma_420 = true;
-    if (HasFlag(args, "--fill-mean")) o.fill = protocol::ColorEncodeOptions::Fill::kMean;
-    if (HasFlag(args, "--fill-pad")) o.fill = protocol::ColorEncodeOptions::Fill::kPad;
-    if (HasFlag(args, "--fill-push-pull")) o.fill = protocol::ColorEncodeOptions::Fill::kPushPull;
-    if (HasFlag(args, "--fast-dct")) o.accurate_dct = false;
-    if (HasFlag(args, "--quant-standard")) o.quant = protocol::ColorEncodeOptions::Quant::kStandard;
-    if (HasFlag(args, "--no-optimize-huffman")) o.optimize_huffman = false;
-    if (HasFlag(args, "--no-pack")) o.pack_blocks = false;
-    o.mask_zstd_level = IntFlag(args, "--mask-zstd-level", o.mask_zstd_level);
-    o.huffman_refresh = IntFlag(args, "--huffman-refresh", o.huffman_refresh);
+    o.jpeg_quality = co.jpeg_quality.value_or(o.jpeg_quality);
+    if (co.chroma444) o.chroma_420 = false;
+    if (co.chroma420) o.chroma_420 = true;
+    if (co.fill_mean) o.fill = protocol::ColorEncodeOptions::Fill::kMean;
+    if (co.fill_pad) o.fill = protocol::ColorEncodeOptions::Fill::kPad;
+    if (co.fill_push_pull) o.fill = protocol::ColorEncodeOptions::Fill::kPushPull;
+    if (co.fast_dct) o.accurate_dct = false;
+    if (co.quant_standard) o.quant = protocol::ColorEncodeOptions::Quant::kStandard;
+    if (co.no_optimize_huffman) o.optimize_huffman = false;
+    if (co.no_pack) o.pack_blocks = false;
+    o.mask_zstd_level = co.mask_zstd_level.value_or(o.mask_zstd_level);
+    o.huffman_refresh = co.huffman_refresh.value_or(o.huffman_refresh);
     Figures fig;
     // As a sender and a receiver would: per pod one encoder, one blob buffer
     // and one decoder (which keeps its images), reused from frame to frame.
@@ -760,8 +723,7 @@ int RunCodecs(const BenchArgs& args) {
           enc_cpu += c1 - c0;
           dec_cpu += c2 - c1;
           if (!es.ok() || !ds.ok()) {
-            std::fprintf(stderr, "codecs: %s failed: %s %s\n", name.c_str(), es.ToString().c_str(),
-                         ds.ToString().c_str());
+            spdlog::error("codecs: {} failed: {} {}", name, es.ToString(), ds.ToString());
             return 1;
           }
           bytes += static_cast<double>(blob.size());
@@ -814,7 +776,7 @@ int RunCodecs(const BenchArgs& args) {
       for (size_t p = 0; p < npods; ++p) {
         auto e = protocol::VideoEncoder::Create(run.o);
         if (!e.ok()) {
-          std::fprintf(stderr, "codecs: video %s: %s\n", run.label.c_str(), e.status().ToString().c_str());
+          spdlog::error("codecs: video {}: {}", run.label, e.status().ToString());
           return 1;
         }
         encoders.push_back(std::move(*e));
@@ -835,7 +797,7 @@ int RunCodecs(const BenchArgs& args) {
           const double t2 = NowMs();
           const double c2 = holo::ThreadCpuTimeMs();
           if (!es.ok() || !ds.ok()) {
-            std::fprintf(stderr, "codecs: video %s failed: %s\n", run.label.c_str(), ds.ToString().c_str());
+            spdlog::error("codecs: video {} failed: {}", run.label, ds.ToString());
             return 1;
           }
           bytes += static_cast<double>(blob.size());
@@ -892,10 +854,10 @@ int RunCodecs(const BenchArgs& args) {
   // into buffers kept between frames — the least work a JPEG-of-the-box
   // codec does. Its time prices the same machine's JPEG speed in this run.
   if (wanted("C1") || wanted("jpeg-box")) {
-    const int quality = IntFlag(args, "--peer-jpeg-quality", 90);
+    const int quality = co.peer_jpeg_quality;
     tjhandle enc_h = tjInitCompress(), dec_h = tjInitDecompress();
     if (enc_h == nullptr || dec_h == nullptr) {
-      std::fprintf(stderr, "codecs: TurboJPEG handles: %s\n", tjGetErrorStr2(nullptr));
+      spdlog::error("codecs: TurboJPEG handles: {}", tjGetErrorStr2(nullptr));
       return 1;
     }
     Figures fig;
@@ -926,7 +888,7 @@ int RunCodecs(const BenchArgs& args) {
                                                TJFLAG_ACCURATEDCT);
           const double c2 = holo::ThreadCpuTimeMs();
           if (e != 0 || d != 0) {
-            std::fprintf(stderr, "codecs: jpeg-box peer failed: %s\n", tjGetErrorStr2(e != 0 ? enc_h : dec_h));
+            spdlog::error("codecs: jpeg-box peer failed: {}", tjGetErrorStr2(e != 0 ? enc_h : dec_h));
             return 1;
           }
           bytes += static_cast<double>(size);
@@ -986,6 +948,43 @@ int RunCodecs(const BenchArgs& args) {
 
 }  // namespace
 
-HOLO_REGISTER_BENCH("codecs", "geometry (G0, G1, Draco) and colour (C0, C1, V1 video) codecs on truth or fused content: bytes, time, error", RunCodecs);
+BenchFn SetupCodecs(CLI::App& app) {
+  auto co = std::make_shared<CodecsOptions>();
+  app.add_option("--content", co->content, "truth (the studio's ground truth) or fused (the capture site's output)")
+      ->check(CLI::IsMember({"truth", "fused"}))
+      ->capture_default_str();
+  app.add_flag("--synthetic", co->synthetic, "workload synthetic-sphere (a noisy blob) instead of the studio");
+  app.add_option("--only", co->only, "only these codecs, comma-separated (e.g. G1,C1)");
+  app.add_flag("--hash", co->hash, "print a hash of every geometry blob of the first repeat to stderr");
+  app.add_option("--chroma-shift", co->chroma_shift, "G1 vertex colour quantization shift");
+  app.add_option("--jpeg-quality", co->jpeg_quality, "C1 JPEG quality 1..100")->check(CLI::Range(1, 100));
+  app.add_flag("--chroma444", co->chroma444, "C1 4:4:4 chroma");
+  app.add_flag("--chroma420", co->chroma420, "C1 4:2:0 chroma (wins over --chroma444)");
+  app.add_flag("--fill-pad", co->fill_pad, "C1 background fill: pad");
+  app.add_flag("--fill-push-pull", co->fill_push_pull, "C1 background fill: push-pull");
+  app.add_flag("--fill-mean", co->fill_mean, "C1 background fill: mean");
+  app.add_flag("--fast-dct", co->fast_dct, "C1 fast integer DCT instead of the accurate one");
+  app.add_flag("--quant-standard", co->quant_standard, "C1 standard JPEG quantization tables");
+  app.add_flag("--no-optimize-huffman", co->no_optimize_huffman, "C1 standard Huffman tables");
+  app.add_flag("--no-pack", co->no_pack, "C1 pod images in their boxes, not packed blocks");
+  app.add_option("--mask-zstd-level", co->mask_zstd_level, "C1 mask rows' zstd level");
+  app.add_option("--huffman-refresh", co->huffman_refresh, "C1 Huffman table refresh interval, frames");
+  app.add_option("--peer-jpeg-quality", co->peer_jpeg_quality, "the jpeg-box peer's TurboJPEG quality")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str();
+  app.add_option("--video", co->video,
+                 "V1 runs, comma-separated LIBRARY-CHROMA[@CRF]: x264-444, x264-420, vpx-vp9-444, vpx-vp9-420, ...")
+      ->capture_default_str();
+  app.add_option("--video-crf", co->video_crf, "V1 CRF for runs without @CRF (-1: the encoder's default)")
+      ->capture_default_str();
+  app.add_option("--video-preset", co->video_preset, "V1 encoder preset (default: the library's)");
+  app.add_option("--keyframe-interval", co->keyframe_interval, "V1 frames between key frames");
+  return [co](const BenchArgs& args) { return RunCodecs(args, *co); };
+}
+
+HOLO_REGISTER_BENCH_OPTIONS(
+    "codecs",
+    "geometry (G0, G1, Draco) and colour (C0, C1, V1 video) codecs on truth or fused content: bytes, time, error",
+    SetupCodecs);
 
 }  // namespace holo::bench

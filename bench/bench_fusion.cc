@@ -31,6 +31,7 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
+#include "common/log.h"
 #include "common/image_io.h"
 #include "common/metrics/mesh_distance.h"
 #include "fusion_pipeline.h"
@@ -201,8 +202,7 @@ PeerResult RunOpen3dPeer(const std::string& dir, const TsdfOptions& o, int repea
 }
 
 void EmitPeerMissing(const std::string& workload, const std::string& why) {
-  std::fprintf(stderr, "fusion: Open3D peer unavailable: %s (install python3-open3d; run with /usr/bin/python3)\n",
-               why.c_str());
+  spdlog::warn("fusion: Open3D peer unavailable: {} (install python3-open3d; run with /usr/bin/python3)", why);
   EmitFigure("fusion", workload, "peer_missing", 1, "bool", {{"peer", "open3d"}, {"reason", why}});
 }
 
@@ -264,12 +264,12 @@ std::map<std::string, std::string> Q(std::initializer_list<std::pair<const std::
 int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", workload.status().ToString().c_str());
+    spdlog::error("fusion: {}", workload.status().ToString());
     return 2;
   }
   auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
   if (!studio.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", studio.status().ToString().c_str());
+    spdlog::error("fusion: {}", studio.status().ToString());
     return 1;
   }
   const std::string& wl = workload->name;
@@ -282,13 +282,13 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   const int frames = args.frames > 0 ? args.frames : 10;
   auto vol = TsdfVolume::Create(cfg.tsdf);
   if (!vol.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", vol.status().ToString().c_str());
+    spdlog::error("fusion: {}", vol.status().ToString());
     return 2;
   }
   const std::string dir = extra.peer ? MakeWorkDir(extra.keep) : "";
   if (extra.peer) {
     if (Status s = WritePeerCameras(dir, workload->rig, frames); !s.ok()) {
-      std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+      spdlog::error("fusion: {}", s.ToString());
       return 1;
     }
   }
@@ -306,7 +306,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
     truth.push_back(gt.foreground_mesh);
     OurFrameResult r;
     if (Status s = FuseFrame(vol->get(), workload->rig, set, cfg, &r); !s.ok()) {
-      std::fprintf(stderr, "fusion: frame %d: %s\n", f, s.ToString().c_str());
+      spdlog::error("fusion: frame {}: {}", f, s.ToString());
       return 1;
     }
     for (size_t i = 0; i < r.fuse_ms.size(); ++i) {
@@ -320,7 +320,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
     auto d = metrics::ComputeMeshDistance(r.cleaned, gt.foreground_mesh, mdo);
     auto draw = metrics::ComputeMeshDistance(r.raw, gt.foreground_mesh, mdo);
     if (!d.ok() || !draw.ok()) {
-      std::fprintf(stderr, "fusion: frame %d: no surface: %s\n", f, (d.ok() ? draw : d).status().ToString().c_str());
+      spdlog::error("fusion: frame {}: no surface: {}", f, (d.ok() ? draw : d).status().ToString().c_str());
       return 1;
     }
     chamfer.push_back(d->chamfer_mm);
@@ -339,7 +339,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
       co.target_triangles = cfg.decimate_to;
       const auto t0 = std::chrono::steady_clock::now();
       if (Status s = CleanupMesh(co, &dec); !s.ok()) {
-        std::fprintf(stderr, "fusion: decimation: %s\n", s.ToString().c_str());
+        spdlog::error("fusion: decimation: {}", s.ToString());
         return 1;
       }
       decimate_ms.push_back(Ms(t0, std::chrono::steady_clock::now()));
@@ -348,18 +348,19 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
     }
     if (extra.peer) {
       if (Status s = WritePeerFrame(dir, f, set); !s.ok()) {
-        std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+        spdlog::error("fusion: {}", s.ToString());
         return 1;
       }
     }
     if (!args.json)
-      std::fprintf(stderr,
-                   "fusion %s frame %d: fuse %.1f ms, mesh %.1f ms, cleanup %.1f ms; %zu blocks, %zu block-views (%zu "
-                   "skipped, %zu free), %zu triangles; chamfer %.2f mm (raw %.2f), completeness %.3f; cpu fuse %.1f mesh %.1f ms; prepare %.1f allocate %.1f integrate %.1f ms\n",
-                   wl.c_str(), f, Median(r.fuse_ms), Median(r.mesh_ms), Median(r.cleanup_ms), r.stats.blocks_touched,
-                   r.stats.block_views, r.stats.block_views_skipped, r.stats.block_views_free, r.cleaned.num_triangles(), d->chamfer_mm,
-                   draw->chamfer_mm, d->completeness, Median(r.fuse_cpu_ms), Median(r.mesh_cpu_ms),
-                   r.stats.prepare_ms, r.stats.allocate_ms, r.stats.integrate_ms);
+      spdlog::info(
+          "fusion {} frame {}: fuse {:.1f} ms, mesh {:.1f} ms, cleanup {:.1f} ms; {} blocks, {} block-views ({} "
+          "skipped, {} free), {} triangles; chamfer {:.2f} mm (raw {:.2f}), completeness {:.3f}; cpu fuse {:.1f} mesh "
+          "{:.1f} ms; prepare {:.1f} allocate {:.1f} integrate {:.1f} ms",
+          wl, f, Median(r.fuse_ms), Median(r.mesh_ms), Median(r.cleanup_ms), r.stats.blocks_touched,
+          r.stats.block_views, r.stats.block_views_skipped, r.stats.block_views_free, r.cleaned.num_triangles(),
+          d->chamfer_mm, draw->chamfer_mm, d->completeness, Median(r.fuse_cpu_ms), Median(r.mesh_cpu_ms),
+          r.stats.prepare_ms, r.stats.allocate_ms, r.stats.integrate_ms);
   }
   const std::string voxel_mm = std::to_string(static_cast<int>(std::lround(cfg.tsdf.voxel_size * 1000)));
   const int threads = (*vol)->options().threads;
@@ -428,12 +429,11 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
     ro.intrinsic_file = "camera_primesense.json";
   auto scene = ImportRedwood(extra.dataset, ro);
   if (!scene.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", scene.status().ToString().c_str());
+    spdlog::error("fusion: {}", scene.status().ToString());
     return 1;
   }
   if (!scene->has_poses) {
-    std::fprintf(stderr, "fusion: %s has no camera poses (trajectory.log); cannot fuse its frames as pods\n",
-                 extra.dataset.c_str());
+    spdlog::error("fusion: {} has no camera poses (trajectory.log); cannot fuse its frames as pods", extra.dataset);
     return 1;
   }
   const std::string wl = "redwood:" + fs::path(extra.dataset).lexically_normal().filename().string() + ":" +
@@ -445,12 +445,12 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
   cfg.cleanup.min_component_triangles = 0;
   auto vol = TsdfVolume::Create(cfg.tsdf);
   if (!vol.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", vol.status().ToString().c_str());
+    spdlog::error("fusion: {}", vol.status().ToString());
     return 2;
   }
   OurFrameResult r;
   if (Status s = FuseFrame(vol->get(), scene->rig, scene->frames, cfg, &r); !s.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    spdlog::error("fusion: {}", s.ToString());
     return 1;
   }
   std::vector<double> fuse_mesh;
@@ -464,16 +464,16 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
   EmitFigure("fusion", wl, "ms", Median(fuse_mesh), "ms", q("fuse_mesh"));
   EmitFigure("fusion", wl, "triangles", static_cast<double>(r.raw.num_triangles()), "count", Q({{"mesh", "raw"}}));
   if (!args.json)
-    std::fprintf(stderr, "fusion %s: fuse %.1f ms, mesh %.1f ms, %zu blocks, %zu triangles\n", wl.c_str(),
-                 Median(r.fuse_ms), Median(r.mesh_ms), r.stats.blocks_touched, r.raw.num_triangles());
+    spdlog::info("fusion {}: fuse {:.1f} ms, mesh {:.1f} ms, {} blocks, {} triangles", wl, Median(r.fuse_ms),
+                 Median(r.mesh_ms), r.stats.blocks_touched, r.raw.num_triangles());
   if (!extra.peer) return 0;
   const std::string dir = MakeWorkDir(extra.keep);
   if (Status s = WritePeerCameras(dir, scene->rig, 1); !s.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    spdlog::error("fusion: {}", s.ToString());
     return 1;
   }
   if (Status s = WritePeerFrame(dir, 0, scene->frames); !s.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", s.ToString().c_str());
+    spdlog::error("fusion: {}", s.ToString());
     return 1;
   }
   PeerResult peer = RunOpen3dPeer(dir, cfg.tsdf, cfg.repeats);
@@ -497,7 +497,7 @@ int RunDataset(const BenchArgs& args, const ExtraArgs& extra) {
     EmitFigure("fusion", wl, "hausdorff95_mm", d->hausdorff_percentile_mm, "mm", Q({{"reference", "open3d"}}));
     EmitFigure("fusion", wl, "completeness", d->completeness, "fraction", Q({{"reference", "open3d"}, {"threshold_mm", "10"}}));
   } else {
-    std::fprintf(stderr, "fusion: mesh distance: %s\n", d.status().ToString().c_str());
+    spdlog::warn("fusion: mesh distance: {}", d.status().ToString());
   }
   if (extra.keep.empty()) fs::remove_all(dir);
   return 0;

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "common/file_util.h"
+#include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "fusion_pipeline.h"
@@ -25,7 +26,7 @@ struct Kept {
 };
 
 void Progress(const BenchArgs& args, const char* what) {
-  if (!args.json) std::fprintf(stderr, "fusion pipeline: %s\n", what);
+  if (!args.json) spdlog::info("fusion pipeline: {}", what);
 }
 
 std::string SourceName(const std::string& src) { return src.rfind("dataset:", 0) == 0 ? "dataset" : src; }
@@ -35,7 +36,7 @@ std::string SourceName(const std::string& src) { return src.rfind("dataset:", 0)
 int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& options) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", workload.status().message().c_str());
+    spdlog::error("fusion: {}", workload.status().message());
     return 2;
   }
   const std::string& wl = workload->name;
@@ -52,8 +53,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
 
   const std::string& src = options.source;
   if (src != "synthetic" && src != "prerendered" && src.rfind("dataset:", 0) != 0) {
-    std::fprintf(stderr, "fusion: --pipeline-source must be synthetic, prerendered or dataset:DIR, got '%s'\n",
-                 src.c_str());
+    spdlog::error("fusion: --pipeline-source must be synthetic, prerendered or dataset:DIR, got '{}'", src);
     return 2;
   }
   // Frames for the prerendered source, rendered once (untimed).
@@ -62,13 +62,13 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     Progress(args, "prerendering the frames into memory");
     auto s = SyntheticStudio::Create(workload->rig, workload->studio);
     if (!s.ok()) {
-      std::fprintf(stderr, "fusion: %s\n", s.status().message().c_str());
+      spdlog::error("fusion: {}", s.status().message());
       return 1;
     }
     prerendered->resize(static_cast<size_t>(options.frames));
     for (auto& f : *prerendered)
       if (Status st = (*s)->Next(&f); !st.ok()) {
-        std::fprintf(stderr, "fusion: prerendering: %s\n", st.message().c_str());
+        spdlog::error("fusion: prerendering: {}", st.message());
         return 1;
       }
   }
@@ -106,7 +106,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   std::unique_ptr<SyntheticStudio>& studio = main_site.studio;
   std::unique_ptr<CaptureSite>* site = &main_site.site;
   if (!made.ok()) {
-    std::fprintf(stderr, "fusion: %s\n", made.message().c_str());
+    spdlog::error("fusion: {}", made.message());
     return 1;
   }
   std::vector<Kept> kept;
@@ -121,7 +121,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     return OkStatus();
   });
   if (!stats.ok()) {
-    std::fprintf(stderr, "fusion: pipeline: %s\n", stats.status().message().c_str());
+    spdlog::error("fusion: pipeline: {}", stats.status().message());
     return 1;
   }
   std::vector<double> total;
@@ -157,7 +157,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   for (const auto& s : stages)
     if (s.first > slowest->first) slowest = &s;
   if (!args.json)
-    std::fprintf(stderr, "fusion pipeline: %.1f fps, bottleneck stage %s (%.1f ms)\n", stats->fps, slowest->second,
+    spdlog::info("fusion pipeline: {:.1f} fps, bottleneck stage {} ({:.1f} ms)", stats->fps, slowest->second,
                  slowest->first);
 
   // 2. CPU per stage: the same stages one at a time (serial mode), process
@@ -179,15 +179,15 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
         const double sum = st->frames > 0 ? st->cpu_ms / static_cast<double>(st->frames) : 0;
         EmitFigure("fusion", wl, "cpu_ms", sum, "ms", q("total_serial"));
         if (!args.json)
-          std::fprintf(stderr,
-                       "fusion pipeline: CPU ms per frame (serial): acquire %.1f segment %.1f fuse %.1f mesh %.1f "
-                       "texture %.1f; all %.1f\n",
-                       c.acquire_cpu_ms, c.segment_cpu_ms, c.fuse_cpu_ms, c.mesh_cpu_ms, c.texture_cpu_ms, sum);
+          spdlog::info(
+              "fusion pipeline: CPU ms per frame (serial): acquire {:.1f} segment {:.1f} fuse {:.1f} mesh {:.1f} "
+              "texture {:.1f}; all {:.1f}",
+              c.acquire_cpu_ms, c.segment_cpu_ms, c.fuse_cpu_ms, c.mesh_cpu_ms, c.texture_cpu_ms, sum);
       } else {
-        std::fprintf(stderr, "fusion: serial run: %s\n", st.status().message().c_str());
+        spdlog::warn("fusion: serial run: {}", st.status().message());
       }
     } else {
-      std::fprintf(stderr, "fusion: serial run: %s\n", s.message().c_str());
+      spdlog::warn("fusion: serial run: {}", s.message());
     }
     site_options.pipeline.serial = false;
   }
@@ -213,7 +213,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   // 4. Quality of the kept frames against ground truth.
   if (!options.png_dir.empty()) {
     if (Status s = MakeDirs(options.png_dir); !s.ok()) {
-      std::fprintf(stderr, "fusion: %s\n", s.message().c_str());
+      spdlog::error("fusion: {}", s.message());
       return 1;
     }
   }
@@ -242,8 +242,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
           psnr.push_back(score->psnr_db);
           ssim.push_back(score->ssim);
         } else {
-          std::fprintf(stderr, "fusion: novel view %zu of frame %lld: %s\n", v, static_cast<long long>(k.frame),
-                       score.status().message().c_str());
+          spdlog::warn("fusion: novel view {} of frame {}: {}", v, k.frame, score.status().message());
         }
       }
     }

@@ -60,6 +60,7 @@
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
 #include "common/clock.h"
+#include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/pose.h"
@@ -203,79 +204,28 @@ CameraModel ViewerCamera(int width, int height, double t) {
   return c;
 }
 
-int Run(const BenchArgs& args) {
-  LiveOptions o;
-  {
-    CLI::App app{"holoport-bench live: the site, its session server and viewers on this machine, end to end"};
-    app.add_option("--content", o.content, "fused (per-frame fusion), temporal (fusion over time) or truth (the studio's meshes)")
-        ->check(CLI::IsMember({"fused", "temporal", "truth"}));
-    app.add_flag("--temporal", [&](int64_t) { o.content = "temporal"; }, "same as --content temporal");
-    app.add_option("--seconds", o.seconds, "measured window, s")->check(CLI::Range(3.0, 3600.0));
-    app.add_option("--warmup", o.warmup_s, "seconds after every viewer's first frame before measuring")->check(CLI::Range(0.0, 60.0));
-    app.add_option("--decoders", o.decoders, "viewers that only decode")->check(CLI::Range(0, 32));
-    app.add_option("--width", o.width, "rendering viewer's width")->check(CLI::Range(64, 4096));
-    app.add_option("--height", o.height, "rendering viewer's height")->check(CLI::Range(64, 4096));
-    app.add_flag("--no-render", [&](int64_t) { o.render = false; }, "no rendering viewer (and no novel-view figures)");
-    app.add_option("--prerender", o.prerender, "pod frame sets rendered before the run and looped")->check(CLI::Range(2, 600));
-    app.add_option("--serial-frames", o.serial_frames, "frames of the serial run that measures CPU per stage (0: skip)")
-        ->check(CLI::Range(0, 600));
-    app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
-    app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
-    app.add_option("--voice", o.voice, "the site's voice: synthetic, off, or a WAV file (--voice of holoport-server)");
-    app.add_option("--av-sync", [&](const std::vector<std::string>& v) {
-                     o.av_sync = v.at(0) == "on";
-                     return true;
-                   }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
-        ->check(CLI::IsMember({"on", "off"}));
-    app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
-                   "lip sync: the voice waits at most this long for a later picture")
-        ->capture_default_str()
-        ->check(CLI::Range(0.0, 10000.0));
-    app.add_option("--max-picture-delay-ms", o.sync.max_picture_delay_ms,
-                   "lip sync: a picture waits at most this long for a later voice")
-        ->capture_default_str()
-        ->check(CLI::Range(0.0, 10000.0));
-    app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
-        ->check(CLI::Range(0.0, 10000.0));
-    app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")
-        ->check(CLI::Range(0.0, 10000.0));
-    app.add_option("--site-arg", o.site_args,
-                   "an extra holoport-server argument (repeatable; e.g. --site-arg=--jpeg-quality --site-arg=70)");
-    std::vector<std::string> argv_s = {"live"};
-    argv_s.insert(argv_s.end(), args.extra.begin(), args.extra.end());
-    std::vector<const char*> argv;
-    for (const auto& s : argv_s) argv.push_back(s.c_str());
-    try {
-      app.parse(static_cast<int>(argv.size()), argv.data());
-    } catch (const CLI::CallForHelp&) {
-      std::printf("%s", app.help().c_str());
-      return 0;
-    } catch (const CLI::ParseError& e) {
-      std::fprintf(stderr, "live: %s\n", e.what());
-      return 2;
-    }
-  }
+int Run(const BenchArgs& args, LiveOptions o) {
   if (args.frames > 0) o.seconds = args.frames / 30.0;
   if (o.site_binary.empty()) o.site_binary = SelfDir() + "/holoport-server";
   if (access(o.site_binary.c_str(), X_OK) != 0) {
-    std::fprintf(stderr, "live: site program %s not found (build holoport-server or pass --site)\n", o.site_binary.c_str());
+    spdlog::error("live: site program {} not found (build holoport-server or pass --site)", o.site_binary);
     return 2;
   }
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "live: %s\n", workload.status().ToString().c_str());
+    spdlog::error("live: {}", workload.status().ToString());
     return 2;
   }
   const std::string& wl = workload->name;
   const std::string content = o.content;
   auto progress = [&](const std::string& s) {
-    if (!args.json) std::fprintf(stderr, "live: %s\n", s.c_str());
+    if (!args.json) spdlog::info("live: {}", s);
   };
   std::string dir = o.keep_dir;
   if (dir.empty()) {
     char tmpl[] = "/tmp/holoport-live-XXXXXX";
     if (!mkdtemp(tmpl)) {
-      std::fprintf(stderr, "live: cannot make a temporary directory\n");
+      spdlog::error("live: cannot make a temporary directory");
       return 1;
     }
     dir = tmpl;
@@ -296,12 +246,12 @@ int Run(const BenchArgs& args) {
     const std::string stats = dir + "/serial_stats.jsonl";
     auto child = Child::Spawn(SiteArgs(o, wl, port, stats, /*serial=*/true), dir + "/serial_site.log");
     if (!child.ok()) {
-      std::fprintf(stderr, "live: %s\n", child.status().ToString().c_str());
+      spdlog::error("live: {}", child.status().ToString());
       return 1;
     }
     const int st = child->Wait();
     if (!WIFEXITED(st) || WEXITSTATUS(st) != 0) {
-      std::fprintf(stderr, "live: the serial site run failed (see %s/serial_site.log)\n", dir.c_str());
+      spdlog::error("live: the serial site run failed (see {}/serial_site.log)", dir);
       return 1;
     }
     std::map<std::string, std::vector<double>> cpu;
@@ -318,7 +268,7 @@ int Run(const BenchArgs& args) {
       cpu["total"].push_back(total);
     }
     if (cpu["total"].size() < 4) {
-      std::fprintf(stderr, "live: the serial site run gave %zu frames\n", cpu["total"].size());
+      spdlog::error("live: the serial site run gave {} frames", cpu["total"].size());
       return 1;
     }
     // The first frames warm caches and allocate: drop them.
@@ -334,7 +284,7 @@ int Run(const BenchArgs& args) {
   progress("starting the site (" + content + ", " + wl + ") on port " + std::to_string(port));
   auto site = Child::Spawn(SiteArgs(o, wl, port, stats_path, /*serial=*/false), dir + "/site.log");
   if (!site.ok()) {
-    std::fprintf(stderr, "live: %s\n", site.status().ToString().c_str());
+    spdlog::error("live: {}", site.status().ToString());
     return 1;
   }
   struct Guard {
@@ -372,7 +322,7 @@ int Run(const BenchArgs& args) {
     logs.push_back(std::make_unique<ViewerLog>());
     auto c = StartViewer(port, "decoder-" + std::to_string(i), {});
     if (!c.ok()) {
-      std::fprintf(stderr, "live: %s\n", c.status().ToString().c_str());
+      spdlog::error("live: {}", c.status().ToString());
       return 1;
     }
     auto sy = net::SiteAvSync::Start(c->get(), sync_options());
@@ -413,7 +363,7 @@ int Run(const BenchArgs& args) {
   if (o.render) {
     auto c = StartViewer(port, "renderer", {});
     if (!c.ok()) {
-      std::fprintf(stderr, "live: %s\n", c.status().ToString().c_str());
+      spdlog::error("live: {}", c.status().ToString());
       return 1;
     }
     render_client = std::move(*c);
@@ -503,14 +453,14 @@ int Run(const BenchArgs& args) {
     if (render_client) all = all && render_frames_seen > 0;
     if (all) break;
     if (!site->Running()) {
-      std::fprintf(stderr, "live: the site exited early (see %s/site.log)\n", dir.c_str());
+      spdlog::error("live: the site exited early (see {}/site.log)", dir);
       stop = true;
       if (render_thread.joinable()) render_thread.join();
       return 1;
     }
     if (!render_status.ok()) break;
     if (std::chrono::steady_clock::now() - start_wait > std::chrono::seconds(180)) {
-      std::fprintf(stderr, "live: no frames after 180 s (see %s/site.log)\n", dir.c_str());
+      spdlog::error("live: no frames after 180 s (see {}/site.log)", dir);
       stop = true;
       if (render_thread.joinable()) render_thread.join();
       return 1;
@@ -665,7 +615,7 @@ int Run(const BenchArgs& args) {
   stop = true;
   if (render_thread.joinable()) render_thread.join();
   if (!render_status.ok()) {
-    std::fprintf(stderr, "live: rendering viewer failed: %s\n", render_status.ToString().c_str());
+    spdlog::error("live: rendering viewer failed: {}", render_status.ToString());
     return 1;
   }
   if (render_client) {
@@ -698,7 +648,7 @@ int Run(const BenchArgs& args) {
     progress("scoring " + std::to_string(kept.size()) + " decoded frames against the ground truth");
     auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
     if (!studio.ok()) {
-      std::fprintf(stderr, "live: %s\n", studio.status().ToString().c_str());
+      spdlog::error("live: {}", studio.status().ToString());
       return 1;
     }
     auto content_frame = [&](int64_t k) {
@@ -749,7 +699,7 @@ int Run(const BenchArgs& args) {
     });
     q.join();
     if (!q_status.ok()) {
-      std::fprintf(stderr, "live: scoring failed: %s\n", q_status.ToString().c_str());
+      spdlog::error("live: scoring failed: {}", q_status.ToString());
       return 1;
     }
     if (!chamfer.empty()) emit("chamfer_mm", Median(chamfer), "mm", {{"at", "viewer"}, {"frames", std::to_string(chamfer.size())}});
@@ -760,16 +710,66 @@ int Run(const BenchArgs& args) {
   }
   if (o.keep_dir.empty()) {
     std::string cmd = "rm -rf '" + dir + "'";
-    if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "live: could not remove %s\n", dir.c_str());
+    if (std::system(cmd.c_str()) != 0) spdlog::warn("live: could not remove {}", dir);
   }
   return 0;
 }
 
+// The benchmark's own options (holoport-bench live --help).
+BenchFn SetupLive(CLI::App& app) {
+  auto options = std::make_shared<LiveOptions>();
+  {
+    LiveOptions& o = *options;
+    app.add_option("--content", o.content,
+                   "fused (per-frame fusion), temporal (fusion over time) or truth (the studio's meshes)")
+        ->check(CLI::IsMember({"fused", "temporal", "truth"}));
+    app.add_flag(
+        "--temporal", [options](int64_t) { options->content = "temporal"; }, "same as --content temporal");
+    app.add_option("--seconds", o.seconds, "measured window, s")->check(CLI::Range(3.0, 3600.0));
+    app.add_option("--warmup", o.warmup_s, "seconds after every viewer's first frame before measuring")
+        ->check(CLI::Range(0.0, 60.0));
+    app.add_option("--decoders", o.decoders, "viewers that only decode")->check(CLI::Range(0, 32));
+    app.add_option("--width", o.width, "rendering viewer's width")->check(CLI::Range(64, 4096));
+    app.add_option("--height", o.height, "rendering viewer's height")->check(CLI::Range(64, 4096));
+    app.add_flag(
+        "--no-render", [options](int64_t) { options->render = false; },
+        "no rendering viewer (and no novel-view figures)");
+    app.add_option("--prerender", o.prerender, "pod frame sets rendered before the run and looped")
+        ->check(CLI::Range(2, 600));
+    app.add_option("--serial-frames", o.serial_frames, "frames of the serial run that measures CPU per stage (0: skip)")
+        ->check(CLI::Range(0, 600));
+    app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
+    app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
+    app.add_option("--voice", o.voice, "the site's voice: synthetic, off, or a WAV file (--voice of holoport-server)");
+    app.add_option("--av-sync", [options](const std::vector<std::string>& v) {
+                     options->av_sync = v.at(0) == "on";
+                     return true;
+                   }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
+        ->check(CLI::IsMember({"on", "off"}));
+    app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
+                   "lip sync: the voice waits at most this long for a later picture")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--max-picture-delay-ms", o.sync.max_picture_delay_ms,
+                   "lip sync: a picture waits at most this long for a later voice")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")
+        ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--site-arg", o.site_args,
+                   "an extra holoport-server argument (repeatable; e.g. --site-arg=--jpeg-quality --site-arg=70)");
+  }
+  return [options](const BenchArgs& args) { return Run(args, *options); };
+}
+
 }  // namespace
 
-HOLO_REGISTER_BENCH("live",
-                    "the product end to end: a site process on paced pod frames, its session server, a rendering "
-                    "viewer and decoding viewers on loopback; fps, CPU per stage, latency, Mbit/s, quality at the viewer",
-                    Run);
+HOLO_REGISTER_BENCH_OPTIONS(
+    "live",
+    "the product end to end: a site process on paced pod frames, its session server, a rendering "
+    "viewer and decoding viewers on loopback; fps, CPU per stage, latency, Mbit/s, quality at the viewer",
+    SetupLive);
 
 }  // namespace holo::bench

@@ -8,6 +8,7 @@
 
 #include "bench.h"
 #include "common/clock.h"
+#include "common/log.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/metrics/triangle_index.h"
@@ -20,7 +21,7 @@ namespace {
 int RunMetricsBench(const BenchArgs& args) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "holoport-bench: %s\n", workload.status().message().c_str());
+    spdlog::error("holoport-bench: {}", workload.status().message());
     return 2;
   }
   SyntheticStudio studio(workload->rig, workload->studio);
@@ -36,7 +37,7 @@ int RunMetricsBench(const BenchArgs& args) {
     auto d = metrics::ComputeMeshDistance(recon, truth, o);
     ms.push_back(sw.ElapsedMs());
     if (!d.ok()) {
-      std::fprintf(stderr, "holoport-bench: %s\n", d.status().message().c_str());
+      spdlog::error("holoport-bench: {}", d.status().message());
       return 1;
     }
     chamfer = d->chamfer_mm;

@@ -36,6 +36,7 @@
 
 #include "bench.h"
 #include "bench_process.h"
+#include "common/log.h"
 #include "common/status.h"
 #include "net/wire_message.h"
 
@@ -170,11 +171,11 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   const std::string server = bin + "/holoport-server", pod_bin = bin + "/holoport-pod";
   for (const auto& p : {server, pod_bin})
     if (access(p.c_str(), X_OK) != 0) {
-      std::fprintf(stderr, "pods: %s not found (build holoport-server and holoport-pod)\n", p.c_str());
+      spdlog::error("pods: {} not found (build holoport-server and holoport-pod)", p);
       return 2;
     }
   if (args.workload != "S8-QVGA" && args.workload != "S8-VGA") {
-    std::fprintf(stderr, "pods: --workload must be S8-QVGA or S8-VGA, got %s\n", args.workload.c_str());
+    spdlog::error("pods: --workload must be S8-QVGA or S8-VGA, got {}", args.workload);
     return 2;
   }
   std::string dir = o.keep_dir;
@@ -207,13 +208,13 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   // The peer first (the machine is quiet then), then the pods.
   RunResult peer;
   if (o.peer) {
-    if (!args.json) std::fprintf(stderr, "pods: in-process peer (%s, prerendered, paced at 30 fps)...\n", W.c_str());
+    if (!args.json) spdlog::info("pods: in-process peer ({}, prerendered, paced at 30 fps)...", W);
     peer = RunPeer(args, o, dir, server);
   }
 
   const uint16_t port = FreePort();
   const std::string site_stats = dir + "/site.jsonl";
-  if (!args.json) std::fprintf(stderr, "pods: site on port %u, 8 pods (%s)...\n", port, link.c_str());
+  if (!args.json) spdlog::info("pods: site on port {}, 8 pods ({})...", port, link);
   const pid_t site = Child::Spawn({server, "--workload", W, "--pods", (o.netns && ns.up ? "10.77.0.1:" : "127.0.0.1:") + std::to_string(port),
                                    "--pod-token", kToken, "--pod-set-stats", "--pod-timeout-ms", std::to_string(o.pod_timeout_ms),
                                    "--stats", site_stats, "-n", "-1"},
@@ -251,7 +252,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     started = accepted >= kPods && any_frame;
   }
   if (!started) {
-    std::fprintf(stderr, "pods: the site never fused a set from 8 connected pods (logs in %s)\n", dir.c_str());
+    spdlog::error("pods: the site never fused a set from 8 connected pods (logs in {})", dir);
     for (pid_t p : pods) Child::Stop(p);
     Child::Stop(site);
     if (ns.up) ns.Teardown();
@@ -350,7 +351,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     emit("latency_p99_ms", p99, "ms", {{"mode", "in-process"}, {"peer", "in-process"}, {"from", "acquisition"}, {"to", "textured mesh"}});
     emit("latency_p50_diff_ms", Pct(latency_ms, 50) - p50, "ms", {{"peer", "in-process"}, {"target", "<= 15"}});
   }
-  if (!args.json) std::fprintf(stderr, "pods: logs and stats in %s\n", dir.c_str());
+  if (!args.json) spdlog::info("pods: logs and stats in {}", dir);
   if (o.keep_dir.empty()) Sh("rm -rf '" + dir + "'");
   return 0;
 }

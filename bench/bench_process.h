@@ -90,6 +90,7 @@ inline pid_t SpawnLogged(const std::vector<std::string>& argv, const std::string
       dup2(fileno(log), 2);
     }
     execv(cargv[0], cargv.data());
+    // A forked child: no logger (its mutex may be held by a thread that did not fork).
     std::fprintf(stderr, "exec %s failed\n", cargv[0]);
     _exit(127);
   }

@@ -31,6 +31,7 @@
 
 #include "bench.h"
 #include "common/clock.h"
+#include "common/log.h"
 #include "net/session_server.h"
 #include "net/site_client.h"
 #include "server/record/recording_reader.h"
@@ -52,11 +53,10 @@ int RunRecordBench(const BenchArgs& args) {
   so.workload = args.workload;
   auto stream = record::SyntheticStream::Create(so);
   if (!stream.ok()) {
-    std::fprintf(stderr, "bench record: %s\n", stream.status().message().c_str());
+    spdlog::error("bench record: {}", stream.status().message());
     return 1;
   }
-  if (!args.json)
-    std::fprintf(stderr, "bench record: preparing %d frames of %s (G1 + PCM audio)...\n", frames, args.workload.c_str());
+  if (!args.json) spdlog::info("bench record: preparing {} frames of {} (G1 + PCM audio)...", frames, args.workload);
   std::vector<record::StreamMessage> msgs;
   const int64_t end_us = (*stream)->fps() > 0 ? static_cast<int64_t>((frames - 1) * 1e6 / (*stream)->fps() + 0.5) : 0;
   for (;;) {
@@ -176,7 +176,7 @@ int RunRecordBench(const BenchArgs& args) {
   }
   std::filesystem::remove_all(dir);
   if (!args.json)
-    std::fprintf(stderr, "bench record: %zu messages, %.2f MB of protocol frames\n", msgs.size(),
+    spdlog::info("bench record: {} messages, {:.2f} MB of protocol frames", msgs.size(),
                  static_cast<double>(payload) / 1e6);
   return 0;
 }
@@ -220,12 +220,10 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
   so.workload = args.workload;
   auto stream = record::SyntheticStream::Create(so);
   if (!stream.ok()) {
-    std::fprintf(stderr, "bench replaynet: %s\n", stream.status().message().c_str());
+    spdlog::error("bench replaynet: {}", stream.status().message());
     return 1;
   }
-  if (!args.json)
-    std::fprintf(stderr, "bench replaynet: preparing %d frames of %s (G1 + PCM audio)...\n", frames,
-                 args.workload.c_str());
+  if (!args.json) spdlog::info("bench replaynet: preparing {} frames of {} (G1 + PCM audio)...", frames, args.workload);
   std::vector<record::StreamMessage> msgs;
   const int64_t end_us = static_cast<int64_t>((frames - 1) * 1e6 / (*stream)->fps() + 0.5);
   for (;;) {
@@ -280,7 +278,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
     };
     auto rs = record::ReplayServer::Start(reader, &clock, o);
     if (!rs.ok()) {
-      std::fprintf(stderr, "bench replaynet: %s\n", rs.status().message().c_str());
+      spdlog::error("bench replaynet: {}", rs.status().message());
       return 1;
     }
     net::NetContext ctx(1);
@@ -304,7 +302,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
       };
       auto c = net::SiteClient::Start(co, cb, &ctx);
       if (!c.ok() || !(*c)->WaitConnected(10)) {
-        std::fprintf(stderr, "bench replaynet: viewer %d did not connect\n", v);
+        spdlog::error("bench replaynet: viewer {} did not connect", v);
         return 1;
       }
       clients.push_back(std::move(*c));

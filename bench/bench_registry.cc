@@ -15,12 +15,11 @@ std::map<std::string, BenchInfo>& Registry() {
 }
 
 bool Register(const std::string& name, const std::string& description, BenchFn fn) {
-  Registry()[name] = BenchInfo{description, std::move(fn), nullptr};
-  return true;
+  return RegisterWithOptions(name, description, NoOptions(std::move(fn)));
 }
 
 bool RegisterWithOptions(const std::string& name, const std::string& description, BenchSetup setup) {
-  Registry()[name] = BenchInfo{description, nullptr, std::move(setup)};
+  Registry()[name] = BenchInfo{description, std::move(setup)};
   return true;
 }
 

@@ -27,6 +27,7 @@
 
 #include "bench.h"
 #include "common/clock.h"
+#include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "server/segment/color_calibration.h"
 #include "server/segment/mog2_baseline.h"
@@ -113,19 +114,18 @@ double MeanAbsDiff(const RgbdFrameSet& a, const std::vector<ImageRgb8>& b, int s
 int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& settings) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "holoport-bench: %s\n", workload.status().message().c_str());
+    spdlog::error("holoport-bench: {}", workload.status().message());
     return 2;
   }
   SegmenterOptions options;
   for (const std::string& e : settings) {
     if (!SetOption(&options, e)) {
-      std::fprintf(stderr, "holoport-bench segment: unknown argument '%s' (expected a SegmenterOptions name=value)\n",
-                   e.c_str());
+      spdlog::error("holoport-bench segment: unknown argument '{}' (expected a SegmenterOptions name=value)", e);
       return 2;
     }
   }
   if (Status st = options.Check(); !st.ok()) {
-    std::fprintf(stderr, "holoport-bench segment: %s\n", st.ToString().c_str());
+    spdlog::error("holoport-bench segment: {}", st.ToString());
     return 2;
   }
   const Rig& rig = workload->rig;
@@ -147,7 +147,7 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
     if (k < 10) calib_frames.push_back(fs);
   }
   if (!seg.FinishBackground().ok()) return 1;
-  if (!args.json) std::fprintf(stderr, "background learned from %d frames\n", background_frames);
+  if (!args.json) spdlog::info("background learned from {} frames", background_frames);
 
   // --- Segmentation.
   SyntheticStudio studio(rig, workload->studio);
@@ -161,7 +161,7 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
     Stopwatch sw;
     const std::clock_t c0 = std::clock();
     if (Status st = seg.Segment(&fs); !st.ok()) {
-      std::fprintf(stderr, "holoport-bench: %s\n", st.ToString().c_str());
+      spdlog::error("holoport-bench: {}", st.ToString());
       return 1;
     }
     ms.push_back(sw.ElapsedMs());
@@ -199,7 +199,7 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
   auto calib = EstimateColorCalibration(rig, calib_frames, ref, ColorCalibrationOptions{}, &stats);
   const double calib_ms = sw.ElapsedMs();
   if (!calib.ok()) {
-    std::fprintf(stderr, "holoport-bench: %s\n", calib.status().ToString().c_str());
+    spdlog::error("holoport-bench: {}", calib.status().ToString());
     return 1;
   }
   EmitFigure("segment", wl, "ms", calib_ms, "ms", {{"stage", "color_calibration"}, {"frames", "10"}});

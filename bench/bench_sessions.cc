@@ -36,6 +36,7 @@
 #include "bench.h"
 #include "client/net/raw_peer.h"
 #include "common/clock.h"
+#include "common/log.h"
 #include "net/session_server.h"
 #include "net/site_client.h"
 #include "protocol/color_codec.h"
@@ -137,7 +138,7 @@ StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
     c.vertices = w.mesh.num_vertices();
     c.geometry.push_back(std::move(blob));
     c.color.push_back(std::move(cf));
-    std::fprintf(stderr, "  fused frame %zu/%d: %zu vertices\n", c.geometry.size(), frames, w.mesh.num_vertices());
+    spdlog::error("  fused frame {}/{}: {} vertices", c.geometry.size(), frames, w.mesh.num_vertices());
     return OkStatus();
   };
   HOLO_ASSIGN_OR_RETURN(auto stats, site->Run(sink));
@@ -157,18 +158,18 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   const double fps = 30.0;
   auto wl = GetWorkload(args.workload);
   if (!wl.ok()) {
-    std::fprintf(stderr, "sessions: %s\n", wl.status().ToString().c_str());
+    spdlog::error("sessions: {}", wl.status().ToString());
     return 2;
   }
-  std::fprintf(stderr, "sessions: load average before: %s\n", LoadAverage().c_str());
-  std::fprintf(stderr, "sessions: pre-encoding %d %s frames (%s mesh G1 + 8 pods C1)...\n", content_frames,
-               args.workload.c_str(), content_kind == "truth" ? "ground-truth" : "fused");
+  spdlog::info("sessions: load average before: {}", LoadAverage());
+  spdlog::info("sessions: pre-encoding {} {} frames ({} mesh G1 + 8 pods C1)...", content_frames, args.workload,
+               content_kind == "truth" ? "ground-truth" : "fused");
   auto content = content_kind == "truth" ? PrepareContent(*wl, content_frames) : PrepareFusedContent(*wl, content_frames);
   if (!content.ok()) {
-    std::fprintf(stderr, "sessions: %s\n", content.status().ToString().c_str());
+    spdlog::error("sessions: {}", content.status().ToString());
     return 1;
   }
-  std::fprintf(stderr, "sessions: %zu vertices, %.1f KB per frame (%.1f Mbit/s per viewer)\n", content->vertices,
+  spdlog::info("sessions: {} vertices, {:.1f} KB per frame ({:.1f} Mbit/s per viewer)", content->vertices,
                content->bytes_per_frame / 1024, content->bytes_per_frame * 8 * fps / 1e6);
 
   net::ServerConfig cfg;
@@ -184,7 +185,7 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   hooks.log = [&log_lines](const std::string&) { ++log_lines; };  // 100 welcomes: not interesting here
   auto server = net::Server::Start(cfg, hooks);
   if (!server.ok()) {
-    std::fprintf(stderr, "sessions: %s\n", server.status().ToString().c_str());
+    spdlog::error("sessions: {}", server.status().ToString());
     return 1;
   }
   const uint16_t port = (*server)->port();
@@ -222,14 +223,14 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
     };
     auto c = net::SiteClient::Start(o, cb, &ctx);
     if (!c.ok()) {
-      std::fprintf(stderr, "sessions: %s\n", c.status().ToString().c_str());
+      spdlog::error("sessions: {}", c.status().ToString());
       return 1;
     }
     viewers.push_back(std::move(*c));
   }
   for (auto& v : viewers)
     if (!v->WaitConnected(30)) {
-      std::fprintf(stderr, "sessions: a viewer did not connect: %s\n", v->status().ToString().c_str());
+      spdlog::error("sessions: a viewer did not connect: {}", v->status().ToString());
       return 1;
     }
   // 1/10 of the stream's byte rate, per 10 ms slice.
@@ -248,16 +249,16 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   ro.bytes_per_10ms = 0;
   auto stalled_viewer = net::RawViewer::Start(ro);
   if (!slow_viewer.ok() || !stalled_viewer.ok()) {
-    std::fprintf(stderr, "sessions: slow/stalled viewer: %s %s\n", slow_viewer.status().ToString().c_str(),
-                 stalled_viewer.status().ToString().c_str());
+    spdlog::error("sessions: slow/stalled viewer: {} {}", slow_viewer.status().ToString(),
+                  stalled_viewer.status().ToString());
     return 1;
   }
   const net::RawViewer& slow = **slow_viewer;
   const net::RawViewer& stalled = **stalled_viewer;
   while ((*server)->num_subscribed(net::kContentGeometry) < static_cast<size_t>(num_viewers + 2))
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  std::fprintf(stderr, "sessions: %d normal + 1 slow + 1 stalled viewers connected; streaming %d s at %.0f fps\n",
-               num_viewers, seconds, fps);
+  spdlog::info("sessions: {} normal + 1 slow + 1 stalled viewers connected; streaming {} s at {:.0f} fps", num_viewers,
+               seconds, fps);
 
   // Publisher: one encode per frame (MakeVideoFrame copies the pre-encoded
   // blobs into the wire buffer once), shared by every viewer.
@@ -296,9 +297,9 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
     int64_t sum = 0;
     for (int i = 0; i < num_viewers; ++i) sum += counts[i].frames - frames0[i];
     const double el = std::chrono::duration<double>(Clock::now() - t0).count();
-    std::fprintf(stderr, "  %.0f s: published %lld, mean %.1f fps per normal viewer, server io CPU %.0f%%, load %s\n",
-                 el + warmup_s, static_cast<long long>(published.load()), sum / el / num_viewers,
-                 ((*server)->IoCpuMs() - server_cpu0) / (el * 10), LoadAverage().c_str());
+    spdlog::info("  {:.0f} s: published {}, mean {:.1f} fps per normal viewer, server io CPU {:.0f}%, load {}",
+                 el + warmup_s, published.load(), sum / el / num_viewers,
+                 ((*server)->IoCpuMs() - server_cpu0) / (el * 10), LoadAverage());
   }
   publisher.join();
   const double window_s = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -375,7 +376,7 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   EmitFigure("sessions", w, "server_send_rate", static_cast<double>(bytes_sent) * 8 / 1e6 / (seconds + 2.0), "Mbit/s",
              with({{"note", "all viewers, whole run incl. warm-up"}}));
   EmitFigure("sessions", w, "window_s", window_s, "s", with({}));
-  std::fprintf(stderr, "sessions: load average after: %s (2 cores shared)\n", LoadAverage().c_str());
+  spdlog::info("sessions: load average after: {} (2 cores shared)", LoadAverage());
 
   return 0;
 }

@@ -19,15 +19,18 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include <CLI/CLI.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "bench.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/visualize.h"
 #include "server/fusion/tsdf.h"
@@ -151,35 +154,25 @@ ImageDepth16 DepthOf(const ImageFloat& disp, double fb_mm) {
 }
 
 int Fail(const std::string& m) {
-  std::fprintf(stderr, "holoport-bench stereo: %s\n", m.c_str());
+  spdlog::error("holoport-bench stereo: {}", m);
   return 2;
 }
 
-int RunStereoBench(const BenchArgs& args) {
-  std::string middlebury = std::string(HOLO_SOURCE_DIR) + "/../shared/data/stereo";
-  std::string sheet_path;
-  int threads = 2, iterations = -1, fuse_frames = 2;
+// The benchmark's own options (holoport-bench stereo --help).
+struct StereoBenchOptions {
+  std::string middlebury = std::string(HOLO_SOURCE_DIR) + "/../shared/data/stereo";  // Middlebury pairs
+  std::string contact_sheet;                                                         // PNG of the depth maps
+  int threads = 2;
+  int iterations = -1;  // PatchMatch iterations (-1: its default)
+  int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   double baseline = kDefaultStereoBaselineM;
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    const std::string& a = args.extra[i];
-    auto value = [&](std::string* out) {
-      if (i + 1 >= args.extra.size()) return false;
-      *out = args.extra[++i];
-      return true;
-    };
-    std::string v;
-    if (a == "--middlebury" && value(&v)) middlebury = v;
-    else if (a == "--contact-sheet" && value(&v)) sheet_path = v;
-    else if (a == "--threads" && value(&v)) threads = std::atoi(v.c_str());
-    else if (a == "--iterations" && value(&v)) iterations = std::atoi(v.c_str());
-    else if (a == "--fuse-frames" && value(&v)) fuse_frames = std::atoi(v.c_str());
-    else if (a == "--baseline" && value(&v)) baseline = std::atof(v.c_str());
-    else return Fail("unknown option or missing value: " + a +
-                     " (known: --middlebury DIR, --threads N, --iterations N, --fuse-frames N, --baseline M, "
-                     "--contact-sheet PNG)");
-  }
-  if (threads < 1 || threads > 64) return Fail("--threads must be in [1, 64]");
-  if (fuse_frames < 0 || fuse_frames > 100) return Fail("--fuse-frames must be in [0, 100]");
+};
+
+int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
+  const std::string& middlebury = o.middlebury;
+  const std::string& sheet_path = o.contact_sheet;
+  const int threads = o.threads, iterations = o.iterations, fuse_frames = o.fuse_frames;
+  const double baseline = o.baseline;
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) return Fail(workload.status().message());
   const std::string& wl = workload->name;
@@ -217,7 +210,7 @@ int RunStereoBench(const BenchArgs& args) {
       {"frames", std::to_string(frames)},
       {"avx2", pm.uses_avx2() ? "1" : "0"}};
   if (!args.json)
-    std::fprintf(stderr, "studio: %s, %zu stereo pods, baseline %.3f m, disparity [%g, %g], %d frames\n", wl.c_str(),
+    spdlog::info("studio: {}, {} stereo pods, baseline {:.3f} m, disparity [{:g}, {:g}], {} frames", wl,
                  rig.pods.size(), baseline, pmo.min_disparity, pmo.max_disparity, frames);
   MethodRun pm_run, sgbm_run;
   std::vector<StereoPair> pairs;
@@ -266,7 +259,7 @@ int RunStereoBench(const BenchArgs& args) {
     for (const auto& t : sheet) tiles.push_back(&t);
     const ImageRgb8 img = TileImages(tiles, 6, 2);
     if (Status s = WriteImageRgb8(sheet_path, img); !s.ok()) return Fail(s.ToString());
-    if (!args.json) std::fprintf(stderr, "contact sheet: %s\n", sheet_path.c_str());
+    if (!args.json) spdlog::info("contact sheet: {}", sheet_path);
   }
 
   // ---- Middlebury ---------------------------------------------------------
@@ -276,10 +269,10 @@ int RunStereoBench(const BenchArgs& args) {
     dir += "/middlebury2006_aloe_full";
   if (!std::filesystem::exists(dir + "/aloeL.jpg") || !std::filesystem::exists(dir + "/aloeR.jpg") ||
       !std::filesystem::exists(dir + "/aloeGT.png")) {
-    std::fprintf(stderr,
-                 "holoport-bench stereo: Middlebury pair not found under %s (need aloeL.jpg, aloeR.jpg, aloeGT.png; "
-                 "pass --middlebury DIR): middlebury figures SKIPPED\n",
-                 middlebury.c_str());
+    spdlog::info(
+        "holoport-bench stereo: Middlebury pair not found under {} (need aloeL.jpg, aloeR.jpg, aloeGT.png; "
+        "pass --middlebury DIR): middlebury figures SKIPPED",
+        middlebury);
     EmitFigure("stereo", wl, "middlebury_available", 0, "1", {{"data", "middlebury"}, {"path", middlebury}});
   } else {
     const cv::Mat l = cv::imread(dir + "/aloeL.jpg", cv::IMREAD_GRAYSCALE);
@@ -371,9 +364,25 @@ int RunStereoBench(const BenchArgs& args) {
   return 0;
 }
 
+BenchFn SetupStereo(CLI::App& app) {
+  auto o = std::make_shared<StereoBenchOptions>();
+  app.add_option("--middlebury", o->middlebury, "directory of Middlebury stereo pairs")->capture_default_str();
+  app.add_option("--contact-sheet", o->contact_sheet, "write a PNG of the depth maps");
+  app.add_option("--threads", o->threads, "threads of PatchMatch, SGBM and the studio")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  app.add_option("--iterations", o->iterations, "PatchMatch iterations (-1: its default)")->capture_default_str();
+  app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
+  app.add_option("--baseline", o->baseline, "stereo baseline, m")->capture_default_str();
+  return [o](const BenchArgs& args) { return RunStereoBench(args, *o); };
+}
+
 }  // namespace
 
-HOLO_REGISTER_BENCH("stereo", "active stereo: PatchMatch vs OpenCV SGBM (studio, Middlebury), fused mesh vs direct depth",
-                    RunStereoBench);
+HOLO_REGISTER_BENCH_OPTIONS("stereo",
+                            "active stereo: PatchMatch vs OpenCV SGBM (studio, Middlebury), fused mesh vs direct depth",
+                            SetupStereo);
 
 }  // namespace holo::bench

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "bench.h"
+#include "common/log.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 
@@ -17,12 +18,12 @@ namespace {
 int RunStudioBench(const holo::bench::BenchArgs& args) {
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "studio: %s\n", workload.status().ToString().c_str());
+    spdlog::error("studio: {}", workload.status().ToString());
     return 2;
   }
   auto studio = holo::SyntheticStudio::Create(workload->rig, workload->studio);
   if (!studio.ok()) {
-    std::fprintf(stderr, "studio: %s\n", studio.status().ToString().c_str());
+    spdlog::error("studio: {}", studio.status().ToString());
     return 1;
   }
   const int frames = args.frames > 0 ? args.frames : 60;
@@ -42,8 +43,8 @@ int RunStudioBench(const holo::bench::BenchArgs& args) {
     fps.push_back(frames / s);
     ms.push_back(1000.0 * s / frames);
     if (!args.json)
-      std::fprintf(stderr, "studio %s run %d: %d frames of %zu pods in %.3f s: %.1f fps\n", workload->name.c_str(), r + 1,
-                   frames, set.frames.size(), s, fps.back());
+      spdlog::info("studio {} run {}: {} frames of {} pods in {:.3f} s: {:.1f} fps", workload->name, r + 1, frames,
+                   set.frames.size(), s, fps.back());
   }
   const std::map<std::string, std::string> q = {{"threads", std::to_string(threads)}, {"ground_truth", "1"}, {"content", "truth"}};
   holo::bench::EmitFigure("studio", workload->name, "fps", holo::bench::Median(fps), "1/s", q);

@@ -32,6 +32,7 @@
 #include <CLI/CLI.hpp>
 
 #include "bench.h"
+#include "common/log.h"
 #include "common/metrics/flicker.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/surface_sampling.h"
@@ -370,68 +371,71 @@ struct Diag {
           as[md] += sum[md][c];
           ac[md] += cnt[md][c];
         }
-      std::fprintf(stderr,
-                   "diag samples seen by no pod: %.1f %% of valid pairs (per_frame) / %.1f %% (temporal); their flicker "
-                   "%.2f / %.2f mm; seen samples %.2f / %.2f mm\n",
-                   100 * hc[0] / std::max(1.0, ac[0]), 100 * hc[1] / std::max(1.0, ac[1]), hs[0] / std::max(1.0, hc[0]),
-                   hs[1] / std::max(1.0, hc[1]), (as[0] - hs[0]) / std::max(1.0, ac[0] - hc[0]),
-                   (as[1] - hs[1]) / std::max(1.0, ac[1] - hc[1]));
+      spdlog::info(
+          "diag samples seen by no pod: {:.1f} % of valid pairs (per_frame) / {:.1f} % (temporal); their flicker "
+          "{:.2f} / {:.2f} mm; seen samples {:.2f} / {:.2f} mm",
+          100 * hc[0] / std::max(1.0, ac[0]), 100 * hc[1] / std::max(1.0, ac[1]), hs[0] / std::max(1.0, hc[0]),
+          hs[1] / std::max(1.0, hc[1]), (as[0] - hs[0]) / std::max(1.0, ac[0] - hc[0]),
+          (as[1] - hs[1]) / std::max(1.0, ac[1] - hc[1]));
       for (size_t c = 0; c < static_cast<size_t>(num_comp); ++c)
-        std::fprintf(stderr, "diag component %zu hidden: %.0f %% of pairs, flicker %.2f / %.2f mm; seen %.2f / %.2f mm\n", c,
-                     100 * hid_cnt[0][c] / std::max(1.0, cnt[0][c]), hid_sum[0][c] / std::max(1.0, hid_cnt[0][c]),
+        spdlog::info("diag component {} hidden: {:.0f} % of pairs, flicker {:.2f} / {:.2f} mm; seen {:.2f} / {:.2f} mm",
+                     c, 100 * hid_cnt[0][c] / std::max(1.0, cnt[0][c]), hid_sum[0][c] / std::max(1.0, hid_cnt[0][c]),
                      hid_sum[1][c] / std::max(1.0, hid_cnt[1][c]),
                      (sum[0][c] - hid_sum[0][c]) / std::max(1.0, cnt[0][c] - hid_cnt[0][c]),
                      (sum[1][c] - hid_sum[1][c]) / std::max(1.0, cnt[1][c] - hid_cnt[1][c]));
     }
-    std::fprintf(stderr, "diag flicker per frame pair (per_frame/temporal mm):");
+    std::string pairs_line = "diag flicker per frame pair (per_frame/temporal mm):";
     for (size_t i = 0; i < per_frame.pairs().size() && i < temporal.pairs().size(); ++i)
-      std::fprintf(stderr, " f%zu %.2f/%.2f", i + 1, per_frame.pairs()[i].flicker_mm, temporal.pairs()[i].flicker_mm);
-    std::fprintf(stderr, "\n");
+      pairs_line +=
+          fmt::format(" f{} {:.2f}/{:.2f}", i + 1, per_frame.pairs()[i].flicker_mm, temporal.pairs()[i].flicker_mm);
+    spdlog::info("{}", pairs_line);
     const double nf = std::max(1.0, frames_seen[1] - 1);
     for (int ci = 0; ci < num_comp; ++ci) {
       const size_t c = static_cast<size_t>(ci);
-      std::fprintf(stderr,
-                   "diag component %d: %zu samples at (%.2f %.2f %.2f), flicker per_frame %.2f temporal %.2f mm; valid/frame %.0f / %.0f; "
-                   "mean |d| %.2f / %.2f mm; truth speed %.1f mm/frame; temporal nodes near/frame %.1f failed %.2f "
-                   "(res %.2f viol %.2f stretch %.2f affine %.2f) unsupported %.2f\n",
-                   ci, comp_size[c], comp_centroid[c].x(), comp_centroid[c].y(), comp_centroid[c].z(), sum[0][c] / std::max(1.0, cnt[0][c]), sum[1][c] / std::max(1.0, cnt[1][c]),
-                   valid[0][c] / std::max(1.0, frames_seen[0]), valid[1][c] / std::max(1.0, frames_seen[1]),
-                   abs_d[0][c] / std::max(1.0, valid[0][c]), abs_d[1][c] / std::max(1.0, valid[1][c]),
-                   speed_sum[c] / std::max(1.0, frames_seen[0] - 1) / static_cast<double>(comp_size[c]), near_nodes[c] / nf,
-                   near_failed[c] / nf, near_res[c] / nf, near_viol[c] / nf, near_stretch[c] / nf, near_affine[c] / nf,
-                   near_low_support[c] / nf);
+      spdlog::info(
+          "diag component {}: {} samples at ({:.2f} {:.2f} {:.2f}), flicker per_frame {:.2f} temporal {:.2f} mm; "
+          "valid/frame {:.0f} / {:.0f}; "
+          "mean |d| {:.2f} / {:.2f} mm; truth speed {:.1f} mm/frame; temporal nodes near/frame {:.1f} failed {:.2f} "
+          "(res {:.2f} viol {:.2f} stretch {:.2f} affine {:.2f}) unsupported {:.2f}",
+          ci, comp_size[c], comp_centroid[c].x(), comp_centroid[c].y(), comp_centroid[c].z(),
+          sum[0][c] / std::max(1.0, cnt[0][c]), sum[1][c] / std::max(1.0, cnt[1][c]),
+          valid[0][c] / std::max(1.0, frames_seen[0]), valid[1][c] / std::max(1.0, frames_seen[1]),
+          abs_d[0][c] / std::max(1.0, valid[0][c]), abs_d[1][c] / std::max(1.0, valid[1][c]),
+          speed_sum[c] / std::max(1.0, frames_seen[0] - 1) / static_cast<double>(comp_size[c]), near_nodes[c] / nf,
+          near_failed[c] / nf, near_res[c] / nf, near_viol[c] / nf, near_stretch[c] / nf, near_affine[c] / nf,
+          near_low_support[c] / nf);
     }
     // Timelines of the small components (< 500 samples).
     for (int ci = 0; ci < num_comp; ++ci) {
       const size_t c = static_cast<size_t>(ci);
       if (comp_size[c] >= 500) continue;
-      std::fprintf(stderr, "diag timeline component %d (per_frame/temporal mm):", ci);
+      std::string line = fmt::format("diag timeline component {} (per_frame/temporal mm):", ci);
       for (size_t f = 1; f < timeline[c].size(); ++f)
-        std::fprintf(stderr, " f%zu %.1f/%.1f", f, timeline[c][f][0], timeline[c][f][1]);
-      std::fprintf(stderr, "\n");
+        line += fmt::format(" f{} {:.1f}/{:.1f}", f, timeline[c][f][0], timeline[c][f][1]);
+      spdlog::info("{}", line);
     }
-    for (size_t f = 0; f < frame_notes.size(); ++f) std::fprintf(stderr, "diag frame %zu: %s\n", f, frame_notes[f].c_str());
+    for (size_t f = 0; f < frame_notes.size(); ++f) spdlog::info("diag frame {}: {}", f, frame_notes[f]);
     for (size_t c = 0; c < comp_err_sum.size(); ++c)
-      std::fprintf(stderr, "diag component %zu: node error along normal (frames 10+) mean %.2f mm over %.0f node-frames\n", c,
+      spdlog::info("diag component {}: node error along normal (frames 10+) mean {:.2f} mm over {:.0f} node-frames", c,
                    comp_err_sum[c] / std::max(1.0, comp_err_cnt[c]), comp_err_cnt[c]);
-    for (size_t f = 0; f < track_err.size(); ++f) std::fprintf(stderr, "diag track error frame %zu: %s\n", f + 1, track_err[f].c_str());
+    for (size_t f = 0; f < track_err.size(); ++f) spdlog::info("diag track error frame {}: {}", f + 1, track_err[f]);
   }
 };
 
 int RunTemporal(const BenchArgs& args, const Extra& extra) {
   auto workload = GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "temporal: %s\n", workload.status().ToString().c_str());
+    spdlog::error("temporal: {}", workload.status().ToString());
     return 2;
   }
   auto solver = ParseTrackerSolver(extra.solver);
   if (!solver.ok()) {
-    std::fprintf(stderr, "temporal: %s\n", solver.status().ToString().c_str());
+    spdlog::error("temporal: {}", solver.status().ToString());
     return 2;
   }
   const Rig& rig = workload->rig;
   if (extra.drop_pod >= static_cast<int>(rig.pods.size())) {
-    std::fprintf(stderr, "temporal: --drop-pod %d but the rig has %zu pods\n", extra.drop_pod, rig.pods.size());
+    spdlog::error("temporal: --drop-pod {} but the rig has {} pods", extra.drop_pod, rig.pods.size());
     return 2;
   }
   const int frames = args.frames > 0 ? args.frames : 30;
@@ -439,7 +443,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
   so.threads = 2;
   auto studio = SyntheticStudio::Create(rig, so);
   if (!studio.ok()) {
-    std::fprintf(stderr, "temporal: %s\n", studio.status().ToString().c_str());
+    spdlog::error("temporal: {}", studio.status().ToString());
     return 1;
   }
 
@@ -476,7 +480,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
     o.temporal = r % 2 == 1;
     auto f = TemporalFusion::Create(o);
     if (!f.ok()) {
-      std::fprintf(stderr, "temporal: %s\n", f.status().ToString().c_str());
+      spdlog::error("temporal: {}", f.status().ToString());
       return 2;
     }
     runs[r].fusion = std::move(*f);
@@ -511,13 +515,13 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
       TemporalFrameStats st;
       const double cpu0 = ProcessCpuMs();
       if (Status s = run.fusion->Process(rig, in, &run.mesh, &st); !s.ok()) {
-        std::fprintf(stderr, "temporal: %s frame %d: %s\n", run.mode.c_str(), f, s.ToString().c_str());
+        spdlog::error("temporal: {} frame {}: {}", run.mode, f, s.ToString());
         return 1;
       }
       const double cpu = ProcessCpuMs() - cpu0;
       if (r < 2) {
         if (Status s = run.flicker.Add(run.mesh, gt.foreground_mesh); !s.ok()) {
-          std::fprintf(stderr, "temporal: flicker: %s\n", s.ToString().c_str());
+          spdlog::error("temporal: flicker: {}", s.ToString());
           return 1;
         }
         if (f > 0) {  // frame 0 is per-frame fusion in both modes
@@ -547,16 +551,17 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
                     sums[b] += x;
                     break;
                   }
-              std::fprintf(stderr, "diag %s f%d verts %zu: <5mm %d <10 %d <20 %d <50 %d <100 %d more %d; sum-mm share:", run.mode.c_str(), f,
-                           dd.size(), hist[0], hist[1], hist[2], hist[3], hist[4], hist[5]);
+              std::string line = fmt::format(
+                  "diag {} f{} verts {}: <5mm {} <10 {} <20 {} <50 {} <100 {} more {}; sum-mm share:", run.mode, f,
+                  dd.size(), hist[0], hist[1], hist[2], hist[3], hist[4], hist[5]);
               double tot = 0;
               for (double x : sums) tot += x;
-              for (double x : sums) std::fprintf(stderr, " %.2f", x / tot);
-              std::fprintf(stderr, "\n");
+              for (double x : sums) line += fmt::format(" {:.2f}", x / tot);
+              spdlog::info("{}", line);
             }
             if (diag_on)
-              std::fprintf(stderr, "diag %s f%d chamfer %.2f accuracy %.2f completeness %.3f\n", run.mode.c_str(), f,
-                           d->chamfer_mm, d->accuracy_mm, d->completeness);
+              spdlog::info("diag {} f{} chamfer {:.2f} accuracy {:.2f} completeness {:.3f}", run.mode, f, d->chamfer_mm,
+                           d->accuracy_mm, d->completeness);
             run.chamfer.push_back(d->chamfer_mm);
             run.completeness.push_back(d->completeness);
             run.accuracy.push_back(d->accuracy_mm);
@@ -570,12 +575,15 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
         runs[1].exclusive.push_back(FractionWithin(runs[1].mesh, exclusive, 0.01f));
       }
       if (std::getenv("HOLO_TEMPORAL_VERBOSE") && st.tracked)
-        std::fprintf(stderr, "%s f%d: nodes %d failed %d (res %d viol %d stretch %d) rms %.2f mm assoc %zu/%zu track %.1f (rigid %.1f assoc %.1f solve %.1f pcg %d it %d step %.2f mm) warp %.1f fuse %.1f mesh %.1f carried %zu reset %zu hull %zu features %.1f ms %zu pairs rms %.1f mm\n",
-                     run.mode.c_str(), f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
-                     st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
-                     st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations, st.track.iterations, st.track.last_step_m * 1000,
-                     st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks, st.reset_blocks, st.hull_blocks, st.features_ms,
-                     st.feature_pairs, st.track.sparse_rms_m * 1000);
+        spdlog::info(
+            "{} f{}: nodes {} failed {} (res {} viol {} stretch {}) rms {:.2f} mm assoc {}/{} track {:.1f} (rigid "
+            "{:.1f} assoc {:.1f} solve {:.1f} pcg {} it {} step {:.2f} mm) warp {:.1f} fuse {:.1f} mesh {:.1f} carried "
+            "{} reset {} hull {} features {:.1f} ms {} pairs rms {:.1f} mm",
+            run.mode, f, st.nodes, st.failed_nodes, st.track.failed_residual, st.track.failed_violation,
+            st.track.failed_stretch, st.track.data_rms_m * 1000, st.track.associated_points, st.track.num_points,
+            st.track_ms, st.track.rigid_ms, st.track.associate_ms, st.track.solve_ms, st.track.pcg_iterations,
+            st.track.iterations, st.track.last_step_m * 1000, st.warp_ms, st.fuse_ms, st.mesh_ms, st.carried_blocks,
+            st.reset_blocks, st.hull_blocks, st.features_ms, st.feature_pairs, st.track.sparse_rms_m * 1000);
       run.tracked += st.tracked;
       run.nodes += st.nodes;
       run.failed_nodes += st.failed_nodes;
@@ -584,12 +592,8 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
       run.lost += st.lost;
       run.resets += st.region_reset || st.full_reset;
     }
-    if (!args.json) {
-      std::fprintf(stderr, "\rframe %d/%d", f + 1, frames);
-      std::fflush(stderr);
-    }
+    if (!args.json && ((f + 1) % 10 == 0 || f + 1 == frames)) spdlog::info("temporal: frame {}/{}", f + 1, frames);
   }
-  if (!args.json) std::fprintf(stderr, "\n");
   if (diag_on) diag.Print(runs[0].flicker, runs[1].flicker);
 
   const std::string w = args.workload;

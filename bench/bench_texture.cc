@@ -17,10 +17,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include <CLI/CLI.hpp>
+
 #include "bench.h"
+#include "common/log.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/tsdf.h"
 #include "studio/studio.h"
@@ -38,46 +42,26 @@ struct Mode {
   holo::TextureOptions options;
 };
 
-int RunTextureBench(const holo::bench::BenchArgs& args) {
-  std::string png_dir;
-  int threads = 2;
-  holo::TextureOptions tuned;  // defaults, or as set by the options below
-  float offset_mm = 0;
-  bool fused = false;
-  std::string only;
-  for (size_t i = 0; i < args.extra.size(); ++i) {
-    if (args.extra[i] == "--png" && i + 1 < args.extra.size()) {
-      png_dir = args.extra[++i];
-    } else if (args.extra[i] == "--threads" && i + 1 < args.extra.size()) {
-      threads = std::atoi(args.extra[++i].c_str());
-      if (threads < 1) {
-        std::fprintf(stderr, "texture: --threads must be >= 1\n");
-        return 2;
-      }
-    } else if (args.extra[i] == "--alpha" && i + 1 < args.extra.size()) {
-      tuned.alpha = std::strtof(args.extra[++i].c_str(), nullptr);
-    } else if (args.extra[i] == "--radius_mm" && i + 1 < args.extra.size()) {
-      tuned.discontinuity_radius_m = 1e-3f * std::strtof(args.extra[++i].c_str(), nullptr);
-    } else if (args.extra[i] == "--fused") {
-      fused = true;
-    } else if (args.extra[i] == "--cluster_mm" && i + 1 < args.extra.size()) {
-      tuned.cluster_size_m = 1e-3f * std::strtof(args.extra[++i].c_str(), nullptr);
-    } else if (args.extra[i] == "--cluster_transfer" && i + 1 < args.extra.size()) {
-      tuned.cluster_transfer = std::atoi(args.extra[++i].c_str());
-    } else if (args.extra[i] == "--only" && i + 1 < args.extra.size()) {
-      only = args.extra[++i];
-    } else if (args.extra[i] == "--no_fallback") {
-      tuned.discontinuity_fallback = false;
-    } else if (args.extra[i] == "--geometry_offset_mm" && i + 1 < args.extra.size()) {
-      offset_mm = std::strtof(args.extra[++i].c_str(), nullptr);
-    } else {
-      std::fprintf(stderr, "texture: unknown option %s\n", args.extra[i].c_str());
-      return 2;
-    }
-  }
+// The benchmark's own options (holoport-bench texture --help).
+struct TextureBenchOptions {
+  std::string png_dir;         // write the novel views of the first frame here
+  int threads = 2;             // the 2-core budget
+  holo::TextureOptions tuned;  // defaults, or as set by the options
+  float offset_mm = 0;         // move the mesh along its normals (texturing's tolerance to geometry error)
+  bool fused = false;          // texture the TSDF mesh instead of the ground truth
+  std::string only;            // one mode
+};
+
+int RunTextureBench(const holo::bench::BenchArgs& args, const TextureBenchOptions& o) {
+  const std::string& png_dir = o.png_dir;
+  const int threads = o.threads;
+  const holo::TextureOptions& tuned = o.tuned;
+  const float offset_mm = o.offset_mm;
+  const bool fused = o.fused;
+  const std::string& only = o.only;
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
-    std::fprintf(stderr, "texture: %s\n", workload.status().ToString().c_str());
+    spdlog::error("texture: {}", workload.status().ToString());
     return 2;
   }
   holo::StudioOptions studio_options = workload->studio;
@@ -86,12 +70,12 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   studio_options.color_variation = false;
   auto studio = holo::SyntheticStudio::Create(workload->rig, studio_options);
   if (!studio.ok()) {
-    std::fprintf(stderr, "texture: %s\n", studio.status().ToString().c_str());
+    spdlog::error("texture: {}", studio.status().ToString());
     return 1;
   }
 
   if (holo::Status s = tuned.Check(); !s.ok()) {
-    std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+    spdlog::error("texture: {}", s.ToString());
     return 2;
   }
   std::vector<Mode> modes(3);
@@ -108,7 +92,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   if (!only.empty()) {
     std::erase_if(modes, [&](const Mode& m) { return m.name != only; });
     if (modes.empty()) {
-      std::fprintf(stderr, "texture: --only must be holoportation, no_discontinuity or naive\n");
+      spdlog::error("texture: --only must be holoportation, no_discontinuity or naive");
       return 2;
     }
   }
@@ -145,7 +129,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
         s = holo::CleanupMesh(holo::MeshCleanupOptions{}, &mesh);
       }
       if (!s.ok()) {
-        std::fprintf(stderr, "texture: fusing frame %lld: %s\n", static_cast<long long>(f), s.ToString().c_str());
+        spdlog::error("texture: fusing frame {}: {}", f, s.ToString());
         return 1;
       }
     }
@@ -166,7 +150,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
       holo::Texturer texturer(workload->rig, mode.options);
       mesh.colors.clear();
       if (holo::Status s = texturer.Apply(set, &mesh); !s.ok()) {  // warm-up: buffers sized
-        std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+        spdlog::error("texture: {}", s.ToString());
         return 1;
       }
       for (int r = 0; r < args.repeats; ++r) {
@@ -177,7 +161,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
         const double dt = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
         cpu_ms[mode.name].push_back(ProcessCpuMs() - c0);
         if (!s.ok()) {
-          std::fprintf(stderr, "texture: %s\n", s.ToString().c_str());
+          spdlog::error("texture: {}", s.ToString());
           return 1;
         }
         ms[mode.name].push_back(dt);
@@ -189,7 +173,7 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
           prefix = png_dir + "/" + workload->name + "_" + mode.name + "_view" + std::to_string(v);
         auto score = holo::ScoreNovelView(**studio, f, mesh, views[v], prefix);
         if (!score.ok()) {
-          std::fprintf(stderr, "texture: %s\n", score.status().ToString().c_str());
+          spdlog::error("texture: {}", score.status().ToString());
           return 1;
         }
         psnr[mode.name].push_back(score->psnr_db);
@@ -198,13 +182,14 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
       }
       if (!args.json) {
         const holo::TextureStats& st = texturer.stats();
-        std::fprintf(stderr,
-                     "texture %s frame %lld %-16s %zu vertices (coarse %zu): %.2f ms (cluster %.2f raster %.2f sample %.2f fill %.2f "
-                     "transfer %.2f), "
-                     "observed %zu edge-only %zu voted %zu min-variance %zu filled %zu fallback %zu\n",
-                     workload->name.c_str(), static_cast<long long>(f), mode.name.c_str(), st.num_vertices, st.coarse_vertices,
-                     st.ms_total, st.ms_cluster, st.ms_raster, st.ms_sample, st.ms_fill, st.ms_transfer, st.observed, st.edge_only, st.voted, st.min_variance,
-                     st.filled_from_neighbours, st.fallback);
+        spdlog::info(
+            "texture {} frame {} {:<16} {} vertices (coarse {}): {:.2f} ms (cluster {:.2f} raster {:.2f} sample {:.2f} "
+            "fill {:.2f} "
+            "transfer {:.2f}), "
+            "observed {} edge-only {} voted {} min-variance {} filled {} fallback {}",
+            workload->name, f, mode.name, st.num_vertices, st.coarse_vertices, st.ms_total, st.ms_cluster, st.ms_raster,
+            st.ms_sample, st.ms_fill, st.ms_transfer, st.observed, st.edge_only, st.voted, st.min_variance,
+            st.filled_from_neighbours, st.fallback);
       }
     }
   }
@@ -244,8 +229,29 @@ int RunTextureBench(const holo::bench::BenchArgs& args) {
   return 0;
 }
 
+holo::bench::BenchFn SetupTexture(CLI::App& app) {
+  auto o = std::make_shared<TextureBenchOptions>();
+  app.add_option("--png", o->png_dir, "write the first frame's novel views as PNGs to this directory");
+  app.add_option("--threads", o->threads, "texturing threads")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--alpha", o->tuned.alpha, "TextureOptions::alpha")->capture_default_str();
+  app.add_option_function<float>(
+      "--radius_mm", [o](float mm) { o->tuned.discontinuity_radius_m = 1e-3f * mm; },
+      "discontinuity radius, mm (default 10)");
+  app.add_flag(
+      "--no_fallback", [o](int64_t) { o->tuned.discontinuity_fallback = false; },
+      "no fallback to the views near a discontinuity");
+  app.add_option_function<float>(
+      "--cluster_mm", [o](float mm) { o->tuned.cluster_size_m = 1e-3f * mm; }, "cluster size, mm (0: off)");
+  app.add_option("--cluster_transfer", o->tuned.cluster_transfer, "TextureOptions::cluster_transfer")
+      ->capture_default_str();
+  app.add_flag("--fused", o->fused, "texture the TSDF mesh fused inside the true masks (not the ground truth)");
+  app.add_option("--geometry_offset_mm", o->offset_mm, "move the mesh along its normals by this many mm");
+  app.add_option("--only", o->only, "run one mode: holoportation, no_discontinuity or naive");
+  return [o](const holo::bench::BenchArgs& args) { return RunTextureBench(args, *o); };
+}
+
 }  // namespace
 
-HOLO_REGISTER_BENCH("texture",
-                    "texturing of the ground-truth mesh: ms, novel-view PSNR/SSIM vs naive and no-discontinuity",
-                    RunTextureBench);
+HOLO_REGISTER_BENCH_OPTIONS(
+    "texture", "texturing of the ground-truth mesh: ms, novel-view PSNR/SSIM vs naive and no-discontinuity",
+    SetupTexture);

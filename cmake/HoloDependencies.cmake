@@ -2,12 +2,13 @@
 find_package(Threads REQUIRED)
 find_package(PkgConfig REQUIRED)
 find_package(Eigen3 3.4 REQUIRED NO_MODULE)
-find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs video features2d)
+find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs video features2d calib3d)
 find_package(OpenMesh REQUIRED)
 find_package(yaml-cpp REQUIRED)
 find_package(CLI11 REQUIRED)
 find_package(nlohmann_json 3.10 REQUIRED)
-find_package(OpenMesh REQUIRED)
+# Log lines of every program and library (common/log.h); compiled, fmt external.
+find_package(spdlog 1.10 REQUIRED)
 if(HOLO_BUILD_TESTS)
   find_package(GTest REQUIRED)
   include(GoogleTest)
@@ -39,10 +40,12 @@ target_compile_definitions(holo_asio INTERFACE ASIO_STANDALONE ASIO_NO_DEPRECATE
 target_link_libraries(holo_asio INTERFACE Threads::Threads)
 find_package(OpenSSL REQUIRED)
 
-# Rendering: GLFW window or EGL surfaceless context; GL functions via libepoxy.
+# Rendering: GLFW window or EGL surfaceless context; GL and EGL functions via
+# libepoxy, which loads libGL/libEGL itself at run time (nothing links them).
+# epoxy/egl.h includes the Khronos EGL/eglplatform.h (libegl-dev).
 find_package(glfw3 3.3 REQUIRED)
-find_package(OpenGL REQUIRED COMPONENTS OpenGL EGL)
 pkg_check_modules(EPOXY REQUIRED IMPORTED_TARGET epoxy)
+find_path(EGL_PLATFORM_INCLUDE_DIR EGL/eglplatform.h REQUIRED)
 # Resampling of voice input to 48 kHz (audio/).
 pkg_check_modules(SOXR REQUIRED IMPORTED_TARGET soxr)
 # Capture-side echo cancellation and noise suppression (audio/echo_canceller):

@@ -35,6 +35,9 @@ Status Status::WithContext(const std::string& context) const {
 }
 
 void CheckFailed(const char* file, int line, const char* expr, const std::string& msg) {
+  // Straight to stderr, not through the log: an abort must say why even with
+  // --log-level off, in a program that never set up logging, or from inside
+  // the logger.
   std::fprintf(stderr, "HOLO_CHECK failed at %s:%d: %s %s\n", file, line, expr, msg.c_str());
   std::fflush(stderr);
   std::abort();

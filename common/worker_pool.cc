@@ -4,8 +4,13 @@
 
 namespace holo {
 
+int ResolveThreadCount(int requested) {
+  if (requested > 0) return requested;
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
 WorkerPool::WorkerPool(int num_threads) {
-  if (num_threads <= 0) num_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  num_threads = ResolveThreadCount(num_threads);
   const int workers = num_threads - 1;
   workers_.reserve(static_cast<size_t>(workers));
   for (int t = 0; t < workers; ++t) workers_.emplace_back([this, t] { WorkerLoop(t + 1); });

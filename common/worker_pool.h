@@ -1,10 +1,14 @@
 // A fixed set of worker threads that run batches of small tasks, so a stage
-// called every frame starts no threads and allocates nothing per call. Shared
-// by segmentation, fusion and texturing (each stage owns its own pool).
+// called every frame starts no threads and allocates nothing per call. The
+// one thread pool of the code base: segmentation, fusion, texturing, the
+// studio, stereo, temporal tracking (each owns its own pool) and the metrics
+// (a pool per call, ParallelForBlocks).
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
+#include <cstddef>
 #include <cstdint>
 #include <mutex>
 #include <thread>
@@ -12,6 +16,10 @@
 #include <vector>
 
 namespace holo {
+
+// Threads for a `requested` count: `requested` if > 0, otherwise
+// std::thread::hardware_concurrency() (at least 1).
+int ResolveThreadCount(int requested);
 
 class WorkerPool {
  public:
@@ -42,6 +50,22 @@ class WorkerPool {
     Run(n, [&fn](int i, int) { fn(i); });
   }
 
+  // Calls `fn(begin, end)` on disjoint contiguous blocks covering [0, n),
+  // blocks of `block` indices (the last one shorter) handed out dynamically,
+  // so uneven per-index cost does not leave a thread idle. Every index goes
+  // to exactly one call: results written per index do not depend on the
+  // thread count.
+  template <typename F>
+  void ParallelForBlocks(size_t n, size_t block, F&& fn) {
+    if (n == 0) return;
+    block = std::max<size_t>(block, 1);
+    const size_t blocks = (n + block - 1) / block;
+    Run(blocks, [&fn, n, block](int b, int) {
+      const size_t begin = static_cast<size_t>(b) * block;
+      fn(begin, std::min(n, begin + block));
+    });
+  }
+
  private:
   using TaskFn = void (*)(void* ctx, int task, int thread);
   void RunImpl(int num_tasks, TaskFn fn, void* ctx);
@@ -59,5 +83,26 @@ class WorkerPool {
   std::atomic<int> next_task_{0};
   std::vector<std::thread> workers_;
 };
+
+// ParallelForBlocks on a pool made for this call only, of up to
+// `num_threads` threads (see ResolveThreadCount) and no more than blocks of
+// at least `min_block` indices; runs inline when one thread suffices. For
+// one-shot work such as the metrics; a stage called every frame keeps its
+// own WorkerPool instead, so it starts no threads per call.
+template <typename F>
+void ParallelForBlocks(size_t n, int num_threads, size_t min_block, F&& fn) {
+  if (n == 0) return;
+  min_block = std::max<size_t>(min_block, 1);
+  const size_t threads =
+      std::min(static_cast<size_t>(ResolveThreadCount(num_threads)), (n + min_block - 1) / min_block);
+  if (threads <= 1) {
+    fn(size_t{0}, n);
+    return;
+  }
+  // About 16 blocks per thread: small enough to even out uneven per-index
+  // cost, large enough that handing them out costs nothing.
+  WorkerPool pool(static_cast<int>(threads));
+  pool.ParallelForBlocks(n, std::max(min_block, n / (threads * 16)), fn);
+}
 
 }  // namespace holo

@@ -18,6 +18,8 @@
 #include <openssl/crypto.h>
 #include <openssl/evp.h>
 
+#include "common/log.h"
+
 namespace holo::net {
 
 using asio::ip::tcp;
@@ -76,10 +78,17 @@ class Server::Impl {
   Impl(ServerConfig c, ServerHooks h) : cfg(std::move(c)), hooks(std::move(h)), acceptor(io) {
     publisher_hash = HashToken(cfg.publisher_token);
     viewer_hash = HashToken(cfg.viewer_token);
-    if (!hooks.log) hooks.log = [](const std::string& s) { std::fprintf(stderr, "[net] %s\n", s.c_str()); };
   }
 
-  void Log(const std::string& s) { hooks.log(s); }
+  // Through the hook when one is set, else the log at `level` (refusals and
+  // failures are warnings, arrivals and departures info).
+  void Log(const std::string& s, spdlog::level::level_enum level = spdlog::level::info) {
+    if (hooks.log) {
+      hooks.log(s);
+    } else {
+      spdlog::log(level, "[net] {}", s);
+    }
+  }
   void Accept();
   // Registers a session after a successful Hello; false when the site is full.
   bool Register(const std::shared_ptr<Session>& s, Role role, std::string* why);
@@ -531,8 +540,9 @@ class Session : public std::enable_shared_from_this<Session> {
       std::lock_guard<std::mutex> l(mu_);
       name = client_name_;
     }
-    srv_->Log("refused " + peer_ + (name.empty() ? "" : " '" + name + "'") + ": " + RefuseReasonName(reason) + ": " +
-              message);
+    srv_->Log(
+        "refused " + peer_ + (name.empty() ? "" : " '" + name + "'") + ": " + RefuseReasonName(reason) + ": " + message,
+        spdlog::level::warn);
     protocol::Refuse r{reason, protocol::kProtocolVersion, protocol::kProtocolVersion, message};
     Header h;
     EnqueuePriorityAlways(MakeWireMessage(h, r, srv_->cfg.fragment_bytes));
@@ -735,7 +745,7 @@ void Server::Impl::Accept() {
     if (stopped) return;
     if (ec) {
       if (ec == asio::error::operation_aborted) return;
-      Log("accept failed: " + ec.message());
+      Log("accept failed: " + ec.message(), spdlog::level::warn);
       Accept();
       return;
     }
@@ -758,7 +768,8 @@ void Server::Impl::Accept() {
       s->Start();
     } else {
       std::error_code ignore;
-      Log("closed a new connection at once: " + std::to_string(cfg.max_pending) + " handshakes already in progress");
+      Log("closed a new connection at once: " + std::to_string(cfg.max_pending) + " handshakes already in progress",
+          spdlog::level::warn);
       sock.close(ignore);
     }
     Accept();

@@ -80,7 +80,8 @@ struct ServerCounters {
 };
 
 struct ServerHooks {
-  // Log lines (refusals with their reason, violations, timeouts). Default: stderr.
+  // Log lines (refusals with their reason, violations, timeouts). Default: the
+  // log (common/log.h), refusals and failures as warnings.
   std::function<void(const std::string&)> log;
   // Pause/seek/speed/key frame/quality from viewers; may be null.
   StreamControlSink* control = nullptr;

@@ -11,6 +11,9 @@
 //        static rANS coder, one context per component.
 // Each blob is self-describing (codec id, counts, flags) and decodes without
 // any other state (every frame is a key frame).
+// The rANS coder is our own (a few hundred lines here): Debian packages no
+// rANS/ANS library (zstd's FSE is internal to zstd), and the browser player
+// (web/src/geometry.js) decodes the same streams bit for bit.
 #pragma once
 
 #include <cstdint>

@@ -37,6 +37,8 @@ inline constexpr uint16_t kFileFlagSegment = 1u << 0;
 enum class RecordKind : uint8_t { kMessage = 1, kIndex = 2, kEnd = 3 };
 
 // CRC-32C (Castagnoli), slicing by 8. `crc` is the running value (0 to start).
+// Our own: Debian packages no CRC-32C library for C++ (zlib has only CRC-32),
+// and the browser player (web/src/bytes.js) checks the same sums.
 uint32_t Crc32c(uint32_t crc, const uint8_t* data, size_t size);
 
 struct FileHeader {

@@ -7,8 +7,8 @@ PACKAGES=(
   build-essential cmake pkg-config ninja-build
   libeigen3-dev libopencv-dev libceres-dev libopenmesh-dev
   liblz4-dev libopus-dev libopenal-dev libglfw3-dev libasio-dev
-  libcli11-dev libyaml-cpp-dev nlohmann-json3-dev
-  libgtest-dev libgmock-dev libpng-dev
+  libcli11-dev libyaml-cpp-dev nlohmann-json3-dev libspdlog-dev
+  libgtest-dev
   libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev
   python3-open3d
   openssl libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng

@@ -4,9 +4,14 @@
 
 #include <unistd.h>
 
+#include "common/log.h"
 #include "test_util.h"
 
 namespace holo::test {
+
+// Library log lines go to stderr in the tests too, as in the programs (spdlog's
+// own default logger would write them to stdout).
+[[maybe_unused]] const bool kLoggingToStderr = (InitLogging(), true);
 
 std::string TestDataPath(const std::string& relative) { return std::string(HOLO_TEST_DATA_DIR) + "/" + relative; }
 

@@ -13,7 +13,6 @@
 #include <emmintrin.h>
 #endif
 
-#include "common/metrics/parallel.h"
 #include "common/worker_pool.h"
 
 namespace holo {
@@ -132,7 +131,7 @@ Texturer::Texturer(const Rig& rig, TextureOptions options) : rig_(rig), options_
   if (init_status_.ok()) init_status_ = rig_.Check();
   if (init_status_.ok() && rig_.pods.empty()) init_status_ = InvalidArgument("rig has no pods");
   if (!init_status_.ok()) init_status_ = init_status_.WithContext("Texturer");
-  threads_ = metrics::ResolveThreadCount(options_.threads);
+  threads_ = ResolveThreadCount(options_.threads);
   for (const PodCalibration& pod : rig_.pods) {
     auto s = std::make_unique<PodState>();
     s->color_camera = pod.ColorCamera();

@@ -31,6 +31,7 @@
 #include "audio/voice_chain.h"
 #include "audio/wav.h"
 #include "common/clock.h"
+#include "common/log.h"
 
 namespace {
 
@@ -141,7 +142,7 @@ Status Speak(const std::string& text, const std::string& voice, const std::strin
 StatusOr<std::vector<float>> RecordMicrophone(const std::string& device, double seconds, bool quiet) {
   HOLO_ASSIGN_OR_RETURN(auto cap, VoiceCapture::OpenDevice(device, RealClock::Instance(), [](int64_t) { return HeadPose{}; }));
   std::vector<float> out;
-  if (!quiet) std::fprintf(stderr, "holoport-voice: recording %.1f s from %s\n", seconds, cap->description().c_str());
+  if (!quiet) spdlog::info("holoport-voice: recording {:.1f} s from {}", seconds, cap->description());
   while (static_cast<double>(out.size()) < seconds * kSampleRate) {
     HOLO_ASSIGN_OR_RETURN(CapturedFrame f, cap->Next());
     out.insert(out.end(), f.samples.begin(), f.samples.end());
@@ -201,8 +202,7 @@ struct Truth {
 int Analyse(const std::string& path, const std::vector<Truth>& truth, double window_s) {
   auto w = ReadWav(path);
   if (!w.ok() || w->channels != 2) {
-    std::fprintf(stderr, "holoport-voice: cannot analyse %s: %s\n", path.c_str(),
-                 w.ok() ? "not stereo" : w.status().message().c_str());
+    spdlog::error("holoport-voice: cannot analyse {}: {}", path, w.ok() ? "not stereo" : w.status().message().c_str());
     return 1;
   }
   const size_t win = static_cast<size_t>(window_s * w->sample_rate);
@@ -283,6 +283,7 @@ int main(int argc, char** argv) {
       "simulated time (capture -> Opus/PCM -> AudioPose message -> network with jitter/loss -> jitter buffer\n"
       "-> room transform -> OpenAL Soft HRTF on the loopback device); writes the listener's stereo WAV.\n"
       "Input: a microphone (--mic, if one exists), a WAV (--audio-in) or espeak-ng speech (--say)."};
+  holo::AddLogLevelOption(app);
   std::string audio_in, say, voice = "en-us", out, trace_path, link_name = "face-to-face", codec = "opus", mic_device;
   bool mic = false, no_fec = false, no_hrtf = false, quiet = false, analyse = false, play = false;
   double duration_s = 0, mic_seconds = 5, jitter_ms = 20, loss = 0, delay_ms = 20, gap_m = 0.5, window_s = 0.25,
@@ -336,12 +337,12 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   // Checked after parsing so that an unknown option is named first.
   if (out.empty()) {
-    std::fprintf(stderr, "holoport-voice: --out FILE.wav is required (see --help)\n");
+    spdlog::error("holoport-voice: --out FILE.wav is required (see --help)");
     return 2;
   }
 
   auto fail = [](const std::string& m) {
-    std::fprintf(stderr, "holoport-voice: %s\n", m.c_str());
+    spdlog::error("holoport-voice: {}", m);
     return 1;
   };
   if (!audio_in.empty() && !say.empty()) return fail("give --audio-in or --say, not both");
@@ -358,7 +359,7 @@ int main(int argc, char** argv) {
     } else if (audio_in.empty() && say.empty()) {
       return fail(rec.status().message() + "; give --audio-in FILE or --say TEXT to run without one");
     } else {
-      std::fprintf(stderr, "holoport-voice: %s; using %s instead\n", rec.status().message().c_str(),
+      spdlog::warn("holoport-voice: {}; using {} instead", rec.status().message(),
                    audio_in.empty() ? "--say" : "--audio-in");
     }
   }
@@ -418,11 +419,10 @@ int main(int argc, char** argv) {
   auto pose_source = [&](int64_t t_us) { return ToRemote(PathAt(po, listener, static_cast<double>(t_us) * 1e-6), link); };
   auto capture = VoiceCapture::FromSamples(std::move(input), clock, pose_source, source);
   if (!quiet) {
-    std::fprintf(stderr,
-                 "holoport-voice: %s, %.1f s; path %s, facing %s; %s %d kbit/s; network %.0f ms + U(0, %.0f) ms, "
-                 "loss %.1f%%; link %s\n",
-                 source.c_str(), duration_s, po.path.c_str(), po.facing.c_str(), codec.c_str(), bitrate / 1000, delay_ms,
-                 jitter_ms, loss * 100, link_name.c_str());
+    spdlog::info(
+        "holoport-voice: {}, {:.1f} s; path {}, facing {}; {} {} kbit/s; network {:.0f} ms + U(0, {:.0f}) ms, "
+        "loss {:.1f}%; link {}",
+        source, duration_s, po.path, po.facing, codec, bitrate / 1000, delay_ms, jitter_ms, loss * 100, link_name);
   }
   std::vector<float> stereo;
   stereo.reserve(static_cast<size_t>((duration_s + 1) * kSampleRate * 2));
@@ -450,7 +450,7 @@ int main(int argc, char** argv) {
             << t.placement.facing.y() << '\n';
     }
     if (!quiet && t.time_us >= next_progress_us) {
-      std::fprintf(stderr, "  t %5.1f s  speaker at %+6.1f deg, %.2f m, gain %5.1f dB%s\n", ts, t.azimuth_deg,
+      spdlog::info("  t {:5.1f} s  speaker at {:+6.1f} deg, {:.2f} m, gain {:5.1f} dB{}", ts, t.azimuth_deg,
                    t.distance_m, 20 * std::log10(std::max(t.gain, 1e-6f)), t.playing ? "" : "  (buffering)");
       next_progress_us += 1'000'000;
     }
@@ -462,23 +462,20 @@ int main(int argc, char** argv) {
   const auto& jb = stats->jitter_buffer;
   const double seconds = static_cast<double>(stats->frames_captured) * 0.02;
   if (!quiet) {
-    std::fprintf(stderr,
-                 "holoport-voice: wrote %s (%.1f s stereo, HRTF %s). sent %lld messages, %.1f kbit/s incl. headers; "
-                 "lost %lld; jitter buffer: concealed %lld (FEC %lld), late %lld, underflows %lld while the speech "
-                 "ran (+%lld draining at the end), target %.0f ms, delay %.0f ms when the speech ended\n",
-                 out.c_str(), static_cast<double>(stereo.size()) / 2 / kSampleRate, stats->hrtf_status.c_str(),
-                 static_cast<long long>(stats->messages_sent),
-                 seconds > 0 ? static_cast<double>(stats->bytes_sent) * 8 / 1000 / seconds : 0.0,
-                 static_cast<long long>(stats->lost_in_network), static_cast<long long>(jb.concealed),
-                 static_cast<long long>(jb.fec_recovered), static_cast<long long>(jb.late),
-                 static_cast<long long>(stats->jitter_buffer_speech_end.underflows),
-                 static_cast<long long>(jb.underflows - stats->jitter_buffer_speech_end.underflows),
-                 stats->jitter_buffer_speech_end.target_delay_ms, stats->jitter_buffer_speech_end.current_delay_ms);
+    spdlog::info(
+        "holoport-voice: wrote {} ({:.1f} s stereo, HRTF {}). sent {} messages, {:.1f} kbit/s incl. headers; "
+        "lost {}; jitter buffer: concealed {} (FEC {}), late {}, underflows {} while the speech "
+        "ran (+{} draining at the end), target {:.0f} ms, delay {:.0f} ms when the speech ended",
+        out, static_cast<double>(stereo.size()) / 2 / kSampleRate, stats->hrtf_status, stats->messages_sent,
+        seconds > 0 ? static_cast<double>(stats->bytes_sent) * 8 / 1000 / seconds : 0.0, stats->lost_in_network,
+        jb.concealed, jb.fec_recovered, jb.late, stats->jitter_buffer_speech_end.underflows,
+        jb.underflows - stats->jitter_buffer_speech_end.underflows, stats->jitter_buffer_speech_end.target_delay_ms,
+        stats->jitter_buffer_speech_end.current_delay_ms);
   }
   if (stats->refused > 0) return fail(std::to_string(stats->refused) + " messages were refused by the receiver");
   const int rc = analyse ? Analyse(out, truth, window_s) : 0;
   if (play) {
-    if (!quiet) std::fprintf(stderr, "holoport-voice: playing %s on the default output device\n", out.c_str());
+    if (!quiet) spdlog::info("holoport-voice: playing {} on the default output device", out);
     const Status ps = PlayOnDefaultDevice(stereo);
     if (!ps.ok()) return fail(ps.message() + "; the WAV " + out + " is written");
   }

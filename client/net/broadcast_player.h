@@ -9,7 +9,9 @@
 //   segment on a 404 or a damaged part, jumps to the newest segment when it
 //   falls `catch_up_segments` behind. Pure logic: tests drive it directly.
 // * HttpGetter: one keep-alive HTTP/1.1 connection with timeouts (plain
-//   sockets; http:// only).
+//   sockets; http:// only). Our own rather than libcurl: GET with keep-alive
+//   to our edges is all it needs, and its response-head parser is checked
+//   and fuzzed like our other parsers of network bytes.
 // * BroadcastPlayer: a thread that polls the manifest, fetches parts through
 //   an HttpGetter, parses them (protocol/live_format.h) and hands every
 //   message to a sink (SiteClient::Feed: the same decode and display path as

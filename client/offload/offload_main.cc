@@ -14,6 +14,7 @@
 #include "client/offload/thin_client.h"
 #include "client/pose/head_motion.h"
 #include "client/pose/trace.h"
+#include "common/log.h"
 #include "net/server_config.h"
 
 namespace holo::offload {
@@ -31,6 +32,7 @@ std::string EnvOr(const char* name, const std::string& fallback) {
 
 int RenderHostMain(int argc, char** argv) {
   CLI::App app{"holoport-client --render-host: render a site's stream for thin clients (docs/offload.md)"};
+  holo::AddLogLevelOption(app);
   bool render_host = false;
   std::string connect, listen = "127.0.0.1:7300", token, thin_token, predict = "kalman", renderer = "auto";
   RenderHostOptions o;
@@ -53,26 +55,26 @@ int RenderHostMain(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (token.empty()) token = EnvOr("HOLO_VIEWER_TOKEN", "");
   if (token.empty()) {
-    std::fprintf(stderr, "render-host: --token (or env HOLO_VIEWER_TOKEN) is required\n");
+    spdlog::error("render-host: --token (or env HOLO_VIEWER_TOKEN) is required");
     return 2;
   }
   if (auto s = net::ParseHostPort(connect, &o.site.host, &o.site.port); !s.ok()) {
-    std::fprintf(stderr, "render-host: --connect: %s\n", s.ToString().c_str());
+    spdlog::error("render-host: --connect: {}", s.ToString());
     return 2;
   }
   if (auto s = net::ParseHostPort(listen, &o.listen_host, &o.listen_port); !s.ok()) {
-    std::fprintf(stderr, "render-host: --listen: %s\n", s.ToString().c_str());
+    spdlog::error("render-host: --listen: {}", s.ToString());
     return 2;
   }
   auto model = pose::ParsePredictorModel(predict);
   if (!model.ok()) {
-    std::fprintf(stderr, "render-host: --predict: %s\n", model.status().ToString().c_str());
+    spdlog::error("render-host: --predict: {}", model.status().ToString());
     return 2;
   }
   o.predictor = *model;
   auto r = ParseHostRenderer(renderer);
   if (!r.ok()) {
-    std::fprintf(stderr, "render-host: --renderer: %s\n", r.status().ToString().c_str());
+    spdlog::error("render-host: --renderer: {}", r.status().ToString());
     return 2;
   }
   o.renderer = *r;
@@ -81,7 +83,7 @@ int RenderHostMain(int argc, char** argv) {
   o.token = thin_token;
   auto host = RenderHost::Start(o);
   if (!host.ok()) {
-    std::fprintf(stderr, "render-host: %s\n", host.status().ToString().c_str());
+    spdlog::error("render-host: {}", host.status().ToString());
     return 1;
   }
   std::signal(SIGINT, OnSignal);
@@ -95,17 +97,14 @@ int RenderHostMain(int argc, char** argv) {
     if (now - last > std::chrono::seconds(5)) {
       last = now;
       const RenderHostStats s = (*host)->stats();
-      std::fprintf(stderr, "render-host: site frames %llu (last %lld), thin clients accepted %llu refused %llu\n",
-                   static_cast<unsigned long long>(s.site_frames), static_cast<long long>(s.last_site_frame),
-                   static_cast<unsigned long long>(s.thin_accepted), static_cast<unsigned long long>(s.thin_refused));
+      spdlog::info("render-host: site frames {} (last {}), thin clients accepted {} refused {}", s.site_frames,
+                   s.last_site_frame, s.thin_accepted, s.thin_refused);
       for (const ThinClientStats& c : s.clients) {
         if (!c.open) continue;
-        std::fprintf(stderr,
-                     "  thin client %llu '%s': poses %llu, frames %llu, render %.1f ms, encode %.1f ms, rtt %.1f ms, "
-                     "horizon %.1f ms, renderer %s\n",
-                     static_cast<unsigned long long>(c.id), c.name.c_str(), static_cast<unsigned long long>(c.poses),
-                     static_cast<unsigned long long>(c.frames_sent), c.render_ms, c.encode_ms, c.rtt_ms, c.horizon_ms,
-                     c.renderer.c_str());
+        spdlog::info(
+            "  thin client {} '{}': poses {}, frames {}, render {:.1f} ms, encode {:.1f} ms, rtt {:.1f} ms, "
+            "horizon {:.1f} ms, renderer {}",
+            c.id, c.name, c.poses, c.frames_sent, c.render_ms, c.encode_ms, c.rtt_ms, c.horizon_ms, c.renderer);
       }
     }
   }
@@ -115,6 +114,7 @@ int RenderHostMain(int argc, char** argv) {
 
 int ThinClientMain(int argc, char** argv) {
   CLI::App app{"holoport-client --thin: a thin client of a render host (docs/offload.md)"};
+  holo::AddLogLevelOption(app);
   std::string thin, trace_path, method = "plane", motion = "lookaround", size = "640x360";
   ThinClientOptions o;
   bool headless = false;
@@ -146,26 +146,26 @@ int ThinClientMain(int argc, char** argv) {
     }
   }
   CLI11_PARSE(app, argc, argv);
-  if (!headless) std::fprintf(stderr, "thin: no window is implemented; running headless\n");
+  if (!headless) spdlog::warn("thin: no window is implemented; running headless");
   if (o.token.empty()) o.token = EnvOr("HOLO_VIEWER_TOKEN", "");
   if (auto s = net::ParseHostPort(thin, &o.host, &o.port); !s.ok()) {
-    std::fprintf(stderr, "thin: --thin: %s\n", s.ToString().c_str());
+    spdlog::error("thin: --thin: {}", s.ToString());
     return 2;
   }
   if (std::sscanf(size.c_str(), "%dx%d", &o.width, &o.height) != 2) {
-    std::fprintf(stderr, "thin: --size must be WxH, got '%s'\n", size.c_str());
+    spdlog::error("thin: --size must be WxH, got '{}'", size);
     return 2;
   }
   auto m = reproject::ParseReprojectMethod(method);
   if (!m.ok()) {
-    std::fprintf(stderr, "thin: --method: %s\n", m.status().ToString().c_str());
+    spdlog::error("thin: --method: {}", m.status().ToString());
     return 2;
   }
   o.method = *m;
   if (!trace_path.empty()) {
     auto t = pose::ReadHeadTrace(trace_path);
     if (!t.ok()) {
-      std::fprintf(stderr, "thin: %s\n", t.status().ToString().c_str());
+      spdlog::error("thin: {}", t.status().ToString());
       return 1;
     }
     o.trace = *t;
@@ -174,14 +174,14 @@ int ThinClientMain(int argc, char** argv) {
     if (motion == "walk") {
       hm.kind = pose::HeadMotionKind::kWalk;
     } else if (motion != "lookaround") {
-      std::fprintf(stderr, "thin: --motion must be lookaround or walk, got '%s'\n", motion.c_str());
+      spdlog::error("thin: --motion must be lookaround or walk, got '{}'", motion);
       return 2;
     }
     hm.seed = seed;
     hm.duration_s = 60;
     auto t = pose::GenerateHeadMotion(hm);
     if (!t.ok()) {
-      std::fprintf(stderr, "thin: %s\n", t.status().ToString().c_str());
+      spdlog::error("thin: {}", t.status().ToString());
       return 1;
     }
     o.trace = *t;
@@ -189,12 +189,12 @@ int ThinClientMain(int argc, char** argv) {
   for (pose::PoseSample& s : o.trace) s.position += Eigen::Vector3d(-view_distance, 0, 0);
   auto r = RunThinClient(o, [&](const DisplayedFrame& d) {
     if (d.index % 60 == 0) {
-      std::fprintf(stderr, "thin: %d/%d displayed, content frame %lld, pose->photon %.1f ms, border %.3f\n", d.index,
-                   o.frames, static_cast<long long>(d.frame_index), d.pose_to_photon_ms, d.black_border_fraction);
+      spdlog::info("thin: {}/{} displayed, content frame {}, pose->photon {:.1f} ms, border {:.3f}", d.index, o.frames,
+                   d.frame_index, d.pose_to_photon_ms, d.black_border_fraction);
     }
   });
   if (!r.ok()) {
-    std::fprintf(stderr, "thin: %s\n", r.status().ToString().c_str());
+    spdlog::error("thin: {}", r.status().ToString());
     return 1;
   }
   std::printf("thin: %d frames displayed at %.1f fps (%d distinct images, %.1f/s), pose->photon %.1f ms mean (p95 %.1f), "

@@ -15,6 +15,7 @@
 #include "client/offload/gl_scene.h"
 #include "client/offload/message_link.h"
 #include "client/reproject/fov.h"
+#include "common/log.h"
 #include "net/session_server.h"
 #include "net/wire_message.h"
 
@@ -87,11 +88,12 @@ struct RenderHost::Impl {
   std::atomic<int64_t> last_site_frame{-1};
   std::atomic<bool> site_connected{false};
 
-  void Log(const std::string& s) {
+  // Through o.log when set, else the log at `level`.
+  void Log(const std::string& s, spdlog::level::level_enum level = spdlog::level::info) {
     if (o.log) {
       o.log(s);
     } else {
-      std::fprintf(stderr, "render-host: %s\n", s.c_str());
+      spdlog::log(level, "render-host: {}", s);
     }
   }
 
@@ -121,7 +123,7 @@ struct RenderHost::Impl {
       acceptor->accept(socket, ec);
       if (stopping) break;
       if (ec) {
-        Log("accept: " + ec.message());
+        Log("accept: " + ec.message(), spdlog::level::warn);
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
         continue;
       }
@@ -131,7 +133,7 @@ struct RenderHost::Impl {
         for (const auto& s : sessions) live += s->done ? 0 : 1;
       }
       if (live >= static_cast<size_t>(o.max_thin_clients) + 16) {  // a flood of connections: no thread each
-        Log("too many connections; closing one at accept");
+        Log("too many connections; closing one at accept", spdlog::level::warn);
         continue;  // the socket closes here
       }
       const int fd = socket.release(ec);
@@ -175,7 +177,7 @@ struct RenderHost::Impl {
     r.reason = reason;
     r.message = message;
     (void)s.link->Send(r);
-    Log("refused thin client " + s.link->peer() + ": " + message);
+    Log("refused thin client " + s.link->peer() + ": " + message, spdlog::level::warn);
     refused++;
     std::lock_guard<std::mutex> lock(s.mu);
     s.stats.open = false;
@@ -237,7 +239,7 @@ struct RenderHost::Impl {
     w.color_codec = protocol::ColorCodec::kC1;
     w.server_name = "render-host";
     if (auto st = s.link->Send(w); !st.ok()) {
-      Log("thin client " + s.link->peer() + ": " + st.ToString());
+      Log("thin client " + s.link->peer() + ": " + st.ToString(), spdlog::level::warn);
       return false;
     }
     {
@@ -327,7 +329,8 @@ struct RenderHost::Impl {
         CloseSession(s, r.status().ToString(), true);
         return;
       } else {
-        Log("thin client " + std::to_string(s.id) + ": " + r.status().ToString() + "; using the CPU renderer");
+        Log("thin client " + std::to_string(s.id) + ": " + r.status().ToString() + "; using the CPU renderer",
+            spdlog::level::warn);
       }
     }
     {
@@ -462,12 +465,12 @@ StatusOr<std::unique_ptr<RenderHost>> RenderHost::Start(RenderHostOptions option
       impl->Log("site: connected");
     } else if (state == net::ClientState::kBackoff) {
       if (impl->site_connected.exchange(false)) {
-        impl->Log("site: connection lost (" + status.ToString() + "); reconnecting");
+        impl->Log("site: connection lost (" + status.ToString() + "); reconnecting", spdlog::level::warn);
       } else {
-        impl->Log("site: unreachable (" + status.ToString() + "); retrying");
+        impl->Log("site: unreachable (" + status.ToString() + "); retrying", spdlog::level::warn);
       }
     } else if (state == net::ClientState::kRefused) {
-      impl->Log("site: refused: " + status.ToString());
+      impl->Log("site: refused: " + status.ToString(), spdlog::level::err);
     }
   };
   auto site = net::SiteClient::Start(options.site, cb);

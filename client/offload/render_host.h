@@ -54,7 +54,7 @@ struct RenderHostOptions {
   HostRenderer renderer = HostRenderer::kCpu;
   double ipd_m = 0.064;
   reproject::FrameEncodeOptions encode;
-  std::function<void(const std::string&)> log;  // default: stderr
+  std::function<void(const std::string&)> log;  // default: the log (common/log.h)
   Status Check() const;
 };
 

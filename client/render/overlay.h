@@ -1,6 +1,8 @@
 // Heads-up text overlay: a built-in 5×7 bitmap font (uppercase letters,
 // digits, common punctuation; lowercase is drawn as uppercase) uploaded as a
 // texture and drawn as one textured quad per character with alpha blending.
+// Built in (not FreeType and a font file) so that the viewer needs no font
+// on the machine and renders the same text everywhere.
 #pragma once
 
 #include <array>

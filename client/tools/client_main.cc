@@ -14,6 +14,7 @@
 
 #include "client/offload/offload_main.h"
 #include "client/tools/viewer_app.h"
+#include "common/log.h"
 
 namespace {
 
@@ -48,6 +49,7 @@ int main(int argc, char** argv) {
       "holoport-client: the Holoport viewer (local OpenGL rendering of a site's stream).\n"
       "Window controls: left-drag turns, wheel zooms, WASD/E/C move, F orbit/fly, T projective/vertex colour,\n"
       "O overlay, Esc quits."};
+  holo::AddLogLevelOption(app);
   app.add_option("--source", o.source,
                  "stream source: synthetic[:WORKLOAD] renders the synthetic studio's ground-truth mesh and pod "
                  "images (workloads S8-QVGA, S8-VGA, S4-QVGA)")
@@ -159,43 +161,41 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   if (!o.connect.empty() + !o.call.empty() + !o.http.empty() > 1) {
-    std::fprintf(stderr, "holoport-client: give one of --connect, --call and --http\n");
+    spdlog::error("holoport-client: give one of --connect, --call and --http");
     return 2;
   }
   o.aec = aec == "on";
   o.av_sync = av_sync == "on";
   if ((!o.audio_in.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
-    std::fprintf(stderr, "holoport-client: --audio-in/--aec/--hrtf need --call\n");
+    spdlog::error("holoport-client: --audio-in/--aec/--hrtf need --call");
     return 2;
   }
   if (!o.audio_out.empty() && o.call.empty() && o.connect.empty() && o.http.empty()) {
-    std::fprintf(stderr, "holoport-client: --audio-out needs --connect, --http or --call\n");
+    spdlog::error("holoport-client: --audio-out needs --connect, --http or --call");
     return 2;
   }
 
   if (!mini_at.empty()) {
     std::vector<float> v;
     if (!ParseFloats(mini_at, &v) || (v.size() != 3 && v.size() != 4)) {
-      std::fprintf(stderr, "holoport-client: --miniature-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n",
-                   mini_at.c_str());
+      spdlog::error("holoport-client: --miniature-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '{}'", mini_at);
       return 2;
     }
     o.miniature_at = Eigen::Vector3f(v[0], v[1], v[2]);
     if (v.size() == 4) o.miniature_yaw_deg = v[3];
     if (o.miniature_scale == 0.0f) {
-      std::fprintf(stderr, "holoport-client: --miniature-at needs --miniature SCALE\n");
+      spdlog::error("holoport-client: --miniature-at needs --miniature SCALE");
       return 2;
     }
   }
   if (!remote_at.empty()) {
     std::vector<float> v;
     if (!ParseFloats(remote_at, &v) || (v.size() != 3 && v.size() != 4)) {
-      std::fprintf(stderr, "holoport-client: --remote-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n",
-                   remote_at.c_str());
+      spdlog::error("holoport-client: --remote-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '{}'", remote_at);
       return 2;
     }
     if (o.miniature_scale != 0.0f) {
-      std::fprintf(stderr, "holoport-client: --remote-at and --miniature exclude each other (use --miniature-at)\n");
+      spdlog::error("holoport-client: --remote-at and --miniature exclude each other (use --miniature-at)");
       return 2;
     }
     o.remote_placed = true;
@@ -205,11 +205,11 @@ int main(int argc, char** argv) {
   if (!head_at.empty()) {
     std::vector<float> v;
     if (!ParseFloats(head_at, &v) || (v.size() != 3 && v.size() != 4)) {
-      std::fprintf(stderr, "holoport-client: --head-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '%s'\n", head_at.c_str());
+      spdlog::error("holoport-client: --head-at: expected X,Y,Z or X,Y,Z,YAW_DEG, got '{}'", head_at);
       return 2;
     }
     if (o.call.empty()) {
-      std::fprintf(stderr, "holoport-client: --head-at needs --call\n");
+      spdlog::error("holoport-client: --head-at needs --call");
       return 2;
     }
     o.head_placed = true;

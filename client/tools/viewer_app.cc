@@ -34,6 +34,7 @@
 #include "client/tools/synthetic_source.h"
 #include "common/clock.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/pose.h"
 #include "net/site_client.h"
@@ -204,9 +205,9 @@ class Viewer {
     }
     controller_.SetOrbit(orbit_target_, std::hypot(orbit_radius_, orbit_height_ - orbit_target_.z()), 20.0f,
                          std::atan2(orbit_height_ - orbit_target_.z(), orbit_radius_) * 180.0f / static_cast<float>(M_PI));
-    std::printf("holoport-client: %s, source %s (%zu pods), %dx%d, %d view(s), %s%s\n",
-                context_->Describe().c_str(), SourceName().c_str(), CurrentRig().pods.size(), o_.width, o_.height,
-                o_.views, render::ColorModeName(mode_), o_.miniature_scale != 0.0f ? ", miniature" : "");
+    spdlog::info("holoport-client: {}, source {} ({} pods), {}x{}, {} view(s), {}{}", context_->Describe(),
+                 SourceName(), CurrentRig().pods.size(), o_.width, o_.height, o_.views, render::ColorModeName(mode_),
+                 o_.miniature_scale != 0.0f ? ", miniature" : "");
     return OkStatus();
   }
 
@@ -233,13 +234,12 @@ class Viewer {
     cb.on_state = [this](net::ClientState st, const Status& why) {
       net_state_ = static_cast<int>(st);
       if (st == net::ClientState::kConnected) {
-        std::printf("holoport-client: connected to %s\n", SourceName().c_str());
+        spdlog::info("holoport-client: connected to {}", SourceName());
       } else if (st == net::ClientState::kBackoff || st == net::ClientState::kRefused) {
-        std::printf("holoport-client: site connection %s%s%s%s\n", net::ClientStateName(st), why.ok() ? "" : ": ",
-                    why.ok() ? "" : why.message().c_str(),
-                    st == net::ClientState::kBackoff ? " (showing the last frame; reconnecting with backoff)" : "");
+        spdlog::warn("holoport-client: site connection {}{}{}{}", net::ClientStateName(st), why.ok() ? "" : ": ",
+                     why.ok() ? "" : why.message().c_str(),
+                     st == net::ClientState::kBackoff ? " (showing the last frame; reconnecting with backoff)" : "");
       }
-      std::fflush(stdout);
     };
     cb.on_rig = [this](const Rig& rig) {
       std::lock_guard<std::mutex> l(rig_mu_);
@@ -313,8 +313,7 @@ class Viewer {
       HOLO_ASSIGN_OR_RETURN(own_client_, net::SiteClient::Start(co, cb));
       client_ = own_client_.get();
     }
-    std::printf("holoport-client: connecting to %s ...\n", SourceName().c_str());
-    std::fflush(stdout);
+    spdlog::info("holoport-client: connecting to {} ...", SourceName());
     const double wait = o_.connect_timeout_s > 0 ? o_.connect_timeout_s : 1e9;
     if (!client_->WaitConnected(wait)) {
       const Status why = client_->status();
@@ -414,8 +413,8 @@ class Viewer {
       if (!st.ok()) {
         // E.g. images of another rig than the one announced: vertex colour for this frame.
         if (!image_error_reported_) {
-          std::printf("holoport-client: pod images unusable (%s); showing vertex colour until they match the rig\n",
-                      st.message().c_str());
+          spdlog::warn("holoport-client: pod images unusable ({}); showing vertex colour until they match the rig",
+                       st.message());
           image_error_reported_ = true;
         }
         frame_has_images_ = false;
@@ -552,10 +551,10 @@ class Viewer {
       const net::DecodedImage* found = it == last_images_.end() ? nullptr : &it->second;
       if (found == nullptr || found->image.width() != pod.color.width || found->image.height() != pod.color.height) {
         if (!image_error_reported_) {
-          std::printf("holoport-client: frame %lld: pod %d image %s; showing vertex colour until images match the "
-                      "rig\n",
-                      static_cast<long long>(f.frame_index), pod.id,
-                      found == nullptr ? "missing" : "does not match the rig's colour camera size");
+          spdlog::warn(
+              "holoport-client: frame {}: pod {} image {}; showing vertex colour until images match the "
+              "rig",
+              f.frame_index, pod.id, found == nullptr ? "missing" : "does not match the rig's colour camera size");
           image_error_reported_ = true;
         }
         return;
@@ -578,16 +577,16 @@ class Viewer {
       rig_pending_ = false;
     }
     if (Status s = rig.Check(); !s.ok()) {
-      std::printf("holoport-client: the site sent an invalid rig (%s); keeping the previous one\n", s.message().c_str());
+      spdlog::warn("holoport-client: the site sent an invalid rig ({}); keeping the previous one", s.message());
       return;
     }
     if (SameRig(rig, net_rig_)) return;  // re-sent after a reconnect
     if (!net_rig_.pods.empty()) {
       ++rig_changes_;
-      std::printf("holoport-client: rig changed mid-stream: '%s' (%zu pods) -> '%s' (%zu pods); projective texturing "
-                  "uses the new calibration from the next frame\n",
-                  net_rig_.name.c_str(), net_rig_.pods.size(), rig.name.c_str(), rig.pods.size());
-      std::fflush(stdout);
+      spdlog::info(
+          "holoport-client: rig changed mid-stream: '{}' ({} pods) -> '{}' ({} pods); projective texturing "
+          "uses the new calibration from the next frame",
+          net_rig_.name, net_rig_.pods.size(), rig.name, rig.pods.size());
     }
     net_rig_ = std::move(rig);
   }
@@ -722,8 +721,7 @@ class Viewer {
         keep_times.has_color = rf.has_color;
         ToStreamFrame(rf, &frame);
         if (Status s = Upload(frame); !s.ok()) {
-          std::printf("holoport-client: frame %lld not shown: %s\n", static_cast<long long>(keep_times.frame_index),
-                      s.message().c_str());
+          spdlog::warn("holoport-client: frame {} not shown: {}", keep_times.frame_index, s.message());
           ++bad_frames_;
           continue;
         }
@@ -789,11 +787,9 @@ class Viewer {
       }
       if (static_cast<int>(t) / 5 != last_progress_s) {
         last_progress_s = static_cast<int>(t) / 5;
-        std::printf("%.0f s: %lld frames shown (%lld new), %.1f fps, latency %.0f ms, %.2f Mbit/s, drops %lld\n", t,
-                    static_cast<long long>(stats_.frames), static_cast<long long>(displayed_new), recent_fps_,
-                    stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_,
-                    static_cast<long long>(stats_.drops));
-        std::fflush(stdout);
+        spdlog::info("{:.0f} s: {} frames shown ({} new), {:.1f} fps, latency {:.0f} ms, {:.2f} Mbit/s, drops {}", t,
+                     stats_.frames, displayed_new, recent_fps_,
+                     stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_, stats_.drops);
       }
     }
     net_elapsed_s_ = (WallNowUs() - start) / 1e6;
@@ -844,9 +840,8 @@ class Viewer {
         pngs_.push_back(name);
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames) {
-        std::printf("frame %d/%d: render %.1f ms, latency %.1f ms\n", i + 1, frames, stats_.render_ms.back(),
-                    stats_.latency_ms.back());
-        std::fflush(stdout);
+        spdlog::info("frame {}/{}: render {:.1f} ms, latency {:.1f} ms", i + 1, frames, stats_.render_ms.back(),
+                     stats_.latency_ms.back());
       }
     }
     return WriteStats();
@@ -1066,14 +1061,14 @@ class Viewer {
     std::ofstream f(path);
     f << j.dump(2) << "\n";
     if (!f) return Fail(Unavailable(path + ": cannot write"));
-    std::printf("%lld frames, %.1f fps, render %.1f ms (median), latency %.1f ms (median), drops %lld; stats in %s\n",
-                static_cast<long long>(stats_.frames), j["fps"].get<double>(), j["render_ms_median"].get<double>(),
-                j["latency_ms_median"].get<double>(), static_cast<long long>(stats_.drops), path.c_str());
+    spdlog::info("{} frames, {:.1f} fps, render {:.1f} ms (median), latency {:.1f} ms (median), drops {}; stats in {}",
+                 stats_.frames, j["fps"].get<double>(), j["render_ms_median"].get<double>(),
+                 j["latency_ms_median"].get<double>(), stats_.drops, path);
     return 0;
   }
 
   int Fail(const Status& s) {
-    std::fprintf(stderr, "holoport-client: %s\n", s.ToString().c_str());
+    spdlog::error("holoport-client: {}", s.ToString());
     return 1;
   }
 

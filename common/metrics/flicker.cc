@@ -6,7 +6,7 @@
 
 #include <Eigen/Geometry>
 
-#include "common/metrics/parallel.h"
+#include "common/worker_pool.h"
 #include "common/metrics/triangle_index.h"
 
 namespace holo::metrics {
@@ -59,7 +59,7 @@ StatusOr<std::vector<float>> ComputeNormalOffsets(const Mesh& reconstruction, co
   HOLO_ASSIGN_OR_RETURN(const TriangleIndex index, TriangleIndex::Build(reconstruction));
   std::vector<float> offsets(samples.size(), std::numeric_limits<float>::quiet_NaN());
   const float cutoff = static_cast<float>(options.cutoff_m);
-  ParallelFor(samples.size(), options.num_threads, [&](size_t begin, size_t end) {
+  ParallelForBlocks(samples.size(), options.num_threads, kQueriesPerBlock, [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) {
       const auto& tri = truth.triangles[samples[i].triangle];
       const Eigen::Vector3f& a = truth.positions[tri[0]];

@@ -5,7 +5,7 @@
 #include <string>
 #include <thread>
 
-#include "common/metrics/parallel.h"
+#include "common/worker_pool.h"
 
 namespace holo::metrics {
 namespace {

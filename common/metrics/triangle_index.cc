@@ -7,7 +7,7 @@
 
 #include <Eigen/Geometry>
 
-#include "common/metrics/parallel.h"
+#include "common/worker_pool.h"
 #include "common/metrics/surface_sampling.h"
 
 namespace holo::metrics {
@@ -338,7 +338,7 @@ std::vector<ClosestPoint> TriangleIndex::QueryBatch(const std::vector<Eigen::Vec
                                                     int num_threads) const {
   std::vector<ClosestPoint> out(points.size());
   const std::vector<uint32_t> order = SpatialOrder(points);
-  ParallelFor(points.size(), num_threads, [&](size_t begin, size_t end) {
+  ParallelForBlocks(points.size(), num_threads, kQueriesPerBlock, [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) out[order[i]] = Query(points[order[i]], max_distance);
   });
   return out;
@@ -348,7 +348,7 @@ std::vector<float> TriangleIndex::DistanceBatch(const std::vector<Eigen::Vector3
                                                 int num_threads) const {
   std::vector<float> out(points.size());
   const std::vector<uint32_t> order = SpatialOrder(points);
-  ParallelFor(points.size(), num_threads, [&](size_t begin, size_t end) {
+  ParallelForBlocks(points.size(), num_threads, kQueriesPerBlock, [&](size_t begin, size_t end) {
     for (size_t i = begin; i < end; ++i) out[order[i]] = Query(points[order[i]], max_distance).distance;
   });
   return out;

@@ -8,6 +8,7 @@
 // equally close triangles are broken by the fixed traversal order).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -33,6 +34,10 @@ struct ClosestPoint {
 
   bool found() const { return triangle != kNoTriangle; }
 };
+
+// Queries per block when a batch of closest-point queries is split across
+// threads: below this a thread hand-off costs more than it saves.
+inline constexpr size_t kQueriesPerBlock = 256;
 
 class TriangleIndex {
  public:

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <string>
 
+#include "common/log.h"
 #include "studio/studio.h"
 
 namespace holo {
@@ -25,7 +26,7 @@ StatusOr<std::unique_ptr<PrerenderedSource>> PrerenderedSource::Render(Synthetic
   for (int k = 0; k < count; ++k) {
     studio.RenderFrame(k, &(*frames)[static_cast<size_t>(k)], nullptr);
     (*frames)[static_cast<size_t>(k)].frame_index = k;
-    if (!quiet && ((k + 1) % 10 == 0 || k + 1 == count)) std::fprintf(stderr, "  pre-rendered %d/%d frame sets\n", k + 1, count);
+    if (!quiet && ((k + 1) % 10 == 0 || k + 1 == count)) spdlog::info("  pre-rendered {}/{} frame sets", k + 1, count);
   }
   return std::make_unique<PrerenderedSource>(studio.rig(), std::move(frames), loop);
 }

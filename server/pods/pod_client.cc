@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 
+#include "common/log.h"
 #include "net/wire_message.h"
 #include "server/pods/socket_io.h"
 
@@ -26,11 +27,11 @@ PodClient::PodClient(PodClientOptions options) : options_(std::move(options)) {}
 
 PodClient::~PodClient() { Stop(); }
 
-void PodClient::Log(const std::string& s) {
+void PodClient::Log(const std::string& s, spdlog::level::level_enum level) {
   if (options_.log) {
     options_.log(s);
   } else {
-    std::fprintf(stderr, "%s: %s\n", options_.name.c_str(), s.c_str());
+    spdlog::log(level, "{}: {}", options_.name, s);
   }
 }
 
@@ -102,11 +103,11 @@ void PodClient::Run() {
     if (s.code() == StatusCode::kInvalidArgument) {  // refused: retrying cannot help
       std::lock_guard<std::mutex> l(mu_);
       status_ = s;
-      Log("giving up: " + s.message());
+      Log("giving up: " + s.message(), spdlog::level::err);
       return;
     }
     if (welcomed) backoff = options_.backoff_initial_ms;  // a working link: start over
-    Log(s.message() + "; reconnecting in " + std::to_string(backoff) + " ms");
+    Log(s.message() + "; reconnecting in " + std::to_string(backoff) + " ms", spdlog::level::warn);
     std::unique_lock<std::mutex> l(mu_);
     cv_.wait_for(l, std::chrono::milliseconds(backoff), [&] { return stop_.load(); });
     backoff = std::min(backoff * 2, options_.backoff_max_ms);

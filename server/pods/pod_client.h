@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "common/log.h"
 #include "common/rig.h"
 #include "common/status.h"
 #include "protocol/messages.h"
@@ -42,7 +43,7 @@ struct PodClientOptions {
   int send_timeout_ms = 2000;
   // The pod's clock (µs), for Pong stamps; must be the clock frames are stamped with.
   std::function<int64_t()> clock;
-  std::function<void(const std::string&)> log;  // null: stderr
+  std::function<void(const std::string&)> log;  // null: the log (common/log.h)
   Status Check() const;
 };
 
@@ -79,7 +80,8 @@ class PodClient {
  private:
   void Run();
   Status Session(bool* welcomed);
-  void Log(const std::string& s);
+  // Through options_.log when set, else the log at `level`.
+  void Log(const std::string& s, spdlog::level::level_enum level = spdlog::level::info);
   PodClientOptions options_;
   std::thread thread_;
   std::atomic<bool> stop_{false};

@@ -10,6 +10,7 @@
 #include "common/clock.h"
 #include "net/session_server.h"
 #include "net/wire_message.h"
+#include "common/log.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 
@@ -130,11 +131,11 @@ StatusOr<std::unique_ptr<PodHub>> PodHub::Start(const Rig& rig, PodHubOptions op
 
 PodHub::~PodHub() { Stop(); }
 
-void PodHub::Log(const std::string& line) {
+void PodHub::Log(const std::string& line, spdlog::level::level_enum level) {
   if (log_) {
     log_(line);
   } else {
-    std::fprintf(stderr, "pod hub: %s\n", line.c_str());
+    spdlog::log(level, "pod hub: {}", line);
   }
 }
 
@@ -186,7 +187,7 @@ void PodHub::AcceptLoop() {
     auto s = Accept(listener_, 200, &peer);
     if (!s.ok()) {
       if (s.status().code() == StatusCode::kOutOfRange) continue;
-      if (!stop_) Log("accept failed: " + s.status().message());
+      if (!stop_) Log("accept failed: " + s.status().message(), spdlog::level::warn);
       if (stop_) return;
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
       continue;
@@ -201,7 +202,8 @@ void PodHub::AcceptLoop() {
     if (conns_.size() >= max_conns) {
       counters_.refused++;
       Log("closed " + peer + " at accept: " + std::to_string(conns_.size()) + " connections already (at most " +
-          std::to_string(max_conns) + ")");
+              std::to_string(max_conns) + ")",
+          spdlog::level::warn);
       continue;  // `conn` closes its socket
     }
     conn->id = next_conn_id_++;
@@ -263,7 +265,7 @@ void PodHub::Serve(std::shared_ptr<Conn> conn) {
   int pod = -1;
   Status s = Handshake(*conn, &pod);
   if (!s.ok()) {
-    Log(s.message());
+    Log(s.message(), spdlog::level::warn);
     conn->socket.Shutdown();
     std::lock_guard<std::mutex> l(mu_);
     conns_.erase(std::remove_if(conns_.begin(), conns_.end(), [&](const auto& c) { return c->id == conn->id; }),

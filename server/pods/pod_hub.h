@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "common/frame_source.h"
+#include "common/log.h"
 #include "common/rig.h"
 #include "common/status.h"
 #include "protocol/messages.h"
@@ -114,7 +115,8 @@ struct SetInfo {
 
 class PodHub final : public FrameSource {
  public:
-  // Starts listening. `log` receives connection events and refusals (null: stderr).
+  // Starts listening. `log` receives connection events and refusals (null: the
+  // log, common/log.h, refusals and failures as warnings).
   static StatusOr<std::unique_ptr<PodHub>> Start(const Rig& rig, PodHubOptions options,
                                                  std::function<void(const std::string&)> log = {});
   ~PodHub() override;  // Stop()
@@ -154,7 +156,8 @@ class PodHub final : public FrameSource {
   Status Handshake(Conn& conn, int* pod_index);
   Status HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival_us);
   void ReleaseReady(int64_t now_us);  // hub lock held
-  void Log(const std::string& line);
+  // Through the hook when one is set, else the log at `level`.
+  void Log(const std::string& line, spdlog::level::level_enum level = spdlog::level::info);
 
   Rig rig_;
   PodHubOptions options_;

@@ -9,6 +9,7 @@
 
 #include "common/clock.h"
 #include "net/wire_message.h"
+#include "common/log.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 #include "server/capture/dataset.h"
@@ -94,7 +95,7 @@ class DatasetFrames final : public PodFrames {
 Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
   HOLO_RETURN_IF_ERROR(o.Check());
   auto say = [&](const std::string& s) {
-    if (!o.quiet) std::fprintf(stderr, "holoport-pod %d: %s\n", o.pod_id, s.c_str());
+    if (!o.quiet) spdlog::info("holoport-pod {}: {}", o.pod_id, s);
   };
   // This pod's calibration and frame producer.
   PodCalibration calibration;

@@ -9,6 +9,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "common/log.h"
+
 namespace holo::record {
 namespace {
 
@@ -151,7 +153,7 @@ RecordingWriter::RecordingWriter(std::unique_ptr<RecordingFile> file, RecordingW
 
 RecordingWriter::~RecordingWriter() {
   Status s = Close();
-  if (!s.ok()) std::fprintf(stderr, "%s: closing the recording: %s\n", name_.c_str(), s.message().c_str());
+  if (!s.ok()) spdlog::error("{}: closing the recording: {}", name_, s.message());
 }
 
 Status RecordingWriter::Fail(Status s) {

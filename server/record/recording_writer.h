@@ -71,7 +71,7 @@ class RecordingWriter {
   static StatusOr<std::unique_ptr<RecordingWriter>> Create(std::unique_ptr<RecordingFile> file,
                                                            RecordingWriterOptions options,
                                                            std::string name = "recording");
-  ~RecordingWriter();  // Close()s, logging an error to stderr
+  ~RecordingWriter();  // Close()s, logging an error (spdlog)
   RecordingWriter(const RecordingWriter&) = delete;
   RecordingWriter& operator=(const RecordingWriter&) = delete;
 

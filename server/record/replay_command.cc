@@ -13,6 +13,7 @@
 
 #include "common/clock.h"
 #include "common/file_util.h"
+#include "common/log.h"
 #include "common/mesh.h"
 #include "net/server_config.h"
 #include "protocol/geometry_codec.h"
@@ -27,7 +28,7 @@ volatile std::sig_atomic_t g_replay_stop = 0;
 void OnReplaySignal(int) { g_replay_stop = 1; }
 
 int Fail(const Status& s) {
-  std::fprintf(stderr, "holoport-server: replay: %s\n", s.message().c_str());
+  spdlog::error("holoport-server: replay: {}", s.message());
   return 1;
 }
 
@@ -122,13 +123,12 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
     return Fail(rs.status());
   }
   if (!o.quiet)
-    std::fprintf(stderr,
-                 "holoport-server: serving %s (%s, %llu messages, %zu key frames%s) at %.2fx%s on %s:%u; viewers "
-                 "control it (pause, resume, seek, speed 0.25..4; one shared timeline). Ctrl-C stops.\n",
-                 o.path.c_str(), FormatSeconds(sum.duration_us).c_str(),
-                 static_cast<unsigned long long>(sum.num_messages), sum.index.size(),
-                 sum.clean ? "" : "; not closed cleanly, index rebuilt", o.speed, o.loop ? ", looping" : "",
-                 so.net.host.c_str(), (*rs)->port());
+    spdlog::info(
+        "holoport-server: serving {} ({}, {} messages, {} key frames{}) at {:.2f}x{} on {}:{}; viewers "
+        "control it (pause, resume, seek, speed 0.25..4; one shared timeline). Ctrl-C stops.",
+        o.path, FormatSeconds(sum.duration_us), sum.num_messages, sum.index.size(),
+        sum.clean ? "" : "; not closed cleanly, index rebuilt", o.speed, o.loop ? ", looping" : "", so.net.host,
+        (*rs)->port());
   std::signal(SIGINT, OnReplaySignal);
   std::signal(SIGTERM, OnReplaySignal);
   const int64_t start = clock.NowUs();
@@ -140,8 +140,10 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
     clock.SleepUntilUs(now + 50000);
     const ReplayState st = (*rs)->source().state();
     if (st.ended && !said_end && !o.quiet) {
-      std::fprintf(stderr, "holoport-server: replay reached the end (%s); still serving: viewers can seek back. "
-                           "Ctrl-C stops.\n", FormatSeconds(st.duration_us).c_str());
+      spdlog::info(
+          "holoport-server: replay reached the end ({}); still serving: viewers can seek back. "
+          "Ctrl-C stops.",
+          FormatSeconds(st.duration_us));
     }
     said_end = st.ended;
     if (!o.quiet && clock.NowUs() >= next_progress) {
@@ -153,10 +155,8 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
         sent += s.video_frames_sent;
         dropped += s.video_frames_dropped;
       }
-      std::fprintf(stderr, "  at %s of %s%s, %.2fx: %zu viewers, %llu frames sent, %llu dropped\n",
-                   FormatSeconds(st.position_us).c_str(), FormatSeconds(st.duration_us).c_str(),
-                   st.paused ? " (paused)" : "", st.speed, viewers, static_cast<unsigned long long>(sent),
-                   static_cast<unsigned long long>(dropped));
+      spdlog::info("  at {} of {}{}, {:.2f}x: {} viewers, {} frames sent, {} dropped", FormatSeconds(st.position_us),
+                   FormatSeconds(st.duration_us), st.paused ? " (paused)" : "", st.speed, viewers, sent, dropped);
       next_progress = clock.NowUs() + 5000000;
     }
   }
@@ -166,12 +166,11 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
   CloseStats(stats);
   if (!o.quiet) {
     std::lock_guard<std::mutex> l(late_mu);
-    std::fprintf(stderr,
-                 "holoport-server: replay served %llu messages; controls applied %llu, rejected %llu; mesh frame "
-                 "fan-out vs schedule p50 %.2f ms, p99 %.2f ms\n",
-                 static_cast<unsigned long long>(rst.emitted), static_cast<unsigned long long>(rst.controls_applied),
-                 static_cast<unsigned long long>(rst.controls_rejected), Percentile(lateness_ms, 0.5),
-                 Percentile(lateness_ms, 0.99));
+    spdlog::info(
+        "holoport-server: replay served {} messages; controls applied {}, rejected {}; mesh frame "
+        "fan-out vs schedule p50 {:.2f} ms, p99 {:.2f} ms",
+        rst.emitted, rst.controls_applied, rst.controls_rejected, Percentile(lateness_ms, 0.5),
+        Percentile(lateness_ms, 0.99));
   }
   if (!err.ok()) return Fail(err);
   return 0;
@@ -200,9 +199,8 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
   if (!stats_file.ok()) return Fail(stats_file.status());
   FILE* const stats = *stats_file;
   if (!o.quiet)
-    std::fprintf(stderr, "holoport-server: replaying %s (%s, %llu messages, %zu key frames%s) at %.2fx%s\n",
-                 o.path.c_str(), FormatSeconds(sum.duration_us).c_str(),
-                 static_cast<unsigned long long>(sum.num_messages), sum.index.size(),
+    spdlog::info("holoport-server: replaying {} ({}, {} messages, {} key frames{}) at {:.2f}x{}", o.path,
+                 FormatSeconds(sum.duration_us), sum.num_messages, sum.index.size(),
                  sum.clean ? "" : "; not closed cleanly, index rebuilt", o.speed, o.loop ? ", looping" : "");
   std::signal(SIGINT, OnReplaySignal);
   std::signal(SIGTERM, OnReplaySignal);
@@ -269,15 +267,14 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
     }
     auto n = (*source)->Pump(sink);
     if (!n.ok()) {
-      std::fprintf(stderr, "holoport-server: replay stopped: %s\n", n.status().message().c_str());
+      spdlog::error("holoport-server: replay stopped: {}", n.status().message());
       code = 1;
       break;
     }
     if (!o.quiet && clock.NowUs() >= next_progress) {
       const ReplayState st = (*source)->state();
-      std::fprintf(stderr, "  at %s of %s: %llu messages, %llu mesh frames\n", FormatSeconds(st.position_us).c_str(),
-                   FormatSeconds(st.duration_us).c_str(), static_cast<unsigned long long>(messages),
-                   static_cast<unsigned long long>(meshes));
+      spdlog::info("  at {} of {}: {} messages, {} mesh frames", FormatSeconds(st.position_us),
+                   FormatSeconds(st.duration_us), messages, meshes);
       next_progress = clock.NowUs() + 2000000;
     }
   }
@@ -285,13 +282,13 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
   if (!sink_error.ok()) return Fail(sink_error);
   const double wall = static_cast<double>(clock.NowUs() - start) * 1e-6;
   if (!o.quiet)
-    std::fprintf(stderr,
-                 "holoport-server: replayed %llu messages (%llu mesh frames, %.2f MB) in %.2f s wall; "
-                 "mesh frame pacing error p50 %.2f ms, p99 %.2f ms, max %.2f ms%s%s\n",
-                 static_cast<unsigned long long>(messages), static_cast<unsigned long long>(meshes),
-                 static_cast<double>(bytes) / 1e6, wall, Percentile(lateness_ms, 0.5), Percentile(lateness_ms, 0.99),
-                 lateness_ms.empty() ? 0.0 : *std::max_element(lateness_ms.begin(), lateness_ms.end()),
-                 o.export_dir.empty() ? "" : "; meshes in ", o.export_dir.c_str());
+    spdlog::info(
+        "holoport-server: replayed {} messages ({} mesh frames, {:.2f} MB) in {:.2f} s wall; "
+        "mesh frame pacing error p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms{}{}",
+        messages, meshes, static_cast<double>(bytes) / 1e6, wall, Percentile(lateness_ms, 0.5),
+        Percentile(lateness_ms, 0.99),
+        lateness_ms.empty() ? 0.0 : *std::max_element(lateness_ms.begin(), lateness_ms.end()),
+        o.export_dir.empty() ? "" : "; meshes in ", o.export_dir);
   return code;
 }
 

@@ -5,6 +5,7 @@
 #include <span>
 #include <utility>
 
+#include "common/log.h"
 #include "net/wire_message.h"
 
 namespace holo::record {
@@ -137,11 +138,11 @@ Status ReplayServer::status() const {
   return error_;
 }
 
-void ReplayServer::Log(const std::string& line) const {
+void ReplayServer::Log(const std::string& line, spdlog::level::level_enum level) const {
   if (options_.log) {
     options_.log(line);
   } else {
-    std::fprintf(stderr, "%s\n", line.c_str());
+    spdlog::log(level, "{}", line);
   }
 }
 
@@ -164,7 +165,7 @@ void ReplayServer::PumpLoop() {
   int64_t due = 0;
   auto sink = [&](std::shared_ptr<const std::vector<uint8_t>> bytes, protocol::Header h) {
     Status s = publisher_->Publish(*bytes, h);
-    if (!s.ok()) Log("replay: " + s.message());
+    if (!s.ok()) Log("replay: " + s.message(), spdlog::level::warn);
     if (options_.on_emit) options_.on_emit(h, due, clock_->NowUs());
   };
   while (!stop_) {
@@ -194,7 +195,7 @@ void ReplayServer::PumpLoop() {
     auto n = source_->Pump(sink, 1);
     if (!n.ok()) {
       publisher_->Flush();
-      Log("replay stopped: " + n.status().message());
+      Log("replay stopped: " + n.status().message(), spdlog::level::warn);
       {
         std::lock_guard<std::mutex> l(mu_);
         if (error_.ok()) error_ = n.status();

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "common/clock.h"
+#include "common/log.h"
 #include "common/status.h"
 #include "net/server_config.h"
 #include "net/session_server.h"
@@ -101,7 +102,8 @@ class ReplayServer final : public net::StreamControlSink {
  private:
   ReplayServer() = default;
   void PumpLoop();
-  void Log(const std::string& line) const;
+  // Through options_.log when set, else the log at `level`.
+  void Log(const std::string& line, spdlog::level::level_enum level = spdlog::level::info) const;
 
   std::shared_ptr<const RecordingReader> reader_;
   Clock* clock_ = nullptr;

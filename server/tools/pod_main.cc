@@ -8,6 +8,7 @@
 #include <csignal>
 #include <cstdio>
 
+#include "common/log.h"
 #include "server/pods/pod_runner.h"
 
 namespace {
@@ -18,6 +19,7 @@ void OnSignal(int) { g_stop = true; }
 int main(int argc, char** argv) {
   holo::pods::PodRunOptions o;
   CLI::App app{"holoport-pod: one RGB-D pod streaming its frames to a site's pod port (holoport-server --pods)"};
+  holo::AddLogLevelOption(app);
   app.add_option("--site", o.site, "the site's pod port, HOST:PORT")->capture_default_str();
   app.add_option("--token", o.token, "the site's pod token (holoport-server --pod-token); required");
   app.add_option("--pod", o.pod_id, "this pod's id in the rig; required");
@@ -44,7 +46,7 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, OnSignal);
   const holo::Status s = holo::pods::RunPod(o, g_stop);
   if (!s.ok()) {
-    std::fprintf(stderr, "holoport-pod: %s\n", s.ToString().c_str());
+    spdlog::error("holoport-pod: {}", s.ToString());
     return s.code() == holo::StatusCode::kInvalidArgument ? 2 : 1;
   }
   return 0;

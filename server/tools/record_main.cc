@@ -17,6 +17,7 @@
 #include <CLI/CLI.hpp>
 
 #include "common/clock.h"
+#include "common/log.h"
 #include "net/server_config.h"
 #include "net/site_client.h"
 #include "server/record/inspect.h"
@@ -39,7 +40,7 @@ double ProcessCpuMs() {
 void OnSignal(int) { g_stop = 1; }
 
 int Fail(const holo::Status& s) {
-  std::fprintf(stderr, "holoport-record: %s\n", s.message().c_str());
+  spdlog::error("holoport-record: {}", s.message());
   return 1;
 }
 
@@ -97,8 +98,7 @@ int Record(const std::string& out, const std::string& source_spec, double durati
   std::signal(SIGTERM, OnSignal);
   const int64_t limit_us = duration_s > 0 ? static_cast<int64_t>(duration_s * 1e6) : INT64_MAX;
   if (!quiet)
-    std::fprintf(stderr, "holoport-record: %s → %s (%s%s, %s)%s\n", wo.source.c_str(), out.c_str(), codec.c_str(),
-                 audio ? " + PCM audio" : "",
+    spdlog::info("holoport-record: {} → {} ({}{}, {}){}", wo.source, out, codec, audio ? " + PCM audio" : "",
                  duration_s > 0 ? holo::record::FormatSeconds(limit_us).c_str() : "until stopped",
                  max_bytes ? (", limit " + std::to_string(max_bytes) + " bytes").c_str() : "");
   holo::RealClock& clock = holo::RealClock::Instance();
@@ -119,8 +119,7 @@ int Record(const std::string& out, const std::string& source_spec, double durati
     const int64_t now = clock.NowUs();
     if (!quiet && now >= next_progress) {
       const auto& st = (*writer)->stats();
-      std::fprintf(stderr, "  %s recorded, %llu messages, %.2f MB\n",
-                   holo::record::FormatSeconds(st.duration_us).c_str(), static_cast<unsigned long long>(st.messages),
+      spdlog::info("  {} recorded, {} messages, {:.2f} MB", holo::record::FormatSeconds(st.duration_us), st.messages,
                    static_cast<double>(st.bytes) / 1e6);
       next_progress = now + 1000000;
     }
@@ -129,17 +128,16 @@ int Record(const std::string& out, const std::string& source_spec, double durati
   if (code == 1) return Fail(end);  // a message the writer refused (should not happen with our own source)
   const auto& st = (*writer)->stats();
   const double wall_s = static_cast<double>(clock.NowUs() - start) * 1e-6;
-  if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
-  if (g_stop && !quiet) std::fprintf(stderr, "holoport-record: stopped by signal; recording closed\n");
+  if (code != 0) spdlog::error("holoport-record: {}", end.message());
+  if (g_stop && !quiet) spdlog::info("holoport-record: stopped by signal; recording closed");
   if (!quiet)
-    std::fprintf(stderr,
-                 "holoport-record: %s: %llu messages (%llu key frames), %s, %.2f MB in %.1f s wall; "
-                 "%.2f MB per minute of media; writing took %.1f ms (%.0f MB/s)\n",
-                 out.c_str(), static_cast<unsigned long long>(st.messages),
-                 static_cast<unsigned long long>(st.key_frames), holo::record::FormatSeconds(st.duration_us).c_str(),
-                 static_cast<double>(st.bytes) / 1e6, wall_s,
-                 st.duration_us > 0 ? static_cast<double>(st.bytes) * 60.0 / static_cast<double>(st.duration_us) : 0.0,
-                 write_ms, write_ms > 0 ? static_cast<double>(st.bytes) / 1e3 / write_ms : 0.0);
+    spdlog::info(
+        "holoport-record: {}: {} messages ({} key frames), {}, {:.2f} MB in {:.1f} s wall; "
+        "{:.2f} MB per minute of media; writing took {:.1f} ms ({:.0f} MB/s)",
+        out, st.messages, st.key_frames, holo::record::FormatSeconds(st.duration_us),
+        static_cast<double>(st.bytes) / 1e6, wall_s,
+        st.duration_us > 0 ? static_cast<double>(st.bytes) * 60.0 / static_cast<double>(st.duration_us) : 0.0, write_ms,
+        write_ms > 0 ? static_cast<double>(st.bytes) / 1e3 / write_ms : 0.0);
   return code;
 }
 
@@ -212,14 +210,14 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   cb.on_state = [&](holo::net::ClientState state, const holo::Status& why) {
     if (quiet) return;
     if (state == holo::net::ClientState::kConnected)
-      std::fprintf(stderr, "holoport-record: connected to %s; recording\n", connect.c_str());
+      spdlog::info("holoport-record: connected to {}; recording", connect);
     else if (state == holo::net::ClientState::kBackoff)
-      std::fprintf(stderr, "holoport-record: %s (retrying): %s\n", connect.c_str(), why.message().c_str());
+      spdlog::warn("holoport-record: {} (retrying): {}", connect, why.message());
   };
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   if (!quiet)
-    std::fprintf(stderr, "holoport-record: %s → %s (%s%s)\n", connect.c_str(), out.c_str(),
+    spdlog::info("holoport-record: {} → {} ({}{})", connect, out,
                  duration_s > 0 ? holo::record::FormatSeconds(limit_us).c_str() : "until stopped",
                  max_bytes ? (", limit " + std::to_string(max_bytes) + " bytes").c_str() : "");
   const int64_t start = clock.NowUs();
@@ -242,11 +240,10 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
     if (!quiet && now >= next_progress) {
       std::lock_guard<std::mutex> l(mu);
       const auto& ws = (*writer)->stats();
-      std::fprintf(stderr, "  %s recorded, %llu messages, %.2f MB, %.2f MB/min\n",
-                   holo::record::FormatSeconds(ws.duration_us).c_str(), static_cast<unsigned long long>(ws.messages),
-                   static_cast<double>(ws.bytes) / 1e6,
-                   ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us)
-                                      : 0.0);
+      spdlog::info(
+          "  {} recorded, {} messages, {:.2f} MB, {:.2f} MB/min", holo::record::FormatSeconds(ws.duration_us),
+          ws.messages, static_cast<double>(ws.bytes) / 1e6,
+          ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us) : 0.0);
       next_progress = now + 1000000;
     }
   }
@@ -254,9 +251,9 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   const holo::Status client_status = (*client)->status();
   int code = EndCode(writer->get(), &end);
   if (code == 1) (void)(*writer)->Close();  // a malformed stream: keep what came before, closed
-  if (code != 0) std::fprintf(stderr, "holoport-record: %s\n", end.message().c_str());
+  if (code != 0) spdlog::error("holoport-record: {}", end.message());
   if (refused) {
-    std::fprintf(stderr, "holoport-record: the site refused the recorder: %s\n", client_status.message().c_str());
+    spdlog::error("holoport-record: the site refused the recorder: {}", client_status.message());
     if (code == 0) code = 1;
     if ((*writer)->stats().messages == 0) {
       std::remove(out.c_str());  // nothing recorded: do not leave an empty recording behind
@@ -267,17 +264,16 @@ int RecordLive(const std::string& out, const std::string& connect, std::string t
   const auto& ss = sink.stats();
   const double wall_s = static_cast<double>(clock.NowUs() - start) * 1e-6;
   const double cpu_ms = ProcessCpuMs() - cpu_start;
-  if (g_stop && !quiet) std::fprintf(stderr, "holoport-record: stopped by signal; recording closed\n");
+  if (g_stop && !quiet) spdlog::info("holoport-record: stopped by signal; recording closed");
   if (!quiet)
-    std::fprintf(stderr,
-                 "holoport-record: %s: %llu messages (%llu key frames; %llu session messages not recorded), %s, "
-                 "%.2f MB in %.1f s wall; %.2f MB per minute of media; CPU %.0f ms (%.1f%% of one core), "
-                 "writing %.1f ms\n",
-                 out.c_str(), static_cast<unsigned long long>(ws.messages),
-                 static_cast<unsigned long long>(ws.key_frames), static_cast<unsigned long long>(ss.ignored_types),
-                 holo::record::FormatSeconds(ws.duration_us).c_str(), static_cast<double>(ws.bytes) / 1e6, wall_s,
-                 ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us) : 0.0,
-                 cpu_ms, wall_s > 0 ? cpu_ms / (wall_s * 10.0) : 0.0, write_ms);
+    spdlog::info(
+        "holoport-record: {}: {} messages ({} key frames; {} session messages not recorded), {}, "
+        "{:.2f} MB in {:.1f} s wall; {:.2f} MB per minute of media; CPU {:.0f} ms ({:.1f}% of one core), "
+        "writing {:.1f} ms",
+        out, ws.messages, ws.key_frames, ss.ignored_types, holo::record::FormatSeconds(ws.duration_us),
+        static_cast<double>(ws.bytes) / 1e6, wall_s,
+        ws.duration_us > 0 ? static_cast<double>(ws.bytes) * 60.0 / static_cast<double>(ws.duration_us) : 0.0, cpu_ms,
+        wall_s > 0 ? cpu_ms / (wall_s * 10.0) : 0.0, write_ms);
   return code;
 }
 
@@ -314,14 +310,14 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     std::copy(payload.begin(), payload.end(), frame.begin() + holo::protocol::kHeaderSize);
     holo::Status s = (*packager)->AddMessage(frame, at);
     if (s.code() == holo::StatusCode::kInvalidArgument) {
-      if (!quiet) std::fprintf(stderr, "holoport-record: skipped a message: %s\n", s.message().c_str());
+      if (!quiet) spdlog::warn("holoport-record: skipped a message: {}", s.message());
     } else if (!s.ok() && failed.ok()) {
       failed = s;
     }
   };
   if (!quiet)
-    std::fprintf(stderr, "holoport-record: %s → %s (segments %.2f s, parts %lld ms)\n", o.source.c_str(),
-                 o.dir.c_str(), static_cast<double>(o.segment_us) * 1e-6, static_cast<long long>(o.part_us / 1000));
+    spdlog::info("holoport-record: {} → {} (segments {:.2f} s, parts {} ms)", o.source, o.dir,
+                 static_cast<double>(o.segment_us) * 1e-6, o.part_us / 1000);
   std::unique_ptr<holo::net::SiteClient> client;
   std::unique_ptr<holo::record::SyntheticStream> synthetic;
   if (!connect.empty()) {
@@ -348,9 +344,9 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
       }
       if (quiet) return;
       if (state == holo::net::ClientState::kConnected)
-        std::fprintf(stderr, "holoport-record: connected to %s; packaging\n", connect.c_str());
+        spdlog::info("holoport-record: connected to {}; packaging", connect);
       else if (state == holo::net::ClientState::kBackoff)
-        std::fprintf(stderr, "holoport-record: %s (retrying): %s\n", connect.c_str(), why.message().c_str());
+        spdlog::warn("holoport-record: {} (retrying): {}", connect, why.message());
     };
     auto c = holo::net::SiteClient::Start(co, cb);
     if (!c.ok()) return Fail(c.status());
@@ -407,15 +403,13 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
   if (!f.ok()) return Fail(f);
   const auto& st = (*packager)->stats();
   if (!quiet)
-    std::fprintf(stderr,
-                 "holoport-record: %llu messages in %llu parts, %llu segments closed (%llu pruned), %llu dropped "
-                 "before a key frame, %llu rejected; next segment %llu\n",
-                 static_cast<unsigned long long>(st.messages), static_cast<unsigned long long>(st.parts),
-                 static_cast<unsigned long long>(st.segments), static_cast<unsigned long long>(st.pruned_segments),
-                 static_cast<unsigned long long>(st.dropped_before_key), static_cast<unsigned long long>(st.rejected),
-                 static_cast<unsigned long long>((*packager)->next_segment()));
+    spdlog::info(
+        "holoport-record: {} messages in {} parts, {} segments closed ({} pruned), {} dropped "
+        "before a key frame, {} rejected; next segment {}",
+        st.messages, st.parts, st.segments, st.pruned_segments, st.dropped_before_key, st.rejected,
+        (*packager)->next_segment());
   if (refused) {
-    std::fprintf(stderr, "holoport-record: the site refused the packager: %s\n", client->status().message().c_str());
+    spdlog::error("holoport-record: the site refused the packager: {}", client->status().message());
     return 1;
   }
   return 0;
@@ -443,10 +437,9 @@ int Cut(const std::string& path, double segment_s, const std::string& dir, bool 
   if (!segs.ok()) return Fail(segs.status());
   if (!quiet)
     for (const auto& s : *segs)
-      std::fprintf(stderr, "  %s: %s .. %s, %llu messages, %llu bytes\n", s.file.c_str(),
-                   holo::record::FormatSeconds(s.start_us).c_str(), holo::record::FormatSeconds(s.end_us).c_str(),
-                   static_cast<unsigned long long>(s.messages), static_cast<unsigned long long>(s.bytes));
-  std::fprintf(stderr, "holoport-record: %zu segments and manifest.json in %s\n", segs->size(), dir.c_str());
+      spdlog::info("  {}: {} .. {}, {} messages, {} bytes", s.file, holo::record::FormatSeconds(s.start_us),
+                   holo::record::FormatSeconds(s.end_us), s.messages, s.bytes);
+  spdlog::info("holoport-record: {} segments and manifest.json in {}", segs->size(), dir);
   return 0;
 }
 
@@ -461,6 +454,7 @@ int main(int argc, char** argv) {
       "[--speed S] [--loop].\n"
       "Exit codes: 0 done; 1 error; 3 size limit reached, 4 disk full (in both cases the file holds\n"
       "everything recorded before and is closed with an index when possible)."};
+  holo::AddLogLevelOption(app);
   std::string out, source = "synthetic:S8-QVGA", info_path, cut_path, out_dir, codec = "g1";
   double duration = 10, step_mm = 1.0, sync_mb = 8, segment_s = 2;
   uint64_t max_bytes = 0;

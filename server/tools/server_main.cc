@@ -23,6 +23,7 @@
 #include "common/clock.h"
 #include "common/file_util.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "common/visualize.h"
 #include "net/server_config.h"
 #include "net/session_server.h"
@@ -42,7 +43,7 @@
 namespace {
 
 int Fail(const holo::Status& s) {
-  std::fprintf(stderr, "holoport-server: %s\n", s.message().c_str());
+  spdlog::error("holoport-server: {}", s.message());
   return 1;
 }
 
@@ -83,6 +84,7 @@ int main(int argc, char** argv) {
       "colour calibration, segmentation, TSDF fusion, marching cubes, clean-up and texturing, stages\n"
       "running concurrently; every frame's textured mesh can be exported as PLY. Stage timings and\n"
       "progress go to stderr, per-frame stats as JSON lines to --stats (or stdout)."};
+  holo::AddLogLevelOption(app);
   std::string source_spec = "synthetic", workload_name = "S8-QVGA", rig_path, background_spec, export_dir, stats_path;
   std::string masks_name = "segment", snapshot_path;
   int64_t frames = 60;
@@ -257,8 +259,8 @@ int main(int argc, char** argv) {
     if (!srv.ok()) return Fail(srv.status());
     server = std::move(*srv);
     if (!quiet)
-      std::fprintf(stderr, "holoport-server: session server '%s' on %s:%u%s, max %d viewers\n", net.name.c_str(),
-                   net.host.c_str(), server->port(), net.tls.enabled ? " (TLS)" : "", net.max_viewers);
+      spdlog::info("holoport-server: session server '{}' on {}:{}{}, max {} viewers", net.name, net.host,
+                   server->port(), net.tls.enabled ? " (TLS)" : "", net.max_viewers);
   }
   holo::net::SitePublisherOptions publish_options;
   publish_options.color = !no_color_stream;
@@ -335,7 +337,7 @@ int main(int argc, char** argv) {
     if (prerender > 0) {
       if (options.masks == holo::MaskSource::kTruth)
         return Fail(holo::InvalidArgument("--prerender cannot be combined with --masks truth (the studio renders the masks)"));
-      if (!quiet) std::fprintf(stderr, "holoport-server: pre-rendering %d frame sets of %s...\n", prerender, workload->name.c_str());
+      if (!quiet) spdlog::info("holoport-server: pre-rendering {} frame sets of {}...", prerender, workload->name);
       auto pr = holo::PrerenderedSource::Render(*studio, prerender, /*loop=*/true, quiet);
       if (!pr.ok()) return Fail(pr.status());
       prerendered = std::move(*pr);
@@ -379,13 +381,12 @@ int main(int argc, char** argv) {
     ho.grouping.tolerance_us = static_cast<int64_t>(pod_tolerance_ms * 1000);
     ho.grouping.timeout_us = static_cast<int64_t>(pod_timeout_ms * 1000);
     auto hub = holo::pods::PodHub::Start(source->rig(), ho, [quiet](const std::string& line) {
-      if (!quiet) std::fprintf(stderr, "holoport-server: pods: %s\n", line.c_str());
+      if (!quiet) spdlog::info("holoport-server: pods: {}", line);
     });
     if (!hub.ok()) return Fail(hub.status());
     pod_hub = std::move(*hub);
     if (!quiet)
-      std::fprintf(stderr, "holoport-server: waiting for %zu pods on port %u\n", source->rig().pods.size(),
-                   pod_hub->port());
+      spdlog::info("holoport-server: waiting for {} pods on port {}", source->rig().pods.size(), pod_hub->port());
     source = pod_hub.get();
     source_name = "pods:" + std::to_string(pod_hub->port());
     // The hub paces the site: sets leave when the pods deliver them.
@@ -526,8 +527,8 @@ int main(int argc, char** argv) {
     if (!studio) return Fail(holo::InvalidArgument("--truth-mesh needs --source synthetic"));
     const double fps = pace > 0 ? pace : 30.0;
     if (!quiet)
-      std::fprintf(stderr, "holoport-server: streaming the studio's ground truth (%s) at %.0f fps%s\n",
-                   source_name.c_str(), fps, frames < 0 ? " until interrupted" : "");
+      spdlog::info("holoport-server: streaming the studio's ground truth ({}) at {:.0f} fps{}", source_name, fps,
+                   frames < 0 ? " until interrupted" : "");
     holo::RgbdFrameSet fs;
     holo::StudioGroundTruth gt;
     // Pre-rendered loop: meshes, colour images and exact masks.
@@ -548,7 +549,7 @@ int main(int argc, char** argv) {
         loop[k].color.push_back(fs.frames[p].color);
         loop[k].mask.push_back(gt.mask[p]);
       }
-      if (!quiet && (k + 1) % 10 == 0) std::fprintf(stderr, "  pre-rendered %d/%d frames\n", k + 1, truth_loop);
+      if (!quiet && (k + 1) % 10 == 0) spdlog::info("  pre-rendered {}/{} frames", k + 1, truth_loop);
     }
     const auto start = std::chrono::steady_clock::now();
     capture_period_us = 1e6 / fps;
@@ -613,9 +614,11 @@ int main(int argc, char** argv) {
       if ((i + 1) % 30 == 0) {
         net_line(i);
         if (!quiet)
-          std::fprintf(stderr, "  frame %lld: %zu vertices, %.1f KB; render %.1f ms, encode G1 %.1f, C1 %.1f, publish %.2f; %zu viewers\n",
-                       static_cast<long long>(i + 1), mesh.num_vertices(), (pt.geometry_bytes + pt.color_bytes) / 1024.0,
-                       r_ms, pt.geometry_ms, pt.color_ms, pt.publish_ms, pt.viewers);
+          spdlog::info(
+              "  frame {}: {} vertices, {:.1f} KB; render {:.1f} ms, encode G1 {:.1f}, C1 {:.1f}, publish {:.2f}; {} "
+              "viewers",
+              i + 1, mesh.num_vertices(), (pt.geometry_bytes + pt.color_bytes) / 1024.0, r_ms, pt.geometry_ms,
+              pt.color_ms, pt.publish_ms, pt.viewers);
       }
     }
     net_line(i);
@@ -627,24 +630,22 @@ int main(int argc, char** argv) {
       return v[v.size() / 2];
     };
     if (!quiet) {
-      std::fprintf(stderr,
-                   "holoport-server: %lld frames in %.2f s = %.1f fps (%lld late); median ms: truth render %.1f, "
-                   "encode G1 %.1f, C1 %.1f, publish %.2f\n",
-                   static_cast<long long>(i), wall, i / std::max(wall, 1e-9), static_cast<long long>(late),
-                   med(render_ms), med(geom_ms), med(color_ms), med(pub_ms));
+      spdlog::info(
+          "holoport-server: {} frames in {:.2f} s = {:.1f} fps ({} late); median ms: truth render {:.1f}, "
+          "encode G1 {:.1f}, C1 {:.1f}, publish {:.2f}",
+          i, wall, i / std::max(wall, 1e-9), late, med(render_ms), med(geom_ms), med(color_ms), med(pub_ms));
       if (server) {
         const NetSummary n = Summarize(*server);
-        std::fprintf(stderr, "holoport-server: %zu viewers at the end; %llu frames sent, %llu dropped; io CPU %.0f ms\n",
-                     n.viewers, static_cast<unsigned long long>(n.sent), static_cast<unsigned long long>(n.dropped),
-                     server->IoCpuMs());
+        spdlog::info("holoport-server: {} viewers at the end; {} frames sent, {} dropped; io CPU {:.0f} ms", n.viewers,
+                     n.sent, n.dropped, server->IoCpuMs());
       }
     }
     return 0;
   }
 
   if (!quiet)
-    std::fprintf(stderr, "holoport-server: %s, %zu pods, masks=%s, voxel %.1f mm, %s pipeline; learning background...\n",
-                 source_name.c_str(), source->rig().pods.size(), holo::MaskSourceName(options.masks),
+    spdlog::info("holoport-server: {}, {} pods, masks={}, voxel {:.1f} mm, {} pipeline; learning background...",
+                 source_name, source->rig().pods.size(), holo::MaskSourceName(options.masks),
                  options.tsdf.voxel_size * 1e3, serial ? "serial" : "concurrent");
   auto site = holo::CaptureSite::Create(source, background, studio.get(), options);
   if (!site.ok()) return Fail(site.status());
@@ -747,12 +748,11 @@ int main(int argc, char** argv) {
       std::fprintf(stats_out, "%s\n", site_line.dump().c_str());
       std::fflush(stats_out);
       if (!quiet)
-        std::fprintf(stderr,
-                     "  frame %lld: %zu triangles; segment %.1f ms, fuse %.1f, mesh %.1f, simplify %.1f, texture %.1f, "
-                     "encode %.1f (G1 %zu B, C1 %zu B); latency %.1f ms; %.1f CPU-ms per frame; %zu viewers\n",
-                     static_cast<long long>(done), w.mesh.num_triangles(), t.segment_ms, t.fuse_ms, t.mesh_ms,
-                     t.simplify_ms, t.texture_ms, t.encode_ms, pt.geometry_bytes, pt.color_bytes,
-                     t.encoded_latency_ms(), (now_cpu - cpu_window) / 30.0, pt.viewers);
+        spdlog::info(
+            "  frame {}: {} triangles; segment {:.1f} ms, fuse {:.1f}, mesh {:.1f}, simplify {:.1f}, texture {:.1f}, "
+            "encode {:.1f} (G1 {} B, C1 {} B); latency {:.1f} ms; {:.1f} CPU-ms per frame; {} viewers",
+            done, w.mesh.num_triangles(), t.segment_ms, t.fuse_ms, t.mesh_ms, t.simplify_ms, t.texture_ms, t.encode_ms,
+            pt.geometry_bytes, pt.color_bytes, t.encoded_latency_ms(), (now_cpu - cpu_window) / 30.0, pt.viewers);
       cpu_window = now_cpu;
     }
     return holo::OkStatus();
@@ -795,20 +795,20 @@ int main(int argc, char** argv) {
     tiles.push_back(&ours);
     s = holo::WriteImageRgb8(snapshot_path, holo::TileImages(tiles, 2));
     if (!s.ok()) return Fail(s);
-    if (!quiet) std::fprintf(stderr, "holoport-server: snapshot of frame %lld in %s\n", static_cast<long long>(last_frame), snapshot_path.c_str());
+    if (!quiet) spdlog::info("holoport-server: snapshot of frame {} in {}", last_frame, snapshot_path);
   }
   const holo::StageTimings m = holo::MedianTimings(*stats);
   if (!quiet)
-    std::fprintf(stderr,
-                 "holoport-server: %lld frames in %.2f s = %.1f fps (%lld camera frames skipped), %.1f CPU-ms per frame; "
-                 "median ms: acquire %.1f, "
-                 "segment %.1f, fuse %.1f, mesh %.1f, simplify %.1f, texture %.1f, encode %.1f; median latency %.1f ms "
-                 "(%s)%s%s\n",
-                 static_cast<long long>(stats->frames), stats->wall_seconds, stats->fps,
-                 static_cast<long long>(stats->dropped_frames), stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0.0, m.acquire_ms,
-                 m.segment_ms, m.fuse_ms, m.mesh_ms, m.simplify_ms, m.texture_ms, m.encode_ms,
-                 holo::MedianLatencyMs(*stats),
-                 pace > 0 ? "paced" : "unpaced: includes waiting in queues; use --pace for live latency",
-                 export_dir.empty() ? "" : "; meshes in ", export_dir.c_str());
+    spdlog::info(
+        "holoport-server: {} frames in {:.2f} s = {:.1f} fps ({} camera frames skipped), {:.1f} CPU-ms per frame; "
+        "median ms: acquire {:.1f}, "
+        "segment {:.1f}, fuse {:.1f}, mesh {:.1f}, simplify {:.1f}, texture {:.1f}, encode {:.1f}; median latency "
+        "{:.1f} ms "
+        "({}){}{}",
+        stats->frames, stats->wall_seconds, stats->fps, stats->dropped_frames,
+        stats->frames > 0 ? stats->cpu_ms / static_cast<double>(stats->frames) : 0.0, m.acquire_ms, m.segment_ms,
+        m.fuse_ms, m.mesh_ms, m.simplify_ms, m.texture_ms, m.encode_ms, holo::MedianLatencyMs(*stats),
+        pace > 0 ? "paced" : "unpaced: includes waiting in queues; use --pace for live latency",
+        export_dir.empty() ? "" : "; meshes in ", export_dir);
   return 0;
 }

@@ -7,6 +7,7 @@
 
 #include "common/file_util.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "server/capture/studio_export.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
@@ -15,6 +16,7 @@ int main(int argc, char** argv) {
   CLI::App app{
       "holoport-studio: render the synthetic studio (every pod's colour and depth, with ground truth)\n"
       "into a dataset folder; print and write a summary; optionally write a contact sheet PNG."};
+  holo::AddLogLevelOption(app);
   std::string workload_name = "S8-QVGA";
   std::string rig_path, out_dir, sheet_path, summary_path;
   int64_t frames = 30, first = 0;
@@ -41,14 +43,14 @@ int main(int argc, char** argv) {
 
   auto workload = holo::GetWorkload(workload_name);
   if (!workload.ok()) {
-    std::fprintf(stderr, "holoport-studio: %s\n", workload.status().message().c_str());
+    spdlog::error("holoport-studio: {}", workload.status().message());
     return 1;
   }
   holo::Rig rig = workload->rig;
   if (!rig_path.empty()) {
     auto loaded = holo::LoadRig(rig_path);
     if (!loaded.ok()) {
-      std::fprintf(stderr, "holoport-studio: %s\n", loaded.status().message().c_str());
+      spdlog::error("holoport-studio: {}", loaded.status().message());
       return 1;
     }
     rig = *loaded;
@@ -61,7 +63,7 @@ int main(int argc, char** argv) {
   options.color_variation = !no_color_variation;
   auto studio = holo::SyntheticStudio::Create(rig, options);
   if (!studio.ok()) {
-    std::fprintf(stderr, "holoport-studio: %s\n", studio.status().message().c_str());
+    spdlog::error("holoport-studio: {}", studio.status().message());
     return 1;
   }
 
@@ -72,21 +74,21 @@ int main(int argc, char** argv) {
   export_options.ground_truth = !no_gt;
   export_options.writer.color_jpeg = jpeg;
   if (!quiet)
-    std::fprintf(stderr, "holoport-studio: %s, %zu pods at %dx%d, frames %lld..%lld%s%s\n", workload->name.c_str(),
-                 rig.pods.size(), rig.pods[0].depth.width, rig.pods[0].depth.height, static_cast<long long>(first),
-                 static_cast<long long>(first + frames - 1), out_dir.empty() ? "" : " -> ", out_dir.c_str());
+    spdlog::info("holoport-studio: {}, {} pods at {}x{}, frames {}..{}{}{}", workload->name, rig.pods.size(),
+                 rig.pods[0].depth.width, rig.pods[0].depth.height, first, first + frames - 1,
+                 out_dir.empty() ? "" : " -> ", out_dir);
   auto summary = holo::ExportStudio(**studio, export_options, [&](int64_t done, int64_t total) {
     if (quiet) return;
-    if (done == total || done % 10 == 0) std::fprintf(stderr, "  frame %lld/%lld\n", static_cast<long long>(done), static_cast<long long>(total));
+    if (done == total || done % 10 == 0) spdlog::info("  frame {}/{}", done, total);
   });
   if (!summary.ok()) {
-    std::fprintf(stderr, "holoport-studio: %s\n", summary.status().message().c_str());
+    spdlog::error("holoport-studio: {}", summary.status().message());
     return 1;
   }
   if (!sheet_path.empty()) {
     const holo::Status s = holo::WriteImageRgb8(sheet_path, summary->contact_sheet);
     if (!s.ok()) {
-      std::fprintf(stderr, "holoport-studio: %s\n", s.message().c_str());
+      spdlog::error("holoport-studio: {}", s.message());
       return 1;
     }
   }
@@ -94,22 +96,22 @@ int main(int argc, char** argv) {
   if (!summary_path.empty()) {
     const holo::Status s = holo::WriteStringToFile(summary_path, json + "\n");
     if (!s.ok()) {
-      std::fprintf(stderr, "holoport-studio: %s\n", s.message().c_str());
+      spdlog::error("holoport-studio: {}", s.message());
       return 1;
     }
   }
   std::printf("%s\n", json.c_str());
   if (!quiet) {
-    std::fprintf(stderr,
-                 "rendered %lld frames of %d pods at %.1f frames/s (render only); foreground %.1f%% of pixels;\n"
-                 "depth noise: %.1f%% of true depth valid, mean |error| %.2f mm, median %.2f mm (foreground: %.1f%% valid, "
-                 "mean |error| %.2f mm, median %.2f mm);\n"
-                 "ground-truth mesh %zu vertices, %zu triangles\n",
-                 static_cast<long long>(summary->frames), summary->pods, summary->render_fps,
-                 100 * summary->foreground_fraction, 100 * summary->depth_valid_fraction, summary->depth_abs_error_mm,
-                 summary->depth_median_abs_error_mm, 100 * summary->fg_depth_valid_fraction,
-                 summary->fg_depth_abs_error_mm, summary->fg_depth_median_abs_error_mm, summary->mesh_vertices, summary->mesh_triangles);
-    if (!sheet_path.empty()) std::fprintf(stderr, "contact sheet: %s\n", sheet_path.c_str());
+    spdlog::info("rendered {} frames of {} pods at {:.1f} frames/s (render only); foreground {:.1f}% of pixels",
+                 summary->frames, summary->pods, summary->render_fps, 100 * summary->foreground_fraction);
+    spdlog::info(
+        "depth noise: {:.1f}% of true depth valid, mean |error| {:.2f} mm, median {:.2f} mm (foreground: {:.1f}% "
+        "valid, "
+        "mean |error| {:.2f} mm, median {:.2f} mm)",
+        100 * summary->depth_valid_fraction, summary->depth_abs_error_mm, summary->depth_median_abs_error_mm,
+        100 * summary->fg_depth_valid_fraction, summary->fg_depth_abs_error_mm, summary->fg_depth_median_abs_error_mm);
+    spdlog::info("ground-truth mesh {} vertices, {} triangles", summary->mesh_vertices, summary->mesh_triangles);
+    if (!sheet_path.empty()) spdlog::info("contact sheet: {}", sheet_path);
   }
   return 0;
 }

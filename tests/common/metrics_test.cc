@@ -11,7 +11,6 @@
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
-#include "common/metrics/parallel.h"
 #include "common/metrics/surface_sampling.h"
 #include "common/metrics/triangle_index.h"
 #include "test_util.h"

@@ -26,6 +26,7 @@
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
 #include "common/image_io.h"
+#include "common/log.h"
 #include "common/pose.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
@@ -246,6 +247,7 @@ Status Render(const std::string& recording, int64_t frame, const std::vector<flo
 
 int main(int argc, char** argv) {
   CLI::App app{"holoport-web-fixture: recordings, golden decodes and native renders for the browser viewer's tests"};
+  holo::AddLogLevelOption(app);
   app.require_subcommand(0, 1);
   std::string out, recording, dir, workload = "S8-QVGA", mode = "vertex";
   double seconds = 8, hfov = 50;
@@ -272,7 +274,7 @@ int main(int argc, char** argv) {
   ren->add_option("--color", mode, "vertex or projective")->check(CLI::IsMember({"vertex", "projective"}));
   CLI11_PARSE(app, argc, argv);
   if (app.get_subcommands().empty()) {
-    std::fprintf(stderr, "holoport-web-fixture: give a subcommand (record, golden or render); --help lists them\n");
+    spdlog::error("holoport-web-fixture: give a subcommand (record, golden or render); --help lists them");
     return 2;
   }
   holo::Status s;
@@ -280,7 +282,7 @@ int main(int argc, char** argv) {
   if (*gold) s = holo::Golden(recording, dir, count);
   if (*ren) s = holo::Render(recording, frame, eye, target, hfov, width, height, mode, out);
   if (!s.ok()) {
-    std::fprintf(stderr, "holoport-web-fixture: %s\n", s.ToString().c_str());
+    spdlog::error("holoport-web-fixture: {}", s.ToString());
     return 1;
   }
   return 0;

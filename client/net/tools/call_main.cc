@@ -28,6 +28,7 @@
 #include "audio/room.h"
 #include "client/net/call_config.h"
 #include "client/net/participant.h"
+#include "common/log.h"
 #include "common/mesh.h"
 #include "net/site_client.h"
 
@@ -37,7 +38,7 @@ std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
 int Fail(const holo::Status& s) {
-  std::fprintf(stderr, "holoport-call: %s\n", s.message().c_str());
+  spdlog::error("holoport-call: {}", s.message());
   return 1;
 }
 
@@ -45,6 +46,7 @@ int Fail(const holo::Status& s) {
 
 int main(int argc, char** argv) {
   CLI::App app{"holoport-call: watch a site, or take part in a two-site call, without a GL viewer"};
+  holo::AddLogLevelOption(app);
   std::string watch, token, config_path, ply_path, ca_file, name = "holoport-call";
   double seconds = 0;
   bool tls = false, no_decode = false;
@@ -82,7 +84,7 @@ int main(int argc, char** argv) {
   view.decode = !no_decode;
   holo::net::ClientCallbacks cb;
   cb.on_state = [](holo::net::ClientState s, const holo::Status& why) {
-    std::fprintf(stderr, "holoport-call: view %s%s%s\n", holo::net::ClientStateName(s), why.ok() ? "" : ": ",
+    spdlog::info("holoport-call: view {}{}{}", holo::net::ClientStateName(s), why.ok() ? "" : ": ",
                  why.ok() ? "" : why.message().c_str());
   };
   std::unique_ptr<holo::net::SiteClient> watcher;
@@ -176,19 +178,18 @@ int main(int argc, char** argv) {
     if (now - last_report >= std::chrono::seconds(2)) {
       const double dt = std::chrono::duration<double>(now - last_report).count();
       const holo::net::ClientStats s = viewer->stats();
-      std::fprintf(stderr, "  %.0f s: %.1f fps, %lld frames, mean latency %.1f ms, RTT %.2f ms", el,
-                   (frames - frames_at_report) / dt, static_cast<long long>(frames),
-                   frames ? latency_sum / frames : 0.0, s.rtt_ms);
+      std::string line =
+          fmt::format("  {:.0f} s: {:.1f} fps, {} frames, mean latency {:.1f} ms, RTT {:.2f} ms", el,
+                      (frames - frames_at_report) / dt, frames, frames ? latency_sum / frames : 0.0, s.rtt_ms);
       if (participant) {
         const holo::net::ParticipantStats ps = participant->stats();
-        std::fprintf(stderr, ", voice sent %lld, remote audio heard %lld", static_cast<long long>(ps.voice_frames_sent),
-                     static_cast<long long>(ps.remote_audio_frames));
+        line += fmt::format(", voice sent {}, remote audio heard {}", ps.voice_frames_sent, ps.remote_audio_frames);
         if (ps.remote_audio_frames > 0) {
-          std::fprintf(stderr, "; remote voice at (%.2f, %.2f, %.2f) in the local room, azimuth %.0f deg",
-                       ps.remote_x, ps.remote_y, ps.remote_z, ps.remote_azimuth_deg);
+          line += fmt::format("; remote voice at ({:.2f}, {:.2f}, {:.2f}) in the local room, azimuth {:.0f} deg",
+                              ps.remote_x, ps.remote_y, ps.remote_z, ps.remote_azimuth_deg);
         }
       }
-      std::fprintf(stderr, "\n");
+      spdlog::info("{}", line);
       last_report = now;
       frames_at_report = frames;
     }
@@ -204,10 +205,11 @@ int main(int argc, char** argv) {
     audio_heard = ps.remote_audio_frames;
     voice_sent = ps.voice_frames_sent;
     audio_delay = ps.audio_delay_ms;
-    if (!ps.hrtf_status.empty()) std::fprintf(stderr, "holoport-call: spatializer %s\n", ps.hrtf_status.c_str());
+    if (!ps.hrtf_status.empty()) spdlog::info("holoport-call: spatializer {}", ps.hrtf_status);
     if (po_aec) {
-      std::fprintf(stderr, "holoport-call: echo canceller on, playout->capture delay %s\n",
-                   ps.aec_delay_ms < 0 ? "not estimated (no echo heard)" : (std::to_string(ps.aec_delay_ms) + " ms").c_str());
+      spdlog::info(
+          "holoport-call: echo canceller on, playout->capture delay {}",
+          ps.aec_delay_ms < 0 ? "not estimated (no echo heard)" : (std::to_string(ps.aec_delay_ms) + " ms").c_str());
     }
     if (!st.ok()) return Fail(st);
   }
