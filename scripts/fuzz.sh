@@ -13,7 +13,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 case "${1:-}" in
-  --smoke) SECONDS_EACH=${HOLO_FUZZ_SMOKE_SECONDS:-6} ;;
+  --smoke) SECONDS_EACH=${HOLO_FUZZ_SMOKE_SECONDS:-3} ;;
   ""|-h|--help) sed -n '2,10p' "$0"; [[ -n "${1:-}" ]] && exit 0; exit 2 ;;
   *)
     if ! [[ "$1" =~ ^[0-9]+([.][0-9]+)?$ ]]; then echo "fuzz.sh: MINUTES must be a number, got '$1'" >&2; exit 2; fi
