@@ -94,6 +94,8 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
     if (offset > options_.late_limit_ms) ++n_.offsets_late;
     Keep(&offsets_, offset);
     Keep(&unsynced_, v.natural_ms - (delay_ms - hold_ms));
+    if (options_.keep_trace && trace_.size() < kMaxSamples)
+      trace_.push_back({display_us, capture_us, id, delay_ms, hold_ms, v.delay_ms, v.natural_ms, voice_target_ms_, offset});
   }
   UpdateVoiceTargetLocked(display_us);
   const double natural = VoiceNaturalLocked(display_us);
@@ -189,11 +191,17 @@ AvSyncStats AvSync::stats() const {
   return s;
 }
 
+std::vector<AvSyncTracePoint> AvSync::trace() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return trace_;
+}
+
 void AvSync::ResetStats() {
   std::lock_guard<std::mutex> l(mu_);
   n_ = AvSyncStats{};
   offsets_.clear();
   unsynced_.clear();
+  trace_.clear();
   voice_sync_.clear();
   picture_sync_.clear();
   picture_delay_.clear();

@@ -68,7 +68,18 @@ struct AvSyncOptions {
   double late_limit_ms = 125.0;
   // A voice counts as playing this long after its last playout, ms.
   double voice_timeout_ms = 200.0;
+  // Keep one TracePoint per picture displayed while a voice plays (trace()).
+  bool keep_trace = false;
   Status Check() const;
+};
+
+// One measured offset, for plots and debugging (AvSyncOptions::keep_trace).
+struct AvSyncTracePoint {
+  int64_t display_us = 0, capture_us = 0;
+  uint32_t stream = 0;
+  double picture_delay_ms = 0, hold_ms = 0;      // capture → displayed; of it, held for the voice
+  double voice_delay_ms = 0, voice_natural_ms = 0, voice_target_ms = 0;
+  double offset_ms = 0;                          // voice_delay − picture_delay
 };
 
 struct AvSyncStats {
@@ -117,6 +128,8 @@ class AvSync {
   double VoiceTargetMs(int64_t now_us);
 
   AvSyncStats stats() const;
+  // The trace since the last ResetStats() (empty unless keep_trace).
+  std::vector<AvSyncTracePoint> trace() const;
   // Forgets the measured offsets and counters (a measuring window starts);
   // the sync state stays.
   void ResetStats();
@@ -143,6 +156,7 @@ class AvSync {
   bool updated_ = false;
   AvSyncStats n_;
   std::vector<float> offsets_, unsynced_, voice_sync_, picture_sync_, picture_delay_;
+  std::vector<AvSyncTracePoint> trace_;
 };
 
 }  // namespace holo::audio

@@ -93,6 +93,7 @@ struct LiveOptions {
   bool av_sync = true;
   double delay_voice_ms = 0, delay_picture_ms = 0;  // injected at every viewer
   audio::AvSyncOptions sync;                         // the viewers' lip sync bounds
+  std::string av_trace;                              // CSV of every offset measured (renderer, decoder 0)
 };
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
@@ -235,6 +236,9 @@ int Run(const BenchArgs& args) {
                    "lip sync: a picture waits at most this long for a later voice")
         ->capture_default_str()
         ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--av-trace", o.av_trace,
+                   "write every voice/picture offset measured by the rendering viewer and the first decoding viewer "
+                   "to this CSV (display and capture time, delays, hold, voice target, offset)");
     app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
         ->check(CLI::Range(0.0, 10000.0));
     app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")
@@ -351,6 +355,7 @@ int Run(const BenchArgs& args) {
     net::SiteAvSyncOptions so;
     so.sync = o.sync;
     so.sync.enabled = o.av_sync;
+    so.sync.keep_trace = !o.av_trace.empty();
     so.voice.inject_delay_ms = o.delay_voice_ms;
     so.inject_picture_delay_ms = o.delay_picture_ms;
     return so;
@@ -539,6 +544,21 @@ int Run(const BenchArgs& args) {
   measuring = false;
   std::vector<audio::AvSyncStats> dec_av;
   for (auto& sy : decoder_syncs) dec_av.push_back(sy->stats());
+  if (!o.av_trace.empty()) {
+    std::ofstream csv(o.av_trace);
+    csv << "viewer,display_s,capture_s,stream,picture_delay_ms,hold_ms,voice_delay_ms,voice_natural_ms,"
+           "voice_target_ms,offset_ms\n";
+    const int64_t t0 = net::WallUs() - static_cast<int64_t>(o.seconds * 1e6);
+    auto dump = [&](const char* viewer, const net::SiteAvSync& sy) {
+      for (const auto& p : sy.sync().trace())
+        csv << viewer << ',' << (p.display_us - t0) / 1e6 << ',' << (p.capture_us - t0) / 1e6 << ',' << p.stream << ','
+            << p.picture_delay_ms << ',' << p.hold_ms << ',' << p.voice_delay_ms << ',' << p.voice_natural_ms << ','
+            << p.voice_target_ms << ',' << p.offset_ms << '\n';
+    };
+    if (render_sync) dump("render", *render_sync);
+    if (!decoder_syncs.empty()) dump("decode", *decoder_syncs.front());
+    if (!csv) std::fprintf(stderr, "live: could not write %s\n", o.av_trace.c_str());
+  }
   const audio::AvSyncStats render_av = render_sync ? render_sync->stats() : audio::AvSyncStats{};
   std::vector<net::RemoteVoicesStats> voice_stats;
   for (auto& sy : decoder_syncs) voice_stats.push_back(sy->voice_stats());

@@ -139,6 +139,7 @@ class SiteAvSync {
   void TickVoice();
 
   audio::AvSync& sync() { return *sync_; }
+  const audio::AvSync& sync() const { return *sync_; }
   audio::AvSyncStats stats() const { return sync_->stats(); }
   RemoteVoicesStats voice_stats() const;
 
