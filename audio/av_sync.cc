@@ -32,6 +32,8 @@ Status AvSyncOptions::Check() const {
   if (!(max_picture_delay_ms >= 0 && max_picture_delay_ms <= 10000))
     return InvalidArgument("max_picture_delay_ms must be in 0..10000, got " + std::to_string(max_picture_delay_ms));
   if (!(window_s > 0 && window_s <= 60)) return InvalidArgument("window_s must be in (0, 60], got " + std::to_string(window_s));
+  if (!(picture_quantile >= 0.5 && picture_quantile <= 1.0))
+    return InvalidArgument("picture_quantile must be in [0.5, 1], got " + std::to_string(picture_quantile));
   if (!(deadband_ms >= 0)) return InvalidArgument("deadband_ms must be >= 0");
   if (!(update_interval_ms >= 0)) return InvalidArgument("update_interval_ms must be >= 0");
   if (!(early_limit_ms > 0 && late_limit_ms > 0)) return InvalidArgument("early_limit_ms and late_limit_ms must be > 0");
@@ -49,14 +51,30 @@ double AvSync::VoiceNaturalLocked(int64_t now_us) const {
   return natural;
 }
 
+double AvSync::VoiceDelayLocked(int64_t now_us) const {
+  double delay = -1.0;
+  const auto timeout_us = static_cast<int64_t>(options_.voice_timeout_ms * 1000.0);
+  for (const auto& [id, v] : voices_)
+    if (v.last_playout_us >= now_us - timeout_us) delay = std::max(delay, v.delay_ms);
+  return delay;
+}
+
 int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
   std::lock_guard<std::mutex> l(mu_);
   int64_t show = ready_us;
-  const double voice = options_.enabled ? VoiceNaturalLocked(ready_us) : -1.0;
+  const double render_ms = Quantile(std::vector<double>(render_ms_.begin(), render_ms_.end()), 0.5);
+  last_picture_us_ = std::max(last_picture_us_, ready_us);
+  if (options_.hold_pictures) {
+    natural_delays_.emplace_back(ready_us, static_cast<double>(ready_us - capture_us) / 1000.0 + render_ms);
+    UpdateVoiceTargetLocked(ready_us);
+  }
+  // Held until the voice of the same instant plays: its actual delay (sync
+  // included) with a picture jitter buffer, else only its own delay.
+  const double voice =
+      !options_.enabled ? -1.0 : (options_.hold_pictures ? VoiceDelayLocked(ready_us) : VoiceNaturalLocked(ready_us));
   if (voice >= 0) {
     // Rendering takes time: start it so that the picture is visible when
     // its voice plays.
-    const double render_ms = Quantile(std::vector<double>(render_ms_.begin(), render_ms_.end()), 0.5);
     const auto want = capture_us + static_cast<int64_t>(std::llround((voice - render_ms) * 1000.0));
     if (want > ready_us) {
       const auto limit = ready_us + static_cast<int64_t>(std::llround(options_.max_picture_delay_ms * 1000.0));
@@ -76,6 +94,7 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
   render_ms_.push_back(static_cast<double>(display_us - render_start_us) / 1000.0);
   while (render_ms_.size() > 15) render_ms_.pop_front();
   picture_delays_.emplace_back(display_us, delay_ms);
+  last_picture_us_ = std::max(last_picture_us_, display_us);
   double hold_ms = 0;
   if (auto it = holds_.find(capture_us); it != holds_.end()) {
     hold_ms = it->second;
@@ -94,8 +113,10 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
     if (offset > options_.late_limit_ms) ++n_.offsets_late;
     Keep(&offsets_, offset);
     Keep(&unsynced_, v.natural_ms - (delay_ms - hold_ms));
+    if (options_.keep_trace && trace_.size() < kMaxSamples)
+      trace_.push_back({display_us, capture_us, id, delay_ms, hold_ms, v.delay_ms, v.natural_ms, voice_target_ms_, offset});
   }
-  UpdateVoiceTargetLocked(display_us);
+  if (!options_.hold_pictures) UpdateVoiceTargetLocked(display_us);
   const double natural = VoiceNaturalLocked(display_us);
   if (natural >= 0) Keep(&voice_sync_, std::max(0.0, voice_target_ms_ - natural));
 }
@@ -103,7 +124,9 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
 void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
   while (!picture_delays_.empty() && picture_delays_.front().first < now_us - window_us) picture_delays_.pop_front();
-  if (!options_.enabled || picture_delays_.empty()) {
+  while (!natural_delays_.empty() && natural_delays_.front().first < now_us - window_us) natural_delays_.pop_front();
+  const auto& window = options_.hold_pictures ? natural_delays_ : picture_delays_;
+  if (!options_.enabled || window.empty()) {
     voice_target_ms_ = 0;
     updated_ = false;
     return;
@@ -112,19 +135,25 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   updated_ = true;
   last_update_us_ = now_us;
   std::vector<double> d;
-  d.reserve(picture_delays_.size());
-  for (const auto& [t, ms] : picture_delays_) d.push_back(ms);
-  // The voice delay that puts the most pictures within the detectability
-  // window (voice at most early_limit_ms ahead, late_limit_ms behind), among
-  // delays within 35 ms of the pictures' median so that the median offset
-  // stays small; ties go to the delay nearest the median. With pictures
-  // whose delays spread, this leans the voice late: voice ahead of the lips
-  // is noticed sooner than voice behind them.
+  d.reserve(window.size());
+  for (const auto& [t, ms] : window) d.push_back(ms);
+  // Pictures held for their voice: the voice as late as most pictures'
+  // natural delays. Else the voice delay that puts the most displayed
+  // pictures within the detectability window (voice at most early_limit_ms
+  // ahead, late_limit_ms behind), among delays within 35 ms of their median
+  // so that the median offset stays small; ties go to the delay nearest the
+  // median (with spread delays this leans the voice late: voice ahead of the
+  // lips is noticed sooner than voice behind them).
   std::sort(d.begin(), d.end());
   const double median = d[d.size() / 2];
   double want = median;
   size_t best = 0;
-  for (double bias = -35.0; bias <= 35.0; bias += 5.0) {
+  if (options_.hold_pictures) {
+    // Late enough for most pictures; the earlier ones wait for their voice.
+    const auto k = static_cast<size_t>(std::ceil(options_.picture_quantile * static_cast<double>(d.size() - 1)));
+    want = d[std::min(d.size() - 1, k)];
+  }
+  for (double bias = -35.0; bias <= 35.0 && !options_.hold_pictures; bias += 5.0) {
     const double v = median + bias;
     const auto lo = std::lower_bound(d.begin(), d.end(), v - options_.late_limit_ms);
     const auto hi = std::upper_bound(d.begin(), d.end(), v + options_.early_limit_ms);
@@ -158,7 +187,7 @@ double AvSync::VoiceTargetMs(int64_t now_us) {
   const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
   // No picture for a whole window (the site stopped sending them): the voice
   // goes back to its own delay instead of waiting for pictures that do not come.
-  if (picture_delays_.empty() || picture_delays_.back().first < now_us - window_us) {
+  if (last_picture_us_ == 0 || last_picture_us_ < now_us - window_us) {
     voice_target_ms_ = 0;
     updated_ = false;
   }
@@ -189,11 +218,17 @@ AvSyncStats AvSync::stats() const {
   return s;
 }
 
+std::vector<AvSyncTracePoint> AvSync::trace() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return trace_;
+}
+
 void AvSync::ResetStats() {
   std::lock_guard<std::mutex> l(mu_);
   n_ = AvSyncStats{};
   offsets_.clear();
   unsynced_.clear();
+  trace_.clear();
   voice_sync_.clear();
   picture_sync_.clear();
   picture_delay_.clear();

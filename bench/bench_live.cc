@@ -94,6 +94,7 @@ struct LiveOptions {
   bool av_sync = true;
   double delay_voice_ms = 0, delay_picture_ms = 0;  // injected at every viewer
   audio::AvSyncOptions sync;                         // the viewers' lip sync bounds
+  std::string av_trace;                              // CSV of every offset measured (renderer, decoder 0)
 };
 
 // CPU time of process `pid` (all threads), ms; -1 if unreadable.
@@ -301,6 +302,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
     net::SiteAvSyncOptions so;
     so.sync = o.sync;
     so.sync.enabled = o.av_sync;
+    so.sync.keep_trace = !o.av_trace.empty();
     so.voice.inject_delay_ms = o.delay_voice_ms;
     so.inject_picture_delay_ms = o.delay_picture_ms;
     return so;
@@ -327,7 +329,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
     }
     auto sy = net::SiteAvSync::Start(c->get(), sync_options());
     if (!sy.ok()) {
-      std::fprintf(stderr, "live: %s\n", sy.status().ToString().c_str());
+      spdlog::error("live: {}", sy.status().ToString());
       return 1;
     }
     decoders.push_back(std::move(*c));
@@ -336,14 +338,16 @@ int Run(const BenchArgs& args, LiveOptions o) {
     decoder_threads.emplace_back([log = logs.back().get(), sync = decoder_syncs.back().get(), &measuring, &stop] {
       net::ReceivedFrame f;
       while (!stop) {
-        if (!sync->NextFrame(&f, 0.1)) continue;
+        int64_t ready = 0;
+        if (!sync->NextFrame(&f, 0.1, &ready)) continue;
         const int64_t now = net::WallUs();
         sync->Displayed(f, now, now);
         if (!measuring || !f.has_mesh) continue;
         FrameRecord r;
         r.frame_index = f.frame_index;
         r.at_us = now;
-        r.latency_decoded_ms = f.latency_ms + static_cast<double>(r.at_us - f.received_us) * 1e-3;
+        // Decoded (taken from the client), before any hold for the voice.
+        r.latency_decoded_ms = f.latency_ms + static_cast<double>(ready - f.received_us) * 1e-3;
         std::lock_guard<std::mutex> l(log->mu);
         log->frames.push_back(r);
       }
@@ -369,7 +373,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
     render_client = std::move(*c);
     auto sy = net::SiteAvSync::Start(render_client.get(), sync_options());
     if (!sy.ok()) {
-      std::fprintf(stderr, "live: %s\n", sy.status().ToString().c_str());
+      spdlog::error("live: {}", sy.status().ToString());
       return 1;
     }
     render_sync = std::move(*sy);
@@ -489,6 +493,21 @@ int Run(const BenchArgs& args, LiveOptions o) {
   measuring = false;
   std::vector<audio::AvSyncStats> dec_av;
   for (auto& sy : decoder_syncs) dec_av.push_back(sy->stats());
+  if (!o.av_trace.empty()) {
+    std::ofstream csv(o.av_trace);
+    csv << "viewer,display_s,capture_s,stream,picture_delay_ms,hold_ms,voice_delay_ms,voice_natural_ms,"
+           "voice_target_ms,offset_ms\n";
+    const int64_t t0 = net::WallUs() - static_cast<int64_t>(o.seconds * 1e6);
+    auto dump = [&](const char* viewer, const net::SiteAvSync& sy) {
+      for (const auto& p : sy.sync().trace())
+        csv << viewer << ',' << (p.display_us - t0) / 1e6 << ',' << (p.capture_us - t0) / 1e6 << ',' << p.stream << ','
+            << p.picture_delay_ms << ',' << p.hold_ms << ',' << p.voice_delay_ms << ',' << p.voice_natural_ms << ','
+            << p.voice_target_ms << ',' << p.offset_ms << '\n';
+    };
+    if (render_sync) dump("render", *render_sync);
+    if (!decoder_syncs.empty()) dump("decode", *decoder_syncs.front());
+    if (!csv) spdlog::error("live: could not write {}", o.av_trace);
+  }
   const audio::AvSyncStats render_av = render_sync ? render_sync->stats() : audio::AvSyncStats{};
   std::vector<net::RemoteVoicesStats> voice_stats;
   for (auto& sy : decoder_syncs) voice_stats.push_back(sy->voice_stats());
@@ -568,13 +587,14 @@ int Run(const BenchArgs& args, LiveOptions o) {
       picture_hold.push_back(a.picture_sync_delay_ms);
     }
     if (offsets == 0) {
-      std::fprintf(stderr, "live: %s viewers measured no voice/picture offset (no voice played?)\n", viewer.c_str());
+      spdlog::warn("live: {} viewers measured no voice/picture offset (no voice played?)", viewer);
       return;
     }
     std::map<std::string, std::string> q = {{"viewer", viewer}, {"sync", sync_state}};
     char bound[64];
     std::snprintf(bound, sizeof bound, "%.0f", o.sync.max_voice_delay_ms);
     q["max_voice_delay_ms"] = bound;
+    q["hold_pictures"] = o.sync.hold_pictures ? "on" : "off";
     auto with = [&](std::map<std::string, std::string> extra) {
       extra.insert(q.begin(), q.end());
       return extra;
@@ -746,6 +766,11 @@ BenchFn SetupLive(CLI::App& app) {
                      return true;
                    }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
         ->check(CLI::IsMember({"on", "off"}));
+    app.add_option("--hold-pictures", [options](const std::vector<std::string>& v) {
+                     options->sync.hold_pictures = v.at(0) == "on";
+                     return true;
+                   }, "lip sync: pictures wait for their voice (on, default) or only for a slower voice (off)")
+        ->check(CLI::IsMember({"on", "off"}));
     app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
                    "lip sync: the voice waits at most this long for a later picture")
         ->capture_default_str()
@@ -754,6 +779,9 @@ BenchFn SetupLive(CLI::App& app) {
                    "lip sync: a picture waits at most this long for a later voice")
         ->capture_default_str()
         ->check(CLI::Range(0.0, 10000.0));
+    app.add_option("--av-trace", o.av_trace,
+                   "write every voice/picture offset measured by the rendering viewer and the first decoding viewer "
+                   "to this CSV (display and capture time, delays, hold, voice target, offset)");
     app.add_option("--delay-voice-ms", o.delay_voice_ms, "hold every voice frame this long at each viewer (test)")
         ->check(CLI::Range(0.0, 10000.0));
     app.add_option("--delay-picture-ms", o.delay_picture_ms, "hold every picture this long at each viewer (test)")

@@ -179,7 +179,7 @@ void SiteAvSync::PollPictures() {
   }
 }
 
-bool SiteAvSync::NextFrame(ReceivedFrame* out, double timeout_s) {
+bool SiteAvSync::NextFrame(ReceivedFrame* out, double timeout_s, int64_t* ready_us) {
   const auto real_deadline =
       std::chrono::steady_clock::now() + std::chrono::microseconds(static_cast<int64_t>(std::llround(timeout_s * 1e6)));
   for (;;) {
@@ -209,6 +209,7 @@ bool SiteAvSync::NextFrame(ReceivedFrame* out, double timeout_s) {
       }
       if (due >= 0) {
         skipped_ += due;
+        if (ready_us != nullptr) *ready_us = held_[static_cast<size_t>(due)].ready_us;
         *out = std::move(held_[static_cast<size_t>(due)].frame);
         held_.erase(held_.begin(), held_.begin() + due + 1);
         return true;

@@ -127,7 +127,9 @@ class SiteAvSync {
 
   // The newest received picture that is due now (older due ones are
   // dropped), waiting up to `timeout_s` for one; false if none.
-  bool NextFrame(ReceivedFrame* out, double timeout_s = 0.0);
+  // `ready_us` (optional): when it was taken from the client, decoded (the
+  // clock's time; it may have been held since).
+  bool NextFrame(ReceivedFrame* out, double timeout_s = 0.0, int64_t* ready_us = nullptr);
   // `frame` (from NextFrame) is visible from `display_us` (the clock's
   // time); rendering it started at `render_start_us`.
   void Displayed(const ReceivedFrame& frame, int64_t render_start_us, int64_t display_us);
@@ -139,6 +141,7 @@ class SiteAvSync {
   void TickVoice();
 
   audio::AvSync& sync() { return *sync_; }
+  const audio::AvSync& sync() const { return *sync_; }
   audio::AvSyncStats stats() const { return sync_->stats(); }
   RemoteVoicesStats voice_stats() const;
 

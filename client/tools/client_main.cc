@@ -132,6 +132,13 @@ int main(int argc, char** argv) {
                  "other): on, or off (each as soon as it can; the offset is still measured and reported)")
       ->capture_default_str()
       ->check(CLI::IsMember({"on", "off"}));
+  std::string hold_pictures = "on";
+  app.add_option("--hold-pictures", hold_pictures,
+                 "lip sync: on (the voice waits until 90 % of the pictures are there and each earlier picture waits "
+                 "for its voice: in sync even when picture delays spread, for that much more picture delay) or off "
+                 "(pictures wait only for a slower voice; the voice follows their median)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--max-voice-delay-ms", o.max_voice_delay_ms,
                  "lip sync: the voice waits at most this long for a later picture (beyond, it leads the picture)")
       ->capture_default_str()
@@ -166,6 +173,7 @@ int main(int argc, char** argv) {
   }
   o.aec = aec == "on";
   o.av_sync = av_sync == "on";
+  o.hold_pictures = hold_pictures == "on";
   if ((!o.audio_in.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
     spdlog::error("holoport-client: --audio-in/--aec/--hrtf need --call");
     return 2;

@@ -357,6 +357,7 @@ class Viewer {
   audio::AvSyncOptions SyncOptions() const {
     audio::AvSyncOptions a;
     a.enabled = o_.av_sync;
+    a.hold_pictures = o_.hold_pictures;
     a.max_voice_delay_ms = o_.max_voice_delay_ms;
     a.max_picture_delay_ms = o_.max_picture_delay_ms;
     return a;
@@ -998,6 +999,7 @@ class Viewer {
         const audio::AvSyncStats as = av_sync_->stats();
         const net::RemoteVoicesStats vs = av_sync_->voice_stats();
         j["av_sync"] = {{"enabled", o_.av_sync},
+                        {"hold_pictures", o_.hold_pictures},
                         {"av_offset_ms_p50", as.av_offset_ms_p50},
                         {"av_offset_ms_p99", as.av_offset_ms_p99},
                         {"av_offset_ms_p1", as.av_offset_ms_p1},

@@ -60,6 +60,7 @@ struct ViewerOptions {
   // arrives first waits for the other, within these bounds (ms). Off: each
   // plays as soon as it can (offsets are still measured).
   bool av_sync = true;
+  bool hold_pictures = true;  // pictures wait for their voice (a picture jitter buffer)
   double max_voice_delay_ms = 1000;
   double max_picture_delay_ms = 300;
   // Test hooks: every voice frame / picture waits this long on arrival (ms).

@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <vector>
+
+#include <spdlog/spdlog.h>
 
 #include "audio/capture.h"
 #include "audio/synthetic_voice.h"
@@ -131,7 +132,7 @@ struct SiteVoice::Impl {
       while (!stop) {
         auto f = mic->Next();
         if (!f.ok()) {
-          std::fprintf(stderr, "holoport-server: voice: %s; the site's voice stops\n", f.status().ToString().c_str());
+          spdlog::error("voice: {}; the site's voice stops", f.status().ToString());
           return;
         }
         if (studio_time && std::isnan(StudioTime(f->capture_time_us))) continue;  // not capturing yet
@@ -163,8 +164,17 @@ struct SiteVoice::Impl {
       }
       Send(pcm, seq++, t0);
       t0 += audio::kFrameUs;
-      // After a long stall (a loaded machine) carry on from now, not with a burst of old frames.
-      if (clock.NowUs() - t0 > 500000) t0 = clock.NowUs() - audio::kFrameUs;
+      // After a long stall (a loaded machine) carry on from now, not with a
+      // burst of old frames; the frames not made count as lost (sequence
+      // numbers skip them), so capture time and sequence stay in step for
+      // the viewers' jitter buffers.
+      if (const int64_t behind = clock.NowUs() - t0; behind > 500000) {
+        const int64_t skip = behind / audio::kFrameUs;
+        t0 += skip * audio::kFrameUs;
+        seq += static_cast<uint32_t>(skip);
+        std::lock_guard<std::mutex> l(mu);
+        stats.late_frames += skip;
+      }
     }
   }
 };

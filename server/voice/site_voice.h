@@ -54,7 +54,7 @@ using PublishFn = std::function<void(const protocol::AudioPose&)>;
 struct SiteVoiceStats {
   int64_t frames = 0;        // published
   int64_t onsets = 0;        // synthetic: syllables and knocks started
-  int64_t late_frames = 0;   // frames made more than 20 ms after they were complete (a stalled thread)
+  int64_t late_frames = 0;   // frames made more than 20 ms late, or skipped after a stall over 0.5 s
   double cpu_ms = 0;         // CPU time of the voice thread so far (synthesis + Opus + publishing)
   std::string description;   // the source, for logs
 };
