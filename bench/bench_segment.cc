@@ -138,22 +138,27 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
   empty_options.empty_room = true;
   SyntheticStudio empty(rig, empty_options);
   Segmenter seg(rig, options);
+  // The same segmenter on the portable unary path: the peer of the AVX2 one.
+  SegmenterOptions portable_options = options;
+  portable_options.simd = false;
+  Segmenter portable(rig, portable_options);
   Mog2Segmenter mog2(static_cast<int>(rig.pods.size()), Mog2Options{});
   std::vector<RgbdFrameSet> calib_frames;
   RgbdFrameSet fs;
   for (int k = 0; k < background_frames; ++k) {
     empty.RenderFrame(k, &fs, nullptr);
-    if (!seg.AddBackgroundFrame(fs).ok() || !mog2.AddBackgroundFrame(fs).ok()) return 1;
+    if (!seg.AddBackgroundFrame(fs).ok() || !portable.AddBackgroundFrame(fs).ok() || !mog2.AddBackgroundFrame(fs).ok())
+      return 1;
     if (k < 10) calib_frames.push_back(fs);
   }
-  if (!seg.FinishBackground().ok()) return 1;
+  if (!seg.FinishBackground().ok() || !portable.FinishBackground().ok()) return 1;
   if (!args.json) spdlog::info("background learned from {} frames", background_frames);
 
   // --- Segmentation.
   SyntheticStudio studio(rig, workload->studio);
   StudioGroundTruth gt;
   std::vector<SegmentDebug> dbg;
-  std::vector<double> ms, cpu_ms, mog2_ms;
+  std::vector<double> ms, cpu_ms, portable_cpu_ms, mog2_ms;
   double iou = 0, unary_iou = 0, mog2_iou = 0, precision = 0, recall = 0;
   for (int k = 0; k < num_frames; ++k) {
     // Frames spread over the animation (every 7th frame: poses differ).
@@ -167,6 +172,12 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
     ms.push_back(sw.ElapsedMs());
     cpu_ms.push_back(1000.0 * static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
     iou += MeanIou(fs, gt.mask, nullptr, &precision, &recall);
+    {
+      RgbdFrameSet copy = fs;
+      const std::clock_t p0 = std::clock();
+      if (!portable.Segment(&copy).ok()) return 1;
+      portable_cpu_ms.push_back(1000.0 * static_cast<double>(std::clock() - p0) / CLOCKS_PER_SEC);
+    }
     if (!seg.Segment(&fs, &dbg).ok()) return 1;
     unary_iou += MeanIou(fs, gt.mask, &dbg);
     sw.Restart();
@@ -181,6 +192,10 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
   // CPU time of all threads: barely changed by other load on the machine.
   EmitFigure("segment", wl, "cpu_ms", Median(cpu_ms), "ms",
              {{"stage", "segment"}, {"mode", "crf"}, {"threads", threads}, {"pods", pods}});
+  EmitFigure("segment", wl, "cpu_ms", Median(portable_cpu_ms), "ms",
+             {{"stage", "segment"}, {"mode", "crf"}, {"threads", threads}, {"pods", pods}, {"unary", "portable"}});
+  EmitFigure("segment", wl, "cpu_ratio_vs_portable", Median(cpu_ms) / std::max(1e-9, Median(portable_cpu_ms)), "x",
+             {{"stage", "segment"}, {"note", "AVX2 unary (where the CPU has it) over the portable path, same run"}});
   EmitFigure("segment", wl, "mask_iou", iou / num_frames, "1", {{"stage", "segment"}, {"mode", "crf"}});
   EmitFigure("segment", wl, "mask_precision", precision / num_frames, "1", {{"stage", "segment"}, {"mode", "crf"}});
   EmitFigure("segment", wl, "mask_recall", recall / num_frames, "1", {{"stage", "segment"}, {"mode", "crf"}});

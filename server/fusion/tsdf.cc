@@ -121,18 +121,25 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
     const int32_t b = static_cast<int32_t>(bi);
     const BlockCoord bc = blocks_.coord(b);
     const VoxelBlock& fine = blocks_.block(b);
+    // Per axis and fine index within the block: the coarse block coordinate
+    // and the index within it (the divisions once per block, not per voxel).
     const int64_t base[3] = {int64_t{kBlockSide} * bc.x, int64_t{kBlockSide} * bc.y, int64_t{kBlockSide} * bc.z};
+    int32_t cblock[3][kBlockSide];
+    int cvox[3][kBlockSide];
+    for (int a = 0; a < 3; ++a)
+      for (int t = 0; t < kBlockSide; ++t) {
+        const int64_t c = floor_div(base[a] + t, step);
+        const int64_t cbk = floor_div(c, kBlockSide);
+        cblock[a][t] = static_cast<int32_t>(cbk);
+        cvox[a][t] = static_cast<int>(c - int64_t{kBlockSide} * cbk);
+      }
     for (int k = 0; k < kBlockSide; ++k) {
-      const int64_t cz = floor_div(base[2] + k, step);
       for (int j = 0; j < kBlockSide; ++j) {
-        const int64_t cy = floor_div(base[1] + j, step);
         for (int i = 0; i < kBlockSide; ++i) {
           const int fv = i + kBlockSide * (j + kBlockSide * k);
           const float w = fine.weight[fv];
           if (!(w > 0)) continue;
-          const int64_t cx = floor_div(base[0] + i, step);
-          const BlockCoord cb{static_cast<int32_t>(floor_div(cx, kBlockSide)), static_cast<int32_t>(floor_div(cy, kBlockSide)),
-                              static_cast<int32_t>(floor_div(cz, kBlockSide))};
+          const BlockCoord cb{cblock[0][i], cblock[1][j], cblock[2][k]};
           if (last_index == VoxelBlockMap::kNotFound || !(cb == last)) {
             bool created = false;
             last_index = out.FindOrAllocate(cb, &created);
@@ -141,9 +148,7 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
             if (created) std::memset(&sums[static_cast<size_t>(last_index)], 0, sizeof(Sums));
           }
           Sums& sm = sums[static_cast<size_t>(last_index)];
-          const int cv = static_cast<int>(cx - int64_t{kBlockSide} * cb.x) +
-                         kBlockSide * (static_cast<int>(cy - int64_t{kBlockSide} * cb.y) +
-                                       kBlockSide * static_cast<int>(cz - int64_t{kBlockSide} * cb.z));
+          const int cv = cvox[0][i] + kBlockSide * (cvox[1][j] + kBlockSide * cvox[2][k]);
           sm.tw[cv] += fine.tsdf[fv] * w;
           sm.w[cv] += w;
           sm.r[cv] += fine.r[fv] * w;

@@ -8,6 +8,11 @@
 
 #include <Eigen/Core>
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define HOLO_SEGMENT_AVX2 1
+#endif
+
 #include "common/worker_pool.h"
 
 namespace holo {
@@ -61,13 +66,18 @@ inline float FastExp2(float x) {
 }
 inline float Sigmoid(float x) { return 1.0f / (1.0f + FastExp2(-1.4426950f * x)); }
 
-// Background model of one pixel, prepared for the unary term.
-struct BgPixel {
+// Background model of a pod's pixels, prepared for the unary term; one
+// array per field so that eight pixels load as one vector.
+struct BgModel {
   // Background depth minus the margin τ, metres; negative when the empty
   // room had no depth here.
-  float depth_offset_m;
-  float a, b, v;
-  float inv_var_ab, inv_var_v;
+  std::vector<float> depth_offset_m;
+  std::vector<float> a, b, v;
+  std::vector<float> inv_var_ab, inv_var_v;
+
+  void Resize(size_t n) {
+    for (auto* f : {&depth_offset_m, &a, &b, &v, &inv_var_ab, &inv_var_v}) f->resize(n);
+  }
 };
 
 }  // namespace
@@ -118,7 +128,7 @@ struct PodState {
   std::vector<uint16_t> depth_count;
   std::vector<double> depth_sum, depth_sum2;  // metres
   std::vector<float> col_sum;                 // a, b, v, a²+b², v² per pixel
-  std::vector<BgPixel> model;
+  BgModel model;
   std::vector<float> bg_depth_m;  // mean background depth (0 = none), for colour registration
 
   // Non-registered pods: unit-depth rays of the depth camera, and colour
@@ -320,11 +330,11 @@ Status Segmenter::FinishBackground() {
 void Segmenter::Impl::Finish(PodState* s, const SegmenterOptions& o) {
   const size_t n = static_cast<size_t>(s->w) * s->h;
   const double frames = background_frames;  // colour means
-  s->model.resize(n);
+  s->model.Resize(n);
   s->bg_depth_m.assign(n, 0.0f);
+  BgModel& m = s->model;
   const float var_ab0 = o.chroma_sigma * o.chroma_sigma, var_v0 = o.value_sigma * o.value_sigma;
   for (size_t i = 0; i < n; ++i) {
-    BgPixel& m = s->model[i];
     const int c = s->depth_count[i];
     if (c > 0) {
       // Pixels valid in only some frames (grazing surfaces, far floor) keep
@@ -333,22 +343,22 @@ void Segmenter::Impl::Finish(PodState* s, const SegmenterOptions& o) {
       const double var = c >= 3 ? std::max(0.0, s->depth_sum2[i] / c - mean * mean) : 0.0;
       const double noise = o.depth_noise_at_1m_m * mean * mean;
       const double tau = o.depth_margin_min_m + o.depth_margin_stddevs * std::sqrt(std::max(var, noise * noise));
-      m.depth_offset_m = static_cast<float>(mean - tau);
+      m.depth_offset_m[i] = static_cast<float>(mean - tau);
       // A surface within the margin of the camera: keep it a (tiny) valid offset.
-      if (m.depth_offset_m <= 0) m.depth_offset_m = 1e-4f;
+      if (m.depth_offset_m[i] <= 0) m.depth_offset_m[i] = 1e-4f;
       s->bg_depth_m[i] = static_cast<float>(mean);
     } else {
-      m.depth_offset_m = -1.0f;
+      m.depth_offset_m[i] = -1.0f;
     }
     const float* cs = &s->col_sum[5 * i];
     const float inv = static_cast<float>(1.0 / frames);
-    m.a = cs[0] * inv;
-    m.b = cs[1] * inv;
-    m.v = cs[2] * inv;
-    const float var_ab = std::max(0.0f, cs[3] * inv - m.a * m.a - m.b * m.b);
-    const float var_v = std::max(0.0f, cs[4] * inv - m.v * m.v);
-    m.inv_var_ab = 1.0f / (var_ab0 + var_ab);
-    m.inv_var_v = 1.0f / (var_v0 + var_v);
+    m.a[i] = cs[0] * inv;
+    m.b[i] = cs[1] * inv;
+    m.v[i] = cs[2] * inv;
+    const float var_ab = std::max(0.0f, cs[3] * inv - m.a[i] * m.a[i] - m.b[i] * m.b[i]);
+    const float var_v = std::max(0.0f, cs[4] * inv - m.v[i] * m.v[i]);
+    m.inv_var_ab[i] = 1.0f / (var_ab0 + var_ab);
+    m.inv_var_v[i] = 1.0f / (var_v0 + var_v);
   }
   // The sums are no longer needed.
   std::vector<uint16_t>().swap(s->depth_count);
@@ -434,6 +444,141 @@ inline float SliceAt(const float* g, size_t base, float fx, float fy, float fz, 
   return n > 1e-6f ? q / n : 0.5f;
 }
 
+// The unary term's constants, from the options.
+struct UnaryParams {
+  explicit UnaryParams(const SegmenterOptions& o)
+      : inv_sd(1.0f / o.depth_sigma_m),
+        dmax(o.depth_max_logodds),
+        cmax(o.colour_max_logodds),
+        cmin(-o.colour_bg_max_logodds),
+        wd(o.depth_weight),
+        wc(o.colour_weight),
+        appeared(std::clamp(o.depth_appeared_logodds, -o.depth_max_logodds, o.depth_max_logodds)),
+        edge_mm(static_cast<int>(o.depth_edge_m * 1000.0f)),
+        edge_cap(o.depth_edge_max_logodds),
+        colour_scale(o.colour_scale),
+        colour_threshold(o.colour_threshold),
+        prior(o.prior_logodds) {}
+  float inv_sd, dmax, cmax, cmin, wd, wc, appeared;
+  int edge_mm;
+  float edge_cap, colour_scale, colour_threshold, prior;
+};
+
+// Unary log-odds and luma of pixel i: colour distance to the background
+// model plus the depth evidence (in front of the background: foreground);
+// at a depth edge (a neighbour more than depth_edge_m away) the depth term
+// is capped, since mixed pixels there lie between the two surfaces.
+inline void UnaryAt(const UnaryParams& p, const BgModel& m, const uint8_t* rgb, const uint16_t* depth, int W, int H,
+                    const float* inv_table, size_t i, float* L, uint8_t* luma) {
+  const int r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
+  luma[i] = Luma(r, g, b);
+  const Hsv c = ToHsv(r, g, b, inv_table);
+  const float da = c.a - m.a[i], db = c.b - m.b[i], dv = c.v - m.v[i];
+  const float dist = std::sqrt((da * da + db * db) * m.inv_var_ab[i] + dv * dv * m.inv_var_v[i]);
+  const float lc = std::clamp(p.colour_scale * (dist - p.colour_threshold), p.cmin, p.cmax);
+  float ld = 0.0f;
+  if (depth[i] > 0) {
+    const float off = m.depth_offset_m[i];
+    ld = off < 0 ? p.appeared : std::clamp((off - depth[i] * 0.001f) * p.inv_sd, -p.dmax, p.dmax);
+    if (ld > p.edge_cap) {
+      const int x = static_cast<int>(i % W), y = static_cast<int>(i / W);
+      const int d = depth[i];
+      auto edge = [&](size_t j) { return depth[j] > 0 && std::abs(depth[j] - d) > p.edge_mm; };
+      if ((x > 0 && edge(i - 1)) || (x + 1 < W && edge(i + 1)) || (y > 0 && edge(i - W)) ||
+          (y + 1 < H && edge(i + W)))
+        ld = p.edge_cap;
+    }
+  }
+  L[i] = p.prior + p.wd * ld + p.wc * lc;
+}
+
+#if defined(HOLO_SEGMENT_AVX2)
+bool CpuHasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+// UnaryAt eight pixels at a time: the same operations in the same order (no
+// FMA; the division is the table's), so the result is bit-identical. Pixels
+// that may sit at a depth edge on the image border go through UnaryAt.
+// Returns how many pixels
+// it did (a multiple of 8, leaving the last 8 or fewer to the caller: the
+// colour gather reads one byte past each pixel).
+__attribute__((target("avx2"))) size_t UnaryAvx2(const UnaryParams& p, const BgModel& m, const uint8_t* rgb,
+                                                 const uint16_t* depth, int W, int H, const float* inv_table,
+                                                 float* L, uint8_t* luma) {
+  const size_t n = static_cast<size_t>(W) * H;
+  const __m256i lane3 = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
+  const __m256i byte = _mm256_set1_epi32(0xFF);
+  const __m256 half = _mm256_set1_ps(0.5f), sqrt3_2 = _mm256_set1_ps(0.8660254f), inv255 = _mm256_set1_ps(1.0f / 255.0f);
+  const __m256 scale = _mm256_set1_ps(p.colour_scale), thr = _mm256_set1_ps(p.colour_threshold);
+  const __m256 cmin = _mm256_set1_ps(p.cmin), cmax = _mm256_set1_ps(p.cmax);
+  const __m256 dmax = _mm256_set1_ps(p.dmax), ndmax = _mm256_set1_ps(-p.dmax), inv_sd = _mm256_set1_ps(p.inv_sd);
+  const __m256 mm = _mm256_set1_ps(0.001f), appeared = _mm256_set1_ps(p.appeared), zero = _mm256_setzero_ps();
+  const __m256 edge_cap = _mm256_set1_ps(p.edge_cap), prior = _mm256_set1_ps(p.prior);
+  const __m256 wd = _mm256_set1_ps(p.wd), wc = _mm256_set1_ps(p.wc);
+  const __m256i edge_mm = _mm256_set1_epi32(p.edge_mm);
+  size_t i = 0;
+  for (; i + 8 < n; i += 8) {
+    const __m256i px = _mm256_i32gather_epi32(reinterpret_cast<const int*>(rgb + 3 * i), lane3, 1);
+    const __m256i r = _mm256_and_si256(px, byte), g = _mm256_and_si256(_mm256_srli_epi32(px, 8), byte),
+                  b = _mm256_and_si256(_mm256_srli_epi32(px, 16), byte);
+    // Luma, (77 r + 150 g + 29 b) >> 8, packed to bytes.
+    const __m256i y32 = _mm256_srli_epi32(
+        _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(r, _mm256_set1_epi32(77)),
+                                          _mm256_mullo_epi32(g, _mm256_set1_epi32(150))),
+                         _mm256_mullo_epi32(b, _mm256_set1_epi32(29))),
+        8);
+    const __m128i y16 = _mm_packus_epi32(_mm256_castsi256_si128(y32), _mm256_extracti128_si256(y32, 1));
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(luma + i), _mm_packus_epi16(y16, y16));
+    // ToHsv.
+    const __m256i mx = _mm256_max_epi32(r, _mm256_max_epi32(g, b));
+    const __m256 inv = _mm256_i32gather_ps(inv_table, mx, 4);
+    const __m256 rf = _mm256_cvtepi32_ps(r);
+    const __m256 ca = _mm256_mul_ps(_mm256_sub_ps(rf, _mm256_mul_ps(half, _mm256_cvtepi32_ps(_mm256_add_epi32(g, b)))), inv);
+    const __m256 cb = _mm256_mul_ps(_mm256_mul_ps(sqrt3_2, _mm256_cvtepi32_ps(_mm256_sub_epi32(g, b))), inv);
+    const __m256 cv = _mm256_mul_ps(_mm256_cvtepi32_ps(mx), inv255);
+    const __m256 da = _mm256_sub_ps(ca, _mm256_loadu_ps(&m.a[i])), db = _mm256_sub_ps(cb, _mm256_loadu_ps(&m.b[i])),
+                 dv = _mm256_sub_ps(cv, _mm256_loadu_ps(&m.v[i]));
+    const __m256 dist = _mm256_sqrt_ps(
+        _mm256_add_ps(_mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(da, da), _mm256_mul_ps(db, db)), _mm256_loadu_ps(&m.inv_var_ab[i])),
+                      _mm256_mul_ps(_mm256_mul_ps(dv, dv), _mm256_loadu_ps(&m.inv_var_v[i]))));
+    const __m256 lc = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(scale, _mm256_sub_ps(dist, thr)), cmin), cmax);
+    // Depth.
+    const __m256i d32 = _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(depth + i)));
+    const __m256 valid = _mm256_castsi256_ps(_mm256_cmpgt_epi32(d32, _mm256_setzero_si256()));
+    const __m256 off = _mm256_loadu_ps(&m.depth_offset_m[i]);
+    const __m256 in_front = _mm256_min_ps(
+        _mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(off, _mm256_mul_ps(_mm256_cvtepi32_ps(d32), mm)), inv_sd), ndmax), dmax);
+    __m256 ld = _mm256_and_ps(valid, _mm256_blendv_ps(in_front, appeared, _mm256_cmp_ps(off, zero, _CMP_LT_OQ)));
+    // Lanes above the cap: is a 4-neighbour valid and more than edge_mm away?
+    const __m256 over = _mm256_cmp_ps(ld, edge_cap, _CMP_GT_OQ);
+    const int over_lanes = _mm256_movemask_ps(over);
+    const size_t x0 = i % static_cast<size_t>(W);
+    const bool interior = i >= static_cast<size_t>(W) && i + 8 + static_cast<size_t>(W) <= n && x0 > 0 &&
+                          x0 + 8 < static_cast<size_t>(W);
+    if (over_lanes != 0 && interior) {
+      auto edge_to = [&](const uint16_t* nb) __attribute__((target("avx2"))) {
+        const __m256i v = _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(nb)));
+        const __m256i far = _mm256_cmpgt_epi32(_mm256_abs_epi32(_mm256_sub_epi32(v, d32)), edge_mm);
+        return _mm256_and_si256(far, _mm256_cmpgt_epi32(v, _mm256_setzero_si256()));
+      };
+      const __m256i edge = _mm256_or_si256(_mm256_or_si256(edge_to(depth + i - 1), edge_to(depth + i + 1)),
+                                           _mm256_or_si256(edge_to(depth + i - W), edge_to(depth + i + W)));
+      ld = _mm256_blendv_ps(ld, edge_cap, _mm256_and_ps(over, _mm256_castsi256_ps(edge)));
+    }
+    _mm256_storeu_ps(L + i, _mm256_add_ps(_mm256_add_ps(prior, _mm256_mul_ps(wd, ld)), _mm256_mul_ps(wc, lc)));
+    // At the image border the scalar path checks the neighbours that exist.
+    if (over_lanes != 0 && !interior) {
+      for (int bits = over_lanes; bits != 0; bits &= bits - 1)
+        UnaryAt(p, m, rgb, depth, W, H, inv_table, i + static_cast<size_t>(__builtin_ctz(static_cast<unsigned>(bits))), L,
+                luma);
+    }
+  }
+  return i;
+}
+#endif
+
 }  // namespace
 
 void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptions& o, SegmentDebug* dbg) {
@@ -445,39 +590,15 @@ void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptio
     rgb = s->colour_in_depth.data();
   }
   // --- Unary log-odds at full resolution.
+  const UnaryParams up(o);
   const uint16_t* depth = f->depth.data();
-  const BgPixel* model = s->model.data();
   float* L = s->unary.data();
   uint8_t* luma = s->luma.data();
-  const float inv_sd = 1.0f / o.depth_sigma_m;
-  const float dmax = o.depth_max_logodds, cmax = o.colour_max_logodds, cmin = -o.colour_bg_max_logodds;
-  const float wd = o.depth_weight, wc = o.colour_weight;
-  const float appeared = std::clamp(o.depth_appeared_logodds, -dmax, dmax);
-  const int edge_mm = static_cast<int>(o.depth_edge_m * 1000.0f);
-  const float edge_cap = o.depth_edge_max_logodds;
-  for (size_t i = 0; i < n; ++i) {
-    const int r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
-    luma[i] = Luma(r, g, b);
-    const BgPixel& m = model[i];
-    const Hsv c = ToHsv(r, g, b, inv_table.data());
-    const float da = c.a - m.a, db = c.b - m.b, dv = c.v - m.v;
-    const float dist = std::sqrt((da * da + db * db) * m.inv_var_ab + dv * dv * m.inv_var_v);
-    const float lc = std::clamp(o.colour_scale * (dist - o.colour_threshold), cmin, cmax);
-    float ld = 0.0f;
-    if (depth[i] > 0) {
-      ld = m.depth_offset_m < 0 ? appeared
-                                : std::clamp((m.depth_offset_m - depth[i] * 0.001f) * inv_sd, -dmax, dmax);
-      if (ld > edge_cap) {
-        const int x = static_cast<int>(i % W), y = static_cast<int>(i / W);
-        const int d = depth[i];
-        auto edge = [&](size_t j) { return depth[j] > 0 && std::abs(depth[j] - d) > edge_mm; };
-        if ((x > 0 && edge(i - 1)) || (x + 1 < W && edge(i + 1)) || (y > 0 && edge(i - W)) ||
-            (y + 1 < H && edge(i + W)))
-          ld = edge_cap;
-      }
-    }
-    L[i] = o.prior_logodds + wd * ld + wc * lc;
-  }
+  size_t done = 0;
+#if defined(HOLO_SEGMENT_AVX2)
+  if (o.simd && CpuHasAvx2()) done = UnaryAvx2(up, s->model, rgb, depth, W, H, inv_table.data(), L, luma);
+#endif
+  for (size_t i = done; i < n; ++i) UnaryAt(up, s->model, rgb, depth, W, H, inv_table.data(), i, L, luma);
   uint8_t* mask = f->mask.data();
   if (dbg) {
     dbg->unary_logodds = s->unary;

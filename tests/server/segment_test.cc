@@ -232,6 +232,45 @@ TEST(SegmenterTest, GreyBoardOnGreyWallFoundByDepth) {
   EXPECT_EQ(fg, 0u);
 }
 
+// The vectorised unary term (AVX2, where the CPU has it) gives the portable
+// path's log-odds bit for bit, depth edges included, and so the same masks.
+TEST(SegmenterTest, VectorisedUnaryMatchesThePortablePath) {
+  const Rig rig = QvgaRig();
+  SegmenterOptions scalar;
+  scalar.simd = false;
+  Segmenter a(rig, SegmenterOptions{}), b(rig, scalar);
+  SyntheticStudio empty(rig, QvgaStudio(true)), studio(rig, QvgaStudio(false));
+  RgbdFrameSet fs;
+  for (int k = 0; k < 5; ++k) {
+    empty.RenderFrame(k, &fs, nullptr);
+    ASSERT_TRUE(a.AddBackgroundFrame(fs).ok());
+    ASSERT_TRUE(b.AddBackgroundFrame(fs).ok());
+  }
+  ASSERT_TRUE(a.FinishBackground().ok());
+  ASSERT_TRUE(b.FinishBackground().ok());
+  for (int k : {12, 40}) {
+    studio.RenderFrame(k, &fs, nullptr);
+    RgbdFrameSet fa = fs, fb = fs;
+    std::vector<SegmentDebug> da, db;
+    ASSERT_TRUE(a.Segment(&fa, &da).ok());
+    ASSERT_TRUE(b.Segment(&fb, &db).ok());
+    size_t fg = 0;
+    for (size_t p = 0; p < fs.frames.size(); ++p) {
+      const ImageFloat& ua = da[p].unary_logodds;
+      const ImageFloat& ub = db[p].unary_logodds;
+      ASSERT_EQ(ua.width(), ub.width());
+      ASSERT_EQ(ua.height(), ub.height());
+      const size_t n = static_cast<size_t>(ua.width()) * ua.height();
+      for (size_t i = 0; i < n; ++i) {
+        ASSERT_EQ(ua.data()[i], ub.data()[i]) << "pod " << p << " pixel " << i;
+        fg += ua.data()[i] > 0;
+      }
+      EXPECT_TRUE(fa.frames[p].mask == fb.frames[p].mask) << p;
+    }
+    EXPECT_GT(fg, 5000u) << "the person is in view";
+  }
+}
+
 TEST(SegmenterTest, SameMasksForAnyThreadCountAndRepeatedCalls) {
   const Rig rig = QvgaRig().Scaled(0.5);  // 160x120
   SegmenterOptions o1;

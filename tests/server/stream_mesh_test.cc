@@ -3,6 +3,7 @@
 #include "server/fusion/stream_mesh.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <utility>
 #include <vector>
@@ -63,6 +64,41 @@ TsdfOptions Options(float voxel) {
   return o;
 }
 
+// Checks every coarse voxel in x, y ∈ [−r, r), z ∈ [z0, z1) against the
+// weighted mean of its step³ fine voxels; returns how many were observed.
+size_t CheckDownsample(const TsdfVolume& fine, const TsdfVolume& coarse, int step, int64_t r, int64_t z0, int64_t z1) {
+  size_t checked = 0;
+  for (int64_t z = z0; z < z1; ++z)
+    for (int64_t y = -r; y < r; ++y)
+      for (int64_t x = -r; x < r; ++x) {
+        double tw = 0, w = 0;
+        int n = 0;
+        for (int dz = 0; dz < step; ++dz)
+          for (int dy = 0; dy < step; ++dy)
+            for (int dx = 0; dx < step; ++dx) {
+              float tf, wf;
+              fine.VoxelAt(step * x + dx, step * y + dy, step * z + dz, &tf, &wf);
+              if (wf > 0) {
+                tw += static_cast<double>(tf) * wf;
+                w += wf;
+                ++n;
+              }
+            }
+        float tc, wc;
+        coarse.VoxelAt(x, y, z, &tc, &wc);
+        if (n == 0) {
+          EXPECT_EQ(wc, 0.0f) << x << " " << y << " " << z;
+          if (wc != 0.0f) return checked;
+          continue;
+        }
+        EXPECT_NEAR(wc, w / n, 1e-4 * w) << x << " " << y << " " << z;
+        EXPECT_NEAR(tc, tw / w, 1e-5) << x << " " << y << " " << z;
+        if (std::abs(tc - tw / w) > 1e-5) return checked;
+        ++checked;
+      }
+  return checked;
+}
+
 TEST(TsdfDownsample, CopiesEveryStepthVoxelAndRefusesMismatchedVolumes) {
   const Rig rig = RingRig(6, {0, 0, 1}, 1.5f);
   TsdfVolume fine(Options(0.01f));
@@ -75,36 +111,14 @@ TEST(TsdfDownsample, CopiesEveryStepthVoxelAndRefusesMismatchedVolumes) {
   TsdfVolume coarse2(co);
   EXPECT_FALSE(fine.DownsampleInto(3, &coarse2).ok()) << "voxel size 2 cm is not 3 × 1 cm";
   ASSERT_TRUE(fine.DownsampleInto(2, &coarse2).ok());
-  size_t checked = 0;
-  for (int64_t z = 40; z < 60; ++z)
-    for (int64_t y = -20; y < 20; ++y)
-      for (int64_t x = -20; x < 20; ++x) {
-        // Coarse voxel (x, y, z) = weighted mean of fine voxels 2x..2x+1 (each axis).
-        double tw = 0, w = 0;
-        int n = 0;
-        for (int dz = 0; dz < 2; ++dz)
-          for (int dy = 0; dy < 2; ++dy)
-            for (int dx = 0; dx < 2; ++dx) {
-              float tf, wf;
-              fine.VoxelAt(2 * x + dx, 2 * y + dy, 2 * z + dz, &tf, &wf);
-              if (wf > 0) {
-                tw += static_cast<double>(tf) * wf;
-                w += wf;
-                ++n;
-              }
-            }
-        float tc, wc;
-        coarse2.VoxelAt(x, y, z, &tc, &wc);
-        if (n == 0) {
-          ASSERT_EQ(wc, 0.0f) << x << " " << y << " " << z;
-          continue;
-        }
-        ASSERT_NEAR(wc, w / n, 1e-4 * w) << x << " " << y << " " << z;
-        ASSERT_NEAR(tc, tw / w, 1e-5);
-        ++checked;
-      }
+  EXPECT_GT(CheckDownsample(fine, coarse2, 2, 20, 40, 60), 1000u);
+  // An odd step: coarse cells straddle fine blocks, and negative coordinates round down.
+  TsdfOptions co3 = Options(0.03f);
+  co3.truncation_voxels = 4.0f / 3.0f;
+  TsdfVolume coarse3(co3);
+  ASSERT_TRUE(fine.DownsampleInto(3, &coarse3).ok());
+  EXPECT_GT(CheckDownsample(fine, coarse3, 3, 14, 27, 40), 500u);
   EXPECT_FLOAT_EQ(fine.DownsampleOffset(2), 0.005f);
-  EXPECT_GT(checked, 1000u);
 }
 
 TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
