@@ -92,7 +92,7 @@ int main(int argc, char** argv) {
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
   bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
-  int prerender = 0, stream_step = 2, max_in_flight = 6;
+  int prerender = 0, stream_step = 2, max_in_flight = 3;
   bool keep_late = false;
   size_t stream_triangles = 20000;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
@@ -117,7 +117,9 @@ int main(int argc, char** argv) {
   app.add_flag("--keep-late", keep_late,
                "with --pace: take every frame however late (latency grows when the site cannot keep up) instead "
                "of skipping to the newest camera frame");
-  app.add_option("--max-in-flight", max_in_flight, "frames in the pipeline at once (0: as many as the queues hold)")
+  app.add_option("--max-in-flight", max_in_flight,
+                 "frames in the pipeline at once (0: as many as the queues hold); on a CPU-bound site the latency is "
+                 "about this many frame times (docs/live.md)")
       ->capture_default_str()
       ->check(CLI::Range(0, 256));
   app.add_option("--prerender", prerender,
