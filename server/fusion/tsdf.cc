@@ -133,13 +133,30 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
         cblock[a][t] = static_cast<int32_t>(cbk);
         cvox[a][t] = static_cast<int>(c - int64_t{kBlockSide} * cbk);
       }
+    // Along a row of the block, fine voxels that fall into the same coarse
+    // voxel (a run of `step`) are summed in registers and added once.
     for (int k = 0; k < kBlockSide; ++k) {
       for (int j = 0; j < kBlockSide; ++j) {
-        for (int i = 0; i < kBlockSide; ++i) {
-          const int fv = i + kBlockSide * (j + kBlockSide * k);
-          const float w = fine.weight[fv];
-          if (!(w > 0)) continue;
-          const BlockCoord cb{cblock[0][i], cblock[1][j], cblock[2][k]};
+        const int row = kBlockSide * (j + kBlockSide * k);
+        int i = 0;
+        while (i < kBlockSide) {
+          const int32_t cbx = cblock[0][i];
+          const int cvx = cvox[0][i];
+          float tw = 0, ws = 0, rs = 0, gs = 0, bs = 0;
+          int cnt = 0;
+          for (; i < kBlockSide && cvox[0][i] == cvx && cblock[0][i] == cbx; ++i) {
+            const int fv = row + i;
+            const float w = fine.weight[fv];
+            if (!(w > 0)) continue;
+            tw += fine.tsdf[fv] * w;
+            ws += w;
+            rs += fine.r[fv] * w;
+            gs += fine.g[fv] * w;
+            bs += fine.b[fv] * w;
+            ++cnt;
+          }
+          if (cnt == 0) continue;
+          const BlockCoord cb{cbx, cblock[1][j], cblock[2][k]};
           if (last_index == VoxelBlockMap::kNotFound || !(cb == last)) {
             bool created = false;
             last_index = out.FindOrAllocate(cb, &created);
@@ -148,13 +165,13 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
             if (created) std::memset(&sums[static_cast<size_t>(last_index)], 0, sizeof(Sums));
           }
           Sums& sm = sums[static_cast<size_t>(last_index)];
-          const int cv = cvox[0][i] + kBlockSide * (cvox[1][j] + kBlockSide * cvox[2][k]);
-          sm.tw[cv] += fine.tsdf[fv] * w;
-          sm.w[cv] += w;
-          sm.r[cv] += fine.r[fv] * w;
-          sm.g[cv] += fine.g[fv] * w;
-          sm.b[cv] += fine.b[fv] * w;
-          ++sm.n[cv];
+          const int cv = cvx + kBlockSide * (cvox[1][j] + kBlockSide * cvox[2][k]);
+          sm.tw[cv] += tw;
+          sm.w[cv] += ws;
+          sm.r[cv] += rs;
+          sm.g[cv] += gs;
+          sm.b[cv] += bs;
+          sm.n[cv] = static_cast<uint16_t>(sm.n[cv] + cnt);
         }
       }
     }
