@@ -35,6 +35,11 @@ Status CaptureSiteOptions::Check() const {
   HOLO_RETURN_IF_ERROR(pipeline.Check().WithContext("pipeline"));
   if (stream_mesh) HOLO_RETURN_IF_ERROR(stream.Check().WithContext("stream mesh"));
   if (temporal) HOLO_RETURN_IF_ERROR(TemporalOptions().Check().WithContext("temporal"));
+  if (hull) {
+    if (temporal) return InvalidArgument("the visual hull is per frame: it cannot be combined with temporal fusion");
+    if (masks == MaskSource::kNone) return InvalidArgument("the visual hull needs masks (segment, truth or dataset)");
+    HOLO_RETURN_IF_ERROR(hull_options.Check().WithContext("visual hull"));
+  }
   return OkStatus();
 }
 
@@ -98,6 +103,9 @@ StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, 
     // computed only to be thrown away (−4 CPU-ms per S8-QVGA frame).
     if (options.texture) tsdf.integrate_color = false;
     HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(tsdf));
+    if (options.hull) {
+      HOLO_ASSIGN_OR_RETURN(site->hull_, VisualHull::Create(options.hull_options));
+    }
   }
   if (options.stream_mesh) {
     TsdfOptions tsdf = options.temporal ? options.TemporalOptions().tsdf : options.tsdf;
@@ -169,8 +177,12 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
       }
       return OkStatus();
     }
-    volume_->Reset();
-    HOLO_RETURN_IF_ERROR(volume_->Integrate(rig_, w.frames));
+    if (hull_) {
+      HOLO_RETURN_IF_ERROR(hull_->Build(rig_, w.frames, volume_.get()));
+    } else {
+      volume_->Reset();
+      HOLO_RETURN_IF_ERROR(volume_->Integrate(rig_, w.frames));
+    }
     w.timings.fuse_ms = sw.ElapsedMs();
     const double cpu1 = cpu ? ProcessCpuTimeMs() : 0;
     sw.Restart();

@@ -23,6 +23,7 @@
 #include "common/status.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/fusion/stream_mesh.h"
+#include "server/fusion/visual_hull.h"
 #include "server/fusion/tsdf.h"
 #include "server/pipeline/pipeline.h"
 #include "server/segment/color_calibration.h"
@@ -65,6 +66,12 @@ struct CaptureSiteOptions {
   // above; the rest (graph, tracker, weight cap, reset policy) is used as is.
   bool temporal = false;
   TemporalFusionOptions temporal_options;
+  // Reconstruct from the masks alone, as colour-only pods would
+  // (server/fusion/visual_hull.h), instead of fusing depth; the volume
+  // (`tsdf`'s voxel size and truncation) holds the hull's distance field and
+  // everything after it runs unchanged. Not with `temporal`; needs masks.
+  bool hull = false;
+  VisualHullOptions hull_options;
   // Publish the compact stream mesh (server/fusion/stream_mesh.h) as
   // FrameWork::mesh. With `full_mesh` the full-resolution mesh is also made
   // (FrameWork::full_mesh, textured too: export, recording of full quality).
@@ -112,6 +119,7 @@ class CaptureSite {
   std::unique_ptr<TsdfVolume> volume_;
   std::unique_ptr<TemporalFusion> temporal_;
   std::unique_ptr<StreamMesher> stream_;
+  std::unique_ptr<VisualHull> hull_;
   int64_t next_sequence_ = 0;  // acquire: the source's next frame set
   std::unique_ptr<Texturer> texturer_;
   std::unique_ptr<Pipeline> pipeline_;

@@ -106,6 +106,12 @@ int main(int argc, char** argv) {
   app.add_option("--depth", depth_mode, "synthetic source: direct (the studio's depth sensor model) or stereo "
                  "(PatchMatch on each pod's IR pair, docs/stereo.md)")->check(CLI::IsMember({"direct", "stereo"}))
       ->capture_default_str();
+  std::string reconstruct = "tsdf";
+  app.add_option("--reconstruct", reconstruct,
+                 "tsdf (fuse the pods' depth) or hull (the visual hull of the pods' masks alone, as colour-only "
+                 "pods would give; docs/visual_hull.md)")
+      ->check(CLI::IsMember({"tsdf", "hull"}))
+      ->capture_default_str();
   app.add_option("-n,--frames", frames, "frames to process (-1: until the source ends)")->capture_default_str();
   app.add_option("--voxel-mm", voxel_mm, "TSDF voxel size, mm (default: the workload's, 10 for datasets)");
   app.add_option("--trunc-voxels", trunc_voxels, "TSDF truncation, voxels")->capture_default_str();
@@ -359,6 +365,16 @@ int main(int argc, char** argv) {
       return Fail(holo::InvalidArgument("--masks truth needs --source synthetic"));
   } else {
     return Fail(holo::InvalidArgument("--source must be 'synthetic' or 'dataset:PATH', got '" + source_spec + "'"));
+  }
+  if (reconstruct == "hull") {
+    options.hull = true;
+    // Carved straight at the stream mesh's resolution: a hull has no depth
+    // noise for the stream mesh's box filter to average.
+    if (options.stream_mesh && options.stream.step > 1) {
+      options.tsdf.voxel_size *= static_cast<float>(options.stream.step);
+      options.tsdf.truncation_voxels /= static_cast<float>(options.stream.step);
+      options.stream.step = 1;
+    }
   }
   // Stereo depth: the studio's IR pairs through PatchMatch replace its depth.
   std::unique_ptr<holo::FrameSource> stereo_source;
