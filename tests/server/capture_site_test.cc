@@ -25,7 +25,8 @@ struct Result {
   std::vector<Mesh> meshes;
 };
 
-Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment, bool temporal = false) {
+Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment, bool temporal = false,
+               bool hull = false) {
   StudioOptions so;
   so.seed = 5;
   SyntheticStudio studio(SmallRig(), so);
@@ -41,6 +42,7 @@ Result RunSite(bool serial, int frames, MaskSource masks = MaskSource::kSegment,
   o.pipeline.max_frames = frames;
   o.temporal = temporal;
   o.temporal_options.track_points = 1000;
+  o.hull = hull;
   auto site = CaptureSite::Create(&studio, &empty, &studio, o);
   EXPECT_TRUE(site.ok()) << site.status().ToString();
   Result r;
@@ -88,6 +90,43 @@ TEST(CaptureSiteTest, TemporalFusionStageRunsAndConcurrentEqualsSerial) {
     if (i > 0) differs = differs || serial.meshes[i].positions != per_frame.meshes[i].positions;
   }
   EXPECT_TRUE(differs) << "temporal option had no effect";
+}
+
+TEST(CaptureSiteTest, VisualHullStageRunsFromMasksAndConcurrentEqualsSerial) {
+  const Result serial = RunSite(true, 4, MaskSource::kTruth, false, true);
+  const Result concurrent = RunSite(false, 4, MaskSource::kTruth, false, true);
+  const Result fused = RunSite(true, 4, MaskSource::kTruth, false, false);
+  ASSERT_EQ(serial.frames.size(), 4u);
+  ASSERT_EQ(concurrent.frames.size(), 4u);
+  ASSERT_EQ(fused.frames.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    EXPECT_GT(serial.meshes[i].num_triangles(), 100u) << "frame " << i << ": a hull was carved";
+    EXPECT_EQ(serial.meshes[i].positions, concurrent.meshes[i].positions) << "frame " << i;
+    EXPECT_NE(serial.meshes[i].positions, fused.meshes[i].positions) << "frame " << i << ": the hull, not the fusion";
+  }
+}
+
+TEST(CaptureSiteTest, VisualHullOptionsAreChecked) {
+  StudioOptions so;
+  SyntheticStudio studio(SmallRig(), so);
+  CaptureSiteOptions o;
+  o.masks = MaskSource::kTruth;
+  o.color_calibration = false;
+  o.hull = true;
+  o.temporal = true;
+  auto site = CaptureSite::Create(&studio, nullptr, &studio, o);
+  ASSERT_FALSE(site.ok());
+  EXPECT_NE(site.status().ToString().find("temporal"), std::string::npos) << site.status().ToString();
+  o.temporal = false;
+  o.masks = MaskSource::kNone;
+  site = CaptureSite::Create(&studio, nullptr, &studio, o);
+  ASSERT_FALSE(site.ok());
+  EXPECT_NE(site.status().ToString().find("needs masks"), std::string::npos) << site.status().ToString();
+  o.masks = MaskSource::kTruth;
+  o.hull_options.min_views = 0;
+  site = CaptureSite::Create(&studio, nullptr, &studio, o);
+  ASSERT_FALSE(site.ok());
+  EXPECT_NE(site.status().ToString().find("min_views"), std::string::npos) << site.status().ToString();
 }
 
 TEST(CaptureSiteTest, TemporalOptionsAreChecked) {
