@@ -38,6 +38,7 @@
 #include "common/metrics/mesh_shapes.h"
 #include "common/pose.h"
 #include "net/site_client.h"
+#include "net/wire_message.h"
 // Recorded head traces come from the pose library when it is part of the
 // build (client/pose, the prediction work); without it --pose-trace is refused.
 #if __has_include("client/pose/trace.h")
@@ -350,7 +351,7 @@ class Viewer {
     }
     HOLO_ASSIGN_OR_RETURN(av_sync_, net::SiteAvSync::Start(client_, so,
                                                           participant_ ? &participant_->av_sync() : nullptr));
-    net_start_us_ = WallNowUs();
+    net_start_us_ = net::WallUs();
     return OkStatus();
   }
 
@@ -361,12 +362,6 @@ class Viewer {
     a.max_voice_delay_ms = o_.max_voice_delay_ms;
     a.max_picture_delay_ms = o_.max_picture_delay_ms;
     return a;
-  }
-
-  static int64_t WallNowUs() {
-    return std::chrono::duration_cast<std::chrono::microseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
   }
 
   // world_from_camera of the centre view at time t (seconds from start).
@@ -595,14 +590,14 @@ class Viewer {
   void NoteNetDisplayed(const net::ReceivedFrame& f, double loop_ms) {
     // capture (site clock) → display: the client's latency to reception is
     // already corrected by its clock-offset estimate; add the time since.
-    const double lat = f.latency_ms + (WallNowUs() - f.received_us) / 1000.0;
+    const double lat = f.latency_ms + (net::WallUs() - f.received_us) / 1000.0;
     stats_.latency_ms.push_back(lat);
     if (last_index_ >= 0 && f.frame_index > last_index_) stats_.drops += f.frame_index - last_index_ - 1;
     last_index_ = f.frame_index;
     ++frames_new_;
     // Network mode: the fps shown is new site frames displayed per second
     // (redraws of the frame already shown for a moving head do not count).
-    new_frame_us_.push_back(WallNowUs());
+    new_frame_us_.push_back(net::WallUs());
     if (new_frame_us_.size() > 16) new_frame_us_.erase(new_frame_us_.begin());
     if (first_new_us_ == 0) first_new_us_ = new_frame_us_.back();
     last_new_us_ = new_frame_us_.back();
@@ -622,7 +617,7 @@ class Viewer {
   }
 
   void UpdateBitrate() {
-    const int64_t now = WallNowUs();
+    const int64_t now = net::WallUs();
     if (now - rate_t_us_ < 1000000) return;
     const uint64_t bytes = client_->stats().bytes_received;
     if (rate_t_us_ > 0) recent_mbps_ = (bytes - rate_bytes_) * 8.0 / static_cast<double>(now - rate_t_us_);
@@ -690,7 +685,7 @@ class Viewer {
     std::filesystem::create_directories(o_.out_dir, ec);
     if (ec && o_.headless) return Fail(Unavailable("--out " + o_.out_dir + ": cannot create: " + ec.message()));
     const int max_frames = o_.frames > 0 ? o_.frames : (o_.seconds > 0 ? 0 : (window ? 0 : 30));
-    const int64_t start = WallNowUs();
+    const int64_t start = net::WallUs();
     ImageRgb8 image;
     StreamFrame frame;
     net::ReceivedFrame rf;
@@ -701,7 +696,7 @@ class Viewer {
     int last_progress_s = -1;
     while (!g_viewer_stop.load()) {
       if (window && glfwWindowShouldClose(w)) break;
-      const int64_t now = WallNowUs();
+      const int64_t now = net::WallUs();
       const double t = (now - start) / 1e6;
       if (o_.seconds > 0 && t >= o_.seconds) break;
       if (max_frames > 0 && displayed_new >= max_frames) break;
@@ -709,7 +704,7 @@ class Viewer {
       CheckRigChange();
       UpdateBitrate();
       bool fresh = false;
-      const int64_t render_start_us = WallNowUs();
+      const int64_t render_start_us = net::WallUs();
       if (av_sync_->NextFrame(&rf)) {
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;  // nothing to show in it
         net::ReceivedFrame keep_times;  // times/index only are used below (no mesh/image copies)
@@ -759,7 +754,7 @@ class Viewer {
       if (window) glfwSwapBuffers(w);
       glFinish();
       stats_.render_ms.push_back(rs.ElapsedMs());
-      last_render_us = WallNowUs();
+      last_render_us = net::WallUs();
       const double loop_ms = loop.ElapsedMs();
       loop.Restart();
       if (fresh) {
@@ -771,11 +766,11 @@ class Viewer {
       }
       bool due = false;
       if (fresh && o_.png_interval_s > 0) {
-        due = last_png_us_ == 0 || WallNowUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
+        due = last_png_us_ == 0 || net::WallUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
       } else if (fresh) {
         due = (displayed_new - 1) % std::max(1, o_.png_every) == 0;
       }
-      if (due) last_png_us_ = WallNowUs();
+      if (due) last_png_us_ = net::WallUs();
       if (o_.headless && o_.write_png &&
           (due || (!fresh && stale_renders_ % 5 == 1 &&
                                                                              static_cast<net::ClientState>(
@@ -793,7 +788,7 @@ class Viewer {
                      stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_, stats_.drops);
       }
     }
-    net_elapsed_s_ = (WallNowUs() - start) / 1e6;
+    net_elapsed_s_ = (net::WallUs() - start) / 1e6;
     Status audio_status;
     av_sync_->Stop();
     if (participant_) audio_status = participant_->Stop();
