@@ -4,17 +4,10 @@
 #include <cmath>
 #include <string>
 
+#include "common/quantile.h"
+
 namespace holo::audio {
 namespace {
-
-// Nearest-rank quantile of `v` (copied), q in [0, 1]; 0 if empty.
-template <typename T>
-double Quantile(std::vector<T> v, double q) {
-  if (v.empty()) return 0.0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::llround(q * static_cast<double>(v.size() - 1))));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return static_cast<double>(v[k]);
-}
 
 // Sample vectors for the run's statistics keep at most this many values
 // (9 hours of pictures at 30 fps).

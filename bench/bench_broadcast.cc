@@ -52,6 +52,7 @@
 #include "bench_process.h"
 #include "client/net/broadcast_player.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "common/status.h"
 
 namespace holo::bench {
@@ -105,12 +106,6 @@ uint16_t FreePort() { return FreeTcpPort(); }
 pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) { return SpawnLogged(argv, log_path); }
 
 void StopChild(pid_t pid) { StopProcess(pid, SIGTERM, 5.0); }
-
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
-}
 
 // Capture times (site clock) of the first and last MeshFrame of a part, by
 // walking its records (lengths only: the load generator does not CRC or
@@ -538,15 +533,15 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   emit("viewers_held", held, "viewers", {{"of", std::to_string(o.viewers)}, {"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
   emit("viewers_complete", complete, "viewers",
        {{"of", std::to_string(o.viewers)}, {"what", "every part of the window, no skip, jump or error, any latency"}});
-  emit("latency_p50_ms", Pct(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
-  emit("latency_p99_ms", Pct(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
-  emit("latency_oldest_p50_ms", Pct(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
-  emit("latency_oldest_p99_ms", Pct(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
-  emit("latency_tier_p50_ms", Pct(tier, 0.5), "ms",
+  emit("latency_p50_ms", Quantile(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_p99_ms", Quantile(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p50_ms", Quantile(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p99_ms", Quantile(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_tier_p50_ms", Quantile(tier, 0.5), "ms",
        {{"from", "packager received the part's last message"}, {"to", "part received"}});
-  emit("latency_tier_p99_ms", Pct(tier, 0.99), "ms",
+  emit("latency_tier_p99_ms", Quantile(tier, 0.99), "ms",
        {{"from", "packager received the part's last message"}, {"to", "part received"}});
-  emit("mbps", Pct(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
+  emit("mbps", Quantile(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
   emit("mbps_total", static_cast<double>(total_bytes) * 8 / window_s / 1e6, "Mbit/s",
        {{"note", "all viewers; loopback ceiling ~23,700 Mbit/s for one TCP stream"}});
   emit("parts_per_viewer_per_s", static_cast<double>(total_parts) / window_s / o.viewers, "1/s",

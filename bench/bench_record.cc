@@ -32,6 +32,7 @@
 #include "bench.h"
 #include "common/clock.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "net/session_server.h"
 #include "net/site_client.h"
 #include "server/record/recording_reader.h"
@@ -199,12 +200,6 @@ int RunRecordBench(const BenchArgs& args) {
 //      live_record_bytes_per_minute   file bytes per minute of media
 //      live_record_cpu_pct            recorder io thread CPU (receive + write) over wall, % of one core
 //      live_record_messages           messages recorded / published
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
 double ThreadCpuMs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -331,10 +326,10 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
     const double cpu_ms = io_ms + (pump_cpu_ms - pump0);
     const uint64_t expected = static_cast<uint64_t>(frames - 1);
     const uint64_t worst = *std::min_element(received.begin(), received.end());
-    EmitFigure("replaynet", args.workload, "replay_latency_ms", Pct(latency_ms, 0.5), "ms", qual({{"stat", "p50"}}));
-    EmitFigure("replaynet", args.workload, "replay_latency_ms", Pct(latency_ms, 0.99), "ms", qual({{"stat", "p99"}}));
-    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Pct(late_ms, 0.5), "ms", qual({{"stat", "p50"}}));
-    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Pct(late_ms, 0.99), "ms", qual({{"stat", "p99"}}));
+    EmitFigure("replaynet", args.workload, "replay_latency_ms", Quantile(latency_ms, 0.5), "ms", qual({{"stat", "p50"}}));
+    EmitFigure("replaynet", args.workload, "replay_latency_ms", Quantile(latency_ms, 0.99), "ms", qual({{"stat", "p99"}}));
+    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Quantile(late_ms, 0.5), "ms", qual({{"stat", "p50"}}));
+    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Quantile(late_ms, 0.99), "ms", qual({{"stat", "p99"}}));
     EmitFigure("replaynet", args.workload, "replay_delivered_fraction",
                static_cast<double>(worst) / static_cast<double>(expected), "1", qual({{"class", "worst_viewer"}}));
     EmitFigure("replaynet", args.workload, "replay_server_cpu_pct_per_viewer",

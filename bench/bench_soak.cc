@@ -78,6 +78,7 @@
 
 #include "bench.h"
 #include "bench_process.h"
+#include "common/quantile.h"
 
 namespace holo::bench {
 namespace {
@@ -140,15 +141,6 @@ class LineTail {
   uint64_t offset_ = 0;
   std::string pending_;
 };
-
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double idx = p / 100.0 * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<size_t>(std::floor(idx));
-  const size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (v[hi] - v[lo]) * (idx - static_cast<double>(lo));
-}
 
 // VmRSS of `pid`, MB; < 0 when the process is gone.
 double RssMbOf(pid_t pid) {
@@ -441,8 +433,8 @@ WindowFigures Figures(const Proc& p, double w0, double w1) {
     f.frames = static_cast<int64_t>(lat.size());
   }
   f.fps = static_cast<double>(f.frames) / std::max(1e-3, w1 - w0);
-  f.p50 = Pct(lat, 50);
-  f.p99 = Pct(lat, 99);
+  f.p50 = InterpolatedQuantile(lat, 0.50);
+  f.p99 = InterpolatedQuantile(lat, 0.99);
   return f;
 }
 

@@ -16,15 +16,10 @@
 #include "audio/spatializer.h"
 #include "audio/voice_codec.h"
 #include "audio/wav.h"
+#include "common/quantile.h"
 
 namespace holo::net {
 namespace {
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
 
 // Appends `v`, keeping the newest 3000–6000 samples (1–2 minutes of 20 ms
 // frames): medians over the recent past, memory and the cost of a median
@@ -281,8 +276,8 @@ const CallConfig& Participant::call() const { return impl_->o.call; }
 ParticipantStats Participant::stats() const {
   std::lock_guard<std::mutex> l(impl_->mu);
   ParticipantStats s = impl_->stats;
-  s.audio_network_ms_median = Median(impl_->network_ms);
-  s.jitter_buffer_ms_median = Median(impl_->jb_ms);
+  s.audio_network_ms_median = Quantile(impl_->network_ms, 0.5);
+  s.jitter_buffer_ms_median = Quantile(impl_->jb_ms, 0.5);
   s.audio_delay_ms = s.remote_audio_frames > 0
                          ? s.audio_network_ms_median + s.jitter_buffer_ms_median + audio::kFrameUs / 1000.0
                          : 0;

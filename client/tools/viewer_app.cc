@@ -37,6 +37,7 @@
 #include "common/log.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/pose.h"
+#include "common/quantile.h"
 #include "net/site_client.h"
 #include "net/wire_message.h"
 // Recorded head traces come from the pose library when it is part of the
@@ -54,13 +55,6 @@ namespace {
 std::atomic<bool> g_viewer_stop{false};
 
 using render::ColorMode;
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
-  return v[i];
-}
 
 // A table for the miniature room: top at `top` (centre of the top face),
 // 1.4 × 1.0 m, on four legs.
@@ -938,12 +932,12 @@ class Viewer {
                      ? 1e6 * static_cast<double>(frames_new_ - 1) / static_cast<double>(last_new_us_ - first_new_us_)
                      : 0.0;
     j["fps_definition"] = "new frames displayed per second (not redraws of a frame already shown)";
-    j["render_ms_median"] = Percentile(stats_.render_ms, 0.5);
-    j["render_ms_p95"] = Percentile(stats_.render_ms, 0.95);
-    j["upload_ms_median"] = Percentile(stats_.upload_ms, 0.5);
-    j["produce_ms_median"] = Percentile(stats_.produce_ms, 0.5);
-    j["latency_ms_median"] = Percentile(stats_.latency_ms, 0.5);
-    j["latency_ms_p95"] = Percentile(stats_.latency_ms, 0.95);
+    j["render_ms_median"] = Quantile(stats_.render_ms, 0.5);
+    j["render_ms_p95"] = Quantile(stats_.render_ms, 0.95);
+    j["upload_ms_median"] = Quantile(stats_.upload_ms, 0.5);
+    j["produce_ms_median"] = Quantile(stats_.produce_ms, 0.5);
+    j["latency_ms_median"] = Quantile(stats_.latency_ms, 0.5);
+    j["latency_ms_p95"] = Quantile(stats_.latency_ms, 0.95);
     j["latency_definition"] =
         "capture (start of producing the frame: studio render + texturing) to display (rendered, glFinish)";
     j["drops"] = stats_.drops;
@@ -984,8 +978,8 @@ class Viewer {
                           {"catch_ups", bs.follower.catch_ups},
                           {"skips", bs.follower.skips},
                           {"discontinuities", bs.follower.discontinuities},
-                          {"latency_ms_p50", Percentile(bs.latency_ms, 0.5)},
-                          {"latency_ms_p99", Percentile(bs.latency_ms, 0.99)},
+                          {"latency_ms_p50", Quantile(bs.latency_ms, 0.5)},
+                          {"latency_ms_p99", Quantile(bs.latency_ms, 0.99)},
                           {"latency_definition",
                            "packager receive time of a part's last message to the part's arrival here (Unix clocks)"},
                           {"last_error", bs.last_error}};
