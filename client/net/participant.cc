@@ -122,14 +122,8 @@ struct Participant::Impl {
       }
       ++seq;
       next_us += audio::kFrameUs;
-      // After a stall (loaded machine) do not send a burst of stale frames;
-      // the skipped ones count as lost (sequence numbers skip them), so that
-      // capture times and sequence numbers stay in step for the receivers.
-      if (const int64_t behind = clock.NowUs() - next_us; behind > 200000) {
-        const int64_t skip = behind / audio::kFrameUs;
-        next_us += skip * audio::kFrameUs;
-        seq += static_cast<uint32_t>(skip);
-      }
+      // After a stall (loaded machine) no burst of stale frames.
+      audio::SkipStalledFrames(clock.NowUs(), 200000, &next_us, &seq);
     }
   }
 
