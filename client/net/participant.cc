@@ -17,18 +17,15 @@
 #include "audio/voice_codec.h"
 #include "audio/wav.h"
 #include "common/quantile.h"
+#include "common/recent.h"
 
 namespace holo::net {
 namespace {
 
-// Appends `v`, keeping the newest 3000–6000 samples (1–2 minutes of 20 ms
-// frames): medians over the recent past, memory and the cost of a median
-// bounded however long the call lasts.
-void PushRecent(std::vector<double>* samples, double v) {
-  constexpr size_t kKeep = 3000;
-  if (samples->size() >= 2 * kKeep) samples->erase(samples->begin(), samples->begin() + kKeep);
-  samples->push_back(v);
-}
+// Medians over the newest 3000–6000 samples (1–2 minutes of 20 ms frames):
+// the recent past, memory and the cost of a median bounded however long the
+// call lasts.
+constexpr size_t kRecentSamples = 3000;
 
 }  // namespace
 
@@ -144,7 +141,7 @@ struct Participant::Impl {
         voices.Insert(sid, std::move(a));
         std::lock_guard<std::mutex> l(mu);
         ++stats.remote_audio_frames;
-        PushRecent(&network_ms, net_ms);
+        AppendRecent(&network_ms, net_ms, kRecentSamples);
       }
       // One 20 ms block: listener = own head, each speaker at its head pose through the room link.
       const std::vector<RemoteVoices::Block> blocks = voices.Pull();
@@ -164,7 +161,7 @@ struct Participant::Impl {
         if (b.playing) {
           const audio::SpeakerPlacement place = audio::PlaceRemoteSpeaker(b.pose, o.call.room);
           std::lock_guard<std::mutex> l(mu);
-          PushRecent(&jb_ms, b.buffer_delay_ms);
+          AppendRecent(&jb_ms, b.buffer_delay_ms, kRecentSamples);
           stats.remote_x = place.position.x();
           stats.remote_y = place.position.y();
           stats.remote_z = place.position.z();

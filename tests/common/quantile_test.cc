@@ -1,10 +1,12 @@
 // Quantile and InterpolatedQuantile: the ranks every statistic and figure
-// relies on (a p50 of an even count, the ends, no values).
+// relies on (a p50 of an even count, the ends, no values); AppendRecent: the
+// bounded history those statistics are taken over.
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "common/quantile.h"
+#include "common/recent.h"
 
 namespace holo {
 namespace {
@@ -37,6 +39,22 @@ TEST(InterpolatedQuantile, InterpolatesBetweenNeighbouringRanks) {
   EXPECT_DOUBLE_EQ(InterpolatedQuantile({5}, 0.99), 5);
   EXPECT_EQ(InterpolatedQuantile({}, 0.5), 0.0);
   EXPECT_EQ(InterpolatedQuantile({}, 0.5, -1.0), -1.0);
+}
+
+TEST(AppendRecent, KeepsTheNewestInOrderWithinTwiceTheBound) {
+  std::vector<int> h;
+  for (int i = 0; i < 10; ++i) AppendRecent(&h, i, 3);
+  // Dropped the oldest 3 at 6 held and again at 6 held: 6..9 remain.
+  EXPECT_EQ(h, (std::vector<int>{6, 7, 8, 9}));
+  for (int i = 10; i < 1000; ++i) {
+    AppendRecent(&h, i, 3);
+    ASSERT_GE(h.size(), 3u);
+    ASSERT_LE(h.size(), 6u);
+    ASSERT_EQ(h.back(), i);
+  }
+  std::vector<int> all;
+  for (int i = 0; i < 100; ++i) AppendRecent(&all, i, 0);  // 0: keep everything
+  EXPECT_EQ(all.size(), 100u);
 }
 
 }  // namespace
