@@ -12,7 +12,6 @@
 //                         over 200 random targets (simulated clock)
 //   seek_error_ms         largest |shown key frame − target| over those seeks
 //   replay_cpu_ms_per_media_s  pumping the whole file, per second of media
-#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -200,12 +199,6 @@ int RunRecordBench(const BenchArgs& args) {
 //      live_record_bytes_per_minute   file bytes per minute of media
 //      live_record_cpu_pct            recorder io thread CPU (receive + write) over wall, % of one core
 //      live_record_messages           messages recorded / published
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-}
-
 constexpr int kReplayNetDefaultViewers = 10;
 
 int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
@@ -269,7 +262,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
       std::lock_guard<std::mutex> l(mu);
       due_of[h.sequence] = due;
       late_ms.push_back(static_cast<double>(emitted - due) * 1e-3);
-      pump_cpu_ms = ThreadCpuMs();  // the pump thread's CPU so far
+      pump_cpu_ms = ThreadCpuTimeMs();  // the pump thread's CPU so far
     };
     auto rs = record::ReplayServer::Start(reader, &clock, o);
     if (!rs.ok()) {
