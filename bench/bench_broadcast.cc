@@ -51,6 +51,7 @@
 #include "bench.h"
 #include "bench_process.h"
 #include "client/net/broadcast_player.h"
+#include "common/clock.h"
 #include "common/log.h"
 #include "common/quantile.h"
 #include "common/status.h"
@@ -81,13 +82,7 @@ int64_t SteadyUs() {
   return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-double WallS() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
+int64_t WallUs() { return WallClock::Instance().NowUs(); }
 
 // 0 for a process that is gone (its CPU no longer counts).
 double CpuMsOf(pid_t pid) { return std::max(0.0, ProcessCpuMsOf(pid)); }

@@ -105,10 +105,6 @@ struct SoakOptions {
 std::atomic<bool> g_interrupted{false};
 void OnSoakSignal(int) { g_interrupted = true; }
 
-double WallS() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
 // Sleeps `s` seconds in short steps; false if interrupted.
 bool SleepS(double s) {
   const double until = WallS() + s;
