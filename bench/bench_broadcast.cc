@@ -567,6 +567,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
 }
 
 BenchFn Setup(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<BroadcastOptions>();
   app.add_option("--viewers", o->viewers, "light HTTP viewers")->check(CLI::Range(1, 20000));
   app.add_option("--edges", o->edges, "nginx edge caches")->check(CLI::Range(1, 16));

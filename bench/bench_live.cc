@@ -734,6 +734,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
 
 // The benchmark's own options (holoport-bench live --help).
 BenchFn SetupLive(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto options = std::make_shared<LiveOptions>();
   {
     LiveOptions& o = *options;

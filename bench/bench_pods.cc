@@ -349,6 +349,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
 }
 
 BenchFn SetupPods(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<PodsOptions>();
   app.add_option("--warmup", o->warmup_s, "seconds after the first full set before measuring")->check(CLI::Range(0.0, 60.0));
   app.add_option("--seconds", o->seconds, "measured window, s")->check(CLI::Range(2.0, 600.0));

@@ -388,6 +388,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
 }  // namespace
 
 BenchFn SetupReplayNet(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto viewers = std::make_shared<int>(kReplayNetDefaultViewers);
   app.add_option("--viewers", *viewers, "viewers of the replay")->capture_default_str()->check(CLI::PositiveNumber);
   return [viewers](const BenchArgs& args) { return RunReplayNetBench(args, *viewers); };

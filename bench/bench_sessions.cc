@@ -376,6 +376,7 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
 }
 
 BenchFn SetupSessions(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<SessionsOptions>();
   app.add_option("--viewers", o->viewers, "viewers on loopback")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--seconds", o->seconds, "seconds of broadcast (at least 4)")->capture_default_str();

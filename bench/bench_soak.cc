@@ -837,6 +837,7 @@ int Soak::Report(double t_end, bool interrupted) {
 }
 
 BenchFn SetupSoak(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<SoakOptions>();
   app.add_option("--minutes", o->minutes,
                  "length of the measured run (after start-up and warm-up); a progress line per window on stderr")
