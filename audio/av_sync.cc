@@ -4,17 +4,10 @@
 #include <cmath>
 #include <string>
 
+#include "common/quantile.h"
+
 namespace holo::audio {
 namespace {
-
-// Nearest-rank quantile of `v` (copied), q in [0, 1]; 0 if empty.
-template <typename T>
-double Quantile(std::vector<T> v, double q) {
-  if (v.empty()) return 0.0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::llround(q * static_cast<double>(v.size() - 1))));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return static_cast<double>(v[k]);
-}
 
 // Sample vectors for the run's statistics keep at most this many values
 // (9 hours of pictures at 30 fps).
@@ -43,20 +36,12 @@ Status AvSyncOptions::Check() const {
 
 AvSync::AvSync(AvSyncOptions options) : options_(options) {}
 
-double AvSync::VoiceNaturalLocked(int64_t now_us) const {
-  double natural = -1.0;
+double AvSync::VoiceMaxLocked(double Voice::*delay, int64_t now_us) const {
+  double largest = -1.0;
   const auto timeout_us = static_cast<int64_t>(options_.voice_timeout_ms * 1000.0);
   for (const auto& [id, v] : voices_)
-    if (v.last_playout_us >= now_us - timeout_us) natural = std::max(natural, v.natural_ms);
-  return natural;
-}
-
-double AvSync::VoiceDelayLocked(int64_t now_us) const {
-  double delay = -1.0;
-  const auto timeout_us = static_cast<int64_t>(options_.voice_timeout_ms * 1000.0);
-  for (const auto& [id, v] : voices_)
-    if (v.last_playout_us >= now_us - timeout_us) delay = std::max(delay, v.delay_ms);
-  return delay;
+    if (v.last_playout_us >= now_us - timeout_us) largest = std::max(largest, v.*delay);
+  return largest;
 }
 
 int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
@@ -71,7 +56,8 @@ int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
   // Held until the voice of the same instant plays: its actual delay (sync
   // included) with a picture jitter buffer, else only its own delay.
   const double voice =
-      !options_.enabled ? -1.0 : (options_.hold_pictures ? VoiceDelayLocked(ready_us) : VoiceNaturalLocked(ready_us));
+      !options_.enabled ? -1.0
+                        : VoiceMaxLocked(options_.hold_pictures ? &Voice::delay_ms : &Voice::natural_ms, ready_us);
   if (voice >= 0) {
     // Rendering takes time: start it so that the picture is visible when
     // its voice plays.
@@ -117,7 +103,7 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
       trace_.push_back({display_us, capture_us, id, delay_ms, hold_ms, v.delay_ms, v.natural_ms, voice_target_ms_, offset});
   }
   if (!options_.hold_pictures) UpdateVoiceTargetLocked(display_us);
-  const double natural = VoiceNaturalLocked(display_us);
+  const double natural = VoiceMaxLocked(&Voice::natural_ms, display_us);
   if (natural >= 0) Keep(&voice_sync_, std::max(0.0, voice_target_ms_ - natural));
 }
 
@@ -163,7 +149,7 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
       want = v;
     }
   }
-  const double natural = VoiceNaturalLocked(now_us);
+  const double natural = VoiceMaxLocked(&Voice::natural_ms, now_us);
   if (natural >= 0 && want > natural + options_.max_voice_delay_ms) {
     want = natural + options_.max_voice_delay_ms;
     ++n_.voice_delay_capped;

@@ -160,9 +160,9 @@ class AvSync {
     double delay_ms = 0;    // capture → playout at the last step
     double natural_ms = 0;
   };
-  // Largest natural (or actual) delay of the voices playing at `now_us`; < 0: none.
-  double VoiceNaturalLocked(int64_t now_us) const;
-  double VoiceDelayLocked(int64_t now_us) const;
+  // Largest `delay` (&Voice::natural_ms or &Voice::delay_ms) of the voices
+  // playing at `now_us`; < 0: none.
+  double VoiceMaxLocked(double Voice::*delay, int64_t now_us) const;
   void UpdateVoiceTargetLocked(int64_t now_us);
 
   AvSyncOptions options_;

@@ -56,6 +56,15 @@ VoiceEncoder::~VoiceEncoder() {
 
 int CodecDelaySamples(AudioCodec codec) { return codec == AudioCodec::kOpus ? 312 : 0; }
 
+int64_t SkipStalledFrames(int64_t now_us, int64_t max_behind_us, int64_t* next_us, uint32_t* sequence) {
+  const int64_t behind = now_us - *next_us;
+  if (behind <= max_behind_us) return 0;
+  const int64_t skip = behind / kFrameUs;
+  *next_us += skip * kFrameUs;
+  *sequence += static_cast<uint32_t>(skip);
+  return skip;
+}
+
 int VoiceEncoder::lookahead_samples() const {
   if (enc_ == nullptr) return 0;
   opus_int32 lookahead = 0;

@@ -32,6 +32,15 @@ inline constexpr int kMaxOpusPacket = 1275;
 // Lip sync adds it to the voice's playout delay.
 int CodecDelaySamples(AudioCodec codec);
 
+// A sender of 20 ms frames after a stall (a loaded machine did not run its
+// thread): when the next frame's capture time `*next_us` is more than
+// `max_behind_us` behind `now_us`, moves it forward by the whole frames it is
+// behind and `*sequence` by as many, so that no burst of stale frames goes
+// out and the receivers count the frames not made as lost (capture times and
+// sequence numbers stay in step for their jitter buffers). Returns the frames
+// skipped (0: not that far behind).
+int64_t SkipStalledFrames(int64_t now_us, int64_t max_behind_us, int64_t* next_us, uint32_t* sequence);
+
 struct VoiceEncoderOptions {
   AudioCodec codec = AudioCodec::kOpus;
   // Opus target bitrate, bit/s (6000..510000). Ignored for PCM.

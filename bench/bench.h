@@ -42,6 +42,11 @@ bool Register(const std::string& name, const std::string& description, BenchFn f
 bool RegisterWithOptions(const std::string& name, const std::string& description, BenchSetup setup);
 // Setup of a benchmark with no options besides the common ones.
 BenchSetup NoOptions(BenchFn fn);
+// For a benchmark's setup: takes common options it does not read (of
+// "--workload", "--frames", "--repeats") off `app`, so that they are refused
+// like any unknown option (exit 2, the option named) instead of accepted and
+// silently ignored.
+void DropCommonOptions(CLI::App& app, const std::vector<std::string>& names);
 
 // Prints one figure as a JSON line:
 // {"bench":"studio","workload":"S8-QVGA","metric":"fps","value":31.4,"unit":"1/s", ...qualifiers}

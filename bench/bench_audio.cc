@@ -359,6 +359,10 @@ int RunAudio(const BenchArgs& args) {
 HOLO_REGISTER_BENCH_OPTIONS("audio",
                             "voice: kbps, encode/decode ms, speech quality, mouth-to-ear ms, ILD/ITD by azimuth, "
                             "directivity",
-                            NoOptions(RunAudio));
+                            [](CLI::App& app) -> BenchFn {
+                              // Its rooms and signals are its own: no workload, no frame count.
+                              DropCommonOptions(app, {"--workload", "--frames"});
+                              return RunAudio;
+                            });
 
 }  // namespace holo::bench

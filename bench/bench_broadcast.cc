@@ -51,7 +51,9 @@
 #include "bench.h"
 #include "bench_process.h"
 #include "client/net/broadcast_player.h"
+#include "common/clock.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "common/status.h"
 
 namespace holo::bench {
@@ -80,13 +82,7 @@ int64_t SteadyUs() {
   return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
 }
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-double WallS() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
+int64_t WallUs() { return WallClock::Instance().NowUs(); }
 
 // 0 for a process that is gone (its CPU no longer counts).
 double CpuMsOf(pid_t pid) { return std::max(0.0, ProcessCpuMsOf(pid)); }
@@ -105,12 +101,6 @@ uint16_t FreePort() { return FreeTcpPort(); }
 pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) { return SpawnLogged(argv, log_path); }
 
 void StopChild(pid_t pid) { StopProcess(pid, SIGTERM, 5.0); }
-
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5))];
-}
 
 // Capture times (site clock) of the first and last MeshFrame of a part, by
 // walking its records (lengths only: the load generator does not CRC or
@@ -538,15 +528,15 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   emit("viewers_held", held, "viewers", {{"of", std::to_string(o.viewers)}, {"in_time_ms", std::to_string(static_cast<int>(o.in_time_ms))}});
   emit("viewers_complete", complete, "viewers",
        {{"of", std::to_string(o.viewers)}, {"what", "every part of the window, no skip, jump or error, any latency"}});
-  emit("latency_p50_ms", Pct(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
-  emit("latency_p99_ms", Pct(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
-  emit("latency_oldest_p50_ms", Pct(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
-  emit("latency_oldest_p99_ms", Pct(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
-  emit("latency_tier_p50_ms", Pct(tier, 0.5), "ms",
+  emit("latency_p50_ms", Quantile(newest, 0.5), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_p99_ms", Quantile(newest, 0.99), "ms", {{"from", "capture of the part's newest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p50_ms", Quantile(oldest, 0.5), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_oldest_p99_ms", Quantile(oldest, 0.99), "ms", {{"from", "capture of the part's oldest frame"}, {"to", "part received"}});
+  emit("latency_tier_p50_ms", Quantile(tier, 0.5), "ms",
        {{"from", "packager received the part's last message"}, {"to", "part received"}});
-  emit("latency_tier_p99_ms", Pct(tier, 0.99), "ms",
+  emit("latency_tier_p99_ms", Quantile(tier, 0.99), "ms",
        {{"from", "packager received the part's last message"}, {"to", "part received"}});
-  emit("mbps", Pct(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
+  emit("mbps", Quantile(mbps, 0.5), "Mbit/s", {{"per", "viewer (median)"}});
   emit("mbps_total", static_cast<double>(total_bytes) * 8 / window_s / 1e6, "Mbit/s",
        {{"note", "all viewers; loopback ceiling ~23,700 Mbit/s for one TCP stream"}});
   emit("parts_per_viewer_per_s", static_cast<double>(total_parts) / window_s / o.viewers, "1/s",
@@ -577,6 +567,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
 }
 
 BenchFn Setup(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<BroadcastOptions>();
   app.add_option("--viewers", o->viewers, "light HTTP viewers")->check(CLI::Range(1, 20000));
   app.add_option("--edges", o->edges, "nginx edge caches")->check(CLI::Range(1, 16));

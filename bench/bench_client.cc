@@ -463,6 +463,7 @@ int RunClientBench(const holo::bench::BenchArgs& args, const ClientBenchOptions&
 }
 
 holo::bench::BenchFn SetupClient(CLI::App& app) {
+  holo::bench::DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<ClientBenchOptions>();
   app.add_option("--parts", o->parts, "run only these parts, comma-separated (render); default all");
   app.add_option("--resolutions", o->resolutions, "render sizes WxH[,WxH...], sides 16..8192")->capture_default_str();

@@ -331,6 +331,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
 }  // namespace
 
 bench::BenchFn SetupClientOffload(CLI::App& app) {
+  bench::DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<OffloadArgs>();
   app.add_option("--latencies", o->latencies, "network latencies, comma-separated ms (0..1000)")->capture_default_str();
   app.add_option("--size", o->size, "display size WxH")->capture_default_str();

@@ -312,6 +312,7 @@ int RunClientPoseBench(const holo::bench::BenchArgs& args, const ClientPoseArgs&
 }  // namespace
 
 holo::bench::BenchFn SetupClientPose(CLI::App& app) {
+  holo::bench::DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto c = std::make_shared<ClientPoseArgs>();
   app.add_option("--part", c->part, "pred (prediction), reproj (reprojection) or all")
       ->capture_default_str()

@@ -97,9 +97,6 @@ struct LiveOptions {
   std::string av_trace;                              // CSV of every offset measured (renderer, decoder 0)
 };
 
-// CPU time of process `pid` (all threads), ms; -1 if unreadable.
-uint16_t FreeLoopbackPort() { return FreeTcpPort(); }
-
 // A child process with stdout and stderr sent to files.
 struct Child {
   pid_t pid = -1;
@@ -243,7 +240,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
   // 1. Serial run: CPU-ms per stage, one stage at a time.
   if (o.serial_frames > 0 && content != "truth") {
     progress("serial run of the site (" + std::to_string(o.serial_frames) + " frames) for CPU per stage");
-    const uint16_t port = FreeLoopbackPort();
+    const uint16_t port = FreeTcpPort();
     const std::string stats = dir + "/serial_stats.jsonl";
     auto child = Child::Spawn(SiteArgs(o, wl, port, stats, /*serial=*/true), dir + "/serial_site.log");
     if (!child.ok()) {
@@ -280,7 +277,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
   }
 
   // 2. The live run.
-  const uint16_t port = FreeLoopbackPort();
+  const uint16_t port = FreeTcpPort();
   const std::string stats_path = dir + "/site_stats.jsonl";
   progress("starting the site (" + content + ", " + wl + ") on port " + std::to_string(port));
   auto site = Child::Spawn(SiteArgs(o, wl, port, stats_path, /*serial=*/false), dir + "/site.log");
@@ -737,6 +734,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
 
 // The benchmark's own options (holoport-bench live --help).
 BenchFn SetupLive(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto options = std::make_shared<LiveOptions>();
   {
     LiveOptions& o = *options;

@@ -7,6 +7,7 @@
 
 #include "bench.h"
 #include "common/log.h"
+#include "common/status.h"
 
 namespace {
 
@@ -22,7 +23,8 @@ void PrintHelp() {
       "  --json           print only the JSON lines (no progress text on stderr)\n"
       "  --frames N       frames per run (default: the benchmark's own)\n"
       "  --repeats N      runs; figures are medians (default 3)\n"
-      "  --log-level L    log lines on stderr from this level up: %s (default info)\n\n"
+      "  --log-level L    log lines on stderr from this level up: %s (default info)\n"
+      "A benchmark that does not read --workload, --frames or --repeats refuses it.\n\n"
       "benchmarks:\n",
       holo::kLogLevelNames);
   for (const auto& [name, info] : holo::bench::Registry()) std::printf("  %-14s %s\n", name.c_str(), info.description.c_str());
@@ -54,6 +56,18 @@ int Run(const std::string& name, const holo::bench::BenchInfo& info, int argc, c
 }
 
 }  // namespace
+
+namespace holo::bench {
+
+void DropCommonOptions(CLI::App& app, const std::vector<std::string>& names) {
+  for (const std::string& name : names) {
+    CLI::Option* option = app.get_option_no_throw(name);
+    HOLO_CHECK_MSG(option != nullptr, "no common option " + name);
+    app.remove_option(option);
+  }
+}
+
+}  // namespace holo::bench
 
 int main(int argc, char** argv) {
   holo::InitLogging();

@@ -37,6 +37,7 @@
 #include "bench.h"
 #include "bench_process.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "common/status.h"
 #include "net/wire_message.h"
 
@@ -80,15 +81,6 @@ std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
     if (!j.is_discarded() && j.is_object()) out.push_back(std::move(j));
   }
   return out;
-}
-
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return -1;
-  std::sort(v.begin(), v.end());
-  const double idx = p / 100.0 * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<size_t>(std::floor(idx));
-  const size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (v[hi] - v[lo]) * (idx - static_cast<double>(lo));
 }
 
 int Sh(const std::string& cmd) { return std::system((cmd + " >/dev/null 2>&1").c_str()); }
@@ -324,8 +316,8 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   }
   char stated[96];
   std::snprintf(stated, sizeof stated, "±%.0f ms offset, −%.0f..+%.0f ppm drift", o.offset_ms, o.drift_ppm, o.drift_ppm);
-  emit("sync_error_p50_ms", Pct(spread_ms, 50), "ms", {{"clocks", stated}, {"link", link}});
-  emit("sync_error_p99_ms", Pct(spread_ms, 99), "ms", {{"clocks", stated}, {"link", link}});
+  emit("sync_error_p50_ms", InterpolatedQuantile(spread_ms, 0.50, -1), "ms", {{"clocks", stated}, {"link", link}});
+  emit("sync_error_p99_ms", InterpolatedQuantile(spread_ms, 0.99, -1), "ms", {{"clocks", stated}, {"link", link}});
   char timeout_s[32];
   std::snprintf(timeout_s, sizeof timeout_s, "%.0f", o.pod_timeout_ms);
   emit("sets_complete_fraction", sets_in > 0 ? static_cast<double>(full_in) / static_cast<double>(sets_in) : 0, "1",
@@ -334,8 +326,8 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   emit("site_fps", static_cast<double>(frames_in) / window_s, "1/s", {{"mode", "pods"}, {"link", link}});
   if (frames_in > 0)
     emit("site_cpu_ms_per_frame", (site_cpu1 - site_cpu0) / static_cast<double>(frames_in), "ms", {{"mode", "pods"}});
-  emit("latency_p50_ms", Pct(latency_ms, 50), "ms", {{"mode", "pods"}, {"from", "pod capture"}, {"to", "textured mesh"}});
-  emit("latency_p99_ms", Pct(latency_ms, 99), "ms", {{"mode", "pods"}, {"from", "pod capture"}, {"to", "textured mesh"}});
+  emit("latency_p50_ms", InterpolatedQuantile(latency_ms, 0.50, -1), "ms", {{"mode", "pods"}, {"from", "pod capture"}, {"to", "textured mesh"}});
+  emit("latency_p99_ms", InterpolatedQuantile(latency_ms, 0.99, -1), "ms", {{"mode", "pods"}, {"from", "pod capture"}, {"to", "textured mesh"}});
   emit("recovery_ms", first_back > 0 ? static_cast<double>(first_back - restarted) * 1e-3 : -1, "ms",
        {{"from", "restarted pod process spawned (pre-renders " + std::to_string(o.prerender) + " frames)"},
         {"to", "first set with that pod"}, {"down_s", std::to_string(static_cast<int>(o.kill_s))}});
@@ -346,10 +338,10 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     emit("site_fps", peer.site_fps, "1/s", {{"mode", "in-process"}, {"peer", "in-process"}});
     if (peer.site_cpu_ms_per_frame > 0)
       emit("site_cpu_ms_per_frame", peer.site_cpu_ms_per_frame, "ms", {{"mode", "in-process"}, {"peer", "in-process"}});
-    const double p50 = Pct(peer.latency_ms, 50), p99 = Pct(peer.latency_ms, 99);
+    const double p50 = InterpolatedQuantile(peer.latency_ms, 0.50, -1), p99 = InterpolatedQuantile(peer.latency_ms, 0.99, -1);
     emit("latency_p50_ms", p50, "ms", {{"mode", "in-process"}, {"peer", "in-process"}, {"from", "acquisition"}, {"to", "textured mesh"}});
     emit("latency_p99_ms", p99, "ms", {{"mode", "in-process"}, {"peer", "in-process"}, {"from", "acquisition"}, {"to", "textured mesh"}});
-    emit("latency_p50_diff_ms", Pct(latency_ms, 50) - p50, "ms", {{"peer", "in-process"}, {"target", "<= 15"}});
+    emit("latency_p50_diff_ms", InterpolatedQuantile(latency_ms, 0.50, -1) - p50, "ms", {{"peer", "in-process"}, {"target", "<= 15"}});
   }
   if (!args.json) spdlog::info("pods: logs and stats in {}", dir);
   if (o.keep_dir.empty()) Sh("rm -rf '" + dir + "'");
@@ -357,6 +349,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
 }
 
 BenchFn SetupPods(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<PodsOptions>();
   app.add_option("--warmup", o->warmup_s, "seconds after the first full set before measuring")->check(CLI::Range(0.0, 60.0));
   app.add_option("--seconds", o->seconds, "measured window, s")->check(CLI::Range(2.0, 600.0));

@@ -1,7 +1,7 @@
 // Child processes for the benchmarks that run whole programs (live, pods,
-// broadcast): spawning with output to a log file, stopping, their CPU time,
-// a free TCP port and the directory of holoport-bench (where the other
-// programs are).
+// broadcast, soak): spawning with output to a log file, stopping, their CPU
+// time, the wall clock their stamps use, a free TCP port and the directory
+// of holoport-bench (where the other programs are).
 #pragma once
 
 #include <arpa/inet.h>
@@ -20,6 +20,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "common/clock.h"
 
 namespace holo::bench {
 
@@ -40,6 +42,10 @@ inline double ProcessCpuMsOf(pid_t pid) {
   if (fields.size() < 13) return -1;
   return 1e3 * (std::stod(fields[11]) + std::stod(fields[12])) / static_cast<double>(sysconf(_SC_CLK_TCK));
 }
+
+// Wall-clock time (system clock), seconds since the Unix epoch: the clock of
+// the capture and arrival stamps the programs write (as µs).
+inline double WallS() { return static_cast<double>(WallClock::Instance().NowUs()) * 1e-6; }
 
 // A TCP port free on every interface right now (0 if none could be bound).
 inline uint16_t FreeTcpPort() {

@@ -12,7 +12,6 @@
 //                         over 200 random targets (simulated clock)
 //   seek_error_ms         largest |shown key frame − target| over those seeks
 //   replay_cpu_ms_per_media_s  pumping the whole file, per second of media
-#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -32,6 +31,7 @@
 #include "bench.h"
 #include "common/clock.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "net/session_server.h"
 #include "net/site_client.h"
 #include "server/record/recording_reader.h"
@@ -199,18 +199,6 @@ int RunRecordBench(const BenchArgs& args) {
 //      live_record_bytes_per_minute   file bytes per minute of media
 //      live_record_cpu_pct            recorder io thread CPU (receive + write) over wall, % of one core
 //      live_record_messages           messages recorded / published
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-}
-
 constexpr int kReplayNetDefaultViewers = 10;
 
 int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
@@ -274,7 +262,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
       std::lock_guard<std::mutex> l(mu);
       due_of[h.sequence] = due;
       late_ms.push_back(static_cast<double>(emitted - due) * 1e-3);
-      pump_cpu_ms = ThreadCpuMs();  // the pump thread's CPU so far
+      pump_cpu_ms = ThreadCpuTimeMs();  // the pump thread's CPU so far
     };
     auto rs = record::ReplayServer::Start(reader, &clock, o);
     if (!rs.ok()) {
@@ -331,10 +319,10 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
     const double cpu_ms = io_ms + (pump_cpu_ms - pump0);
     const uint64_t expected = static_cast<uint64_t>(frames - 1);
     const uint64_t worst = *std::min_element(received.begin(), received.end());
-    EmitFigure("replaynet", args.workload, "replay_latency_ms", Pct(latency_ms, 0.5), "ms", qual({{"stat", "p50"}}));
-    EmitFigure("replaynet", args.workload, "replay_latency_ms", Pct(latency_ms, 0.99), "ms", qual({{"stat", "p99"}}));
-    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Pct(late_ms, 0.5), "ms", qual({{"stat", "p50"}}));
-    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Pct(late_ms, 0.99), "ms", qual({{"stat", "p99"}}));
+    EmitFigure("replaynet", args.workload, "replay_latency_ms", Quantile(latency_ms, 0.5), "ms", qual({{"stat", "p50"}}));
+    EmitFigure("replaynet", args.workload, "replay_latency_ms", Quantile(latency_ms, 0.99), "ms", qual({{"stat", "p99"}}));
+    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Quantile(late_ms, 0.5), "ms", qual({{"stat", "p50"}}));
+    EmitFigure("replaynet", args.workload, "replay_emit_late_ms", Quantile(late_ms, 0.99), "ms", qual({{"stat", "p99"}}));
     EmitFigure("replaynet", args.workload, "replay_delivered_fraction",
                static_cast<double>(worst) / static_cast<double>(expected), "1", qual({{"class", "worst_viewer"}}));
     EmitFigure("replaynet", args.workload, "replay_server_cpu_pct_per_viewer",
@@ -400,6 +388,7 @@ int RunReplayNetBench(const BenchArgs& args, int viewers_option) {
 }  // namespace
 
 BenchFn SetupReplayNet(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto viewers = std::make_shared<int>(kReplayNetDefaultViewers);
   app.add_option("--viewers", *viewers, "viewers of the replay")->capture_default_str()->check(CLI::PositiveNumber);
   return [viewers](const BenchArgs& args) { return RunReplayNetBench(args, *viewers); };

@@ -281,6 +281,7 @@ int RunSegmentBench(const BenchArgs& args, const std::vector<std::string>& setti
 }  // namespace
 
 BenchFn SetupSegment(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto settings = std::make_shared<std::vector<std::string>>();
   app.add_option("settings", *settings, "SegmenterOptions fields to change, as NAME=VALUE (e.g. depth_sigma_m=0.02)");
   return [settings](const BenchArgs& args) { return RunSegmentBench(args, *settings); };

@@ -37,6 +37,7 @@
 #include "client/net/raw_peer.h"
 #include "common/clock.h"
 #include "common/log.h"
+#include "common/quantile.h"
 #include "net/session_server.h"
 #include "net/site_client.h"
 #include "protocol/color_codec.h"
@@ -63,13 +64,6 @@ std::string LoadAverage() {
   std::string a, b, c;
   f >> a >> b >> c;
   return a + " " + b + " " + c;
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
-  return v[i];
 }
 
 struct Content {
@@ -364,8 +358,8 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   EmitFigure("sessions", w, "fps_per_viewer", Median(fps_list), "1/s", with({{"class", "normal"}, {"stat", "median"}}));
   EmitFigure("sessions", w, "fps_per_viewer", *std::min_element(fps_list.begin(), fps_list.end()), "1/s",
              with({{"class", "normal"}, {"stat", "min"}}));
-  EmitFigure("sessions", w, "publish_to_received_p50_ms", Percentile(lat, 0.5), "ms", with({{"class", "normal"}}));
-  EmitFigure("sessions", w, "publish_to_received_p99_ms", Percentile(lat, 0.99), "ms", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "publish_to_received_p50_ms", Quantile(lat, 0.5), "ms", with({{"class", "normal"}}));
+  EmitFigure("sessions", w, "publish_to_received_p99_ms", Quantile(lat, 0.99), "ms", with({{"class", "normal"}}));
   EmitFigure("sessions", w, "cpu_per_viewer_pct", cpu_pct_per_viewer, "%",
              with({{"stage", "server"}, {"note", "io threads + publisher, per wall second"}}));
   EmitFigure("sessions", w, "cpu_pct", server_total_cpu_ms / (window_s * 10), "%", with({{"stage", "server"}}));
@@ -382,6 +376,7 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
 }
 
 BenchFn SetupSessions(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<SessionsOptions>();
   app.add_option("--viewers", o->viewers, "viewers on loopback")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--seconds", o->seconds, "seconds of broadcast (at least 4)")->capture_default_str();

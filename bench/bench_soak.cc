@@ -27,8 +27,8 @@
 // The run: sites start, then the clients; once every client receives frames
 // (and each participant hears the other) and --warmup seconds have passed,
 // the measured run of --minutes starts. It is cut into windows of
-// W = min(60 s, run / 3) ("minutes"); one progress line per window on
-// stderr, always (a long run shows that it is alive).
+// W = min(60 s, run / 3) ("minutes"); one progress line per window in the
+// log (info level, also with --json: a long run shows that it is alive).
 //
 // Figures (JSON lines, content "fused", "process" names the program):
 //   rss_mb (at the end of the first window and at the end), rss_growth_pct
@@ -62,6 +62,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iterator>
@@ -78,6 +79,8 @@
 
 #include "bench.h"
 #include "bench_process.h"
+#include "common/log.h"
+#include "common/quantile.h"
 
 namespace holo::bench {
 namespace {
@@ -101,10 +104,6 @@ struct SoakOptions {
 
 std::atomic<bool> g_interrupted{false};
 void OnSoakSignal(int) { g_interrupted = true; }
-
-double WallS() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
 
 // Sleeps `s` seconds in short steps; false if interrupted.
 bool SleepS(double s) {
@@ -140,15 +139,6 @@ class LineTail {
   uint64_t offset_ = 0;
   std::string pending_;
 };
-
-double Pct(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double idx = p / 100.0 * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<size_t>(std::floor(idx));
-  const size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (v[hi] - v[lo]) * (idx - static_cast<double>(lo));
-}
 
 // VmRSS of `pid`, MB; < 0 when the process is gone.
 double RssMbOf(pid_t pid) {
@@ -248,14 +238,14 @@ class Soak {
 
  private:
   void Say(const std::string& s) const {
-    if (!args_.json) std::fprintf(stderr, "soak: %s\n", s.c_str());
+    if (!args_.json) spdlog::info("soak: {}", s);
   }
   bool Spawn(Proc* p) {
     p->pid = SpawnLogged(p->argv, p->log_path, /*tied=*/true);
     p->running = p->pid > 0;
     p->log_tail.SetPath(p->log_path);
     if (!p->stats_path.empty()) p->stats_tail.SetPath(p->stats_path);
-    if (!p->running) std::fprintf(stderr, "soak: cannot start %s\n", p->argv[0].c_str());
+    if (!p->running) spdlog::error("soak: cannot start {}", p->argv[0]);
     return p->running;
   }
   void SampleAll();
@@ -397,13 +387,13 @@ bool Soak::WaitUntil(const std::string& what, double timeout_s, const std::funct
     if (ready()) return true;
     for (auto& p : procs_) {
       if (!p->running) {
-        std::fprintf(stderr, "soak: %s exited while waiting for %s (%s; log %s)\n", p->name.c_str(), what.c_str(),
-                     DescribeStatus(p->exit_status).c_str(), p->log_path.c_str());
+        spdlog::error("soak: {} exited while waiting for {} ({}; log {})", p->name, what,
+                      DescribeStatus(p->exit_status), p->log_path);
         return false;
       }
     }
     if (WallS() > until) {
-      std::fprintf(stderr, "soak: no %s within %.0f s (logs in %s)\n", what.c_str(), timeout_s, dir_.c_str());
+      spdlog::error("soak: no {} within {:.0f} s (logs in {})", what, timeout_s, dir_);
       return false;
     }
     SleepS(0.5);
@@ -441,8 +431,8 @@ WindowFigures Figures(const Proc& p, double w0, double w1) {
     f.frames = static_cast<int64_t>(lat.size());
   }
   f.fps = static_cast<double>(f.frames) / std::max(1e-3, w1 - w0);
-  f.p50 = Pct(lat, 50);
-  f.p99 = Pct(lat, 99);
+  f.p50 = InterpolatedQuantile(lat, 0.50);
+  f.p99 = InterpolatedQuantile(lat, 0.99);
   return f;
 }
 
@@ -503,15 +493,14 @@ void Soak::Progress(int window, int windows, double w0, double w1) {
   }
   std::snprintf(buf, sizeof buf, "errors %lld, load %.1f", static_cast<long long>(errors), ValueAt(load_, w1));
   s << buf;
-  std::fprintf(stderr, "%s\n", s.str().c_str());
+  spdlog::info("{}", s.str());
 }
 
 int Soak::Run() {
   bin_ = SelfDir();
   for (const char* prog : {"holoport-server", "holoport-call", "holoport-record"}) {
     if (access((bin_ + "/" + prog).c_str(), X_OK) != 0) {
-      std::fprintf(stderr, "soak: %s/%s not found (build it: cmake --build build --target %s)\n", bin_.c_str(), prog,
-                   prog);
+      spdlog::error("soak: {}/{} not found (build it: cmake --build build --target {})", bin_, prog, prog);
       return 2;
     }
   }
@@ -519,12 +508,12 @@ int Soak::Run() {
   if (dir_.empty()) {
     char tmpl[] = "/tmp/holoport-soak-XXXXXX";
     if (!mkdtemp(tmpl)) {
-      std::fprintf(stderr, "soak: cannot make a temporary directory\n");
+      spdlog::error("soak: cannot make a temporary directory");
       return 1;
     }
     dir_ = tmpl;
-  } else if (std::system(("mkdir -p '" + dir_ + "'").c_str()) != 0) {
-    std::fprintf(stderr, "soak: cannot make %s\n", dir_.c_str());
+  } else if (std::error_code ec; !std::filesystem::create_directories(dir_, ec) && ec) {
+    spdlog::error("soak: cannot make {}: {}", dir_, ec.message());
     return 1;
   }
   const uint16_t port_a = FreeTcpPort();
@@ -630,7 +619,7 @@ int Soak::Run() {
   const double w = std::min(60.0, run_s / 3.0);
   const int windows = static_cast<int>(std::floor(run_s / w + 1e-6));
   t0_ = WallS();
-  std::fprintf(stderr, "soak: measuring %.1f min (windows of %.0f s); Ctrl-C stops early and reports\n", o_.minutes, w);
+  spdlog::info("soak: measuring {:.1f} min (windows of {:.0f} s); Ctrl-C stops early and reports", o_.minutes, w);
   int window = 0;
   double next = t0_;
   while (!g_interrupted && window < windows) {
@@ -646,12 +635,12 @@ int Soak::Run() {
   const double t_end = WallS();
   SampleAll();
   const bool interrupted = g_interrupted;
-  if (interrupted) std::fprintf(stderr, "soak: interrupted after %.1f min; stopping every process\n", (t_end - t0_) / 60);
+  if (interrupted) spdlog::warn("soak: interrupted after {:.1f} min; stopping every process", (t_end - t0_) / 60);
   StopAll();
   for (auto& p : procs_) Read(p.get());  // the last lines written at exit
   const int code = Report(t_end, interrupted);
   for (auto& p : procs_)
-    if (p->running) std::fprintf(stderr, "soak: %s (pid %d) is still running\n", p->name.c_str(), p->pid);
+    if (p->running) spdlog::error("soak: {} (pid {}) is still running", p->name, p->pid);
   return interrupted ? 130 : code;
 }
 
@@ -664,7 +653,7 @@ int Soak::Report(double t_end, bool interrupted) {
   };
   const double run_s = t_end - t0_;
   if (run_s < 3) {
-    std::fprintf(stderr, "soak: the run lasted %.1f s: no figures\n", run_s);
+    spdlog::error("soak: the run lasted {:.1f} s: no figures", run_s);
     return 1;
   }
   // An interrupted run is cut into windows of its own length.
@@ -815,8 +804,7 @@ int Soak::Report(double t_end, bool interrupted) {
       total_errors += n;
       emit("errors", static_cast<double>(n), "count",
            {{"process", up->name}, {"kind", kind}, {"example", up->error_example[kind]}});
-      std::fprintf(stderr, "soak: %s: %lld %s error(s), e.g. %s\n", up->name.c_str(), static_cast<long long>(n),
-                   kind.c_str(), up->error_example[kind].c_str());
+      spdlog::warn("soak: {}: {} {} error(s), e.g. {}", up->name, n, kind, up->error_example[kind]);
     }
   }
   emit("errors", static_cast<double>(total_errors), "count", {{"process", "all"}});
@@ -831,23 +819,25 @@ int Soak::Report(double t_end, bool interrupted) {
     pass = pass && c->met;
   }
   emit("soak_pass", pass ? 1 : 0, "bool", {{"minutes", num(run_s / 60)}});
-  std::fprintf(stderr, "soak: %s after %.1f min: RSS growth worst %+.1f %% (%s), fps change worst %+.1f %% (%s), "
-                       "latency p99 change worst %+.1f %% (%s), %lld errors; load %.1f\n",
-               pass ? "PASS" : "FAIL", run_s / 60, rss_check.worst, rss_check.worst_process.c_str(), fps_check.worst,
-               fps_check.worst_process.c_str(), lat_check.worst, lat_check.worst_process.c_str(),
-               static_cast<long long>(total_errors), MedianIn(load_, first0, last1));
+  spdlog::info("soak: {} after {:.1f} min: RSS growth worst {:+.1f} % ({}), fps change worst {:+.1f} % ({}), "
+               "latency p99 change worst {:+.1f} % ({}), {} errors; load {:.1f}",
+               pass ? "PASS" : "FAIL", run_s / 60, rss_check.worst, rss_check.worst_process, fps_check.worst,
+               fps_check.worst_process, lat_check.worst, lat_check.worst_process, total_errors,
+               MedianIn(load_, first0, last1));
   if (o_.keep_dir.empty()) {
     std::remove(recording_.c_str());
     if (total_errors == 0) {
-      if (std::system(("rm -rf '" + dir_ + "'").c_str()) != 0) std::fprintf(stderr, "soak: could not remove %s\n", dir_.c_str());
+      std::error_code ec;
+      if (std::filesystem::remove_all(dir_, ec); ec) spdlog::warn("soak: could not remove {}: {}", dir_, ec.message());
     } else {
-      std::fprintf(stderr, "soak: logs kept in %s\n", dir_.c_str());
+      spdlog::info("soak: logs kept in {}", dir_);
     }
   }
   return pass ? 0 : 1;
 }
 
 BenchFn SetupSoak(CLI::App& app) {
+  DropCommonOptions(app, {"--frames", "--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<SoakOptions>();
   app.add_option("--minutes", o->minutes,
                  "length of the measured run (after start-up and warm-up); a progress line per window on stderr")

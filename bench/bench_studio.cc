@@ -5,11 +5,11 @@
 #include <ctime>
 #include <cstdio>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "bench.h"
 #include "common/log.h"
+#include "common/worker_pool.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 
@@ -27,8 +27,7 @@ int RunStudioBench(const holo::bench::BenchArgs& args) {
     return 1;
   }
   const int frames = args.frames > 0 ? args.frames : 60;
-  const int threads = workload->studio.threads > 0 ? workload->studio.threads
-                                                   : static_cast<int>(std::thread::hardware_concurrency());
+  const int threads = holo::ResolveThreadCount(workload->studio.threads);
   holo::RgbdFrameSet set;
   holo::StudioGroundTruth gt;
   (*studio)->RenderFrame(0, &set, &gt);  // warm-up: buffers sized outside the timed loop

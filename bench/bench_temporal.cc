@@ -655,6 +655,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
 }  // namespace
 
 BenchFn SetupTemporal(CLI::App& app) {
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto extra = std::make_shared<Extra>();
   DeclareOptions(app, extra.get());
   return [extra](const BenchArgs& args) { return RunTemporal(args, *extra); };

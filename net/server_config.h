@@ -1,4 +1,4 @@
-// Configuration of the session server (server/net/): listening address,
+// Configuration of the session server (net/session_server.h): listening address,
 // access tokens, limits and timeouts, TLS. Loaded from YAML (docs/sessions.md
 // lists every key) and validated; every error names the key.
 #pragma once

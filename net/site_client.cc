@@ -18,6 +18,7 @@
 #include <asio.hpp>
 #include <asio/ssl.hpp>
 
+#include "net/wire_message.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
@@ -29,11 +30,6 @@ using protocol::Header;
 using protocol::MessageType;
 
 namespace {
-
-int64_t NowWallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
 
 std::chrono::microseconds Seconds(double s) { return std::chrono::microseconds(static_cast<int64_t>(s * 1e6)); }
 
@@ -370,7 +366,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       return;
     }
     if (!complete) return;
-    raw.received_us = NowWallUs();
+    raw.received_us = WallUs();
     {
       std::lock_guard<std::mutex> l(mu);
       ++stats.messages_received;
@@ -467,7 +463,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         auto p = protocol::DecodePayload(t, raw.payload, limits);
         if (!p.ok()) return BadPayload(t, p.status());
         const auto& ping = std::get<protocol::Ping>(*p);
-        const int64_t now = NowWallUs();
+        const int64_t now = WallUs();
         Queue(Encode(Header{}, protocol::Pong{ping.nonce, ping.send_time_us, now, now}), false);
         return;
       }
@@ -475,7 +471,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         auto p = protocol::DecodePayload(t, raw.payload, limits);
         if (!p.ok()) return BadPayload(t, p.status());
         const auto& pong = std::get<protocol::Pong>(*p);
-        const int64_t t3 = NowWallUs();
+        const int64_t t3 = WallUs();
         const int64_t rtt = (t3 - pong.ping_send_time_us) - (pong.send_time_us - pong.receive_time_us);
         if (rtt < 0 || rtt > 3600LL * 1000000) return;
         const int64_t offset = ((pong.receive_time_us - pong.ping_send_time_us) + (pong.send_time_us - t3)) / 2;
@@ -700,7 +696,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     ping_timer.async_wait(asio::bind_executor(strand, [this, self, my](std::error_code ec) {
       if (ec || my != attempt_id || stopped) return;
       ++ping_count;
-      Queue(Encode(Header{}, protocol::Ping{ping_count, NowWallUs()}), false);
+      Queue(Encode(Header{}, protocol::Ping{ping_count, WallUs()}), false);
       ArmPing();
     }));
   }

@@ -1,8 +1,9 @@
 #include "net/wire_message.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cstring>
+
+#include "common/clock.h"
 
 namespace holo::net {
 
@@ -91,9 +92,6 @@ VideoFramePtr MakeVideoFrame(int64_t frame_index, int64_t capture_time_us, proto
   return f;
 }
 
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
+int64_t WallUs() { return WallClock::Instance().NowUs(); }
 
 }  // namespace holo::net

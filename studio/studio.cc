@@ -50,7 +50,7 @@ struct SyntheticStudio::Impl {
 
   Impl(const Rig& rig, const StudioOptions& options)
       : scene(studio::SceneConfig{options.num_figures, options.num_props, options.empty_room}),
-        pool(options.threads > 0 ? options.threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()))) {
+        pool(options.threads) {  // 0: one thread per core
     pods.resize(rig.pods.size());
     pool.Run(static_cast<int>(rig.pods.size()), [&](int i, int) {
       const PodCalibration& pod = rig.pods[i];

@@ -2,7 +2,8 @@
 # Every program in BIN_DIR (holoport-*, not the fuzz targets) answers --help
 # with exit 0 and some text, and refuses an option it does not know (non-zero
 # exit, the option named on stderr, no run). The same for every benchmark of
-# holoport-bench (holoport-bench --list), which must exit 2 on an unknown one.
+# holoport-bench (holoport-bench --list), which must exit 2 on an unknown one
+# and on a common option (--workload, --frames, --repeats) it does not read.
 # Every program and benchmark takes --log-level (named in its --help).
 set -uo pipefail
 BIN=${1:?usage: programs_help_test.sh BIN_DIR}
@@ -47,5 +48,14 @@ if [[ -x "$BIN/holoport-bench" ]]; then
     fi
     echo "holoport-bench $name: --help ok, unknown option refused"
   done < <("$BIN/holoport-bench" --list)
+  # A common option that a benchmark does not read is refused too, not ignored.
+  for cmd in "soak --repeats 2" "audio --frames 5"; do
+    read -r name option value <<< "$cmd"
+    out=$(timeout 20 "$BIN/holoport-bench" "$name" "$option" "$value" 2>&1 < /dev/null); rc=$?
+    if ((rc != 2)) || [[ "$out" != *"$option"* ]]; then
+      echo "FAIL: holoport-bench $cmd: exit $rc, ${out:0:200}"; fail=1
+    fi
+    echo "holoport-bench $cmd: refused"
+  done
 fi
 exit $fail

@@ -16,15 +16,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include "net/wire_message.h"
 #include "protocol/live_format.h"
 
 namespace holo::net {
 namespace {
 
-int64_t WallUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
 int64_t SteadyMs() {
   return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();

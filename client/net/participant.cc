@@ -16,24 +16,16 @@
 #include "audio/spatializer.h"
 #include "audio/voice_codec.h"
 #include "audio/wav.h"
+#include "common/quantile.h"
+#include "common/recent.h"
 
 namespace holo::net {
 namespace {
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
-// Appends `v`, keeping the newest 3000–6000 samples (1–2 minutes of 20 ms
-// frames): medians over the recent past, memory and the cost of a median
-// bounded however long the call lasts.
-void PushRecent(std::vector<double>* samples, double v) {
-  constexpr size_t kKeep = 3000;
-  if (samples->size() >= 2 * kKeep) samples->erase(samples->begin(), samples->begin() + kKeep);
-  samples->push_back(v);
-}
+// Medians over the newest 3000–6000 samples (1–2 minutes of 20 ms frames):
+// the recent past, memory and the cost of a median bounded however long the
+// call lasts.
+constexpr size_t kRecentSamples = 3000;
 
 }  // namespace
 
@@ -127,14 +119,8 @@ struct Participant::Impl {
       }
       ++seq;
       next_us += audio::kFrameUs;
-      // After a stall (loaded machine) do not send a burst of stale frames;
-      // the skipped ones count as lost (sequence numbers skip them), so that
-      // capture times and sequence numbers stay in step for the receivers.
-      if (const int64_t behind = clock.NowUs() - next_us; behind > 200000) {
-        const int64_t skip = behind / audio::kFrameUs;
-        next_us += skip * audio::kFrameUs;
-        seq += static_cast<uint32_t>(skip);
-      }
+      // After a stall (loaded machine) no burst of stale frames.
+      audio::SkipStalledFrames(clock.NowUs(), 200000, &next_us, &seq);
     }
   }
 
@@ -155,7 +141,7 @@ struct Participant::Impl {
         voices.Insert(sid, std::move(a));
         std::lock_guard<std::mutex> l(mu);
         ++stats.remote_audio_frames;
-        PushRecent(&network_ms, net_ms);
+        AppendRecent(&network_ms, net_ms, kRecentSamples);
       }
       // One 20 ms block: listener = own head, each speaker at its head pose through the room link.
       const std::vector<RemoteVoices::Block> blocks = voices.Pull();
@@ -175,7 +161,7 @@ struct Participant::Impl {
         if (b.playing) {
           const audio::SpeakerPlacement place = audio::PlaceRemoteSpeaker(b.pose, o.call.room);
           std::lock_guard<std::mutex> l(mu);
-          PushRecent(&jb_ms, b.buffer_delay_ms);
+          AppendRecent(&jb_ms, b.buffer_delay_ms, kRecentSamples);
           stats.remote_x = place.position.x();
           stats.remote_y = place.position.y();
           stats.remote_z = place.position.z();
@@ -281,8 +267,8 @@ const CallConfig& Participant::call() const { return impl_->o.call; }
 ParticipantStats Participant::stats() const {
   std::lock_guard<std::mutex> l(impl_->mu);
   ParticipantStats s = impl_->stats;
-  s.audio_network_ms_median = Median(impl_->network_ms);
-  s.jitter_buffer_ms_median = Median(impl_->jb_ms);
+  s.audio_network_ms_median = Quantile(impl_->network_ms, 0.5);
+  s.jitter_buffer_ms_median = Quantile(impl_->jb_ms, 0.5);
   s.audio_delay_ms = s.remote_audio_frames > 0
                          ? s.audio_network_ms_median + s.jitter_buffer_ms_median + audio::kFrameUs / 1000.0
                          : 0;

@@ -167,16 +167,17 @@ void SiteAvSync::TickVoice() {
   voice_stats_ = voices_->stats();
 }
 
+void SiteAvSync::Hold(ReceivedFrame frame) {
+  Held h;
+  h.ready_us = clock_->NowUs() + static_cast<int64_t>(std::llround(options_.inject_picture_delay_ms * 1000.0));
+  h.frame = std::move(frame);
+  std::lock_guard<std::mutex> l(mu_);
+  held_.push_back(std::move(h));
+}
+
 void SiteAvSync::PollPictures() {
   ReceivedFrame f;
-  const auto inject_us = static_cast<int64_t>(std::llround(options_.inject_picture_delay_ms * 1000.0));
-  while (client_->PollFrame(&f)) {
-    Held h;
-    h.ready_us = clock_->NowUs() + inject_us;
-    h.frame = std::move(f);
-    std::lock_guard<std::mutex> l(mu_);
-    held_.push_back(std::move(h));
-  }
+  while (client_->PollFrame(&f)) Hold(std::move(f));
 }
 
 bool SiteAvSync::NextFrame(ReceivedFrame* out, double timeout_s, int64_t* ready_us) {
@@ -217,8 +218,11 @@ bool SiteAvSync::NextFrame(ReceivedFrame* out, double timeout_s, int64_t* ready_
     }
     const auto left = real_deadline - std::chrono::steady_clock::now();
     if (left <= std::chrono::steady_clock::duration::zero()) return false;
-    const auto wait = std::chrono::microseconds(std::clamp<int64_t>(next_event - now, 500, 5000));
-    std::this_thread::sleep_for(std::min<std::chrono::steady_clock::duration>(wait, left));
+    // Until the next held picture is due or a new one arrives, whichever is first.
+    const auto wait = std::min<std::chrono::steady_clock::duration>(
+        std::chrono::microseconds(std::clamp<int64_t>(next_event - now, 500, 5000)), left);
+    ReceivedFrame f;
+    if (client_->WaitFrame(&f, std::chrono::duration<double>(wait).count())) Hold(std::move(f));
   }
 }
 

@@ -148,7 +148,9 @@ class SiteAvSync {
  private:
   SiteAvSync() = default;
   void VoiceLoop();
+  // Takes the client's waiting pictures (Hold: one of them, decoded now).
   void PollPictures();
+  void Hold(ReceivedFrame frame);
 
   SiteClient* client_ = nullptr;
   SiteAvSyncOptions options_;

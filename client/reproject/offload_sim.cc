@@ -10,6 +10,7 @@
 
 #include "common/image_io.h"
 #include "common/metrics/image_metrics.h"
+#include "common/quantile.h"
 #include "protocol/messages.h"
 
 namespace holo::reproject {
@@ -20,12 +21,6 @@ double MeanOf(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x;
   return s / static_cast<double>(v.size());
-}
-
-double MedianOf(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
 }
 
 }  // namespace
@@ -175,7 +170,7 @@ StatusOr<std::vector<OffloadResult>> SimulateOffload(const std::vector<pose::Pos
       r.black_border_fraction = MeanOf(a.border);
       r.hole_fraction = MeanOf(a.holes);
       r.wire_bytes = MeanOf(a.bytes);
-      r.reproject_cpu_ms = MedianOf(a.cpu_ms);
+      r.reproject_cpu_ms = Quantile(a.cpu_ms, 0.5);
       r.frame_psnr_db = a.psnr;
       results.push_back(r);
     }

@@ -37,7 +37,9 @@
 #include "common/log.h"
 #include "common/metrics/mesh_shapes.h"
 #include "common/pose.h"
+#include "common/quantile.h"
 #include "net/site_client.h"
+#include "net/wire_message.h"
 // Recorded head traces come from the pose library when it is part of the
 // build (client/pose, the prediction work); without it --pose-trace is refused.
 #if __has_include("client/pose/trace.h")
@@ -53,13 +55,6 @@ namespace {
 std::atomic<bool> g_viewer_stop{false};
 
 using render::ColorMode;
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t i = std::min(v.size() - 1, static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5));
-  return v[i];
-}
 
 // A table for the miniature room: top at `top` (centre of the top face),
 // 1.4 × 1.0 m, on four legs.
@@ -350,7 +345,7 @@ class Viewer {
     }
     HOLO_ASSIGN_OR_RETURN(av_sync_, net::SiteAvSync::Start(client_, so,
                                                           participant_ ? &participant_->av_sync() : nullptr));
-    net_start_us_ = WallNowUs();
+    net_start_us_ = net::WallUs();
     return OkStatus();
   }
 
@@ -361,12 +356,6 @@ class Viewer {
     a.max_voice_delay_ms = o_.max_voice_delay_ms;
     a.max_picture_delay_ms = o_.max_picture_delay_ms;
     return a;
-  }
-
-  static int64_t WallNowUs() {
-    return std::chrono::duration_cast<std::chrono::microseconds>(
-               std::chrono::system_clock::now().time_since_epoch())
-        .count();
   }
 
   // world_from_camera of the centre view at time t (seconds from start).
@@ -595,14 +584,14 @@ class Viewer {
   void NoteNetDisplayed(const net::ReceivedFrame& f, double loop_ms) {
     // capture (site clock) → display: the client's latency to reception is
     // already corrected by its clock-offset estimate; add the time since.
-    const double lat = f.latency_ms + (WallNowUs() - f.received_us) / 1000.0;
+    const double lat = f.latency_ms + (net::WallUs() - f.received_us) / 1000.0;
     stats_.latency_ms.push_back(lat);
     if (last_index_ >= 0 && f.frame_index > last_index_) stats_.drops += f.frame_index - last_index_ - 1;
     last_index_ = f.frame_index;
     ++frames_new_;
     // Network mode: the fps shown is new site frames displayed per second
     // (redraws of the frame already shown for a moving head do not count).
-    new_frame_us_.push_back(WallNowUs());
+    new_frame_us_.push_back(net::WallUs());
     if (new_frame_us_.size() > 16) new_frame_us_.erase(new_frame_us_.begin());
     if (first_new_us_ == 0) first_new_us_ = new_frame_us_.back();
     last_new_us_ = new_frame_us_.back();
@@ -622,7 +611,7 @@ class Viewer {
   }
 
   void UpdateBitrate() {
-    const int64_t now = WallNowUs();
+    const int64_t now = net::WallUs();
     if (now - rate_t_us_ < 1000000) return;
     const uint64_t bytes = client_->stats().bytes_received;
     if (rate_t_us_ > 0) recent_mbps_ = (bytes - rate_bytes_) * 8.0 / static_cast<double>(now - rate_t_us_);
@@ -690,7 +679,7 @@ class Viewer {
     std::filesystem::create_directories(o_.out_dir, ec);
     if (ec && o_.headless) return Fail(Unavailable("--out " + o_.out_dir + ": cannot create: " + ec.message()));
     const int max_frames = o_.frames > 0 ? o_.frames : (o_.seconds > 0 ? 0 : (window ? 0 : 30));
-    const int64_t start = WallNowUs();
+    const int64_t start = net::WallUs();
     ImageRgb8 image;
     StreamFrame frame;
     net::ReceivedFrame rf;
@@ -701,7 +690,7 @@ class Viewer {
     int last_progress_s = -1;
     while (!g_viewer_stop.load()) {
       if (window && glfwWindowShouldClose(w)) break;
-      const int64_t now = WallNowUs();
+      const int64_t now = net::WallUs();
       const double t = (now - start) / 1e6;
       if (o_.seconds > 0 && t >= o_.seconds) break;
       if (max_frames > 0 && displayed_new >= max_frames) break;
@@ -709,7 +698,7 @@ class Viewer {
       CheckRigChange();
       UpdateBitrate();
       bool fresh = false;
-      const int64_t render_start_us = WallNowUs();
+      const int64_t render_start_us = net::WallUs();
       if (av_sync_->NextFrame(&rf)) {
         if (!rf.has_mesh || rf.mesh.positions.empty()) continue;  // nothing to show in it
         net::ReceivedFrame keep_times;  // times/index only are used below (no mesh/image copies)
@@ -759,7 +748,7 @@ class Viewer {
       if (window) glfwSwapBuffers(w);
       glFinish();
       stats_.render_ms.push_back(rs.ElapsedMs());
-      last_render_us = WallNowUs();
+      last_render_us = net::WallUs();
       const double loop_ms = loop.ElapsedMs();
       loop.Restart();
       if (fresh) {
@@ -771,11 +760,11 @@ class Viewer {
       }
       bool due = false;
       if (fresh && o_.png_interval_s > 0) {
-        due = last_png_us_ == 0 || WallNowUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
+        due = last_png_us_ == 0 || net::WallUs() - last_png_us_ >= static_cast<int64_t>(o_.png_interval_s * 1e6);
       } else if (fresh) {
         due = (displayed_new - 1) % std::max(1, o_.png_every) == 0;
       }
-      if (due) last_png_us_ = WallNowUs();
+      if (due) last_png_us_ = net::WallUs();
       if (o_.headless && o_.write_png &&
           (due || (!fresh && stale_renders_ % 5 == 1 &&
                                                                              static_cast<net::ClientState>(
@@ -793,7 +782,7 @@ class Viewer {
                      stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_, stats_.drops);
       }
     }
-    net_elapsed_s_ = (WallNowUs() - start) / 1e6;
+    net_elapsed_s_ = (net::WallUs() - start) / 1e6;
     Status audio_status;
     av_sync_->Stop();
     if (participant_) audio_status = participant_->Stop();
@@ -943,12 +932,12 @@ class Viewer {
                      ? 1e6 * static_cast<double>(frames_new_ - 1) / static_cast<double>(last_new_us_ - first_new_us_)
                      : 0.0;
     j["fps_definition"] = "new frames displayed per second (not redraws of a frame already shown)";
-    j["render_ms_median"] = Percentile(stats_.render_ms, 0.5);
-    j["render_ms_p95"] = Percentile(stats_.render_ms, 0.95);
-    j["upload_ms_median"] = Percentile(stats_.upload_ms, 0.5);
-    j["produce_ms_median"] = Percentile(stats_.produce_ms, 0.5);
-    j["latency_ms_median"] = Percentile(stats_.latency_ms, 0.5);
-    j["latency_ms_p95"] = Percentile(stats_.latency_ms, 0.95);
+    j["render_ms_median"] = Quantile(stats_.render_ms, 0.5);
+    j["render_ms_p95"] = Quantile(stats_.render_ms, 0.95);
+    j["upload_ms_median"] = Quantile(stats_.upload_ms, 0.5);
+    j["produce_ms_median"] = Quantile(stats_.produce_ms, 0.5);
+    j["latency_ms_median"] = Quantile(stats_.latency_ms, 0.5);
+    j["latency_ms_p95"] = Quantile(stats_.latency_ms, 0.95);
     j["latency_definition"] =
         "capture (start of producing the frame: studio render + texturing) to display (rendered, glFinish)";
     j["drops"] = stats_.drops;
@@ -989,8 +978,8 @@ class Viewer {
                           {"catch_ups", bs.follower.catch_ups},
                           {"skips", bs.follower.skips},
                           {"discontinuities", bs.follower.discontinuities},
-                          {"latency_ms_p50", Percentile(bs.latency_ms, 0.5)},
-                          {"latency_ms_p99", Percentile(bs.latency_ms, 0.99)},
+                          {"latency_ms_p50", Quantile(bs.latency_ms, 0.5)},
+                          {"latency_ms_p99", Quantile(bs.latency_ms, 0.99)},
                           {"latency_definition",
                            "packager receive time of a part's last message to the part's arrival here (Unix clocks)"},
                           {"last_error", bs.last_error}};

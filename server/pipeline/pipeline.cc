@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "common/bounded_queue.h"
+#include "common/recent.h"
 
 namespace holo {
 
@@ -39,14 +40,6 @@ double ProcessCpuTimeMs() {
 }
 
 namespace {
-
-// Appends `t` to `per_frame`; with `keep` > 0 drops the oldest `keep` entries
-// whenever 2·keep are held (amortized O(1), the order stays).
-void KeepTimings(const StageTimings& t, int64_t keep, std::vector<StageTimings>* per_frame) {
-  if (keep > 0 && per_frame->size() >= 2 * static_cast<size_t>(keep))
-    per_frame->erase(per_frame->begin(), per_frame->begin() + keep);
-  per_frame->push_back(t);
-}
 
 // Runs `fn` on `work` and stores its wall time in `*ms` (and, if `cpu_ms` is
 // set, the process CPU time meanwhile).
@@ -130,7 +123,7 @@ StatusOr<PipelineStats> Pipeline::RunSerial() {
     HOLO_RETURN_IF_ERROR(Timed(stages_.encode, work, &work.timings.encode_ms, &work.timings.encode_cpu_ms));
     work.timings.encoded_us = clock_.NowUs();
     if (stages_.sink) HOLO_RETURN_IF_ERROR(stages_.sink(work));
-    KeepTimings(work.timings, options_.keep_frame_timings, &stats.per_frame);
+    AppendRecent(&stats.per_frame, work.timings, static_cast<size_t>(options_.keep_frame_timings));
     ++stats.frames;
   }
   stats.cpu_ms = ProcessCpuTimeMs() - cpu0;
@@ -226,7 +219,7 @@ StatusOr<PipelineStats> Pipeline::RunConcurrent() {
           break;
         }
       }
-      KeepTimings((*item)->timings, options_.keep_frame_timings, &stats.per_frame);
+      AppendRecent(&stats.per_frame, (*item)->timings, static_cast<size_t>(options_.keep_frame_timings));
       ++stats.frames;
       free_items.Push(*item);
     }

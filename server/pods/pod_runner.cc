@@ -7,6 +7,8 @@
 #include <thread>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "common/clock.h"
 #include "net/wire_message.h"
 #include "common/log.h"
@@ -210,18 +212,22 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
       next_stats += 1000000;
       const PodClientCounters c = client.counters();
       if (stats) {
-        std::fprintf(stats,
-                     "{\"pod\":%d,\"frames\":%lld,\"skipped\":%lld,\"sent\":%llu,\"bytes_sent\":%llu,"
-                     "\"dropped_queue_full\":%llu,\"dropped_disconnected\":%llu,\"connects\":%llu,"
-                     "\"connected\":%s,\"encode_cpu_ms\":%.1f,\"produce_cpu_ms\":%.1f,\"depth_bytes\":%llu,"
-                     "\"color_bytes\":%llu}\n",
-                     o.pod_id, static_cast<long long>(done), static_cast<long long>(skipped),
-                     static_cast<unsigned long long>(c.sent), static_cast<unsigned long long>(c.bytes_sent),
-                     static_cast<unsigned long long>(c.dropped_queue_full),
-                     static_cast<unsigned long long>(c.dropped_disconnected),
-                     static_cast<unsigned long long>(c.connects), c.connected ? "true" : "false", encode_cpu_ms,
-                     produce_cpu_ms, static_cast<unsigned long long>(depth_bytes),
-                     static_cast<unsigned long long>(color_bytes));
+        // One JSON line per second; CPU times rounded to 0.1 ms.
+        nlohmann::ordered_json j;
+        j["pod"] = o.pod_id;
+        j["frames"] = done;
+        j["skipped"] = skipped;
+        j["sent"] = c.sent;
+        j["bytes_sent"] = c.bytes_sent;
+        j["dropped_queue_full"] = c.dropped_queue_full;
+        j["dropped_disconnected"] = c.dropped_disconnected;
+        j["connects"] = c.connects;
+        j["connected"] = c.connected;
+        j["encode_cpu_ms"] = std::round(encode_cpu_ms * 10) / 10;
+        j["produce_cpu_ms"] = std::round(produce_cpu_ms * 10) / 10;
+        j["depth_bytes"] = depth_bytes;
+        j["color_bytes"] = color_bytes;
+        std::fprintf(stats, "%s\n", j.dump().c_str());
         std::fflush(stats);
       }
     }

@@ -15,6 +15,7 @@
 #include "common/file_util.h"
 #include "common/log.h"
 #include "common/mesh.h"
+#include "common/quantile.h"
 #include "net/server_config.h"
 #include "protocol/geometry_codec.h"
 #include "server/record/recording_reader.h"
@@ -30,12 +31,6 @@ void OnReplaySignal(int) { g_replay_stop = 1; }
 int Fail(const Status& s) {
   spdlog::error("holoport-server: replay: {}", s.message());
   return 1;
-}
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
 }
 
 std::string RandomToken() {
@@ -169,8 +164,8 @@ int RunNetworkReplay(const ReplayCommandOptions& o, std::shared_ptr<const Record
     spdlog::info(
         "holoport-server: replay served {} messages; controls applied {}, rejected {}; mesh frame "
         "fan-out vs schedule p50 {:.2f} ms, p99 {:.2f} ms",
-        rst.emitted, rst.controls_applied, rst.controls_rejected, Percentile(lateness_ms, 0.5),
-        Percentile(lateness_ms, 0.99));
+        rst.emitted, rst.controls_applied, rst.controls_rejected, Quantile(lateness_ms, 0.5),
+        Quantile(lateness_ms, 0.99));
   }
   if (!err.ok()) return Fail(err);
   return 0;
@@ -285,8 +280,8 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
     spdlog::info(
         "holoport-server: replayed {} messages ({} mesh frames, {:.2f} MB) in {:.2f} s wall; "
         "mesh frame pacing error p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms{}{}",
-        messages, meshes, static_cast<double>(bytes) / 1e6, wall, Percentile(lateness_ms, 0.5),
-        Percentile(lateness_ms, 0.99),
+        messages, meshes, static_cast<double>(bytes) / 1e6, wall, Quantile(lateness_ms, 0.5),
+        Quantile(lateness_ms, 0.99),
         lateness_ms.empty() ? 0.0 : *std::max_element(lateness_ms.begin(), lateness_ms.end()),
         o.export_dir.empty() ? "" : "; meshes in ", o.export_dir);
   return code;

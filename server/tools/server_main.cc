@@ -478,7 +478,7 @@ int main(int argc, char** argv) {
     });
     if (!v.ok()) return Fail(v.status());
     site_voice = std::move(*v);
-    if (!quiet) std::fprintf(stderr, "holoport-server: voice: %s\n", site_voice->stats().description.c_str());
+    if (!quiet) spdlog::info("holoport-server: voice: {}", site_voice->stats().description);
   }
   options.pipeline.on_start = [&](int64_t start_us) { capture_start_us = start_us; };
   pod_stats = stats_out;

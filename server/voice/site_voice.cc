@@ -165,15 +165,10 @@ struct SiteVoice::Impl {
       Send(pcm, seq++, t0);
       t0 += audio::kFrameUs;
       // After a long stall (a loaded machine) carry on from now, not with a
-      // burst of old frames; the frames not made count as lost (sequence
-      // numbers skip them), so capture time and sequence stay in step for
-      // the viewers' jitter buffers.
-      if (const int64_t behind = clock.NowUs() - t0; behind > 500000) {
-        const int64_t skip = behind / audio::kFrameUs;
-        t0 += skip * audio::kFrameUs;
-        seq += static_cast<uint32_t>(skip);
+      // burst of old frames.
+      if (const int64_t skipped = audio::SkipStalledFrames(clock.NowUs(), 500000, &t0, &seq); skipped > 0) {
         std::lock_guard<std::mutex> l(mu);
-        stats.late_frames += skip;
+        stats.late_frames += skipped;
       }
     }
   }

@@ -198,5 +198,26 @@ TEST(VoiceCodec, CodecDelayIsTheOpusLookAhead) {
   EXPECT_NEAR(first - (2 * kFrameSamples + 400), CodecDelaySamples(AudioCodec::kOpus), 12);
 }
 
+// A sender that stalled skips whole frames, capture time and sequence
+// together, and only beyond the bound it is given.
+TEST(VoiceCodec, StalledSenderSkipsWholeFramesInStep) {
+  int64_t next_us = 1000000;
+  uint32_t seq = 7;
+  EXPECT_EQ(SkipStalledFrames(next_us + 200000, 200000, &next_us, &seq), 0);  // at the bound: no skip
+  EXPECT_EQ(next_us, 1000000);
+  EXPECT_EQ(seq, 7u);
+  // 0.55 s behind: 27 whole frames skipped, the next one is the frame under way.
+  EXPECT_EQ(SkipStalledFrames(1550000, 200000, &next_us, &seq), 27);
+  EXPECT_EQ(next_us, 1000000 + 27 * kFrameUs);
+  EXPECT_EQ(seq, 34u);
+  EXPECT_LE(next_us, 1550000);
+  EXPECT_GT(next_us + kFrameUs, 1550000);
+  // The sequence wraps as the wire's 32-bit counter does.
+  uint32_t high = 0xFFFFFFFEu;
+  int64_t t = 0;
+  EXPECT_EQ(SkipStalledFrames(5 * kFrameUs, 0, &t, &high), 5);
+  EXPECT_EQ(high, 3u);
+}
+
 }  // namespace
 }  // namespace holo::audio

@@ -20,6 +20,7 @@
 #include "audio/synthetic_voice.h"
 #include "audio/voice_codec.h"
 #include "client/net/site_av_sync.h"
+#include "common/quantile.h"
 #include "net/net_fixtures.h"
 #include "net/site_client.h"
 #include "net/wire_message.h"
@@ -133,12 +134,6 @@ struct Result {
   std::vector<double> content_offsets_ms;  // syllable heard − its picture shown, after kMeasureFrom
   int64_t displayed = 0;
 };
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 
 // Voice: a frame leaves when complete (20 ms), network 2 ms + U(0, 8 ms).
 // Pictures: the site's pipeline and the network 60 ms + U(0, 20 ms); the
@@ -269,7 +264,7 @@ Result Simulate(const Case& k) {
               "pictures held\n",
               k.extra_voice_ms, k.extra_picture_ms, k.sync ? "on" : "off", r.stats.av_offset_ms_p1,
               r.stats.av_offset_ms_p50, r.stats.av_offset_ms_p99, static_cast<long long>(r.stats.offsets),
-              Median(r.content_offsets_ms), r.content_offsets_ms.size(), r.stats.voice_sync_delay_ms,
+              Quantile(r.content_offsets_ms, 0.5), r.content_offsets_ms.size(), r.stats.voice_sync_delay_ms,
               r.stats.picture_sync_delay_ms, static_cast<long long>(r.stats.pictures_held),
               static_cast<long long>(r.stats.pictures));
   return r;
@@ -287,7 +282,7 @@ void ExpectInSync(const Result& r) {
     EXPECT_GE(o, -45.0);
     EXPECT_LE(o, 125.0);
   }
-  EXPECT_NEAR(Median(r.content_offsets_ms), r.stats.av_offset_ms_p50, 15.0);
+  EXPECT_NEAR(Quantile(r.content_offsets_ms, 0.5), r.stats.av_offset_ms_p50, 15.0);
 }
 
 TEST(LipSync, InSyncOverTheMessagePath) {
@@ -304,7 +299,7 @@ TEST(LipSync, VoiceDelayed200MsHoldsThePictures) {
   // Without sync the 200 ms show up: the voice is late beyond +125 ms.
   const Result off = Simulate({200, 0, false});
   EXPECT_GT(off.stats.av_offset_ms_p50, 150.0);
-  EXPECT_GT(Median(off.content_offsets_ms), 150.0);
+  EXPECT_GT(Quantile(off.content_offsets_ms, 0.5), 150.0);
   EXPECT_EQ(off.stats.pictures_held, 0);
 }
 
@@ -316,7 +311,7 @@ TEST(LipSync, PictureDelayed200MsDelaysTheVoice) {
   // Without sync the voice runs 200 ms ahead of the lips.
   const Result off = Simulate({0, 200, false});
   EXPECT_LT(off.stats.av_offset_ms_p50, -150.0);
-  EXPECT_LT(Median(off.content_offsets_ms), -150.0);
+  EXPECT_LT(Quantile(off.content_offsets_ms, 0.5), -150.0);
 }
 
 }  // namespace

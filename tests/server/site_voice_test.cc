@@ -8,9 +8,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <mutex>
-#include <thread>
 #include <vector>
 
 #include "audio/room.h"
@@ -97,15 +98,25 @@ TEST(SiteVoice, SyntheticSoundsStartAtTheCaptureTimeOfTheirEvents) {
     return t_us < start ? std::nan("") : static_cast<double>(t_us - start) / 1e6 + 0.3;  // starts at studio 0.3 s
   };
   std::mutex mu;
+  std::condition_variable published;
   std::vector<protocol::AudioPose> frames;
   voice::SiteVoiceOptions o;
   o.source = "synthetic";
   auto v = voice::SiteVoice::Start(o, studio.get(), studio_time, [&](const protocol::AudioPose& a) {
     std::lock_guard<std::mutex> l(mu);
     frames.push_back(a);
+    published.notify_all();
   });
   ASSERT_TRUE(v.ok()) << v.status().ToString();
-  std::this_thread::sleep_for(std::chrono::milliseconds(1800));
+  {
+    // Until the frames reach studio time 2.0 s (the checks below look up to
+    // 1.9 s): however late a loaded machine runs the voice thread.
+    std::unique_lock<std::mutex> l(mu);
+    const int64_t until_us = start + wall_minus_steady + 1700000;
+    EXPECT_TRUE(published.wait_for(l, std::chrono::seconds(30), [&] {
+      return !frames.empty() && frames.back().capture_time_us >= until_us;
+    })) << "the voice did not reach studio time 2.0 s within 30 s";
+  }
   (*v)->Stop();
   ASSERT_GT(frames.size(), 60u);
   // Decode in order and note where sounds begin (above 0.05 after ≥ 60 ms below it).

@@ -31,6 +31,7 @@
 #include "common/log.h"
 #include "common/mesh.h"
 #include "net/site_client.h"
+#include "net/wire_message.h"
 
 namespace {
 
@@ -121,17 +122,13 @@ int main(int argc, char** argv) {
     stats_file.reset(std::fopen(stats_path.c_str(), "w"));
     if (!stats_file) return Fail(holo::Unavailable("--stats " + stats_path + ": cannot open for writing"));
   }
-  auto wall_us = [] {
-    return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
-        .count();
-  };
   std::vector<double> second_latency_ms;  // frames taken since the last --stats line
   // One --stats line: this second's frames and the counters so far.
   auto write_stats_line = [&] {
     if (!stats_file) return;
     const holo::net::ClientStats s = viewer->stats();
     nlohmann::ordered_json j;
-    j["wall_us"] = wall_us();
+    j["wall_us"] = holo::net::WallUs();
     j["frames"] = second_latency_ms.size();
     j["latency_ms"] = second_latency_ms;
     j["state"] = holo::net::ClientStateName(viewer->state());
@@ -168,7 +165,7 @@ int main(int argc, char** argv) {
       ++frames;
       latency_sum += f.latency_ms;
       if (stats_file)
-        second_latency_ms.push_back(f.latency_ms + static_cast<double>(wall_us() - f.received_us) * 1e-3);
+        second_latency_ms.push_back(f.latency_ms + static_cast<double>(holo::net::WallUs() - f.received_us) * 1e-3);
       if (f.has_mesh && !f.mesh.positions.empty()) last_mesh = std::move(f.mesh);
     }
     if (now - last_stats_line >= std::chrono::seconds(1)) {
