@@ -183,6 +183,7 @@ int RunHullBench(const BenchArgs& args, const HullBenchOptions& o) {
 
 BenchFn SetupHull(CLI::App& app) {
   auto o = std::make_shared<HullBenchOptions>();
+  DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   app.add_option("--pods", o->pods, "pod counts to compare, comma separated (pods spread over the rig)")
       ->capture_default_str();
   app.add_option("--hull-voxel-mm", o->hull_voxel_mm, "voxel of the visual hull, mm (TSDF: the workload's)")
