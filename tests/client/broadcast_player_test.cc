@@ -3,6 +3,7 @@
 // follower's choices (join at the live edge, parts in order, skip on 404,
 // catch up), and a player against a live packager behind a small HTTP server
 // that loses a part, stalls and sees the site restart.
+#include <algorithm>
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -380,7 +381,14 @@ TEST(BroadcastPlayer, SurvivesA404AStalledEdgeAndASiteRestart) {
   const auto log = edge.log();
   const std::set<std::string> fetched(log.begin(), log.end());
   EXPECT_TRUE(fetched.count("seg_00004.p0"));
-  EXPECT_TRUE(fetched.count("seg_00005.p1"));
+  // After the slow part it went on: the next part of segment 5, or (on a
+  // loaded machine, behind the live edge after the 700 ms wait) a later
+  // segment.
+  const auto slow = std::find(log.begin(), log.end(), "seg_00005.p0");
+  ASSERT_NE(slow, log.end());
+  EXPECT_TRUE(std::any_of(slow + 1, log.end(), [](const std::string& n) {
+    return n.rfind("seg_", 0) == 0 && n > "seg_00005.p0" && n.find(".p") != std::string::npos;
+  })) << "stopped at the slow part";
   const uint64_t last = (*packager)->next_segment() - 1;
   EXPECT_TRUE(fetched.count(record::LivePartName(last, 0))) << "never reached the last segment " << last;
   EXPECT_FALSE(fetched.count("seg_00003.p2")) << "kept playing a segment after its lost part";
