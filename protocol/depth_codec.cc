@@ -7,11 +7,13 @@
 #include <string>
 
 #include "protocol/byte_io.h"
+#include "protocol/rans_coder.h"
 
 namespace holo::protocol {
 namespace {
 
 constexpr uint8_t kD1 = 1;
+constexpr uint8_t kD2 = 2;
 constexpr size_t kBlobHeader = 1 + 2 + 2 + 4;
 
 // LOCO-I's median edge detector from the left (a), upper (b) and upper-left
@@ -33,15 +35,202 @@ inline int16_t UnZigZag(uint16_t z) { return static_cast<int16_t>((z >> 1) ^ (~(
 }  // namespace
 
 Status DepthEncodeOptions::Check() const {
+  if (codec != DepthCodec::kD1 && codec != DepthCodec::kD2)
+    return InvalidArgument("depth codec must be D1 or D2, got " + std::to_string(static_cast<int>(codec)));
   if (zstd_level < 1 || zstd_level > 19) return InvalidArgument("zstd_level must be in 1..19, got " + std::to_string(zstd_level));
+  if (noise_at_1m_um < 1 || noise_at_1m_um > 0xFFFF)
+    return InvalidArgument("noise_at_1m_um must be in 1..65535, got " + std::to_string(noise_at_1m_um));
   return OkStatus();
 }
+
+namespace {
+
+// ------------------------------------------------------------------ D2
+//
+// The model both sides run per pixel, in row-major order (PROTOCOL.md §8.2).
+// `f` and `m` point at pixel (x, y) of the fill plane (the depth, with every
+// invalid pixel replaced by its prediction) and the magnitude plane (|residual|
+// of valid pixels, 0 for invalid ones); `d` and `dup` are rows y and y − 1 of
+// the depth (dup is null on row 0), of which only pixels before (x, y) are read.
+
+constexpr size_t kD2Header = 1 + 2 + 2 + 2 + 4;
+constexpr uint32_t kD2Contexts = 192;
+constexpr uint32_t kInvalidToken = 40;  // one past the largest token of a 16-bit value
+// The least-squares plane through these causal neighbours (dx, dy), evaluated
+// at (0, 0), in 1/4096: exact weights 59/226, 49/226, 39/226, 2/339, 17/339,
+// 32/339, 47/339, 62/339, 77/339, −109/678, −79/678, −49/678, rounded, summing
+// to 4096. The residual variance of a noisy plane is ~1.31 σ² (MED: ~2 σ²).
+constexpr int kPlaneDx[12] = {-1, -2, -3, -2, -1, 0, 1, 2, 3, -1, 0, 1};
+constexpr int kPlaneDy[12] = {0, 0, 0, -1, -1, -1, -1, -1, -1, -2, -2, -2};
+constexpr int32_t kPlaneW[12] = {1069, 888, 707, 24, 205, 387, 568, 749, 930, -658, -477, -296};
+static_assert(kPlaneW[0] + kPlaneW[1] + kPlaneW[2] + kPlaneW[3] + kPlaneW[4] + kPlaneW[5] + kPlaneW[6] + kPlaneW[7] +
+                  kPlaneW[8] + kPlaneW[9] + kPlaneW[10] + kPlaneW[11] ==
+              4096);
+
+struct D2Pixel {
+  int pred;
+  uint32_t ctx;
+};
+
+inline D2Pixel D2Model(const uint16_t* f, const uint16_t* m, const uint16_t* d, const uint16_t* dup, int w, int x,
+                       int y, uint64_t noise_um) {
+  int a, b, c;
+  if (y == 0) {
+    a = b = c = x > 0 ? f[-1] : 0;
+  } else if (x == 0) {
+    a = b = c = f[-w];
+  } else {
+    a = f[-1];
+    b = f[-w];
+    c = f[-w - 1];
+  }
+  const int med = c >= std::max(a, b) ? std::min(a, b) : c <= std::min(a, b) ? std::max(a, b) : a + b - c;
+  // σ(med) = noise_um · med² / 10^9 mm; s = 10^9 σ.
+  const uint64_t s = uint64_t{static_cast<uint32_t>(med)} * static_cast<uint32_t>(med) * noise_um;
+  int pred = med;
+  bool plane = false;
+  if (y >= 2 && x >= 3 && x + 3 < w) {
+    const uint16_t* r1 = f - w;
+    const uint16_t* r2 = f - 2 * w;
+    const int v[12] = {f[-1], f[-2], f[-3], r1[-2], r1[-1], r1[0], r1[1], r1[2], r1[3], r2[-1], r2[0], r2[1]};
+    int lo = v[0], hi = v[0];
+    int32_t sum = 0;
+    for (int k = 0; k < 12; ++k) {
+      lo = std::min(lo, v[k]);
+      hi = std::max(hi, v[k]);
+      sum += kPlaneW[k] * v[k];
+    }
+    // The window is one surface when its spread is within 8 σ + 4 mm.
+    if (static_cast<uint64_t>(hi - lo) <= s * 8 / 1000000000u + 4) {
+      pred = std::clamp((sum + 2048) >> 12, 0, 0xFFFF);
+      plane = true;
+    }
+  }
+  uint32_t ra = 0, rb = 0, rc = 0, rd = 0, invalid = 0;
+  if (x > 0) {
+    ra = m[-1];
+    invalid += d[x - 1] == 0;
+  }
+  if (y > 0) {
+    rb = m[-w];
+    invalid += dup[x] == 0;
+    if (x > 0) {
+      rc = m[-w - 1];
+      invalid += dup[x - 1] == 0;
+    }
+    if (x + 1 < w) {
+      rd = m[-w + 1];
+      invalid += dup[x + 1] == 0;
+    }
+  }
+  // Expected residual size, ~12× the typical |residual|: the neighbours'
+  // residuals and the noise level (10 σ), quantized to quarter octaves.
+  const uint64_t e = 2 * uint64_t{ra + rb} + rc + rd + s / 100000000u + 6;
+  const int n = std::bit_width(e);  // ≥ 3
+  const int q = std::clamp(4 * (n - 1) + static_cast<int>((e >> (n - 3)) & 3) - 12, 0, 31);
+  return {pred, static_cast<uint32_t>(q) + (plane ? 0u : 32u) + 64u * std::min<uint32_t>(invalid, 2)};
+}
+
+Status EncodeD2(const ImageDepth16& depth, const DepthEncodeOptions& options, std::vector<uint8_t>* out) {
+  const int w = depth.width(), h = depth.height();
+  const size_t n = static_cast<size_t>(w) * h;
+  thread_local std::vector<uint16_t> fill, mag, syms;
+  fill.resize(n);
+  mag.resize(n);
+  const uint64_t noise = static_cast<uint64_t>(options.noise_at_1m_um);
+  rans::TokenWriter tw(kD2Contexts, n, &syms);
+  for (int y = 0; y < h; ++y) {
+    const uint16_t* row = depth.row(y);
+    const uint16_t* up = y > 0 ? depth.row(y - 1) : nullptr;
+    uint16_t* f = fill.data() + static_cast<size_t>(y) * w;
+    uint16_t* m = mag.data() + static_cast<size_t>(y) * w;
+    for (int x = 0; x < w; ++x) {
+      const D2Pixel px = D2Model(f + x, m + x, row, up, w, x, y, noise);
+      const uint16_t v = row[x];
+      if (v == 0) {
+        tw.Put(px.ctx, kInvalidToken);
+        f[x] = static_cast<uint16_t>(px.pred);
+        m[x] = 0;
+      } else {
+        const auto r = static_cast<int16_t>(static_cast<uint16_t>(v - px.pred));
+        tw.PutValue(px.ctx, rans::ZigZag(r));
+        f[x] = v;
+        m[x] = static_cast<uint16_t>(r < 0 ? -r : r);
+      }
+    }
+  }
+  ByteWriter bw(out);
+  bw.U8(kD2);
+  bw.U16(static_cast<uint16_t>(w));
+  bw.U16(static_cast<uint16_t>(h));
+  bw.U16(static_cast<uint16_t>(options.noise_at_1m_um));
+  const size_t size_at = bw.ReserveU32();
+  const size_t start = out->size();
+  tw.Finish(out);
+  bw.PatchU32(size_at, static_cast<uint32_t>(out->size() - start));
+  return OkStatus();
+}
+
+Status DecodeD2(ByteReader& r, std::span<const uint8_t> blob, int w, int h, ImageDepth16* depth) {
+  uint16_t noise16 = 0;
+  HOLO_RETURN_IF_ERROR(r.U16("depth.d2.noise", &noise16));
+  std::span<const uint8_t> coded;
+  HOLO_RETURN_IF_ERROR(r.Blob32("depth.d2.stream", blob.size(), &coded));
+  HOLO_RETURN_IF_ERROR(r.ExpectEnd("depth"));
+  thread_local rans::TokenReader tr;  // its tables and buffers kept between frames
+  HOLO_RETURN_IF_ERROR(tr.Init(coded, kD2Contexts, "depth.d2"));
+  const size_t n = static_cast<size_t>(w) * h;
+  if (n > tr.MaxSymbols())
+    return DataLoss("depth.d2: " + std::to_string(n) + " pixels cannot fit in " + std::to_string(coded.size()) +
+                    " coded bytes");
+  if (depth->width() != w || depth->height() != h) depth->Resize(w, h);
+  thread_local std::vector<uint16_t> fill, mag;
+  fill.resize(n);
+  mag.resize(n);
+  const uint64_t noise = noise16;
+  for (int y = 0; y < h; ++y) {
+    uint16_t* row = depth->row(y);
+    const uint16_t* up = y > 0 ? depth->row(y - 1) : nullptr;
+    uint16_t* f = fill.data() + static_cast<size_t>(y) * w;
+    uint16_t* m = mag.data() + static_cast<size_t>(y) * w;
+    for (int x = 0; x < w; ++x) {
+      const D2Pixel px = D2Model(f + x, m + x, row, up, w, x, y, noise);
+      const uint32_t tok = tr.Get(px.ctx);
+      if (tok == kInvalidToken) {
+        row[x] = 0;
+        f[x] = static_cast<uint16_t>(px.pred);
+        m[x] = 0;
+        continue;
+      }
+      if (tok > kInvalidToken) return DataLoss("depth.d2: token " + std::to_string(tok) + " is not a 16-bit residual");
+      uint32_t z = tok;
+      if (tok >= 16) {
+        const uint32_t nb = (tok - 16) / 2 + 5;
+        z = (1u << (nb - 1)) | ((tok & 1u) << (nb - 2)) | tr.GetBits(nb - 2);
+      }
+      const int32_t res = rans::UnZigZag(z);
+      const auto v = static_cast<uint16_t>(px.pred + res);
+      if (v == 0) {
+        if (!tr.ok()) return tr.Finish();
+        return DataLoss("depth.d2: a residual decodes to depth 0 (invalid pixels have their own token)");
+      }
+      row[x] = v;
+      f[x] = v;
+      m[x] = static_cast<uint16_t>(res < 0 ? -res : res);
+    }
+    if (!tr.ok()) return tr.Finish();
+  }
+  return tr.Finish();
+}
+
+}  // namespace
 
 Status EncodeDepth(const ImageDepth16& depth, const DepthEncodeOptions& options, std::vector<uint8_t>* out) {
   HOLO_RETURN_IF_ERROR(options.Check());
   const int w = depth.width(), h = depth.height();
   if (w <= 0 || h <= 0 || w > 0xFFFF || h > 0xFFFF)
     return InvalidArgument("EncodeDepth: image size " + std::to_string(w) + "x" + std::to_string(h) + " outside 1..65535");
+  if (options.codec == DepthCodec::kD2) return EncodeD2(depth, options, out);
   // MED-predicted residuals, zigzag coded, split into a plane of high bytes
   // then a plane of low bytes (mostly zeros, then small numbers: what zstd's
   // entropy stage codes well).
@@ -80,20 +269,26 @@ Status EncodeDepth(const ImageDepth16& depth, const DepthEncodeOptions& options,
 }
 
 namespace {
-// The blob's codec byte (must be D1), width and height.
-Status ReadDepthHeader(ByteReader& r, uint16_t* w, uint16_t* h) {
-  uint8_t codec = 0;
-  HOLO_RETURN_IF_ERROR(r.U8("depth.codec", &codec));
-  if (codec != kD1) return DataLoss("depth.codec: unknown depth codec " + std::to_string(codec));
+// The blob's codec byte (D1 or D2), width and height.
+Status ReadDepthHeader(ByteReader& r, uint8_t* codec, uint16_t* w, uint16_t* h) {
+  HOLO_RETURN_IF_ERROR(r.U8("depth.codec", codec));
+  if (*codec != kD1 && *codec != kD2) return DataLoss("depth.codec: unknown depth codec " + std::to_string(*codec));
   HOLO_RETURN_IF_ERROR(r.U16("depth.width", w));
   return r.U16("depth.height", h);
 }
 }  // namespace
 
+StatusOr<DepthCodec> PeekDepthCodec(std::span<const uint8_t> blob) {
+  if (blob.empty()) return DataLoss("depth.codec: empty blob");
+  if (blob[0] != kD1 && blob[0] != kD2) return DataLoss("depth.codec: unknown depth codec " + std::to_string(blob[0]));
+  return static_cast<DepthCodec>(blob[0]);
+}
+
 Status PeekDepthSize(std::span<const uint8_t> blob, int* width, int* height) {
   ByteReader r(blob);
+  uint8_t codec = 0;
   uint16_t w = 0, h = 0;
-  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &w, &h));
+  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &codec, &w, &h));
   *width = w;
   *height = h;
   return OkStatus();
@@ -101,14 +296,16 @@ Status PeekDepthSize(std::span<const uint8_t> blob, int* width, int* height) {
 
 Status DecodeDepth(std::span<const uint8_t> blob, ImageDepth16* depth, const Limits& limits) {
   ByteReader r(blob);
+  uint8_t codec = 0;
   uint16_t w = 0, h = 0;
-  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &w, &h));
+  HOLO_RETURN_IF_ERROR(ReadDepthHeader(r, &codec, &w, &h));
   if (w == 0 || h == 0 || w > limits.max_image_dim || h > limits.max_image_dim)
     return DataLoss("depth.width: image size " + std::to_string(w) + "x" + std::to_string(h) + " outside 1.." +
                     std::to_string(limits.max_image_dim));
   const uint64_t pixels = uint64_t{w} * h;
   if (pixels > limits.max_image_pixels)
     return DataLoss("depth.width: " + std::to_string(pixels) + " pixels exceed limit " + std::to_string(limits.max_image_pixels));
+  if (codec == kD2) return DecodeD2(r, blob, w, h, depth);
   std::span<const uint8_t> z;
   HOLO_RETURN_IF_ERROR(r.Blob32("depth.zstd", blob.size(), &z));
   HOLO_RETURN_IF_ERROR(r.ExpectEnd("depth"));
