@@ -54,7 +54,7 @@ namespace {
 // the depth (dup is null on row 0), of which only pixels before (x, y) are read.
 
 constexpr size_t kD2Header = 1 + 2 + 2 + 2 + 4;
-constexpr uint32_t kD2Contexts = 192;
+constexpr uint32_t kD2Contexts = 16;
 constexpr uint32_t kInvalidToken = 40;  // one past the largest token of a 16-bit value
 // The least-squares plane through these causal neighbours (dx, dy), evaluated
 // at (0, 0), in 1/4096: exact weights 59/226, 49/226, 39/226, 2/339, 17/339,
@@ -88,7 +88,6 @@ inline D2Pixel D2Model(const uint16_t* f, const uint16_t* m, const uint16_t* d, 
   // σ(med) = noise_um · med² / 10^9 mm; s = 10^9 σ.
   const uint64_t s = uint64_t{static_cast<uint32_t>(med)} * static_cast<uint32_t>(med) * noise_um;
   int pred = med;
-  bool plane = false;
   if (y >= 2 && x >= 3 && x + 3 < w) {
     const uint16_t* r1 = f - w;
     const uint16_t* r2 = f - 2 * w;
@@ -103,7 +102,6 @@ inline D2Pixel D2Model(const uint16_t* f, const uint16_t* m, const uint16_t* d, 
     // The window is one surface when its spread is within 8 σ + 4 mm.
     if (static_cast<uint64_t>(hi - lo) <= s * 8 / 1000000000u + 4) {
       pred = std::clamp((sum + 2048) >> 12, 0, 0xFFFF);
-      plane = true;
     }
   }
   uint32_t ra = 0, rb = 0, rc = 0, rd = 0, invalid = 0;
@@ -124,11 +122,12 @@ inline D2Pixel D2Model(const uint16_t* f, const uint16_t* m, const uint16_t* d, 
     }
   }
   // Expected residual size, ~12× the typical |residual|: the neighbours'
-  // residuals and the noise level (10 σ), quantized to quarter octaves.
+  // residuals and the noise level (10 σ), in octaves. (Finer classes, or
+  // classes by predictor or by 2+ invalid neighbours, cost more in frequency
+  // tables than they save: measured on the studio's pods.)
   const uint64_t e = 2 * uint64_t{ra + rb} + rc + rd + s / 100000000u + 6;
-  const int n = std::bit_width(e);  // ≥ 3
-  const int q = std::clamp(4 * (n - 1) + static_cast<int>((e >> (n - 3)) & 3) - 12, 0, 31);
-  return {pred, static_cast<uint32_t>(q) + (plane ? 0u : 32u) + 64u * std::min<uint32_t>(invalid, 2)};
+  const int q = std::clamp(static_cast<int>(std::bit_width(e)) - 4, 0, 7);
+  return {pred, static_cast<uint32_t>(q) + (invalid ? 8u : 0u)};
 }
 
 Status EncodeD2(const ImageDepth16& depth, const DepthEncodeOptions& options, std::vector<uint8_t>* out) {
