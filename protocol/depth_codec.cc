@@ -47,24 +47,27 @@ namespace {
 
 // ------------------------------------------------------------------ D2
 //
-// The model both sides run per pixel, in row-major order (PROTOCOL.md §8.2).
-// `f` and `m` point at pixel (x, y) of the fill plane (the depth, with every
-// invalid pixel replaced by its prediction) and the magnitude plane (|residual|
-// of valid pixels, 0 for invalid ones); `d` and `dup` are rows y and y − 1 of
-// the depth (dup is null on row 0), of which only pixels before (x, y) are read.
+// The model both sides run per pixel, in row-major order (PROTOCOL.md §8.2),
+// on the fill plane F (the depth, with every invalid pixel replaced by its
+// prediction) and the magnitude plane M (|residual| of valid pixels, 0 for
+// invalid ones). What depends only on the rows above is computed for a whole
+// row first (PrepareRow: no dependency between pixels, so it pipelines); the
+// serial per-pixel part (At) adds the current row's left neighbours.
 
 constexpr size_t kD2Header = 1 + 2 + 2 + 2 + 4;
 constexpr uint32_t kD2Contexts = 16;
 constexpr uint32_t kInvalidToken = 40;  // one past the largest token of a 16-bit value
-// The least-squares plane through these causal neighbours (dx, dy), evaluated
-// at (0, 0), in 1/4096: exact weights 59/226, 49/226, 39/226, 2/339, 17/339,
-// 32/339, 47/339, 62/339, 77/339, −109/678, −79/678, −49/678, rounded, summing
-// to 4096. The residual variance of a noisy plane is ~1.31 σ² (MED: ~2 σ²).
-constexpr int kPlaneDx[12] = {-1, -2, -3, -2, -1, 0, 1, 2, 3, -1, 0, 1};
-constexpr int kPlaneDy[12] = {0, 0, 0, -1, -1, -1, -1, -1, -1, -2, -2, -2};
-constexpr int32_t kPlaneW[12] = {1069, 888, 707, 24, 205, 387, 568, 749, 930, -658, -477, -296};
-static_assert(kPlaneW[0] + kPlaneW[1] + kPlaneW[2] + kPlaneW[3] + kPlaneW[4] + kPlaneW[5] + kPlaneW[6] + kPlaneW[7] +
-                  kPlaneW[8] + kPlaneW[9] + kPlaneW[10] + kPlaneW[11] ==
+// The least-squares plane through the causal neighbours (dx, dy) = (−1,0)
+// (−2,0) (−3,0) | (−2,−1) (−1,−1) (0,−1) (1,−1) (2,−1) (3,−1) | (−1,−2)
+// (0,−2) (1,−2), evaluated at (0, 0), in 1/4096: exact weights 59/226,
+// 49/226, 39/226, 2/339, 17/339, 32/339, 47/339, 62/339, 77/339, −109/678,
+// −79/678, −49/678, rounded, summing to 4096. The residual variance of a
+// noisy plane is ~1.31 σ² (MED: ~2 σ²).
+constexpr int32_t kW0[3] = {1069, 888, 707};                  // row y: x−1, x−2, x−3
+constexpr int32_t kW1[6] = {24, 205, 387, 568, 749, 930};     // row y−1: x−2 .. x+3
+constexpr int32_t kW2[3] = {-658, -477, -296};                // row y−2: x−1 .. x+1
+static_assert(kW0[0] + kW0[1] + kW0[2] + kW1[0] + kW1[1] + kW1[2] + kW1[3] + kW1[4] + kW1[5] + kW2[0] + kW2[1] +
+                  kW2[2] ==
               4096);
 
 struct D2Pixel {
@@ -72,63 +75,89 @@ struct D2Pixel {
   uint32_t ctx;
 };
 
-inline D2Pixel D2Model(const uint16_t* f, const uint16_t* m, const uint16_t* d, const uint16_t* dup, int w, int x,
-                       int y, uint64_t noise_um) {
-  int a, b, c;
-  if (y == 0) {
-    a = b = c = x > 0 ? f[-1] : 0;
-  } else if (x == 0) {
-    a = b = c = f[-w];
-  } else {
-    a = f[-1];
-    b = f[-w];
-    c = f[-w - 1];
+class D2Model {
+ public:
+  explicit D2Model(int w, uint64_t noise_um) : w_(w), noise_(noise_um) {
+    for (auto* v : {&e_up_, &thr_}) v->resize(static_cast<size_t>(w));
+    for (auto* v : {&sum_, &lo_, &hi_}) v->resize(static_cast<size_t>(w));
+    inv_up_.resize(static_cast<size_t>(w));
   }
-  const int med = c >= std::max(a, b) ? std::min(a, b) : c <= std::min(a, b) ? std::max(a, b) : a + b - c;
-  // σ(med) = noise_um · med² / 10^9 mm; s = 10^9 σ.
-  const uint64_t s = uint64_t{static_cast<uint32_t>(med)} * static_cast<uint32_t>(med) * noise_um;
-  int pred = med;
-  if (y >= 2 && x >= 3 && x + 3 < w) {
-    const uint16_t* r1 = f - w;
-    const uint16_t* r2 = f - 2 * w;
-    const int v[12] = {f[-1], f[-2], f[-3], r1[-2], r1[-1], r1[0], r1[1], r1[2], r1[3], r2[-1], r2[0], r2[1]};
-    int lo = v[0], hi = v[0];
-    int32_t sum = 0;
-    for (int k = 0; k < 12; ++k) {
-      lo = std::min(lo, v[k]);
-      hi = std::max(hi, v[k]);
-      sum += kPlaneW[k] * v[k];
+
+  // Before row y: `f`, `m` are row y of F and M (rows above at −w, −2w);
+  // `dup` is row y − 1 of the depth (null on row 0).
+  void PrepareRow(const uint16_t* f, const uint16_t* m, const uint16_t* dup, int y) {
+    y_ = y;
+    if (y == 0) return;
+    const int w = w_;
+    const uint16_t* f1 = f - w;
+    const uint16_t* m1 = m - w;
+    for (int x = 0; x < w; ++x) {
+      // S = noise × b², b = F(x, y−1): the noise level σ = S / 10^9 mm.
+      const uint64_t b = f1[x];
+      const uint64_t s = noise_ * b * b;
+      const uint32_t rc = x > 0 ? m1[x - 1] : 0, rd = x + 1 < w ? m1[x + 1] : 0;
+      e_up_[x] = 2u * m1[x] + rc + rd + static_cast<uint32_t>(s / 100000000u) + 6u;
+      thr_[x] = static_cast<uint32_t>(std::min<uint64_t>(s * 8 / 1000000000u + 4, UINT32_MAX));
+      inv_up_[x] = static_cast<uint8_t>((dup[x] == 0) + (x > 0 && dup[x - 1] == 0) + (x + 1 < w && dup[x + 1] == 0));
     }
-    // The window is one surface when its spread is within 8 σ + 4 mm.
-    if (static_cast<uint64_t>(hi - lo) <= s * 8 / 1000000000u + 4) {
-      pred = std::clamp((sum + 2048) >> 12, 0, 0xFFFF);
-    }
-  }
-  uint32_t ra = 0, rb = 0, rc = 0, rd = 0, invalid = 0;
-  if (x > 0) {
-    ra = m[-1];
-    invalid += d[x - 1] == 0;
-  }
-  if (y > 0) {
-    rb = m[-w];
-    invalid += dup[x] == 0;
-    if (x > 0) {
-      rc = m[-w - 1];
-      invalid += dup[x - 1] == 0;
-    }
-    if (x + 1 < w) {
-      rd = m[-w + 1];
-      invalid += dup[x + 1] == 0;
+    if (y < 2) return;
+    const uint16_t* f2 = f - 2 * w;
+    for (int x = 3; x + 3 < w; ++x) {
+      const int v[9] = {f1[x - 2], f1[x - 1], f1[x], f1[x + 1], f1[x + 2], f1[x + 3], f2[x - 1], f2[x], f2[x + 1]};
+      int lo = v[0], hi = v[0];
+      int32_t sum = 0;
+      for (int k = 0; k < 9; ++k) {
+        lo = std::min(lo, v[k]);
+        hi = std::max(hi, v[k]);
+        sum += (k < 6 ? kW1[k] : kW2[k - 6]) * v[k];
+      }
+      sum_[x] = sum;
+      lo_[x] = lo;
+      hi_[x] = hi;
     }
   }
-  // Expected residual size, ~12× the typical |residual|: the neighbours'
-  // residuals and the noise level (10 σ), in octaves. (Finer classes, or
-  // classes by predictor or by 2+ invalid neighbours, cost more in frequency
-  // tables than they save: measured on the studio's pods.)
-  const uint64_t e = 2 * uint64_t{ra + rb} + rc + rd + s / 100000000u + 6;
-  const int q = std::clamp(static_cast<int>(std::bit_width(e)) - 4, 0, 7);
-  return {pred, static_cast<uint32_t>(q) + (invalid ? 8u : 0u)};
-}
+
+  // Pixel x of the prepared row: `f`, `m` as for PrepareRow (pixels before x
+  // of row y already set), `d` row y of the depth.
+  D2Pixel At(const uint16_t* f, const uint16_t* m, const uint16_t* d, int x) const {
+    if (y_ == 0) {  // a = b = c = the left neighbour
+      const uint32_t a = x > 0 ? f[x - 1] : 0, ra = x > 0 ? m[x - 1] : 0;
+      const uint64_t e = 2u * ra + noise_ * a * a / 100000000u + 6u;
+      return {static_cast<int>(a), Context(e, x > 0 && d[x - 1] == 0)};
+    }
+    const int w = w_;
+    const int b = f[x - w];
+    const int a = x > 0 ? f[x - 1] : b, c = x > 0 ? f[x - w - 1] : b;
+    int pred = c >= std::max(a, b) ? std::min(a, b) : c <= std::min(a, b) ? std::max(a, b) : a + b - c;
+    if (y_ >= 2 && x >= 3 && x + 3 < w) {
+      const int v0 = f[x - 1], v1 = f[x - 2], v2 = f[x - 3];
+      const int lo = std::min({lo_[x], v0, v1, v2}), hi = std::max({hi_[x], v0, v1, v2});
+      const int plane = std::clamp((sum_[x] + kW0[0] * v0 + kW0[1] * v1 + kW0[2] * v2 + 2048) >> 12, 0, 0xFFFF);
+      // The window is one surface when its spread is within 8 σ + 4 mm.
+      pred = static_cast<uint32_t>(hi - lo) <= thr_[x] ? plane : pred;
+    }
+    const uint32_t ra = x > 0 ? m[x - 1] : 0;
+    const uint32_t invalid = inv_up_[x] + (x > 0 && d[x - 1] == 0);
+    return {pred, Context(uint64_t{e_up_[x]} + 2u * ra, invalid != 0)};
+  }
+
+ private:
+  // E ≈ 12 × the expected |residual| (the neighbours' residuals and 10 σ), in
+  // octaves, × whether a neighbour is invalid. (Finer classes, or classes by
+  // predictor or by 2+ invalid neighbours, cost more in frequency tables than
+  // they save: measured on the studio's pods.)
+  static uint32_t Context(uint64_t e, bool invalid) {
+    const int q = std::clamp(static_cast<int>(std::bit_width(e)) - 4, 0, 7);
+    return static_cast<uint32_t>(q) + (invalid ? 8u : 0u);
+  }
+
+  int w_;
+  uint64_t noise_;
+  int y_ = 0;
+  std::vector<uint32_t> e_up_, thr_;
+  std::vector<int32_t> sum_, lo_, hi_;
+  std::vector<uint8_t> inv_up_;
+};
 
 Status EncodeD2(const ImageDepth16& depth, const DepthEncodeOptions& options, std::vector<uint8_t>* out) {
   const int w = depth.width(), h = depth.height();
@@ -138,13 +167,15 @@ Status EncodeD2(const ImageDepth16& depth, const DepthEncodeOptions& options, st
   mag.resize(n);
   const uint64_t noise = static_cast<uint64_t>(options.noise_at_1m_um);
   rans::TokenWriter tw(kD2Contexts, n, &syms);
+  D2Model model(w, noise);
   for (int y = 0; y < h; ++y) {
     const uint16_t* row = depth.row(y);
     const uint16_t* up = y > 0 ? depth.row(y - 1) : nullptr;
     uint16_t* f = fill.data() + static_cast<size_t>(y) * w;
     uint16_t* m = mag.data() + static_cast<size_t>(y) * w;
+    model.PrepareRow(f, m, up, y);
     for (int x = 0; x < w; ++x) {
-      const D2Pixel px = D2Model(f + x, m + x, row, up, w, x, y, noise);
+      const D2Pixel px = model.At(f, m, row, x);
       const uint16_t v = row[x];
       if (v == 0) {
         tw.Put(px.ctx, kInvalidToken);
@@ -152,7 +183,7 @@ Status EncodeD2(const ImageDepth16& depth, const DepthEncodeOptions& options, st
         m[x] = 0;
       } else {
         const auto r = static_cast<int16_t>(static_cast<uint16_t>(v - px.pred));
-        tw.PutValue(px.ctx, rans::ZigZag(r));
+        tw.PutValue16(px.ctx, rans::ZigZag(r));
         f[x] = v;
         m[x] = static_cast<uint16_t>(r < 0 ? -r : r);
       }
@@ -186,14 +217,15 @@ Status DecodeD2(ByteReader& r, std::span<const uint8_t> blob, int w, int h, Imag
   thread_local std::vector<uint16_t> fill, mag;
   fill.resize(n);
   mag.resize(n);
-  const uint64_t noise = noise16;
+  D2Model model(w, noise16);
   for (int y = 0; y < h; ++y) {
     uint16_t* row = depth->row(y);
     const uint16_t* up = y > 0 ? depth->row(y - 1) : nullptr;
     uint16_t* f = fill.data() + static_cast<size_t>(y) * w;
     uint16_t* m = mag.data() + static_cast<size_t>(y) * w;
+    model.PrepareRow(f, m, up, y);
     for (int x = 0; x < w; ++x) {
-      const D2Pixel px = D2Model(f + x, m + x, row, up, w, x, y, noise);
+      const D2Pixel px = model.At(f, m, row, x);
       const uint32_t tok = tr.Get(px.ctx);
       if (tok == kInvalidToken) {
         row[x] = 0;
@@ -202,12 +234,7 @@ Status DecodeD2(ByteReader& r, std::span<const uint8_t> blob, int w, int h, Imag
         continue;
       }
       if (tok > kInvalidToken) return DataLoss("depth.d2: token " + std::to_string(tok) + " is not a 16-bit residual");
-      uint32_t z = tok;
-      if (tok >= 16) {
-        const uint32_t nb = (tok - 16) / 2 + 5;
-        z = (1u << (nb - 1)) | ((tok & 1u) << (nb - 2)) | tr.GetBits(nb - 2);
-      }
-      const int32_t res = rans::UnZigZag(z);
+      const int32_t res = rans::UnZigZag(tr.ValueOfToken16(tok));
       const auto v = static_cast<uint16_t>(px.pred + res);
       if (v == 0) {
         if (!tr.ok()) return tr.Finish();

@@ -69,6 +69,16 @@ class TokenWriter {
     Put(ctx, tok);
     if (nbits) PutBits(z & ((1u << nbits) - 1u), nbits);
   }
+  // The same as PutValue for z < 2^16, without a data-dependent branch (the
+  // depth codec's residuals: whether one is < 16 is a coin toss).
+  void PutValue16(uint32_t ctx, uint32_t z) {
+    const uint32_t n = std::max<uint32_t>(static_cast<uint32_t>(std::bit_width(z)), 5);
+    const bool small = z < 16;
+    const uint32_t tok = small ? z : 16 + 2 * (n - 5) + ((z >> (n - 2)) & 1u);
+    const uint32_t nbits = small ? 0 : n - 2;
+    Put(ctx, tok);
+    PutBits(z & ((1u << nbits) - 1u), nbits);
+  }
   void PutBits(uint32_t v, uint32_t n) {  // n ≤ 26
     acc_ |= uint64_t{v} << nacc_;
     nacc_ += n;
@@ -298,6 +308,15 @@ class TokenReader {
     acc_ >>= n;
     nacc_ -= n;
     return v;
+  }
+  // The value of a token below 40 (its raw bits read), without a
+  // data-dependent branch; GetValue's result for values < 2^16.
+  uint32_t ValueOfToken16(uint32_t tok) {
+    const bool small = tok < 16;
+    const uint32_t nb = small ? 0 : (tok - 16) / 2 + 3;  // raw bits: bit length − 2
+    const uint32_t bits = GetBits(nb);
+    const uint32_t big = (1u << (nb + 1)) | ((tok & 1u) << nb) | bits;
+    return small ? tok : big;
   }
   uint32_t GetValue(uint32_t ctx) {
     const uint32_t tok = Get(ctx);
