@@ -4,11 +4,15 @@
 // bit flip and header lie; D1 blobs still decode next to it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <bit>
+#include <cstdlib>
 #include <random>
 
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 #include "protocol/fuzz_decoders.h"
+#include "protocol/rans_coder.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 
@@ -76,6 +80,87 @@ TEST(DepthCodecD2, StudioFramesRoundTripExactlyAndSmallerThanD1) {
     // D2 exists to be smaller on this content (measured: ~19 %; asserted loosely).
     EXPECT_LT(d2.size(), d1.size() * 95 / 100) << i << ": D1 " << d1.size() << " B, D2 " << d2.size() << " B";
   }
+}
+
+// PROTOCOL.md §8.2 written out pixel by pixel, as someone reimplementing it
+// from the text would (no row preparation, every border tested directly).
+std::vector<uint8_t> ReferenceD2(const ImageDepth16& d, uint16_t noise) {
+  const int w = d.width(), h = d.height();
+  std::vector<int> F(static_cast<size_t>(w) * h), M(F.size());
+  auto at = [&](const std::vector<int>& p, int x, int y) { return p[static_cast<size_t>(y) * w + x]; };
+  auto inside = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h; };
+  rans::TokenWriter tw(16, F.size());
+  const int dxs[12] = {-1, -2, -3, -2, -1, 0, 1, 2, 3, -1, 0, 1}, dys[12] = {0, 0, 0, -1, -1, -1, -1, -1, -1, -2, -2, -2};
+  const int ws[12] = {1069, 888, 707, 24, 205, 387, 568, 749, 930, -658, -477, -296};
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      int a, b, c;
+      if (y == 0) {
+        a = b = c = x > 0 ? at(F, x - 1, 0) : 0;
+      } else if (x == 0) {
+        a = b = c = at(F, 0, y - 1);
+      } else {
+        a = at(F, x - 1, y), b = at(F, x, y - 1), c = at(F, x - 1, y - 1);
+      }
+      const int med = c >= std::max(a, b) ? std::min(a, b) : c <= std::min(a, b) ? std::max(a, b) : a + b - c;
+      const uint64_t S = uint64_t{noise} * static_cast<uint64_t>(b) * static_cast<uint64_t>(b);
+      int P = med;
+      if (y >= 2 && x >= 3 && x + 3 < w) {
+        int lo = 65535, hi = 0;
+        int64_t sum = 0;
+        for (int i = 0; i < 12; ++i) {
+          const int v = at(F, x + dxs[i], y + dys[i]);
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+          sum += int64_t{ws[i]} * v;
+        }
+        if (static_cast<uint64_t>(hi - lo) <= 8 * S / 1000000000 + 4)
+          P = static_cast<int>(std::clamp<int64_t>((sum + 2048) >> 12, 0, 65535));
+      }
+      auto r_at = [&](int xx, int yy) { return inside(xx, yy) ? static_cast<uint64_t>(at(M, xx, yy)) : 0; };
+      const uint64_t rb = r_at(x, y - 1), rc = r_at(x - 1, y - 1), rd = r_at(x + 1, y - 1);
+      const uint64_t E = 2 * rb + rc + rd + (rc + rd) / 2 + S / 100000000 + 6;
+      const int q = std::clamp(static_cast<int>(std::bit_width(E)) - 4, 0, 7);
+      bool invalid = false;
+      for (auto [xx, yy] : {std::pair{x - 1, y}, std::pair{x, y - 1}, std::pair{x - 1, y - 1}, std::pair{x + 1, y - 1}})
+        invalid |= inside(xx, yy) && d.at(xx, yy) == 0;
+      const uint32_t ctx = static_cast<uint32_t>(q) + (invalid ? 8 : 0);
+      const size_t i = static_cast<size_t>(y) * w + x;
+      if (d.at(x, y) == 0) {
+        tw.Put(ctx, 40);
+        F[i] = P;
+        M[i] = 0;
+      } else {
+        const auto r = static_cast<int16_t>(static_cast<uint16_t>(d.at(x, y) - P));
+        tw.PutValue(ctx, rans::ZigZag(r));  // G1's general token path
+        F[i] = d.at(x, y);
+        M[i] = std::abs(r);
+      }
+    }
+  std::vector<uint8_t> stream;
+  tw.Finish(&stream);
+  std::vector<uint8_t> blob = {2, static_cast<uint8_t>(w), static_cast<uint8_t>(w >> 8), static_cast<uint8_t>(h),
+                               static_cast<uint8_t>(h >> 8), static_cast<uint8_t>(noise),
+                               static_cast<uint8_t>(noise >> 8)};
+  for (int k = 0; k < 4; ++k) blob.push_back(static_cast<uint8_t>(stream.size() >> (8 * k)));
+  blob.insert(blob.end(), stream.begin(), stream.end());
+  return blob;
+}
+
+TEST(DepthCodecD2, EncoderFollowsTheSpecificationByteForByte) {
+  std::vector<ImageDepth16> images = {StudioDepth()[0], Crop(StudioDepth()[1], 7, 5, 41, 23), ImageDepth16(5, 4, 0)};
+  ImageDepth16 edge(13, 9);
+  for (int y = 0; y < 9; ++y)
+    for (int x = 0; x < 13; ++x) edge.at(x, y) = (x * 7 + y * 3) % 5 == 0 ? 0 : static_cast<uint16_t>(x < 6 ? 900 : 65000 - y);
+  images.push_back(edge);
+  for (const ImageDepth16& d : images)
+    for (int noise : {3000, 17}) {
+      DepthEncodeOptions o = Opts(DepthCodec::kD2);
+      o.noise_at_1m_um = noise;
+      std::vector<uint8_t> blob;
+      ASSERT_TRUE(EncodeDepth(d, o, &blob).ok());
+      EXPECT_EQ(blob, ReferenceD2(d, static_cast<uint16_t>(noise))) << d.width() << "x" << d.height() << " noise " << noise;
+    }
 }
 
 TEST(DepthCodecD2, ExtremesInvalidPixelsAndOddSizesRoundTrip) {
