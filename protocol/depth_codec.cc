@@ -57,6 +57,7 @@ namespace {
 constexpr size_t kD2Header = 1 + 2 + 2 + 2 + 4;
 constexpr uint32_t kD2Contexts = 16;
 constexpr uint32_t kInvalidToken = 40;  // one past the largest token of a 16-bit value
+constexpr int32_t kInvalidResidual = INT32_MIN;
 // The least-squares plane through the causal neighbours (dx, dy) = (−1,0)
 // (−2,0) (−3,0) | (−2,−1) (−1,−1) (0,−1) (1,−1) (2,−1) (3,−1) | (−1,−2)
 // (0,−2) (1,−2), evaluated at (0, 0), in 1/4096: exact weights 59/226,
@@ -149,6 +150,8 @@ class D2Model {
     }
     return {pred, ctx_up_[x] | (invalid_left ? 8u : 0u)};
   }
+  // The context of pixel x (row ≥ 1) but for an invalid left neighbour (+8).
+  uint32_t ContextAbove(int x) const { return ctx_up_[x]; }
   // The interior pixels of the prepared row: [InteriorBegin, InteriorEnd).
   int InteriorBegin() const { return y_ >= 2 && w_ > 6 ? 3 : w_; }
   int InteriorEnd() const { return y_ >= 2 && w_ > 6 ? w_ - 3 : w_; }
@@ -235,6 +238,8 @@ Status DecodeD2(ByteReader& r, std::span<const uint8_t> blob, int w, int h, Imag
   mag.resize(n);
   D2Model model(w, noise16);
   std::string error;
+  thread_local std::vector<int32_t> res;  // one row's residuals (kInvalidResidual: invalid)
+  res.resize(static_cast<size_t>(w));
   for (int y = 0; y < h; ++y) {
     uint16_t* row = depth->row(y);
     const uint16_t* up = y > 0 ? depth->row(y - 1) : nullptr;
@@ -267,9 +272,48 @@ Status DecodeD2(ByteReader& r, std::span<const uint8_t> blob, int w, int h, Imag
     };
     const int x0 = model.InteriorBegin(), x1 = model.InteriorEnd();
     bool ok = true;
-    for (int x = 0; ok && x < x0; ++x) ok = decode(x, model.At<false>(f, row, x));
-    for (int x = x0; ok && x < x1; ++x) ok = decode(x, model.At<true>(f, row, x));
-    for (int x = x1; ok && x < w; ++x) ok = decode(x, model.At<false>(f, row, x));
+    if (y == 0) {  // the contexts of row 0 depend on the decoded depth to the left
+      for (int x = 0; ok && x < w; ++x) ok = decode(x, model.At<false>(f, row, x));
+    } else {
+      // Below row 0 a context depends only on the rows above and on whether
+      // the left pixel is invalid: all of the row's tokens first (the rANS
+      // chain alone), then its pixels (the prediction chain alone).
+      bool left_invalid = false;
+      for (int x = 0; x < w; ++x) {
+        const uint32_t tok = tr.Get(model.ContextAbove(x) | (left_invalid ? 8u : 0u));
+        left_invalid = tok == kInvalidToken;
+        if (left_invalid) {
+          res[x] = kInvalidResidual;
+          continue;
+        }
+        if (tok > kInvalidToken) {
+          error = "token " + std::to_string(tok) + " is not a 16-bit residual";
+          ok = false;
+          break;
+        }
+        res[x] = rans::UnZigZag(tr.ValueOfToken16(tok));
+      }
+      auto place = [&](int x, int pred) {
+        const int32_t r = res[x];
+        if (r == kInvalidResidual) {
+          row[x] = 0;
+          f[x] = static_cast<uint16_t>(pred);
+          m[x] = 0;
+          return true;
+        }
+        const auto v = static_cast<uint16_t>(pred + r);
+        row[x] = v;
+        f[x] = v;
+        m[x] = static_cast<uint16_t>(r < 0 ? -r : r);
+        return v != 0;
+      };
+      if (ok) {
+        for (int x = 0; ok && x < x0; ++x) ok = place(x, model.At<false>(f, row, x).pred);
+        for (int x = x0; ok && x < x1; ++x) ok = place(x, model.At<true>(f, row, x).pred);
+        for (int x = x1; ok && x < w; ++x) ok = place(x, model.At<false>(f, row, x).pred);
+        if (!ok) error = "a residual decodes to depth 0 (invalid pixels have their own token)";
+      }
+    }
     if (!ok) return tr.ok() ? DataLoss("depth.d2: " + error) : tr.Finish();
     if (!tr.ok()) return tr.Finish();
   }
