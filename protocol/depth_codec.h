@@ -8,16 +8,16 @@
 //        (row-major) then their low bytes go through one zstd frame.
 //        Blob: `u8 codec` (1) · `u16 width` · `u16 height` · `u32 n` · `n`
 //        bytes: one zstd frame whose declared content size is width × height × 2.
-//   D2 — (the default of holoport-pod) Each pixel is predicted by a
+//   D2 — (the default of holoport-pod) Each pixel is predicted by the
 //        least-squares plane through 12 causal neighbours (fixed integer
-//        weights) where they lie within the sensor's noise of each other,
-//        else by the median edge detector; invalid neighbours count as their
-//        own prediction. The residual (or an "invalid" token) is coded by the
-//        static rANS token coder of G1 (protocol/rans_coder.h) with 192
-//        contexts: the expected residual size from the neighbours' residuals
-//        and the depth's noise level (σ = noise_at_1m · z²), which predictor
-//        ran, and how many neighbours are invalid. ~19 % smaller than D1 on
-//        the studio's pods (docs/codecs.md).
+//        weights) where they lie within 8 σ of each other (one surface),
+//        else by the median edge detector; an invalid pixel is a token of its
+//        own and counts as its prediction for later pixels. Residuals go
+//        through G1's static rANS token coder (protocol/rans_coder.h) with 16
+//        contexts: the octave of the expected residual (the residuals above
+//        and the depth's noise level σ = noise_at_1m · z²) × whether a
+//        neighbour is invalid. ~18 % smaller than D1 on the studio's pods, at
+//        ~3× its CPU (docs/codecs.md).
 //        Blob: `u8 codec` (2) · `u16 width` · `u16 height` · `u16 noise_um`
 //        (σ at 1 m, µm) · `u32 n` · `n` bytes: the token stream.
 #pragma once

@@ -33,7 +33,7 @@ struct PodRunOptions {
   int prerender = 0;                    // studio: render this many frames first and loop them (0: render live)
   double clock_offset_ms = 0;           // simulated pod clock: offset against the system clock
   double clock_drift_ppm = 0;           // ... and drift (parts per million)
-  int jpeg_quality = 60;                // colour C1 quality (60: ~26 KB per QVGA frame; depth D2 ~69 KB, D1 ~85 KB)
+  int jpeg_quality = 60;                // colour C1 quality (60: ~24 KB per QVGA frame; depth D2 ~70 KB, D1 ~85 KB)
   std::string depth_codec = "d2";       // "d2" (PROTOCOL.md §8.2) or "d1" (§8.1)
   int zstd_level = 1;                   // depth D1 level
   int queue_frames = 3;                 // frames waiting for the link
