@@ -29,6 +29,12 @@
 // angles to the input's normals, and "area-weighted-unquantized" shows how
 // much of that is the method rather than the quantization.
 //
+// Depth codecs D1 and D2 (PROTOCOL.md §8) on every pod's depth image of the
+// truth content (the studio's noisy pod depth, as holoport-pod sends it),
+// figures per pod frame, qualifier content "studio-pod-depth"; `pod_mbps` adds
+// the pod's colour as holoport-pod sends it (C1 quality 60, no mask) and the
+// PodFrame message: a pod's stream at 30 fps. (--only=D1,D2 runs just these.)
+//
 // Geometry codecs G0 (Holoportation's fp16 + LZ4 baseline) and G1 (ours),
 // Draco side by side in the same process on the same meshes at comparable
 // quantization (position step ≤ 1 mm), and colour codecs C0 and C1 on the
@@ -64,6 +70,7 @@
 #include "common/log.h"
 #include "common/mesh.h"
 #include "protocol/color_codec.h"
+#include "protocol/depth_codec.h"
 #include "protocol/draco_peer.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
@@ -108,6 +115,7 @@ struct CodecsOptions {
 struct PodImageInput {
   ImageRgb8 color;
   ImageGray8 mask;
+  ImageDepth16 depth;  // the pod's depth as it sends it (studio truth content only)
 };
 
 struct FrameInput {
@@ -393,7 +401,7 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
       if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) {
         return InvalidArgument("pod " + std::to_string(f.pod_id) + ": the site's mask is not the colour image's size");
       }
-      in.pods.push_back({f.color, f.mask});
+      in.pods.push_back({f.color, f.mask, {}});
     }
     return OkStatus();
   });
@@ -509,6 +517,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       for (size_t p = 0; p < fs.frames.size(); ++p) {
         PodImageInput pi;
         pi.color = fs.frames[p].color;
+        pi.depth = fs.frames[p].depth;
         if (p < gt.mask.size() && gt.mask[p].width() == pi.color.width() && gt.mask[p].height() == pi.color.height()) {
           pi.mask = gt.mask[p];
         }
@@ -762,6 +771,108 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     // The mean includes the frames whose Huffman tables were optimized (one in huffman_refresh per pod).
     emit(name, "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
     emit(name, "color_psnr_db", Median(fig.a), "dB", extra);
+  }
+
+  // ---- depth (D1, D2): every pod's depth image as holoport-pod sends it (the
+  // studio's noisy pod depth with dropouts; truth content only), one encoder
+  // and decoder buffer reused throughout. Figures per pod frame; the pod's
+  // whole stream adds its colour as holoport-pod sends it (C1, JPEG quality
+  // 60, whole image, no mask) and the PodFrame message around both.
+  const bool have_depth = !inputs.empty() && !inputs[0].pods.empty() && !inputs[0].pods[0].depth.empty();
+  std::map<std::string, double> depth_bytes_of, depth_cpu_of;
+  double pod_color_bytes = 0, pod_message_overhead = 0;
+  if (have_depth && (wanted("D1") || wanted("D2"))) {
+    protocol::ColorEncodeOptions o;
+    o.jpeg_quality = 60;  // holoport-pod's default (server/pods/pod_runner.h)
+    protocol::ColorEncoder enc(o);
+    std::vector<double> sizes;
+    std::vector<uint8_t> blob;
+    for (const FrameInput& in : inputs)
+      for (const PodImageInput& pod : in.pods) {
+        blob.clear();
+        if (!enc.Encode(pod.color, ImageGray8(), &blob).ok()) {
+          spdlog::error("codecs: pod colour failed");
+          return 1;
+        }
+        sizes.push_back(static_cast<double>(blob.size()));
+      }
+    pod_color_bytes = Mean(sizes);
+    // The PodFrame message minus its two blobs (header, ids, times, codec bytes, lengths).
+    protocol::PodFrame pf;
+    pf.depth.assign(1, 0);
+    pf.color.assign(1, 0);
+    pod_message_overhead = static_cast<double>(protocol::EncodeMessage({}, pf).size()) - 2;
+    const std::map<std::string, std::string> extra{{"jpeg_quality", "60"}, {"mask", "none"}};
+    emit("C1-pod", "bytes_per_pod_frame", pod_color_bytes, "B", extra);
+  }
+  for (const protocol::DepthCodec dc : {protocol::DepthCodec::kD1, protocol::DepthCodec::kD2}) {
+    const std::string name = dc == protocol::DepthCodec::kD1 ? "D1" : "D2";
+    if (!have_depth || !wanted(name)) continue;
+    protocol::DepthEncodeOptions o;
+    o.codec = dc;
+    Figures fig;
+    std::vector<uint8_t> blob;
+    ImageDepth16 out;
+    size_t invalid = 0, pixels = 0;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      for (const FrameInput& in : inputs) {
+        for (const PodImageInput& pod : in.pods) {
+          blob.clear();
+          const double c0 = holo::ThreadCpuTimeMs();
+          const double t0 = NowMs();
+          const Status es = protocol::EncodeDepth(pod.depth, o, &blob);
+          const double t1 = NowMs();
+          const double c1 = holo::ThreadCpuTimeMs();
+          const Status ds = es.ok() ? protocol::DecodeDepth(blob, &out) : es;
+          const double t2 = NowMs();
+          const double c2 = holo::ThreadCpuTimeMs();
+          if (!ds.ok()) {
+            spdlog::error("codecs: {} failed: {}", name, ds.ToString());
+            return 1;
+          }
+          if (rep == 0) {
+            if (out != pod.depth) {
+              spdlog::error("codecs: {} is not lossless", name);
+              return 1;
+            }
+            fig.bytes.push_back(static_cast<double>(blob.size()));
+            for (int y = 0; y < pod.depth.height(); ++y)
+              for (int x = 0; x < pod.depth.width(); ++x) invalid += pod.depth.at(x, y) == 0;
+            pixels += pod.depth.num_pixels();
+          }
+          fig.enc.push_back(t1 - t0);
+          fig.dec.push_back(t2 - t1);
+          fig.enc_cpu.push_back(c1 - c0);
+          fig.dec_cpu.push_back(c2 - c1);
+        }
+      }
+    }
+    const double bytes = Mean(fig.bytes);
+    depth_bytes_of[name] = bytes;
+    depth_cpu_of[name] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
+    std::map<std::string, std::string> extra{{"content", "studio-pod-depth"},
+                                             {"pod_frames", std::to_string(fig.bytes.size())},
+                                             {"invalid_fraction", std::to_string(static_cast<double>(invalid) /
+                                                                                 static_cast<double>(std::max<size_t>(1, pixels)))}};
+    if (dc == protocol::DepthCodec::kD1) extra["zstd_level"] = std::to_string(o.zstd_level);
+    if (dc == protocol::DepthCodec::kD2) extra["noise_at_1m_um"] = std::to_string(o.noise_at_1m_um);
+    emit(name, "bytes_per_pod_frame", bytes, "B", extra);
+    emit(name, "bits_per_pixel", bytes * 8 / static_cast<double>(inputs[0].pods[0].depth.num_pixels()), "bit", extra);
+    emit(name, "depth_mbps_per_pod", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit(name, "encode_ms", Median(fig.enc), "ms", extra);
+    emit(name, "decode_ms", Median(fig.dec), "ms", extra);
+    emit(name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit(name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit(name, "codec_cpu_ms", depth_cpu_of[name], "ms", extra);
+    if (pod_color_bytes > 0) {
+      extra["color"] = "C1-q60-no-mask";
+      emit(name, "pod_mbps", (bytes + pod_color_bytes + pod_message_overhead) * 8 * 30 / 1e6, "Mbit/s", extra);
+    }
+  }
+  if (depth_bytes_of.count("D1") && depth_bytes_of.count("D2")) {
+    const std::map<std::string, std::string> extra{{"content", "studio-pod-depth"}, {"peer", "D1"}};
+    emit("D2", "bytes_ratio_vs_D1", depth_bytes_of["D2"] / depth_bytes_of["D1"], "1", extra);
+    emit("D2", "codec_cpu_ratio_vs_D1", depth_cpu_of["D2"] / depth_cpu_of["D1"], "1", extra);
   }
 
   // ---- video colour (V1): one encoder and one decoder per pod over the sequence

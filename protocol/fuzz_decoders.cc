@@ -76,8 +76,10 @@ int FuzzPodFrame(std::span<const uint8_t> body) {
   const auto& f = std::get<PodFrame>(*p);
   int decoded = 1;
   ImageDepth16 depth;
-  if (DecodeDepth(f.depth, &depth, limits).ok()) {
-    HOLO_CHECK(depth.width() > 0 && depth.height() > 0);
+  if (DecodeDepth(f.depth, &depth, limits).ok()) {  // D1 or D2, by the blob's codec byte
+    int w = 0, h = 0;
+    HOLO_CHECK(PeekDepthSize(f.depth, &w, &h).ok());
+    HOLO_CHECK(depth.width() == w && depth.height() == h && w > 0 && h > 0);
     ++decoded;
   }
   ImageRgb8 image;

@@ -27,8 +27,8 @@ int FuzzStream(std::span<const uint8_t> bytes);    // FrameParser (uneven chunks
 int FuzzMessage(std::span<const uint8_t> bytes);   // DecodeMessage
 int FuzzGeometry(std::span<const uint8_t> bytes);  // DecodeGeometry (G0, G1, …)
 int FuzzColor(std::span<const uint8_t> bytes);     // DecodeColor (C0, C1, …) and ColorDecoder
-// A PodFrame payload (DecodePayload) and, when it decodes, its depth and
-// colour blobs (DecodeDepth, DecodeColor). Not part of FuzzDecoders (whose
+// A PodFrame payload (DecodePayload) and, when it decodes, its depth (D1 or
+// D2) and colour blobs (DecodeDepth, DecodeColor). Not part of FuzzDecoders (whose
 // selector byte and corpus stay as they are); its own libFuzzer target.
 int FuzzPodFrame(std::span<const uint8_t> bytes);
 

@@ -446,7 +446,7 @@ Status Read(ByteReader& r, const Limits& l, PodFrame* m) {
   HOLO_RETURN_IF_ERROR(r.I64("pod_frame.capture_time_us", &m->capture_time_us));
   uint8_t d = 0, c = 0;
   HOLO_RETURN_IF_ERROR(r.U8("pod_frame.depth_codec", &d));
-  if (d != 1) return DataLoss("pod_frame.depth_codec: unknown depth codec " + Str(d));
+  if (d < 1 || d > 2) return DataLoss("pod_frame.depth_codec: unknown depth codec " + Str(d));
   m->depth_codec = static_cast<DepthCodec>(d);
   HOLO_RETURN_IF_ERROR(ReadBytes32(r, "pod_frame.depth", l.max_message_bytes, &m->depth));
   if (m->depth.empty()) return DataLoss("pod_frame.depth: empty");

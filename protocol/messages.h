@@ -57,8 +57,9 @@ enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2 };
 // VideoDecoder per pod stream, not DecodeColor.
 enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */, kV1 = 4 };
 enum class AudioCodec : uint8_t { kPcm16 = 1, kOpus = 2 };
-// Depth codecs of PodFrame (protocol/depth_codec.h): D1 = zstd of row deltas.
-enum class DepthCodec : uint8_t { kD1 = 1 };
+// Depth codecs of PodFrame (protocol/depth_codec.h): D1 = zstd of
+// median-predicted residuals; D2 = plane-predicted residuals, context-modelled rANS.
+enum class DepthCodec : uint8_t { kD1 = 1, kD2 = 2 };
 
 // Limits every decoder enforces. The defaults are the protocol's hard limits;
 // a deployment may lower them (never raise them above the defaults).

@@ -1,5 +1,6 @@
 // libFuzzer target: protocol FuzzPodFrame (protocol/fuzz_decoders.h): a
-// PodFrame payload and its depth (D1) and colour blobs.
+// PodFrame payload and its depth (D1 or D2) and colour blobs. Seeds:
+// protocol/fuzz/corpus/pod_frame (written by tests/protocol/fuzz_corpus_test.cc).
 #include <cstddef>
 #include <cstdint>
 #include <span>

@@ -414,6 +414,11 @@ Status PodHub::HandleFrame(int pod, const protocol::PodFrame& f, int64_t arrival
     }
   }
   auto frame = std::make_shared<RgbdFrame>();
+  // D1 or D2 (the blob names its codec; it must agree with the frame's).
+  HOLO_ASSIGN_OR_RETURN(protocol::DepthCodec blob_codec, protocol::PeekDepthCodec(f.depth));
+  if (blob_codec != f.depth_codec)
+    return DataLoss("depth blob is codec D" + std::to_string(static_cast<int>(blob_codec)) + ", the frame says D" +
+                    std::to_string(static_cast<int>(f.depth_codec)));
   HOLO_RETURN_IF_ERROR(protocol::DecodeDepth(f.depth, &frame->depth, options_.limits));
   if (frame->depth.width() != cal.depth.width || frame->depth.height() != cal.depth.height)
     return DataLoss("depth image is " + std::to_string(frame->depth.width()) + "x" +

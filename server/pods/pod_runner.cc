@@ -30,6 +30,8 @@ Status PodRunOptions::Check() const {
   if (prerender < 0) return InvalidArgument("--prerender must be >= 0");
   if (jpeg_quality < 1 || jpeg_quality > 100) return InvalidArgument("--jpeg-quality must be in 1..100");
   if (queue_frames < 1) return InvalidArgument("--queue must be >= 1");
+  if (depth_codec != "d1" && depth_codec != "d2")
+    return InvalidArgument("--depth-codec must be d1 or d2, got '" + depth_codec + "'");
   if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
   std::string host;
   uint16_t port = 0;
@@ -161,6 +163,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
   copt.jpeg_quality = o.jpeg_quality;
   protocol::ColorEncoder color_encoder(copt);
   protocol::DepthEncodeOptions dopt;
+  dopt.codec = o.depth_codec == "d1" ? protocol::DepthCodec::kD1 : protocol::DepthCodec::kD2;
   dopt.zstd_level = o.zstd_level;
   const ImageGray8 no_mask;  // the whole image: the site segments
 
@@ -199,6 +202,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
     pf.pod_id = static_cast<uint16_t>(o.pod_id);
     pf.frame_number = number++;
     pf.capture_time_us = pod_clock_at(slot_wall);  // the trigger instant on the pod's clock
+    pf.depth_codec = dopt.codec;
     HOLO_RETURN_IF_ERROR(protocol::EncodeDepth(frame.depth, dopt, &pf.depth));
     HOLO_RETURN_IF_ERROR(color_encoder.Encode(frame.color, no_mask, &pf.color));
     encode_cpu_ms += ThreadCpuTimeMs() - c1;
@@ -227,6 +231,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
         j["produce_cpu_ms"] = std::round(produce_cpu_ms * 10) / 10;
         j["depth_bytes"] = depth_bytes;
         j["color_bytes"] = color_bytes;
+        j["depth_codec"] = o.depth_codec;
         std::fprintf(stats, "%s\n", j.dump().c_str());
         std::fflush(stats);
       }

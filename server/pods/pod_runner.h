@@ -1,6 +1,6 @@
 // holoport-pod's loop as a library (so tests and benchmarks run the same
 // code): produce this pod's frames at the camera rate, stamp them with the
-// pod's clock, compress them (depth D1, colour C1) and hand them to a
+// pod's clock, compress them (depth D2 or D1, colour C1) and hand them to a
 // PodClient.
 //
 // Frames come from the synthetic studio rendering only this pod (a rig of
@@ -33,7 +33,8 @@ struct PodRunOptions {
   int prerender = 0;                    // studio: render this many frames first and loop them (0: render live)
   double clock_offset_ms = 0;           // simulated pod clock: offset against the system clock
   double clock_drift_ppm = 0;           // ... and drift (parts per million)
-  int jpeg_quality = 60;                // colour C1 quality (60: ~26 KB per QVGA frame; depth is ~81 KB)
+  int jpeg_quality = 60;                // colour C1 quality (60: ~24 KB per QVGA frame; depth D2 ~70 KB, D1 ~85 KB)
+  std::string depth_codec = "d2";       // "d2" (PROTOCOL.md §8.2) or "d1" (§8.1)
   int zstd_level = 1;                   // depth D1 level
   int queue_frames = 3;                 // frames waiting for the link
   std::string stats_path;               // JSON lines of the pod's counters, once a second ("-": stdout)

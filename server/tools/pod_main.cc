@@ -36,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--clock-drift-ppm", o.clock_drift_ppm, "simulate a pod clock drift, parts per million")
       ->capture_default_str();
   app.add_option("--jpeg-quality", o.jpeg_quality, "colour (C1 JPEG) quality 1..100")->capture_default_str();
+  app.add_option("--depth-codec", o.depth_codec, "depth codec: d2 (plane prediction + context-modelled rANS) or d1 (zstd)")
+      ->check(CLI::IsMember({"d1", "d2"}))
+      ->capture_default_str();
   app.add_option("--zstd-level", o.zstd_level, "depth (D1) zstd level 1..19")->capture_default_str();
   app.add_option("--queue", o.queue_frames, "frames waiting for the link; when full the oldest is dropped")
       ->capture_default_str();

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <thread>
 
 #include "net/wire_message.h"
@@ -40,14 +41,19 @@ Rig SmallRig(int pods) {
   return rig;
 }
 
+// Pods with an odd id send depth D2, the others D1: the site decodes both.
 protocol::PodFrame MakeFrame(const PodCalibration& cal, int64_t number, int64_t pod_time_us) {
   protocol::PodFrame f;
   f.pod_id = static_cast<uint16_t>(cal.id);
   f.frame_number = number;
   f.capture_time_us = pod_time_us;
   ImageDepth16 depth(kW, kH, static_cast<uint16_t>(1000 + cal.id));
+  depth.at(kW - 1, kH - 1) = 0;  // an invalid pixel
   ImageRgb8 color(kW, kH, static_cast<uint8_t>(cal.id));
-  HOLO_CHECK(protocol::EncodeDepth(depth, {}, &f.depth).ok());
+  protocol::DepthEncodeOptions dopt;
+  dopt.codec = cal.id % 2 ? protocol::DepthCodec::kD2 : protocol::DepthCodec::kD1;
+  f.depth_codec = dopt.codec;
+  HOLO_CHECK(protocol::EncodeDepth(depth, dopt, &f.depth).ok());
   HOLO_CHECK(protocol::EncodeColor(color, ImageGray8(), {}, &f.color).ok());
   return f;
 }
@@ -137,7 +143,8 @@ TEST(PodHub, GroupsPodsWithOffsetClocksIntoCompleteSets) {
       EXPECT_LT(info.spread_us, 15000) << "offsets not taken out";
       for (size_t p = 0; p < 3; ++p) {
         EXPECT_EQ(set.frames[p].pod_id, rig.pods[p].id);
-        EXPECT_EQ(set.frames[p].depth.at(0, 0), 1000 + rig.pods[p].id);  // decoded losslessly
+        EXPECT_EQ(set.frames[p].depth.at(0, 0), 1000 + rig.pods[p].id);  // decoded losslessly (D1 and D2)
+        EXPECT_EQ(set.frames[p].depth.at(kW - 1, kH - 1), 0);
         EXPECT_NEAR(static_cast<double>(set.frames[p].timestamp_us), static_cast<double>(info.time_us), 15000.0);
       }
     }
@@ -191,7 +198,10 @@ TEST(PodHub, TakesAPodBackAfterItRestarts) {
   EXPECT_NEAR(pods[1].offset_ms, -7.0, 2.0);
 }
 
-TEST(PodHub, AMalformedMessageClosesOnlyThatPod) {
+// Pod 1 connects by hand, sends a frame spoiled by `spoil`, and must be closed
+// with `reason` while pod 0 streams on.
+void ExpectSpoiledFrameClosesOnlyThatPod(const std::function<void(protocol::PodFrame*)>& spoil,
+                                         const std::string& reason) {
   const Rig rig = SmallRig(2);
   auto hub = PodHub::Start(rig, HubOptions(), [](const std::string&) {});
   ASSERT_TRUE(hub.ok()) << hub.status().ToString();
@@ -214,13 +224,13 @@ TEST(PodHub, AMalformedMessageClosesOnlyThatPod) {
   ASSERT_TRUE(reader.Read(*s, 2000, &m).ok());
   ASSERT_EQ(m.header.type, protocol::MessageType::kWelcome);
   ASSERT_TRUE(WaitFor([&] { return (*hub)->Pods()[1].connected; }));
-  // A PodFrame whose depth blob lies about its size.
   protocol::PodFrame f = MakeFrame(rig.pods[1], 0, net::WallUs());
-  f.depth[1] ^= 0x40;
+  spoil(&f);
   bytes = protocol::EncodeMessage({}, f);
   ASSERT_TRUE(SendAll(*s, bytes.data(), bytes.size(), 1000).ok());
   ASSERT_TRUE(WaitFor([&] { return !(*hub)->Pods()[1].connected; }));
   EXPECT_NE((*hub)->Pods()[1].last_error.find("malformed"), std::string::npos) << (*hub)->Pods()[1].last_error;
+  EXPECT_NE((*hub)->Pods()[1].last_error.find(reason), std::string::npos) << (*hub)->Pods()[1].last_error;
   EXPECT_EQ((*hub)->counters().violations, 1u);
   // The hub closed that connection...
   Status st;
@@ -233,6 +243,16 @@ TEST(PodHub, AMalformedMessageClosesOnlyThatPod) {
   for (int i = 0; i < 5; ++i) ASSERT_TRUE((*hub)->Next(&set).ok());
   EXPECT_TRUE((*hub)->Pods()[0].connected);
   EXPECT_GT((*hub)->Pods()[0].received, before);
+}
+
+TEST(PodHub, AMalformedMessageClosesOnlyThatPod) {
+  // A depth blob (D2) that lies about its size.
+  ExpectSpoiledFrameClosesOnlyThatPod([](protocol::PodFrame* f) { f->depth[1] ^= 0x40; }, "depth");
+}
+
+TEST(PodHub, ADepthBlobOfAnotherCodecThanTheFrameSaysClosesOnlyThatPod) {
+  ExpectSpoiledFrameClosesOnlyThatPod([](protocol::PodFrame* f) { f->depth_codec = protocol::DepthCodec::kD1; },
+                                      "depth blob is codec D2, the frame says D1");
 }
 
 TEST(PodHub, RefusesAWrongTokenWithAReason) {

@@ -1,5 +1,6 @@
 // D1 depth codec (protocol/depth_codec.h): lossless round trip, and a clear
-// error for every truncation, bit flip and lie in the header.
+// error for every truncation, bit flip and lie in the header. (D2:
+// codec_depth_d2_test.cc.)
 #include <gtest/gtest.h>
 
 #include <random>
@@ -98,9 +99,9 @@ TEST(DepthCodec, HeaderLiesAreRefusedBeforeAllocation) {
   EXPECT_NE(s.message().find("outside 1..8"), std::string::npos) << s.message();
   // Unknown codec.
   b = blob;
-  b[0] = 2;
+  b[0] = 3;
   s = DecodeDepth(b, &out);
-  EXPECT_NE(s.message().find("unknown depth codec 2"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("unknown depth codec 3"), std::string::npos) << s.message();
 }
 
 TEST(DepthCodec, PodFrameFuzzEntryDecodesAValidFrame) {
