@@ -54,7 +54,6 @@ namespace {
 // row first (PrepareRow: no dependency between pixels, so it pipelines); the
 // serial per-pixel part (At) adds the current row's left neighbours.
 
-constexpr size_t kD2Header = 1 + 2 + 2 + 2 + 4;
 constexpr uint32_t kD2Contexts = 16;
 constexpr uint32_t kInvalidToken = 40;  // one past the largest token of a 16-bit value
 constexpr int32_t kInvalidResidual = INT32_MIN;
