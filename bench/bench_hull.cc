@@ -18,7 +18,6 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -40,7 +39,7 @@ namespace holo::bench {
 namespace {
 
 struct HullBenchOptions {
-  std::string pods = "4,6,8";
+  std::vector<int> pods = {4, 6, 8};
   double hull_voxel_mm = 16.0;
   int threads = 2;
   std::string png_dir;
@@ -59,27 +58,19 @@ int RunHullBench(const BenchArgs& args, const HullBenchOptions& o) {
     spdlog::error("hull: {}", workload.status().ToString());
     return 2;
   }
-  std::vector<size_t> pod_counts;
-  {
-    std::stringstream ss(o.pods);
-    std::string item;
-    while (std::getline(ss, item, ',')) {
-      char* end = nullptr;
-      const long v = std::strtol(item.c_str(), &end, 10);
-      if (item.empty() || *end != '\0' || v < 2 || static_cast<size_t>(v) > workload->rig.pods.size()) {
-        spdlog::error("hull: --pods wants counts in 2..{} separated by commas, got '{}'", workload->rig.pods.size(), o.pods);
-        return 2;
-      }
-      pod_counts.push_back(static_cast<size_t>(v));
+  for (int k : o.pods)
+    if (static_cast<size_t>(k) > workload->rig.pods.size()) {
+      spdlog::error("hull: --pods {} but the rig has {} pods", k, workload->rig.pods.size());
+      return 2;
     }
-  }
   const int frames = args.frames > 0 ? args.frames : 4;
   const std::string& wl = args.workload;
   SyntheticStudio studio(workload->rig, workload->studio);
   NovelViewOptions nvo;
   const std::vector<NovelView> views = MakeNovelViews(nvo);
 
-  for (size_t k : pod_counts) {
+  for (const int pods : o.pods) {
+    const auto k = static_cast<size_t>(pods);
     const std::vector<size_t> chosen = PickPods(workload->rig.pods.size(), k);
     Rig rig = workload->rig;
     rig.pods.clear();
@@ -87,10 +78,11 @@ int RunHullBench(const BenchArgs& args, const HullBenchOptions& o) {
       rig.pods.push_back(workload->rig.pods[p]);
       rig.pods.back().id = static_cast<int>(rig.pods.size() - 1);
     }
-    for (const std::string method : {"hull", "tsdf"}) {
+    for (const bool is_hull : {true, false}) {
+      const std::string method = is_hull ? "hull" : "tsdf";
       TsdfOptions to;
-      to.voxel_size = method == std::string("hull") ? static_cast<float>(o.hull_voxel_mm * 1e-3) : workload->voxel_size_m;
-      to.truncation_voxels = method == std::string("hull") ? 2.0f : 4.0f;
+      to.voxel_size = is_hull ? static_cast<float>(o.hull_voxel_mm * 1e-3) : workload->voxel_size_m;
+      to.truncation_voxels = is_hull ? 2.0f : 4.0f;
       to.integrate_color = false;
       to.threads = o.threads;
       TsdfVolume volume(to);
@@ -115,7 +107,7 @@ int RunHullBench(const BenchArgs& args, const HullBenchOptions& o) {
         Mesh mesh;
         const double cpu0 = ProcessCpuMs();
         const auto t0 = std::chrono::steady_clock::now();
-        Status st = method == std::string("hull") ? hull.Build(rig, fs, &volume)
+        Status st = is_hull ? hull.Build(rig, fs, &volume)
                                                   : (volume.Reset(), volume.Integrate(rig, fs));
         if (st.ok()) {
           volume.ExtractMesh(&mesh);
@@ -123,7 +115,7 @@ int RunHullBench(const BenchArgs& args, const HullBenchOptions& o) {
         }
         ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
         cpu_ms.push_back(ProcessCpuMs() - cpu0);
-        if (method == std::string("hull")) {
+        if (is_hull) {
           distance_ms.push_back(hull.stats().distance_ms);
           fill_ms.push_back(hull.stats().fill_ms);
         }
@@ -185,6 +177,8 @@ BenchFn SetupHull(CLI::App& app) {
   auto o = std::make_shared<HullBenchOptions>();
   DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   app.add_option("--pods", o->pods, "pod counts to compare, comma separated (pods spread over the rig)")
+      ->delimiter(',')
+      ->check(CLI::Range(2, 64))
       ->capture_default_str();
   app.add_option("--hull-voxel-mm", o->hull_voxel_mm, "voxel of the visual hull, mm (TSDF: the workload's)")
       ->check(CLI::Range(2.0, 100.0))

@@ -2,21 +2,17 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <string>
 
 #include <opencv2/imgproc.hpp>
 
+#include "common/clock.h"
 #include "common/worker_pool.h"
 #include "server/fusion/tsdf_internal.h"
 
 namespace holo {
 namespace {
-
-double MsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // One pod's silhouette as the hull needs it: the camera (pinhole fast path,
 // or the full model when the lens is distorted) and the mask's signed
@@ -76,7 +72,6 @@ struct VisualHull::Impl {
   std::vector<PodSilhouette> pods;
   std::vector<BlockCoord> near;       // blocks near the surface, this frame
   std::vector<uint8_t> near_flag;     // per candidate block (scratch)
-  cv::Mat inside, outside;            // distance transform scratch (per thread would race: pods run serially here)
 };
 
 VisualHull::VisualHull(VisualHullOptions options) : options_(options) {
@@ -113,7 +108,7 @@ Status VisualHull::Build(const Rig& rig, const RgbdFrameSet& frames, TsdfVolume*
   const size_t num_pods = rig.pods.size();
 
   // 1. Cameras and signed distance transforms (per pod, in parallel).
-  auto t0 = std::chrono::steady_clock::now();
+  Stopwatch sw;
   im.pods.resize(num_pods);
   im.pool.Run(num_pods, [&](size_t k, int) {
     const PodCalibration& pod = rig.pods[k];
@@ -141,10 +136,10 @@ Status VisualHull::Build(const Rig& rig, const RgbdFrameSet& frames, TsdfVolume*
     cv::distanceTransform(bg, dout, cv::DIST_L2, cv::DIST_MASK_5);
     s.signed_distance = din - dout;
   });
-  stats_.distance_ms = MsSince(t0);
+  stats_.distance_ms = sw.ElapsedMs();
 
   // 2. Blocks near the surface: the field at every block centre of the box.
-  t0 = std::chrono::steady_clock::now();
+  sw.Restart();
   volume->Reset();
   const TsdfOptions& vo = volume->options();
   const float voxel = vo.voxel_size;
@@ -271,7 +266,7 @@ Status VisualHull::Build(const Rig& rig, const RgbdFrameSet& frames, TsdfVolume*
     blocks.set_flags(index[i], BlockFlagsOf(has_neg, has_pos, has_band));
   });
   stats_.blocks_filled = im.near.size();
-  stats_.fill_ms = MsSince(t0);
+  stats_.fill_ms = sw.ElapsedMs();
   return OkStatus();
 }
 

@@ -2,11 +2,13 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <initializer_list>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <Eigen/Geometry>
+
 #include <gtest/gtest.h>
 
 #include "common/image_io.h"
@@ -232,6 +234,16 @@ TEST(SegmenterTest, GreyBoardOnGreyWallFoundByDepth) {
   EXPECT_EQ(fg, 0u);
 }
 
+// Both segmenters learn the same `frames` empty-room frame sets.
+void LearnBackground(SyntheticStudio& empty, int frames, std::initializer_list<Segmenter*> segs) {
+  RgbdFrameSet fs;
+  for (int k = 0; k < frames; ++k) {
+    empty.RenderFrame(k, &fs, nullptr);
+    for (Segmenter* s : segs) ASSERT_TRUE(s->AddBackgroundFrame(fs).ok());
+  }
+  for (Segmenter* s : segs) ASSERT_TRUE(s->FinishBackground().ok());
+}
+
 // The vectorised unary term (AVX2, where the CPU has it) gives the portable
 // path's log-odds bit for bit, depth edges included, and so the same masks.
 TEST(SegmenterTest, VectorisedUnaryMatchesThePortablePath) {
@@ -241,13 +253,7 @@ TEST(SegmenterTest, VectorisedUnaryMatchesThePortablePath) {
   Segmenter a(rig, SegmenterOptions{}), b(rig, scalar);
   SyntheticStudio empty(rig, QvgaStudio(true)), studio(rig, QvgaStudio(false));
   RgbdFrameSet fs;
-  for (int k = 0; k < 5; ++k) {
-    empty.RenderFrame(k, &fs, nullptr);
-    ASSERT_TRUE(a.AddBackgroundFrame(fs).ok());
-    ASSERT_TRUE(b.AddBackgroundFrame(fs).ok());
-  }
-  ASSERT_TRUE(a.FinishBackground().ok());
-  ASSERT_TRUE(b.FinishBackground().ok());
+  ASSERT_NO_FATAL_FAILURE(LearnBackground(empty, 5, {&a, &b}));
   for (int k : {12, 40}) {
     studio.RenderFrame(k, &fs, nullptr);
     RgbdFrameSet fa = fs, fb = fs;
@@ -280,13 +286,7 @@ TEST(SegmenterTest, SameMasksForAnyThreadCountAndRepeatedCalls) {
   Segmenter a(rig, o1), b(rig, o2);
   SyntheticStudio empty(rig, QvgaStudio(true)), studio(rig, QvgaStudio(false));
   RgbdFrameSet fs;
-  for (int k = 0; k < 5; ++k) {
-    empty.RenderFrame(k, &fs, nullptr);
-    ASSERT_TRUE(a.AddBackgroundFrame(fs).ok());
-    ASSERT_TRUE(b.AddBackgroundFrame(fs).ok());
-  }
-  ASSERT_TRUE(a.FinishBackground().ok());
-  ASSERT_TRUE(b.FinishBackground().ok());
+  ASSERT_NO_FATAL_FAILURE(LearnBackground(empty, 5, {&a, &b}));
   studio.RenderFrame(30, &fs, nullptr);
   RgbdFrameSet fa = fs, fb = fs;
   ASSERT_TRUE(a.Segment(&fa).ok());
