@@ -56,6 +56,8 @@ struct ClientBenchOptions {
   size_t reduce = 20000;                         // triangle budget of the reduced fused mesh
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
+  int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
+  int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -350,6 +352,10 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       base.depth_prepass = options.prepass == "1";
       q["depth_prepass"] = base.depth_prepass ? "true" : "false";
     }
+    if (options.pods_per_vertex >= 0) base.projective.pods_per_vertex = options.pods_per_vertex;
+    if (options.max_pods_per_triangle >= 0) base.projective.max_pods_per_triangle = options.max_pods_per_triangle;
+    q["pods_per_vertex"] = std::to_string(base.projective.pods_per_vertex);
+    q["max_pods_per_triangle"] = std::to_string(base.projective.max_pods_per_triangle);
     if (!(*renderer)->SetRemoteMesh(c.mesh).ok()) return 1;
     if (holo::Status s = (*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()); !s.ok())
       return Fail(s);
@@ -428,6 +434,13 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         EmitFigure("client", args.workload, "render_cpu_ms", Median(cpu), "ms", qm);
       }
     }
+    // The per-mesh pod selection behind the projective frames above.
+    const auto& sel = (*renderer)->selection_stats();
+    EmitFigure("client", args.workload, "pod_sets", static_cast<double>(sel.draws), "", q);
+    EmitFigure("client", args.workload, "mean_pods_per_triangle", sel.mean_pods, "", q);
+    EmitFigure("client", args.workload, "capped_triangles", static_cast<double>(sel.capped_triangles), "", q);
+    EmitFigure("client", args.workload, "select_ms", sel.select_ms, "ms", q);
+    EmitFigure("client", args.workload, "select_cpu_ms", sel.select_cpu_ms, "ms", q);
   }
   return 0;
 }
@@ -481,6 +494,12 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--cull", o->cull, "0: no back-face culling")->check(CLI::IsMember({"0", "1"}))->capture_default_str();
   app.add_option("--prepass", o->prepass, "1 / 0: depth pre-pass on / off (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
+  app.add_option("--pods-per-vertex", o->pods_per_vertex,
+                 "pods each vertex keeps for projective texturing, 0 = all (default: the renderer's)")
+      ->check(CLI::Range(0, holo::render::Renderer::kMaxPods));
+  app.add_option("--max-pods-per-triangle", o->max_pods_per_triangle,
+                 "pods a triangle is textured from at most (default: the renderer's)")
+      ->check(CLI::Range(1, holo::render::Renderer::kMaxPods));
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 

@@ -1,6 +1,7 @@
 #include "client/render/renderer.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -9,6 +10,7 @@
 
 #include "client/render/gl_util.h"
 #include "client/render/view.h"
+#include "common/clock.h"
 
 namespace holo::render {
 namespace {
@@ -39,25 +41,34 @@ vec2 Distort(vec2 x, vec4 d, float k3) {
 // discontinuities with one fetch of the flagged depth map and blends.
 // (Interpolating the per-pod camera-frame points as varyings instead was no
 // faster on llvmpipe and needs 4 varying components per pod.)
-constexpr const char* kDrawVs = R"(#version 330 core
-#define MAX_PODS 16
+//
+// A program is built per number of pod *slots* (SLOTS, defined when it is
+// built; 0 = per-vertex colour only, also the depth pre-pass): each draw
+// call covers the triangles that use the same set of pods (see
+// Renderer::SelectPods), whose cameras are passed as slot uniforms. The
+// loops over slots have a constant bound, so they are unrolled with static
+// indices. llvmpipe runs every iteration of a fragment loop for the whole
+// SIMD block whatever the weights (a `continue` saves nothing), so the cost
+// per fragment is the number of slots, not the number of pods that matter.
+constexpr const char* kDrawVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec4 a_color;
+// Bit i set: pod i may colour this vertex (its per-mesh selection).
+layout(location = 3) in uint a_pods;
 uniform mat4 u_clip_from_local;
 uniform mat4 u_local_from_remote;
-uniform int u_mode;
-uniform int u_num_pods;
-uniform mat4 u_pod_cam_from_world[MAX_PODS];
-uniform vec3 u_pod_center[MAX_PODS];  // remote world
+out vec3 v_color;
+out vec3 v_remote;
+invariant gl_Position;
+#if SLOTS > 0
+uniform vec3 u_slot_center[SLOTS];  // remote world
+uniform int u_slot_pod[SLOTS];
 uniform vec3 u_eye_remote;
 uniform float u_alpha;
 uniform float u_beta;
-out vec3 v_color;
-out vec3 v_remote;
-// Pod i's blending weight (0 = pod unusable) in component i % 4 of v_w[i / 4].
-out vec4 v_w[MAX_PODS / 4];
-invariant gl_Position;
+// Slot s's blending weight (0 = pod unusable) in component s % 4 of v_w[s / 4].
+out vec4 v_w[(SLOTS + 3) / 4];
 // pow() is costly on CPU renderers; the usual exponents are small integers.
 float Pow(float x, float e) {
   if (e == 2.0) return x * x;
@@ -66,37 +77,38 @@ float Pow(float x, float e) {
   if (e == 4.0) return (x * x) * (x * x);
   return pow(x, e);
 }
+#endif
 void main() {
   v_color = a_color.rgb;
   v_remote = a_pos;
   gl_Position = u_clip_from_local * (u_local_from_remote * vec4(a_pos, 1.0));
-  for (int k = 0; k < MAX_PODS / 4; ++k) v_w[k] = vec4(0.0);
-  if (u_mode == 0) return;
+#if SLOTS > 0
   vec3 n = normalize(a_normal);
   vec3 to_eye = normalize(u_eye_remote - a_pos);
-  for (int i = 0; i < u_num_pods; ++i) {
-    vec3 to_pod = normalize(u_pod_center[i] - a_pos);
+  for (int s = 0; s < (SLOTS + 3) / 4; ++s) v_w[s] = vec4(0.0);
+  for (int s = 0; s < SLOTS; ++s) {
+    vec3 to_pod = normalize(u_slot_center[s] - a_pos);
     float ndv = dot(n, to_pod);
-    float w = ndv > 0.0 ? Pow(ndv, u_alpha) * Pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
-    v_w[i / 4][i % 4] = w;
+    bool allowed = ((a_pods >> uint(u_slot_pod[s])) & 1u) != 0u;
+    float w = allowed && ndv > 0.0 ? Pow(ndv, u_alpha) * Pow(max(0.5 * (1.0 + dot(to_pod, to_eye)), 1e-6), u_beta) : 0.0;
+    v_w[s / 4][s % 4] = w;
   }
+#endif
 }
 )";
 
-// u_mode 0: per-vertex colour; 1: projective texturing from the pods.
-constexpr const char* kDrawFs = R"(#version 330 core
-#define MAX_PODS 16
+constexpr const char* kDrawFs = R"(
 in vec3 v_color;
 in vec3 v_remote;
-in vec4 v_w[MAX_PODS / 4];
 out vec4 o_color;
-uniform int u_mode;
-uniform mat4 u_pod_cam_from_world[MAX_PODS];
-uniform int u_num_pods;
-uniform vec4 u_pod_intr[MAX_PODS];   // fx, fy, cx, cy
-uniform vec4 u_pod_dist[MAX_PODS];   // k1, k2, p1, p2
-uniform float u_pod_k3[MAX_PODS];
-uniform vec2 u_pod_size[MAX_PODS];   // width, height (pixels)
+#if SLOTS > 0
+in vec4 v_w[(SLOTS + 3) / 4];
+uniform mat4 u_slot_cam_from_world[SLOTS];
+uniform vec4 u_slot_intr[SLOTS];   // fx, fy, cx, cy
+uniform vec4 u_slot_dist[SLOTS];   // k1, k2, p1, p2
+uniform float u_slot_k3[SLOTS];
+uniform vec2 u_slot_size[SLOTS];   // width, height (pixels)
+uniform int u_slot_pod[SLOTS];     // texture array layer
 uniform vec2 u_array_size;
 uniform sampler2DArray u_pod_color;
 uniform sampler2DArray u_pod_depth;
@@ -105,36 +117,37 @@ uniform float u_edge_weight;
 uniform bool u_distorted;
 uniform float u_min_confidence;
 vec2 Distort(vec2 x, vec4 d, float k3);  // kDistortGlsl, appended when the program is built
+#endif
 
 void main() {
-  if (u_mode == 0 || u_num_pods == 0) {
-    o_color = vec4(v_color, 1.0);
-    return;
-  }
+#if SLOTS == 0
+  o_color = vec4(v_color, 1.0);
+#else
   vec3 acc = vec3(0.0);
   float acc_w = 0.0, sum_w = 0.0;
-  for (int i = 0; i < u_num_pods; ++i) {
-    float w = v_w[i / 4][i % 4];
+  for (int s = 0; s < SLOTS; ++s) {
+    float w = v_w[s / 4][s % 4];
     if (w <= 1e-6) continue;
     // Without lens distortion the matrix holds the intrinsics too (pixel
     // x·z, y·z, z); with it, camera coordinates.
-    vec3 pod = (u_pod_cam_from_world[i] * vec4(v_remote, 1.0)).xyz;
+    vec3 pod = (u_slot_cam_from_world[s] * vec4(v_remote, 1.0)).xyz;
     if (pod.z < 0.05) continue;
     vec2 px = pod.xy / pod.z;
     if (u_distorted) {
-      vec2 xn = Distort(px, u_pod_dist[i], u_pod_k3[i]);
-      vec4 intr = u_pod_intr[i];
+      vec2 xn = Distort(px, u_slot_dist[s], u_slot_k3[s]);
+      vec4 intr = u_slot_intr[s];
       px = vec2(intr.x * xn.x + intr.z, intr.y * xn.y + intr.w);
     }
-    vec2 size = u_pod_size[i];
+    vec2 size = u_slot_size[s];
     if (px.x < -0.5 || px.y < -0.5 || px.x >= size.x - 0.5 || px.y >= size.y - 0.5) continue;
     // Flagged depth: camera z of the nearest surface, negative when that
     // texel is near a depth discontinuity (see kEdgeFs), 0 = nothing.
-    float zf = texelFetch(u_pod_depth, ivec3(ivec2(floor(px + 0.5)), i), 0).r;
+    int layer = u_slot_pod[s];
+    float zf = texelFetch(u_pod_depth, ivec3(ivec2(floor(px + 0.5)), layer), 0).r;
     float zmap = abs(zf);
     if (zmap <= 0.0 || pod.z > zmap + u_vis_tol) continue;
     // Premultiplied by the texel's mask weight (alpha; 0 = background).
-    vec4 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(i)));
+    vec4 c = texture(u_pod_color, vec3((px + 0.5) / u_array_size, float(layer)));
     // Near a depth discontinuity: used only when nothing clean is there.
     float k = zf < 0.0 ? u_edge_weight * w : w;
     acc += k * c.rgb;
@@ -151,6 +164,7 @@ void main() {
   } else {
     o_color = vec4(v_color, 1.0);
   }
+#endif
 }
 )";
 
@@ -256,6 +270,12 @@ Status ProjectiveOptions::Check() const {
     return InvalidArgument("min_mask_confidence must be in [0, 1]");
   }
   if (!(edge_floor_weight > 0 && edge_floor_weight <= 1)) return InvalidArgument("edge_floor_weight must be in (0, 1]");
+  if (pods_per_vertex < 0 || pods_per_vertex > Renderer::kMaxPods) {
+    return InvalidArgument("pods_per_vertex must be in [0, " + std::to_string(Renderer::kMaxPods) + "]");
+  }
+  if (max_pods_per_triangle < 1 || max_pods_per_triangle > Renderer::kMaxPods) {
+    return InvalidArgument("max_pods_per_triangle must be in [1, " + std::to_string(Renderer::kMaxPods) + "]");
+  }
   return OkStatus();
 }
 
@@ -263,6 +283,7 @@ ProjectiveOptions ProjectiveOptions::Legacy() {
   ProjectiveOptions o;
   o.use_masks = false;
   o.cull_back_faces = true;
+  o.pods_per_vertex = 0;
   return o;
 }
 
@@ -337,7 +358,10 @@ Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out) {
 Renderer::~Renderer() {
   FreeMesh(&remote_);
   FreeMesh(&local_);
-  if (draw_program_) glDeleteProgram(draw_program_);
+  for (unsigned p : draw_programs_) {
+    if (p) glDeleteProgram(p);
+  }
+  if (remote_pods_vbo_) glDeleteBuffers(1, &remote_pods_vbo_);
   if (depth_program_) glDeleteProgram(depth_program_);
   if (pod_color_tex_) glDeleteTextures(1, &pod_color_tex_);
   if (pod_depth_tex_) glDeleteTextures(1, &pod_depth_tex_);
@@ -362,17 +386,32 @@ Status Renderer::Init() {
     return Unavailable("the renderer needs OpenGL 3.3, the context has " + std::to_string(major) + "." +
                        std::to_string(minor));
   }
-  const std::string draw_fs = std::string(kDrawFs) + kDistortGlsl;
   const std::string depth_vs = std::string(kDepthVs) + kDistortGlsl;
-  HOLO_ASSIGN_OR_RETURN(draw_program_, BuildProgram("mesh", kDrawVs, draw_fs.c_str()));
+  HOLO_RETURN_IF_ERROR(DrawProgram(0).status());
   HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", depth_vs.c_str(), kDepthFs));
   HOLO_ASSIGN_OR_RETURN(edge_program_, BuildProgram("pod discontinuities", kEdgeVs, kEdgeFs));
   glGenVertexArrays(1, &empty_vao_);
-  glUseProgram(draw_program_);
-  glUniform1i(Loc(draw_program_, "u_pod_color"), 0);
-  glUniform1i(Loc(draw_program_, "u_pod_depth"), 1);
-  glUseProgram(0);
+  // Meshes without per-vertex pod bits (the local mesh) read this constant:
+  // every pod allowed.
+  glVertexAttribI4ui(3, 0xFFFFu, 0, 0, 0);
   return CheckGlError("Renderer::Init");
+}
+
+StatusOr<unsigned> Renderer::DrawProgram(int slots) {
+  if (slots < 0 || slots > kMaxPods) return InvalidArgument("no draw program for " + std::to_string(slots) + " pods");
+  if (draw_programs_[slots]) return draw_programs_[slots];
+  const std::string head = "#version 330 core\n#define SLOTS " + std::to_string(slots) + "\n";
+  const std::string vs = head + kDrawVs;
+  const std::string fs = head + kDrawFs + (slots > 0 ? kDistortGlsl : "");
+  HOLO_ASSIGN_OR_RETURN(unsigned p, BuildProgram("mesh (" + std::to_string(slots) + " pods)", vs.c_str(), fs.c_str()));
+  if (slots > 0) {
+    glUseProgram(p);
+    glUniform1i(Loc(p, "u_pod_color"), 0);
+    glUniform1i(Loc(p, "u_pod_depth"), 1);
+    glUseProgram(0);
+  }
+  draw_programs_[slots] = p;
+  return p;
 }
 
 void Renderer::FreeMesh(GpuMesh* gpu) {
@@ -382,7 +421,7 @@ void Renderer::FreeMesh(GpuMesh* gpu) {
   *gpu = GpuMesh{};
 }
 
-Status Renderer::Upload(const Mesh& mesh, GpuMesh* gpu) {
+Status Renderer::Upload(const Mesh& mesh, GpuMesh* gpu, std::vector<Eigen::Vector3f>* normals) {
   HOLO_RETURN_IF_ERROR(mesh.Validate());
   if (mesh.num_vertices() > (1u << 30) || mesh.num_triangles() > (1u << 30)) {
     return InvalidArgument("mesh too large to draw: " + std::to_string(mesh.num_vertices()) + " vertices");
@@ -438,6 +477,7 @@ Status Renderer::Upload(const Mesh& mesh, GpuMesh* gpu) {
   }
   gpu->index_count = m->triangles.size() * 3;
   glBindVertexArray(0);
+  if (normals) *normals = m->normals;
   return CheckGlError("mesh upload");
 }
 
@@ -449,7 +489,26 @@ void Renderer::Draw(const GpuMesh& gpu) const {
 }
 
 Status Renderer::SetRemoteMesh(const Mesh& mesh) {
-  HOLO_RETURN_IF_ERROR(Upload(mesh, &remote_));
+  HOLO_RETURN_IF_ERROR(Upload(mesh, &remote_, &remote_normals_));
+  remote_positions_ = mesh.positions;
+  remote_triangles_ = mesh.triangles;
+  // Per-vertex pod bits: every pod allowed until SelectPods chooses.
+  const std::vector<uint16_t> all(mesh.num_vertices(), 0xFFFFu);
+  if (!remote_pods_vbo_) glGenBuffers(1, &remote_pods_vbo_);
+  glBindVertexArray(remote_.vao);
+  glBindBuffer(GL_ARRAY_BUFFER, remote_pods_vbo_);
+  const size_t bytes = all.size() * sizeof(uint16_t);
+  if (bytes > remote_pods_vbo_bytes_) {
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(bytes), all.data(), GL_DYNAMIC_DRAW);
+    remote_pods_vbo_bytes_ = bytes;
+  } else if (bytes > 0) {
+    glBufferSubData(GL_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(bytes), all.data());
+  }
+  glEnableVertexAttribArray(3);
+  glVertexAttribIPointer(3, 1, GL_UNSIGNED_SHORT, sizeof(uint16_t), nullptr);
+  glBindVertexArray(0);
+  pod_sets_.clear();
+  selection_dirty_ = true;
   remote_has_colors_ = !mesh.colors.empty() && mesh.colors.size() == mesh.positions.size();
   remote_min_ = Eigen::Vector3f::Constant(1e30f);
   remote_max_ = Eigen::Vector3f::Constant(-1e30f);
@@ -639,11 +698,13 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   edge_jump_m_ = options.discontinuity_jump_m;
   edge_radius_m_ = options.discontinuity_radius_m;
   visibility_dirty_ = false;
+  selection_dirty_ = true;
   return CheckGlError("pod visibility pass");
 }
 
 void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
   const bool use_masks = options.use_masks && !pod_masks_.empty();
+  pod_alpha_.assign(use_masks ? num_pods_ : 0, {});
   glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
   for (int i = 0; i < num_pods_; ++i) {
@@ -712,6 +773,9 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
         out[4 * k + 2] = static_cast<uint8_t>((in[3 * k + 2] * a + 127) / 255);
         out[4 * k + 3] = static_cast<uint8_t>(a);
       }
+      std::vector<uint8_t>& alpha = pod_alpha_[i];
+      alpha.resize(npx);
+      for (size_t k = 0; k < npx; ++k) alpha[k] = lut[d[k]];
     }
     glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, w, h, 1, GL_RGBA, GL_UNSIGNED_BYTE, out);
   }
@@ -721,6 +785,180 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
   tex_feather_ = options.mask_feather_px;
   tex_floor_ = options.edge_floor_weight;
   textures_dirty_ = false;
+  selection_dirty_ = true;
+}
+
+Status Renderer::SelectPods(const ProjectiveOptions& options) {
+  Stopwatch sw;
+  const double cpu0 = ThreadCpuTimeMs();
+  const int n = num_pods_;
+  const size_t nv = remote_positions_.size();
+  const size_t nt = remote_triangles_.size();
+  std::vector<uint16_t> vertex_pods(nv, 0xFFFFu);
+  std::vector<std::array<uint32_t, 3>> ordered;
+  pod_sets_.clear();
+  selection_stats_ = {};
+  const bool select = options.pods_per_vertex > 0 &&
+                      !(options.pods_per_vertex >= n && options.max_pods_per_triangle >= n);
+  if (!select) {
+    // Every pod everywhere: one draw call over the mesh as it came.
+    PodSet all;
+    for (int i = 0; i < n; ++i) all.pods[i] = i;
+    all.num_pods = n;
+    all.index_count = nt * 3;
+    pod_sets_.push_back(all);
+    ordered = remote_triangles_;
+    selection_stats_.mean_pods = n;
+  } else {
+    // The flagged depth maps of the visibility pass (camera z, negative
+    // near a discontinuity), read back once per mesh.
+    std::vector<std::vector<float>> depth(n);
+    GLint old_fbo = 0;
+    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    for (int i = 0; i < n; ++i) {
+      const Intrinsics& in = pod_cameras_[i].intrinsics;
+      depth[i].resize(static_cast<size_t>(in.width) * in.height);
+      glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+      glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, depth[i].data());
+    }
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+    HOLO_RETURN_IF_ERROR(CheckGlError("pod depth readback"));
+    // Per pod: camera from world, and without distortion the pixel
+    // projection folded into one 3×4 matrix (rows: u·z, v·z, z).
+    std::vector<Eigen::Matrix<float, 3, 4>> projection(n);
+    std::vector<bool> distorted(n);
+    for (int i = 0; i < n; ++i) {
+      const CameraModel& cam = pod_cameras_[i];
+      const Eigen::Matrix4f cam_from_world = cam.world_from_camera.inverse().matrix();
+      Eigen::Matrix3f k = Eigen::Matrix3f::Identity();
+      distorted[i] = cam.intrinsics.HasDistortion();
+      if (!distorted[i]) {
+        k(0, 0) = static_cast<float>(cam.intrinsics.fx);
+        k(1, 1) = static_cast<float>(cam.intrinsics.fy);
+        k(0, 2) = static_cast<float>(cam.intrinsics.cx);
+        k(1, 2) = static_cast<float>(cam.intrinsics.cy);
+      }
+      projection[i] = k * cam_from_world.topRows<3>();
+    }
+    // The view-independent weight of every (vertex, pod), as the shaders
+    // would give it: facing term, visibility, discontinuity and mask weight.
+    // The vertex test is lenient (twice the tolerance, best of a 3×3
+    // neighbourhood): it only chooses pods; fragments still test exactly.
+    const float tol = 2.0f * options.visibility_tolerance_m;
+    const bool masks = !pod_alpha_.empty();
+    std::vector<float> weight(nv * n, 0.0f);
+    // Pod by pod: one depth map (and mask) stays in cache.
+    for (int i = 0; i < n; ++i) {
+      const CameraModel& cam = pod_cameras_[i];
+      for (size_t v = 0; v < nv; ++v) {
+        const Eigen::Vector3f& p = remote_positions_[v];
+        const Eigen::Vector3f& nrm = remote_normals_[v];
+        const Eigen::Vector3f to_pod = cam.Center() - p;
+        const float len = to_pod.norm();
+        if (!(len > 0)) continue;
+        const float ndv = nrm.dot(to_pod) / (len * std::max(nrm.norm(), 1e-12f));
+        if (!(ndv > 0)) continue;
+        const Eigen::Vector3f pc = projection[i] * p.homogeneous();  // camera point, or pixel·z
+        if (pc.z() < 0.05f) continue;
+        Eigen::Vector2f px = pc.head<2>() / pc.z();
+        if (distorted[i] && !cam.ProjectCamera(pc, &px)) continue;
+        const int w = cam.intrinsics.width, h = cam.intrinsics.height;
+        const int x = static_cast<int>(std::floor(px.x() + 0.5f)), y = static_cast<int>(std::floor(px.y() + 0.5f));
+        if (x < 0 || y < 0 || x >= w || y >= h) continue;
+        float best = 0.0f, best_err = 1e30f;  // flagged depth of the best texel (0 = none)
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+            const float zf = depth[i][static_cast<size_t>(yy) * w + xx];
+            const float err = std::abs(std::abs(zf) - pc.z());
+            if (zf != 0.0f && err < best_err) {
+              best_err = err;
+              best = zf;
+            }
+          }
+        }
+        if (best == 0.0f || pc.z() > std::abs(best) + tol) continue;
+        float wgt = options.alpha == 2.0f ? ndv * ndv : std::pow(ndv, options.alpha);
+        if (best < 0.0f) wgt *= options.discontinuity_weight;
+        if (masks) wgt *= pod_alpha_[i][static_cast<size_t>(y) * w + x] / 255.0f;
+        weight[v * n + i] = wgt;
+      }
+    }
+    // Each vertex keeps its `pods_per_vertex` best pods.
+    const int keep = std::min(options.pods_per_vertex, n);
+    std::array<int, kMaxPods> order{};
+    for (size_t v = 0; v < nv; ++v) {
+      const float* wv = &weight[v * n];
+      for (int i = 0; i < n; ++i) order[i] = i;
+      std::partial_sort(order.begin(), order.begin() + keep, order.begin() + n,
+                        [&](int a, int b) { return wv[a] > wv[b] || (wv[a] == wv[b] && a < b); });
+      uint16_t bits = 0;
+      for (int k = 0; k < keep; ++k) {
+        if (wv[order[k]] > 0.0f) bits = static_cast<uint16_t>(bits | (1u << order[k]));
+      }
+      vertex_pods[v] = bits;
+    }
+    // Each triangle: the union of its vertices' pods, capped.
+    std::vector<std::pair<uint16_t, uint32_t>> keyed(nt);
+    size_t slots = 0;
+    for (size_t t = 0; t < nt; ++t) {
+      const auto& tri = remote_triangles_[t];
+      uint16_t bits = static_cast<uint16_t>(vertex_pods[tri[0]] | vertex_pods[tri[1]] | vertex_pods[tri[2]]);
+      int count = std::popcount(bits);
+      if (count > options.max_pods_per_triangle) {
+        ++selection_stats_.capped_triangles;
+        std::array<float, kMaxPods> sum{};
+        int m = 0;
+        for (int i = 0; i < n; ++i) {
+          if (bits & (1u << i)) {
+            order[m++] = i;
+            sum[i] = weight[tri[0] * n + i] + weight[tri[1] * n + i] + weight[tri[2] * n + i];
+          }
+        }
+        std::partial_sort(order.begin(), order.begin() + options.max_pods_per_triangle, order.begin() + m,
+                          [&](int a, int b) { return sum[a] > sum[b] || (sum[a] == sum[b] && a < b); });
+        bits = 0;
+        for (int k = 0; k < options.max_pods_per_triangle; ++k) bits = static_cast<uint16_t>(bits | (1u << order[k]));
+        count = options.max_pods_per_triangle;
+      }
+      if (count == 0) ++selection_stats_.uncoloured_triangles;
+      slots += static_cast<size_t>(count);
+      keyed[t] = {bits, static_cast<uint32_t>(t)};
+    }
+    std::sort(keyed.begin(), keyed.end());
+    ordered.resize(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      ordered[t] = remote_triangles_[keyed[t].second];
+      if (t == 0 || keyed[t].first != keyed[t - 1].first) {
+        PodSet set;
+        for (int i = 0; i < n; ++i) {
+          if (keyed[t].first & (1u << i)) set.pods[set.num_pods++] = i;
+        }
+        set.first_index = t * 3;
+        pod_sets_.push_back(set);
+      }
+      pod_sets_.back().index_count += 3;
+    }
+    selection_stats_.mean_pods = nt ? static_cast<double>(slots) / static_cast<double>(nt) : 0.0;
+  }
+  glBindVertexArray(remote_.vao);
+  glBindBuffer(GL_ARRAY_BUFFER, remote_pods_vbo_);
+  if (nv > 0) glBufferSubData(GL_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(nv * sizeof(uint16_t)), vertex_pods.data());
+  if (nt > 0) {
+    glBufferSubData(GL_ELEMENT_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(nt * sizeof(ordered[0])), ordered.data());
+  }
+  glBindVertexArray(0);
+  selection_stats_.draws = pod_sets_.size();
+  sel_per_vertex_ = options.pods_per_vertex;
+  sel_per_triangle_ = options.max_pods_per_triangle;
+  sel_alpha_ = options.alpha;
+  selection_dirty_ = false;
+  selection_stats_.select_ms = sw.ElapsedMs();
+  selection_stats_.select_cpu_ms = ThreadCpuTimeMs() - cpu0;
+  return CheckGlError("pod selection");
 }
 
 void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
@@ -787,6 +1025,10 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
         po.mask_feather_px != tex_feather_ || po.edge_floor_weight != tex_floor_) {
       UploadPodTextures(po);
     }
+    if (selection_dirty_ || po.pods_per_vertex != sel_per_vertex_ || po.max_pods_per_triangle != sel_per_triangle_ ||
+        po.alpha != sel_alpha_) {
+      HOLO_RETURN_IF_ERROR(SelectPods(po));
+    }
   }
   const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
   if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
@@ -807,20 +1049,20 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   glDisable(GL_BLEND);
 
   const Eigen::Matrix4f clip_from_local = ViewProjection(camera, settings.near_m, settings.far_m);
-  glUseProgram(draw_program_);
-  SetMat4(draw_program_, "u_clip_from_local", clip_from_local);
+  HOLO_ASSIGN_OR_RETURN(const unsigned plain, DrawProgram(0));
+  glUseProgram(plain);
+  SetMat4(plain, "u_clip_from_local", clip_from_local);
 
   // Local geometry first: it fills the depth buffer, so remote fragments
   // behind it are discarded by the depth test.
   if (settings.composite_local && local_.index_count > 0) {
-    SetMat4(draw_program_, "u_local_from_remote", Eigen::Matrix4f::Identity());
-    glUniform1i(Loc(draw_program_, "u_mode"), 0);
+    SetMat4(plain, "u_local_from_remote", Eigen::Matrix4f::Identity());
     if (!settings.show_local) glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
     Draw(local_);
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
   }
 
-  SetMat4(draw_program_, "u_local_from_remote", local_from_remote);
+  SetMat4(plain, "u_local_from_remote", local_from_remote);
   if (settings.cull_back_faces) {
     // Counter-clockwise seen from outside stays counter-clockwise in window
     // coordinates (the y flip of the projection undoes the camera's y-down).
@@ -828,19 +1070,19 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     glCullFace(GL_BACK);
     glEnable(GL_CULL_FACE);
   }
-  if (projective && settings.depth_prepass) {
-    // Depth first with the cheap colour mode, then the projective shader
-    // only on the visible surface (GL_LEQUAL on identical positions:
-    // gl_Position is invariant): each pixel is textured once.
-    glUniform1i(Loc(draw_program_, "u_mode"), 0);
-    glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+  if (!projective) {
     Draw(remote_);
-    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    glDepthFunc(GL_LEQUAL);
-    glDepthMask(GL_FALSE);
-  }
-  glUniform1i(Loc(draw_program_, "u_mode"), projective ? 1 : 0);
-  if (projective) {
+  } else {
+    if (settings.depth_prepass) {
+      // Depth first with the cheap colour program, then the projective
+      // shaders only on the visible surface (GL_LEQUAL on identical
+      // positions: gl_Position is invariant): each pixel is textured once.
+      glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+      Draw(remote_);
+      glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+      glDepthFunc(GL_LEQUAL);
+      glDepthMask(GL_FALSE);
+    }
     const int n = num_pods_;
     std::vector<float> cam_from_world(16 * n), intr(4 * n), dist(4 * n), k3(n), size(2 * n), center(3 * n);
     bool distorted = false;
@@ -869,33 +1111,64 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
       const Eigen::Vector3f ctr = c.Center();
       for (int k = 0; k < 3; ++k) center[3 * i + k] = ctr[k];
     }
-    glUniform1i(Loc(draw_program_, "u_num_pods"), n);  // also read by the vertex shader
-    glUniform1i(Loc(draw_program_, "u_distorted"), distorted ? 1 : 0);
-    glUniformMatrix4fv(Loc(draw_program_, "u_pod_cam_from_world"), n, GL_FALSE, cam_from_world.data());
-    glUniform4fv(Loc(draw_program_, "u_pod_intr"), n, intr.data());
-    glUniform4fv(Loc(draw_program_, "u_pod_dist"), n, dist.data());
-    glUniform1fv(Loc(draw_program_, "u_pod_k3"), n, k3.data());
-    glUniform2fv(Loc(draw_program_, "u_pod_size"), n, size.data());
-    glUniform3fv(Loc(draw_program_, "u_pod_center"), n, center.data());
-    glUniform2f(Loc(draw_program_, "u_array_size"), static_cast<float>(array_width_),
-                static_cast<float>(array_height_));
     const Eigen::Vector4f eye_local(camera.Center().x(), camera.Center().y(), camera.Center().z(), 1.0f);
     const Eigen::Vector4f eye_remote = local_from_remote.inverse() * eye_local;
-    glUniform3f(Loc(draw_program_, "u_eye_remote"), eye_remote.x() / eye_remote.w(), eye_remote.y() / eye_remote.w(),
-                eye_remote.z() / eye_remote.w());
     const ProjectiveOptions& po = settings.projective;
-    glUniform1f(Loc(draw_program_, "u_alpha"), po.alpha);
-    glUniform1f(Loc(draw_program_, "u_beta"), po.beta);
-    glUniform1f(Loc(draw_program_, "u_vis_tol"), po.visibility_tolerance_m);
-    glUniform1f(Loc(draw_program_, "u_edge_weight"), po.discontinuity_weight);
-    glUniform1f(Loc(draw_program_, "u_min_confidence"),
-                po.use_masks && !pod_masks_.empty() && remote_has_colors_ ? po.min_mask_confidence : 0.0f);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
     glActiveTexture(GL_TEXTURE1);
     glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
+    // One draw call per pod set; the slot uniforms are that set's pods.
+    std::array<bool, kMaxPods + 1> frame_uniforms_set{};
+    std::vector<float> s_cam(16 * kMaxPods), s_intr(4 * kMaxPods), s_dist(4 * kMaxPods), s_k3(kMaxPods),
+        s_size(2 * kMaxPods), s_center(3 * kMaxPods);
+    std::vector<int> s_pod(kMaxPods);
+    glBindVertexArray(remote_.vao);
+    for (const PodSet& set : pod_sets_) {
+      const int slots = set.num_pods;
+      HOLO_ASSIGN_OR_RETURN(const unsigned prog, DrawProgram(slots));
+      glUseProgram(prog);
+      if (!frame_uniforms_set[slots]) {
+        frame_uniforms_set[slots] = true;
+        SetMat4(prog, "u_clip_from_local", clip_from_local);
+        SetMat4(prog, "u_local_from_remote", local_from_remote);
+        if (slots > 0) {
+          glUniform1i(Loc(prog, "u_distorted"), distorted ? 1 : 0);
+          glUniform2f(Loc(prog, "u_array_size"), static_cast<float>(array_width_), static_cast<float>(array_height_));
+          glUniform3f(Loc(prog, "u_eye_remote"), eye_remote.x() / eye_remote.w(), eye_remote.y() / eye_remote.w(),
+                      eye_remote.z() / eye_remote.w());
+          glUniform1f(Loc(prog, "u_alpha"), po.alpha);
+          glUniform1f(Loc(prog, "u_beta"), po.beta);
+          glUniform1f(Loc(prog, "u_vis_tol"), po.visibility_tolerance_m);
+          glUniform1f(Loc(prog, "u_edge_weight"), po.discontinuity_weight);
+          glUniform1f(Loc(prog, "u_min_confidence"),
+                      po.use_masks && !pod_masks_.empty() && remote_has_colors_ ? po.min_mask_confidence : 0.0f);
+        }
+      }
+      if (slots > 0) {
+        for (int k = 0; k < slots; ++k) {
+          const int i = set.pods[k];
+          std::copy_n(&cam_from_world[16 * i], 16, &s_cam[16 * k]);
+          std::copy_n(&intr[4 * i], 4, &s_intr[4 * k]);
+          std::copy_n(&dist[4 * i], 4, &s_dist[4 * k]);
+          s_k3[k] = k3[i];
+          std::copy_n(&size[2 * i], 2, &s_size[2 * k]);
+          std::copy_n(&center[3 * i], 3, &s_center[3 * k]);
+          s_pod[k] = i;
+        }
+        glUniformMatrix4fv(Loc(prog, "u_slot_cam_from_world"), slots, GL_FALSE, s_cam.data());
+        glUniform4fv(Loc(prog, "u_slot_intr"), slots, s_intr.data());
+        glUniform4fv(Loc(prog, "u_slot_dist"), slots, s_dist.data());
+        glUniform1fv(Loc(prog, "u_slot_k3"), slots, s_k3.data());
+        glUniform2fv(Loc(prog, "u_slot_size"), slots, s_size.data());
+        glUniform3fv(Loc(prog, "u_slot_center"), slots, s_center.data());
+        glUniform1iv(Loc(prog, "u_slot_pod"), slots, s_pod.data());
+      }
+      glDrawElements(GL_TRIANGLES, static_cast<GLsizei>(set.index_count), GL_UNSIGNED_INT,
+                     reinterpret_cast<void*>(set.first_index * sizeof(uint32_t)));
+    }
+    glBindVertexArray(0);
   }
-  Draw(remote_);
   glDisable(GL_CULL_FACE);
   glDepthMask(GL_TRUE);
   glDepthFunc(GL_LESS);

@@ -72,6 +72,19 @@ struct ProjectiveOptions {
   // Below this mean mask weight of a fragment's samples the colour fades to
   // the mesh's per-vertex colour (0 = never).
   float min_mask_confidence = 0.5f;
+  // Pod selection, once per mesh (Renderer::SelectPods): each vertex keeps
+  // the `pods_per_vertex` pods with the largest view-independent weight
+  // (visible in the pod's depth map, facing it, inside its mask; edge
+  // samples down-weighted) and gives the others weight 0; each triangle is
+  // textured from the pods its vertices keep, at most
+  // `max_pods_per_triangle` of them (the largest summed weights; a pod
+  // dropped there makes a small seam, counted in SelectionStats). Weights
+  // stay continuous across triangles, since a pod's weight on an edge
+  // depends only on the edge's vertices. The fragment shader then loops
+  // over a triangle's few pods instead of all of them. 0 = every pod
+  // everywhere (one draw call, the renderer before selection existed).
+  int pods_per_vertex = 3;
+  int max_pods_per_triangle = 4;
   Status Check() const;
   // The renderer as it was before masks and edge weights (for before/after
   // comparisons): masks ignored, back faces culled in the pods' depth maps.
@@ -174,6 +187,17 @@ class Renderer {
   // visibility pass, for tests and debugging.
   Status ReadPodDepth(int i, ImageFloat* out);
 
+  // What the last pod selection produced (ProjectiveOptions::pods_per_vertex).
+  struct SelectionStats {
+    size_t draws = 0;              // draw calls (distinct pod sets) per projective frame
+    double mean_pods = 0;          // mean pods per triangle (slots the fragment shader loops over)
+    size_t capped_triangles = 0;   // triangles whose vertices kept more than max_pods_per_triangle pods
+    size_t uncoloured_triangles = 0;  // no pod sees any of their vertices: per-vertex colour
+    double select_ms = 0;          // wall time of the selection (readback + choice + index upload)
+    double select_cpu_ms = 0;      // CPU time of the calling thread in it
+  };
+  const SelectionStats& selection_stats() const { return selection_stats_; }
+
  private:
   struct GpuMesh {
     unsigned vao = 0, vbo = 0, ibo = 0;
@@ -182,17 +206,46 @@ class Renderer {
   };
   Renderer() = default;
   Status Init();
-  Status Upload(const Mesh& mesh, GpuMesh* gpu);
+  // `normals` (optional) receives the normals uploaded (computed when the
+  // mesh has none).
+  Status Upload(const Mesh& mesh, GpuMesh* gpu, std::vector<Eigen::Vector3f>* normals = nullptr);
   void Draw(const GpuMesh& gpu) const;
   void FreeMesh(GpuMesh* gpu);
   // Scissor box {x, y, w, h} of pod image pixels the remote mesh can cover;
   // left unchanged (whole image) when it cannot be bounded.
   void PodBox(const CameraModel& cam, int box[4]) const;
+  // The program for `slots` pod slots (0 = per-vertex colour), built on
+  // first use.
+  StatusOr<unsigned> DrawProgram(int slots);
+  // Chooses the pods of every vertex and triangle and orders the remote
+  // mesh's triangles into one range per pod set (see ProjectiveOptions).
+  Status SelectPods(const ProjectiveOptions& options);
   // Uploads the pods' images as premultiplied RGBA (alpha = the texel's mask
   // weight, see ProjectiveOptions) for `options`.
   void UploadPodTextures(const ProjectiveOptions& options);
 
-  unsigned draw_program_ = 0, depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
+  std::array<unsigned, kMaxPods + 1> draw_programs_{};
+  unsigned depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
+  // Per-vertex pod bits of the remote mesh (attribute 3).
+  unsigned remote_pods_vbo_ = 0;
+  size_t remote_pods_vbo_bytes_ = 0;
+  // CPU copy of the remote mesh (normals computed when missing) for the
+  // pod selection, in the order the mesh came.
+  std::vector<Eigen::Vector3f> remote_positions_, remote_normals_;
+  std::vector<std::array<uint32_t, 3>> remote_triangles_;
+  // One draw call per pod set: the pods (rig order) and the index range.
+  struct PodSet {
+    std::array<int, kMaxPods> pods{};
+    int num_pods = 0;
+    size_t first_index = 0, index_count = 0;
+  };
+  std::vector<PodSet> pod_sets_;
+  bool selection_dirty_ = true;
+  int sel_per_vertex_ = -1, sel_per_triangle_ = -1;
+  float sel_alpha_ = -1;
+  SelectionStats selection_stats_;
+  // Mask weight (alpha) of every pod texel as uploaded; empty = no masks.
+  std::vector<std::vector<uint8_t>> pod_alpha_;
   GpuMesh remote_, local_;
   Eigen::Vector3f remote_min_ = Eigen::Vector3f::Constant(1e30f), remote_max_ = Eigen::Vector3f::Constant(-1e30f);
   // The remote mesh carries per-vertex colours (a live site streaming pod

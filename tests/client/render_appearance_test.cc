@@ -8,7 +8,10 @@
 //     the black painted speckles onto the person (old renderer: it did);
 //   * a surface point hidden from a pod must not take that pod's colour;
 //   * novel-view PSNR on the live fused stream (the real capture site with
-//     its segmentation, S8-QVGA) stays above a stated threshold.
+//     its segmentation, S8-QVGA) stays above a stated threshold, and the
+//     per-mesh pod selection (a few pods per triangle instead of all)
+//     draws the same picture as blending every pod.
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -363,7 +366,7 @@ TEST_F(AppearanceTest, BadMasksAndOptionsAreErrors) {
   auto target = OffscreenTarget::Create(64, 48);
   ASSERT_TRUE(target.ok());
   (*target)->Bind();
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < 7; ++k) {
     RenderSettings settings;
     if (k == 0)
       settings.projective.mask_erode_px = -1;
@@ -373,6 +376,12 @@ TEST_F(AppearanceTest, BadMasksAndOptionsAreErrors) {
       settings.projective.edge_floor_weight = 0;
     if (k == 3)
       settings.projective.min_mask_confidence = 2;
+    if (k == 4)
+      settings.projective.pods_per_vertex = -1;
+    if (k == 5)
+      settings.projective.pods_per_vertex = Renderer::kMaxPods + 1;
+    if (k == 6)
+      settings.projective.max_pods_per_triangle = 0;
     EXPECT_EQ(
         renderer_->Render(NovelCamera(64, 48, 0), settings, {0, 0, 64, 48})
             .code(),
@@ -389,6 +398,9 @@ TEST_F(AppearanceTest, BadMasksAndOptionsAreErrors) {
 constexpr double kFusedProjectivePsnrDb =
     17.5; // measured 18.56 dB (the old renderer: 18.01)
 constexpr double kFusedVertexPsnrDb = 17.5; // measured 18.58 dB
+// The same view with the default pod selection and with every pod blended
+// (pods_per_vertex 0), compared with each other inside the true foreground.
+constexpr double kSelectedVsEveryPodPsnrDb = 35.0;
 
 TEST_F(AppearanceTest, FusedStreamNovelViewPsnrStaysAboveThreshold) {
   auto workload = GetWorkload("S8-QVGA");
@@ -406,7 +418,7 @@ TEST_F(AppearanceTest, FusedStreamNovelViewPsnrStaysAboveThreshold) {
   o.pipeline.max_frames = 6;
   auto site = CaptureSite::Create(studio->get(), empty->get(), nullptr, o);
   ASSERT_TRUE(site.ok()) << site.status().ToString();
-  double sum_p = 0, sum_v = 0, sum_old = 0;
+  double sum_p = 0, sum_v = 0, sum_old = 0, min_same = 1e9;
   int n = 0;
   auto stats = (*site)->Run([&](const FrameWork &w) -> Status {
     if (w.frames.frame_index < 3)
@@ -436,9 +448,21 @@ TEST_F(AppearanceTest, FusedStreamNovelViewPsnrStaysAboveThreshold) {
       (*studio)->RenderView(w.frames.frame_index, cam, &truth, nullptr, &mask);
       RenderSettings settings;
       settings.background = {0, 0, 0};
+      const ImageRgb8 selected = RenderTo(cam, settings);
+      HOLO_ASSIGN_OR_RETURN(double p,
+                            metrics::ComputePsnr(selected, truth, &mask));
+      // The selection must have split the mesh into pod sets of at most
+      // max_pods_per_triangle pods, and draw what every pod would.
+      const Renderer::SelectionStats sel = renderer_->selection_stats();
+      EXPECT_GT(sel.draws, 1u);
+      EXPECT_LE(sel.mean_pods, settings.projective.max_pods_per_triangle);
+      EXPECT_LT(sel.mean_pods, 4.0);
+      RenderSettings every_pod = settings;
+      every_pod.projective.pods_per_vertex = 0;
       HOLO_ASSIGN_OR_RETURN(
-          double p,
-          metrics::ComputePsnr(RenderTo(cam, settings), truth, &mask));
+          double same, metrics::ComputePsnr(RenderTo(cam, every_pod), selected, &mask));
+      EXPECT_EQ(renderer_->selection_stats().draws, 1u);
+      min_same = std::min(min_same, same);
       settings.mode = ColorMode::kVertexColor;
       HOLO_ASSIGN_OR_RETURN(
           double v,
@@ -461,8 +485,10 @@ TEST_F(AppearanceTest, FusedStreamNovelViewPsnrStaysAboveThreshold) {
   });
   ASSERT_TRUE(stats.ok()) << stats.status().ToString();
   ASSERT_EQ(n, 6);
-  std::printf("mean: projective %.2f dB (old %.2f), per-vertex %.2f dB\n",
-              sum_p / n, sum_old / n, sum_v / n);
+  std::printf("mean: projective %.2f dB (old %.2f), per-vertex %.2f dB; "
+              "selected pods vs every pod: >= %.2f dB\n",
+              sum_p / n, sum_old / n, sum_v / n, min_same);
+  EXPECT_GT(min_same, kSelectedVsEveryPodPsnrDb);
   EXPECT_GT(sum_p / n, kFusedProjectivePsnrDb);
   EXPECT_GT(sum_v / n, kFusedVertexPsnrDb);
 }
