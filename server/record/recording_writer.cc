@@ -79,7 +79,7 @@ class PosixRecordingFile final : public RecordingFile {
 bool Recordable(protocol::MessageType t) {
   using protocol::MessageType;
   return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats;
+         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
 }
 
 std::string Seconds(int64_t us) {

@@ -112,12 +112,14 @@ TEST(RegionsConfig, ErrorsNameTheFileKeyAndValue) {
 TEST(RegionOccupancy, CountsCellsWithEnoughPointsInsideTheShape) {
   const RegionsConfig c = TableConfig();
   std::vector<uint64_t> scratch;
-  // The 16 × 10 cm hand lies flat inside the table box: 8 × 5 cells of 2 cm, 8 cm³ each.
-  const auto hand = Hand({0.1f, 0.1f, 1.0f});
+  // The 16 × 10 cm hand lies flat inside the table box: 8 × 5 cells of 2 cm,
+  // 8 cm³ each (corners 1 mm off the cell grid, so rounding cannot split a row).
+  const auto hand = Hand({0.101f, 0.101f, 1.001f});
   EXPECT_NEAR(OccupiedLitres(c.regions[0], hand, c.cell_m, 1, &scratch), 8 * 5 * 8e-3f, 1e-4f);
-  // Outside: nothing. Half in (x from 0.52 to 0.68): half the cells.
+  // Outside: nothing. Half in (x from 0.521 to 0.676, the box ends at 0.6): half the cells.
   EXPECT_EQ(OccupiedLitres(c.regions[0], Hand({0.1f, 0.1f, 1.3f}), c.cell_m, 1, &scratch), 0.0f);
-  EXPECT_NEAR(OccupiedLitres(c.regions[0], Hand({0.52f, 0.1f, 1.0f}), c.cell_m, 1, &scratch), 4 * 5 * 8e-3f, 1e-4f);
+  EXPECT_NEAR(OccupiedLitres(c.regions[0], Hand({0.521f, 0.101f, 1.001f}), c.cell_m, 1, &scratch), 4 * 5 * 8e-3f,
+              1e-4f);
   // Scattered single points fill no cell at min_points_per_cell 2.
   std::vector<Eigen::Vector3f> specks;
   for (int i = 0; i < 20; ++i) specks.push_back({0.01f + 0.029f * i, 0.2f, 0.81f + 0.019f * i});
