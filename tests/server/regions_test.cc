@@ -61,6 +61,14 @@ TEST(RegionsConfig, ParsesBoxesSpheresAndOverrides) {
   EXPECT_FLOAT_EQ(d->regions[0].enter_litres, RegionsConfig{}.enter_litres);
 }
 
+TEST(RegionsConfig, TheExampleConfigLoads) {
+  auto c = LoadRegionsConfig(std::string(HOLO_SOURCE_DIR) + "/config/regions/studio-example.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  ASSERT_EQ(c->regions.size(), 3u);
+  EXPECT_EQ(c->regions[1].name, "ball path");
+  EXPECT_EQ(c->regions[1].shape, protocol::RegionShape::kSphere);
+}
+
 TEST(RegionsConfig, ErrorsNameTheFileKeyAndValue) {
   const std::string box = "box: {min: [0,0,0], max: [1,1,1]}";
   const std::vector<std::pair<std::string, std::string>> cases = {
