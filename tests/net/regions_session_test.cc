@@ -80,8 +80,8 @@ TEST(RegionsSession, AnnouncedRegionsReachANewViewer) {
 // know type 15: it must never receive one, and the announcement it gets is
 // an ordinary Stats message.
 TEST(RegionsSession, OldViewersNeverReceiveType15) {
-  Site site(/*announce=*/true);
   for (int64_t value : {0, 7}) {
+    Site site(/*announce=*/true);  // one viewer per site: Subscription() is that viewer's
     auto p = RawPeer::Connect("127.0.0.1", site.server->port());
     ASSERT_TRUE(p.ok());
     ASSERT_TRUE((*p)->SendHello(protocol::Role::kViewer, "view-secret", "old-viewer").ok());
