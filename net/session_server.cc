@@ -120,6 +120,7 @@ class Server::Impl {
   uint32_t next_publisher_slot = 0;
   size_t pending = 0;
   WireMessagePtr rig_msg;
+  WireMessagePtr regions_announce;  // Stats "site.regions" (null: this site publishes no Regions)
   protocol::GeometryCodec geometry = protocol::GeometryCodec::kG1;
   protocol::ColorCodec color = protocol::ColorCodec::kC1;
   uint64_t next_id = 1;
@@ -392,8 +393,8 @@ class Session : public std::enable_shared_from_this<Session> {
           Violation("control: subscribe to unknown stream " + std::to_string(c.stream_id));
           return;
         }
-        if (c.value < 0 || c.value > kContentAll) {
-          Violation("control.value: content bits must be 0..7, got " + std::to_string(c.value));
+        if (c.value < 0 || c.value > kContentKnown) {
+          Violation("control.value: content bits must be 0..15, got " + std::to_string(c.value));
           return;
         }
         const uint32_t bits = c.value == 0 ? kContentAll : static_cast<uint32_t>(c.value);
@@ -505,12 +506,14 @@ class Session : public std::enable_shared_from_this<Session> {
     Header hdr;
     EnqueuePriority(MakeWireMessage(hdr, w, srv_->cfg.fragment_bytes));
     if (IsViewerRole(h.role)) {
-      WireMessagePtr rig;
+      WireMessagePtr rig, announce;
       {
         std::lock_guard<std::mutex> l(srv_->mu);
         rig = srv_->rig_msg;
+        announce = srv_->regions_announce;
       }
       if (rig) EnqueuePriorityAlways(rig);
+      if (announce) EnqueuePriorityAlways(announce);
     }
     state_ = State::kActive;
     srv_->Log("welcome " + peer_ + " '" + h.client_name + "' as " + protocol::RoleName(h.role) + " (session " +
@@ -890,6 +893,20 @@ void Server::SetRig(const Rig& rig) {
     h.sequence = impl_->rig_sequence++;
     msg = MakeWireMessage(h, protocol::RigMessage{rig}, impl_->cfg.fragment_bytes);
     impl_->rig_msg = msg;
+    viewers = impl_->viewers_list;
+  }
+  for (const auto& v : viewers) v->SendRig(msg);
+}
+
+void Server::AnnounceRegions(size_t num_regions) {
+  std::vector<std::shared_ptr<Session>> viewers;
+  WireMessagePtr msg;
+  {
+    std::lock_guard<std::mutex> l(impl_->mu);
+    protocol::Stats s;
+    s.values = {{protocol::kRegionsAnnounceKey, static_cast<double>(num_regions)}};
+    msg = MakeWireMessage(Header{}, s, impl_->cfg.fragment_bytes);
+    impl_->regions_announce = msg;
     viewers = impl_->viewers_list;
   }
   for (const auto& v : viewers) v->SendRig(msg);

@@ -110,6 +110,13 @@ class Server {
   // recorded bytes unchanged). `message->type` must be kRig.
   void SetRigMessage(WireMessagePtr message);
 
+  // This site publishes Regions (PROTOCOL.md §4, type 15): every viewer,
+  // now and at each Welcome after the Rig, gets a Stats message
+  // {"site.regions": num_regions}; viewers that know Regions subscribe to
+  // them (content bit 8) when they see it. Regions then go out with
+  // PublishPriority to those subscribers only.
+  void AnnounceRegions(size_t num_regions);
+
   // Fan-out (any thread, never blocks on a viewer). Video frames go to every
   // viewer subscribed to geometry or colour; a viewer whose queue is full
   // loses its oldest waiting frame.

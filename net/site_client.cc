@@ -110,7 +110,7 @@ Status ClientOptions::Check() const {
   if (!fed && port == 0) return InvalidArgument("client: port must be set (1..65535)");
   if (token.size() > 256) return InvalidArgument("client: token over 256 bytes");
   if (name.size() > 1024) return InvalidArgument("client: name over 1024 bytes");
-  if (subscribe > kSubscribeAll) return InvalidArgument("client: subscribe bits must be 0..7");
+  if (subscribe > (kSubscribeAll | kSubscribeRegions)) return InvalidArgument("client: subscribe bits must be 0..15");
   if (!(backoff_initial_s > 0 && backoff_initial_s <= backoff_max_s && backoff_max_s <= 3600))
     return InvalidArgument("client: need 0 < backoff_initial_s <= backoff_max_s <= 3600");
   if (!(connect_timeout_s > 0 && connect_timeout_s <= 3600)) return InvalidArgument("client: connect_timeout_s 0..3600");
@@ -418,8 +418,10 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       if (opt.role != protocol::Role::kPublisher) {
         protocol::Control c;
         c.command = protocol::ControlCommand::kSubscribe;
-        c.value = subscription.load();
+        // Regions only after the site announces them (Deliver, kStats).
+        c.value = subscription.load() & kSubscribeAll;
         if (c.value != 0) Queue(Encode(Header{}, c), false);
+        regions_subscribed = false;
       }
       SetState(ClientState::kConnected, OkStatus());
       ArmPing();
@@ -483,13 +485,45 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         }
         return;
       }
+      case MessageType::kStats: {
+        auto p = protocol::DecodePayload(t, raw.payload, limits);
+        if (!p.ok()) return BadPayload(t, p.status());
+        for (const auto& [key, value] : std::get<protocol::Stats>(*p).values) {
+          if (key != protocol::kRegionsAnnounceKey) continue;
+          // The site publishes Regions: ask for them (once per connection).
+          if ((subscription.load() & kSubscribeRegions) && !regions_subscribed && !opt.fed &&
+              opt.role != protocol::Role::kPublisher) {
+            protocol::Control c;
+            c.command = protocol::ControlCommand::kSubscribe;
+            c.value = kSubscribeRegions;
+            Queue(Encode(Header{}, c), false);
+            regions_subscribed = true;
+          }
+        }
+        return;
+      }
+      case MessageType::kRegions: {
+        auto p = protocol::DecodePayload(t, raw.payload, limits);
+        if (!p.ok()) return BadPayload(t, p.status());
+        ReceivedRegions r;
+        r.regions = std::move(std::get<protocol::Regions>(*p));
+        r.capture_time_us = raw.header.capture_time_us;
+        r.received_us = raw.received_us;
+        {
+          std::lock_guard<std::mutex> l(mu);
+          ++stats.regions_received;
+          latest_regions = r;
+        }
+        if (cb.on_regions) cb.on_regions(r);
+        return;
+      }
       case MessageType::kWelcome:
       case MessageType::kRefuse:
       case MessageType::kHello:
         Lost(DataLoss(std::string("unexpected ") + protocol::MessageTypeName(t) + " after Welcome"));
         return;
       default:
-        return;  // Stats, Control, ClientPose, RenderedFrame: not for this client
+        return;  // Control, ClientPose, RenderedFrame: not for this client
     }
   }
 
@@ -734,6 +768,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   int backoff_step = 0;
   uint64_t ping_count = 0;
   std::atomic<uint32_t> subscription{0};
+  bool regions_subscribed = false;  // Subscribe(regions) sent on this connection (strand)
   std::optional<ReceivedFrame> pending;
   std::map<uint16_t, std::unique_ptr<protocol::VideoDecoder>> video_decoders;  // V1, per pod (strand)
   std::chrono::steady_clock::time_point last_keyframe_request{};
@@ -747,6 +782,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   std::optional<protocol::Refuse> refusal;
   std::optional<protocol::Welcome> welcome;
   std::optional<Rig> rig;
+  std::optional<ReceivedRegions> latest_regions;
   std::deque<ReceivedFrame> frames;
   std::deque<std::pair<protocol::AudioPose, uint32_t>> audio_q;
   ClientStats stats;
@@ -906,9 +942,9 @@ void SiteClient::SendClientPose(const protocol::ClientPose& pose) {
 }
 
 void SiteClient::SendControl(const protocol::Control& control) {
-  if (control.command == protocol::ControlCommand::kSubscribe && control.value >= 0 && control.value <= 7)
+  if (control.command == protocol::ControlCommand::kSubscribe && control.value >= 0 && control.value <= 15)
     impl_->subscription |= control.value == 0 ? kSubscribeAll : static_cast<uint32_t>(control.value);
-  if (control.command == protocol::ControlCommand::kUnsubscribe && control.value >= 0 && control.value <= 7)
+  if (control.command == protocol::ControlCommand::kUnsubscribe && control.value >= 0 && control.value <= 15)
     impl_->subscription &= ~(control.value == 0 ? kSubscribeAll : static_cast<uint32_t>(control.value));
   impl_->Post(Encode(Header{}, control));
 }
@@ -932,6 +968,13 @@ void SiteClient::Resume() { SendControl(MakeControl(protocol::ControlCommand::kR
 void SiteClient::SetLoop(bool loop) { SendControl(MakeControl(protocol::ControlCommand::kSetLoop, loop ? 1 : 0)); }
 void SiteClient::Seek(int64_t t) { SendControl(MakeControl(protocol::ControlCommand::kSeek, t)); }
 void SiteClient::SetSpeed(float s) { SendControl(MakeControl(protocol::ControlCommand::kSetSpeed, 0, s)); }
+
+bool SiteClient::LatestRegions(ReceivedRegions* out) const {
+  std::lock_guard<std::mutex> l(impl_->mu);
+  if (!impl_->latest_regions) return false;
+  *out = *impl_->latest_regions;
+  return true;
+}
 
 ClientStats SiteClient::stats() const {
   std::lock_guard<std::mutex> l(impl_->mu);

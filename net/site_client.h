@@ -25,7 +25,11 @@ namespace holo::net {
 inline constexpr uint32_t kSubscribeGeometry = 1;
 inline constexpr uint32_t kSubscribeColor = 2;
 inline constexpr uint32_t kSubscribeAudio = 4;
-inline constexpr uint32_t kSubscribeAll = 7;
+inline constexpr uint32_t kSubscribeAll = 7;  // geometry, colour, audio (what value 0 means on the wire)
+// Regions (PROTOCOL.md §4, type 15). Never sent to the site at Welcome: the
+// client subscribes to them only when the site announces them (Stats
+// "site.regions"), so an older site never sees an unknown content bit.
+inline constexpr uint32_t kSubscribeRegions = 8;
 
 // Io threads shared by many clients (a recorder of several sites, the
 // load benchmark's hundred viewers). A client without one makes its own.
@@ -57,7 +61,7 @@ struct ClientOptions {
   std::string token;
   std::string name = "holoport-client";
   // Content sent with Control.subscribe after Welcome (viewers, render hosts, recorders).
-  uint32_t subscribe = kSubscribeAll;
+  uint32_t subscribe = kSubscribeAll | kSubscribeRegions;
   // Decode MeshFrame → Mesh and ColorFrame → images on the io thread. Off:
   // frames carry only their index, times and sizes (recorders, load tests).
   bool decode = true;
@@ -101,6 +105,13 @@ struct ReceivedFrame {
   std::vector<DecodedImage> images;
 };
 
+// One Regions report as received (PROTOCOL.md §4 Regions).
+struct ReceivedRegions {
+  protocol::Regions regions;
+  int64_t capture_time_us = 0;  // of the frame the report is about (site clock)
+  int64_t received_us = 0;      // this machine's wall clock (net::WallUs)
+};
+
 // One reassembled message as received (unfragmented header + payload).
 struct RawMessage {
   protocol::Header header;
@@ -116,6 +127,7 @@ struct ClientCallbacks {
   std::function<void(const ReceivedFrame&)> on_frame;
   std::function<void(const protocol::AudioPose&, uint32_t stream_id)> on_audio;
   std::function<void(const Rig&)> on_rig;
+  std::function<void(const ReceivedRegions&)> on_regions;
   std::function<void(const RawMessage&)> on_raw;  // every message after Welcome (recorders)
   std::function<void(ClientState, const Status&)> on_state;
 };
@@ -126,6 +138,7 @@ struct ClientStats {
   uint64_t frames_received = 0;
   uint64_t frames_dropped_local = 0;  // pull queue overflow (the application did not poll)
   uint64_t audio_received = 0;
+  uint64_t regions_received = 0;  // Regions messages (one per frame of a site with regions)
   uint64_t messages_received = 0;
   uint64_t bytes_received = 0;
   uint64_t decode_errors = 0;
@@ -166,6 +179,8 @@ class SiteClient {
   bool LatestFrame(ReceivedFrame* out);
   bool WaitFrame(ReceivedFrame* out, double timeout_s);
   bool PollAudio(protocol::AudioPose* out, uint32_t* stream_id = nullptr);
+  // The newest Regions report (false before the first).
+  bool LatestRegions(ReceivedRegions* out) const;
 
   // Sending (any thread; dropped and counted while not connected).
   void SendAudioPose(const protocol::AudioPose& audio);

@@ -16,6 +16,7 @@ uint32_t ContentBitOf(MessageType type) {
     case MessageType::kMeshFrame: return kContentGeometry;
     case MessageType::kColorFrame: return kContentColor;
     case MessageType::kAudioPose: return kContentAudio;
+    case MessageType::kRegions: return kContentRegions;
     default: return 0;
   }
 }

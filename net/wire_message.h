@@ -16,7 +16,9 @@ namespace holo::net {
 inline constexpr uint32_t kContentGeometry = 1;
 inline constexpr uint32_t kContentColor = 2;
 inline constexpr uint32_t kContentAudio = 4;
+inline constexpr uint32_t kContentRegions = 8;  // only on request: value 0 ("all") does not include it
 inline constexpr uint32_t kContentAll = 7;
+inline constexpr uint32_t kContentKnown = 15;
 
 // Stream ids: 0 session control, 1 the site's capture (mesh + colour),
 // 2 the voice of the person the site captures (holoport-server --voice),

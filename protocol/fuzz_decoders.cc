@@ -88,6 +88,18 @@ int FuzzPodFrame(std::span<const uint8_t> body) {
   return decoded;
 }
 
+int FuzzRegions(std::span<const uint8_t> body) {
+  auto p = DecodePayload(MessageType::kRegions, body, FuzzLimits());
+  if (!p.ok()) return 0;
+  const auto& m = std::get<Regions>(*p);
+  HOLO_CHECK(m.regions.size() <= kMaxRegions);
+  // Every accepted payload has exactly one encoding (no slack a decoder could misread).
+  const std::vector<uint8_t> again = EncodePayload(m);
+  HOLO_CHECK_MSG(std::equal(again.begin(), again.end(), body.begin(), body.end()),
+                 "regions payload does not re-encode to the same bytes");
+  return 1;
+}
+
 int FuzzDecoders(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
   const std::span<const uint8_t> body(data + 1, size - 1);

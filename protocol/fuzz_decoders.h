@@ -31,6 +31,9 @@ int FuzzColor(std::span<const uint8_t> bytes);     // DecodeColor (C0, C1, …) 
 // D2) and colour blobs (DecodeDepth, DecodeColor). Not part of FuzzDecoders (whose
 // selector byte and corpus stay as they are); its own libFuzzer target.
 int FuzzPodFrame(std::span<const uint8_t> bytes);
+// A Regions payload (DecodePayload of type 15); what it accepts must
+// re-encode to the same bytes. Its own libFuzzer target (fuzz_regions).
+int FuzzRegions(std::span<const uint8_t> bytes);
 
 int FuzzDecoders(const uint8_t* data, size_t size);
 

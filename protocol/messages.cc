@@ -458,6 +458,64 @@ Status Read(ByteReader& r, const Limits& l, PodFrame* m) {
   return OkStatus();
 }
 
+void Write(ByteWriter& w, const Regions& m) {
+  HOLO_CHECK(m.regions.size() <= kMaxRegions);
+  w.I64(m.frame_index);
+  w.U8(static_cast<uint8_t>(m.regions.size()));
+  for (const RegionReport& r : m.regions) {
+    HOLO_CHECK(!r.name.empty() && r.name.size() <= kMaxRegionName);
+    w.String8(r.name);
+    w.U8(static_cast<uint8_t>(r.shape));
+    WriteFloats(w, r.a);
+    if (r.shape == RegionShape::kBox) {
+      WriteFloats(w, r.b);
+    } else {
+      w.F32(r.b[0]);
+    }
+    w.U8(static_cast<uint8_t>(r.state));
+    w.F32(r.occupied_litres);
+  }
+}
+Status Read(ByteReader& r, const Limits&, Regions* m) {
+  HOLO_RETURN_IF_ERROR(r.I64("regions.frame_index", &m->frame_index));
+  if (m->frame_index < 0) return DataLoss("regions.frame_index: must be >= 0, got " + std::to_string(m->frame_index));
+  uint8_t n = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("regions.count", &n));
+  if (n > kMaxRegions) return DataLoss("regions.count: " + Str(n) + " exceeds limit " + Str(kMaxRegions));
+  // Smallest region: 1-byte name (2) + shape (1) + sphere (16) + state (1) + volume (4).
+  HOLO_RETURN_IF_ERROR(r.CheckCount("regions.count", n, 24));
+  m->regions.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    RegionReport& g = m->regions[i];
+    HOLO_RETURN_IF_ERROR(r.String8("regions.name", &g.name));
+    if (g.name.empty() || g.name.size() > kMaxRegionName)
+      return DataLoss("regions.name: " + Str(g.name.size()) + " bytes, must be 1.." + Str(kMaxRegionName));
+    for (size_t j = 0; j < i; ++j)
+      if (m->regions[j].name == g.name) return DataLoss("regions.name: '" + g.name + "' appears twice");
+    uint8_t shape = 0;
+    HOLO_RETURN_IF_ERROR(r.U8("regions.shape", &shape));
+    if (shape != 1 && shape != 2) return DataLoss("regions.shape: unknown shape " + Str(shape));
+    g.shape = static_cast<RegionShape>(shape);
+    HOLO_RETURN_IF_ERROR(ReadFloats(r, "regions.a", &g.a));
+    if (g.shape == RegionShape::kBox) {
+      HOLO_RETURN_IF_ERROR(ReadFloats(r, "regions.b", &g.b));
+      for (int k = 0; k < 3; ++k)
+        if (!(g.a[k] < g.b[k])) return DataLoss("regions.b: box max must exceed min on every axis");
+    } else {
+      g.b = {0, 0, 0};
+      HOLO_RETURN_IF_ERROR(r.F32("regions.radius", &g.b[0]));
+      if (!(g.b[0] > 0)) return DataLoss("regions.radius: must be > 0");
+    }
+    uint8_t state = 0;
+    HOLO_RETURN_IF_ERROR(r.U8("regions.state", &state));
+    if (state > 3) return DataLoss("regions.state: unknown state " + Str(state));
+    g.state = static_cast<RegionState>(state);
+    HOLO_RETURN_IF_ERROR(r.F32("regions.occupied_litres", &g.occupied_litres));
+    if (g.occupied_litres < 0) return DataLoss("regions.occupied_litres: must be >= 0");
+  }
+  return OkStatus();
+}
+
 template <typename T>
 StatusOr<Payload> ReadAs(ByteReader& r, const Limits& l, const char* name) {
   T m;
@@ -502,11 +560,22 @@ const char* MessageTypeName(MessageType t) {
     case MessageType::kPong: return "pong";
     case MessageType::kStats: return "stats";
     case MessageType::kPodFrame: return "pod_frame";
+    case MessageType::kRegions: return "regions";
   }
   return "unknown";
 }
 
-bool IsKnownMessageType(uint16_t t) { return t >= 1 && t <= 14; }
+bool IsKnownMessageType(uint16_t t) { return t >= 1 && t <= 15; }
+
+const char* RegionStateName(RegionState s) {
+  switch (s) {
+    case RegionState::kEmpty: return "empty";
+    case RegionState::kEnter: return "enter";
+    case RegionState::kStay: return "stay";
+    case RegionState::kLeave: return "leave";
+  }
+  return "unknown";
+}
 
 const char* RoleName(Role r) {
   switch (r) {
@@ -572,7 +641,7 @@ MessageType TypeOf(const Payload& p) {
       MessageType::kHello,      MessageType::kWelcome,   MessageType::kRefuse,        MessageType::kRig,
       MessageType::kMeshFrame,  MessageType::kColorFrame, MessageType::kAudioPose,    MessageType::kClientPose,
       MessageType::kRenderedFrame, MessageType::kControl, MessageType::kPing,         MessageType::kPong,
-      MessageType::kStats,      MessageType::kPodFrame};
+      MessageType::kStats,      MessageType::kPodFrame,   MessageType::kRegions};
   return kTypes[p.index()];
 }
 
@@ -600,6 +669,7 @@ StatusOr<Payload> DecodePayload(MessageType type, std::span<const uint8_t> bytes
     case MessageType::kPong: return ReadAs<Pong>(r, l, "pong");
     case MessageType::kStats: return ReadAs<Stats>(r, l, "stats");
     case MessageType::kPodFrame: return ReadAs<PodFrame>(r, l, "pod_frame");
+    case MessageType::kRegions: return ReadAs<Regions>(r, l, "regions");
   }
   return DataLoss("unknown message type " + Str(static_cast<uint16_t>(type)));
 }

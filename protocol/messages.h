@@ -42,6 +42,7 @@ enum class MessageType : uint16_t {
   kPong = 12,
   kStats = 13,
   kPodFrame = 14,
+  kRegions = 15,
 };
 const char* MessageTypeName(MessageType t);
 bool IsKnownMessageType(uint16_t t);
@@ -239,6 +240,16 @@ enum class ControlCommand : uint8_t {
   kRequestKeyFrame = 8,
   kSetLoop = 9,       // value = 1 loop at the end of a replay, 0 stop there
 };
+// Content bits of kSubscribe / kUnsubscribe. Value 0 means 1|2|4 (not
+// regions: a viewer that never heard of Regions must never receive one).
+inline constexpr uint32_t kContentBitGeometry = 1;
+inline constexpr uint32_t kContentBitColor = 2;
+inline constexpr uint32_t kContentBitAudio = 4;
+inline constexpr uint32_t kContentBitRegions = 8;
+// Stats key a site sends right after Welcome (value = number of regions)
+// when it publishes Regions; a viewer subscribes to kContentBitRegions only
+// after seeing it, so a new viewer never sends bit 8 to an old site.
+inline constexpr const char* kRegionsAnnounceKey = "site.regions";
 
 struct Control {
   ControlCommand command = ControlCommand::kSubscribe;
@@ -281,8 +292,40 @@ struct PodFrame {
   bool operator==(const PodFrame&) const = default;
 };
 
+// Active regions (PROTOCOL.md §4 Regions): the site's named regions and, for
+// one frame, whether its reconstruction occupies each one. Sent only to
+// viewers that subscribed to the regions content bit (old viewers never see
+// type 15).
+inline constexpr size_t kMaxRegions = 64;
+inline constexpr size_t kMaxRegionName = 64;  // bytes of UTF-8
+enum class RegionShape : uint8_t { kBox = 1, kSphere = 2 };
+enum class RegionState : uint8_t {
+  kEmpty = 0,  // not occupied
+  kEnter = 1,  // occupied from this frame on (sent once per entry)
+  kStay = 2,   // still occupied
+  kLeave = 3,  // empty from this frame on (sent once per exit)
+};
+const char* RegionStateName(RegionState s);
+struct RegionReport {
+  std::string name;  // 1..kMaxRegionName bytes, unique within a message
+  RegionShape shape = RegionShape::kBox;
+  // Box: axis-aligned in the site's world frame, `a` = min corner, `b` = max
+  // corner (a < b on every axis). Sphere: `a` = centre, b[0] = radius (> 0),
+  // b[1] = b[2] = 0. Metres.
+  std::array<float, 3> a{};
+  std::array<float, 3> b{};
+  RegionState state = RegionState::kEmpty;
+  float occupied_litres = 0;  // reconstruction inside the region this frame (≥ 0)
+  bool operator==(const RegionReport&) const = default;
+};
+struct Regions {
+  int64_t frame_index = 0;  // the MeshFrame this report is about
+  std::vector<RegionReport> regions;
+  bool operator==(const Regions&) const = default;
+};
+
 using Payload = std::variant<Hello, Welcome, Refuse, RigMessage, MeshFrame, ColorFrame, AudioPose, ClientPose,
-                             RenderedFrame, Control, Ping, Pong, Stats, PodFrame>;
+                             RenderedFrame, Control, Ping, Pong, Stats, PodFrame, Regions>;
 
 MessageType TypeOf(const Payload& p);
 

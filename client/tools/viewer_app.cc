@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -29,6 +30,7 @@
 #include "client/net/site_av_sync.h"
 #include "client/render/gl_context.h"
 #include "client/render/overlay.h"
+#include "client/render/region_boxes.h"
 #include "client/render/renderer.h"
 #include "client/render/view.h"
 #include "client/tools/synthetic_source.h"
@@ -168,6 +170,7 @@ class Viewer {
     if (o_.overlay) {
       HOLO_ASSIGN_OR_RETURN(overlay_, render::Overlay::Create());
     }
+    HOLO_ASSIGN_OR_RETURN(region_boxes_, render::RegionBoxes::Create());
     if (o_.headless) {
       HOLO_ASSIGN_OR_RETURN(target_, render::OffscreenTarget::Create(o_.width, o_.height));
     }
@@ -240,6 +243,23 @@ class Viewer {
       std::lock_guard<std::mutex> l(rig_mu_);
       pending_rig_ = rig;
       rig_pending_ = true;
+    };
+    // Active regions: the newest report is drawn (LatestRegions); entries and
+    // exits are listed in the overlay, newest last.
+    cb.on_regions = [this](const net::ReceivedRegions& r) {
+      std::lock_guard<std::mutex> l(regions_mu_);
+      for (const auto& g : r.regions.regions) {
+        if (g.state != protocol::RegionState::kEnter && g.state != protocol::RegionState::kLeave) continue;
+        std::string name = g.name;
+        for (auto& c : name) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+        char line[160];
+        std::snprintf(line, sizeof line, "%s %s  FRAME %lld  %.2f L  +%.0f MS", g.state == protocol::RegionState::kEnter ? "ENTER" : "LEAVE",
+                      name.c_str(), static_cast<long long>(r.regions.frame_index), g.occupied_litres,
+                      static_cast<double>(r.received_us - r.capture_time_us) * 1e-3);
+        region_events_.push_back(line);
+        ++region_events_total_;
+        while (region_events_.size() > 4) region_events_.pop_front();
+      }
     };
     if (!o_.call.empty()) {
       HOLO_ASSIGN_OR_RETURN(net::CallConfig call, net::LoadCallConfig(o_.call));
@@ -450,6 +470,10 @@ class Viewer {
       const render::Viewport vp{layout->TileX(i), fb_height - layout->TileY(i) - layout->tile_height,
                                 layout->tile_width, layout->tile_height};
       HOLO_RETURN_IF_ERROR(renderer_->Render(cams[i], settings, vp));
+      net::ReceivedRegions rr;
+      if (net_mode_ && client_ != nullptr && client_->LatestRegions(&rr))
+        HOLO_RETURN_IF_ERROR(region_boxes_->Draw(rr.regions.regions, cams[i], settings.local_from_remote,
+                                                 settings.near_m, settings.far_m, vp));
     }
     if (overlay_ && show_overlay_) {
       const int scale = fb_height >= 600 && o_.views == 1 ? 2 : 1;
@@ -512,6 +536,24 @@ class Viewer {
     }
     std::string src = SourceName();
     for (auto& c : src) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    // Active regions: each with its state, then the latest entries and exits.
+    std::string regions;
+    net::ReceivedRegions rr;
+    if (client_ != nullptr && client_->LatestRegions(&rr) && !rr.regions.regions.empty()) {
+      regions = "\nREGIONS";
+      for (const auto& g : rr.regions.regions) {
+        std::string name = g.name;
+        for (auto& c : name) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+        char item[128];
+        if (render::RegionOccupied(g))
+          std::snprintf(item, sizeof item, "  %s: OCCUPIED %.1f L", name.c_str(), g.occupied_litres);
+        else
+          std::snprintf(item, sizeof item, "  %s: EMPTY", name.c_str());
+        regions += item;
+      }
+      std::lock_guard<std::mutex> l(regions_mu_);
+      for (const auto& e : region_events_) regions += "\n  " + e;
+    }
     char buf[768];
     std::snprintf(buf, sizeof buf,
                   "HOLOPORT VIEWER  %s\n%s\nFPS %s  RENDER %s MS\nLATENCY %s MS CAPTURE->DISPLAY\n"
@@ -519,7 +561,7 @@ class Viewer {
                   src.c_str(), status.c_str(), fps, rms, lat, recent_mbps_, static_cast<long long>(stats_.drops),
                   renderer_->remote_triangles(),
                   frame_has_images_ && mode_ == ColorMode::kProjective ? "PROJECTIVE" : "VERTEX COLOUR", audio);
-    return buf;
+    return buf + regions;
   }
 
   // Received frame → what the renderer takes (pod images in rig order; none
@@ -955,6 +997,11 @@ class Viewer {
       j["connects"] = cs.connects;
       j["connect_failures"] = cs.connect_failures;
       j["decode_errors"] = cs.decode_errors;
+      j["regions_received"] = cs.regions_received;
+      {
+        std::lock_guard<std::mutex> l(regions_mu_);
+        j["region_events"] = region_events_total_;
+      }
       j["color_images_waiting"] = cs.color_images_waiting;
       j["keyframe_requests"] = cs.keyframe_requests;
       j["bad_frames"] = bad_frames_;
@@ -1110,6 +1157,10 @@ class Viewer {
   std::unique_ptr<render::GlContext> context_;
   std::unique_ptr<render::Renderer> renderer_;
   std::unique_ptr<render::Overlay> overlay_;
+  std::unique_ptr<render::RegionBoxes> region_boxes_;
+  mutable std::mutex regions_mu_;
+  std::deque<std::string> region_events_;  // latest entries and exits, for the overlay (under regions_mu_)
+  int64_t region_events_total_ = 0;        // under regions_mu_
   std::unique_ptr<render::OffscreenTarget> target_;
   bool have_local_ = false;
   bool interactive_ = false;

@@ -256,6 +256,8 @@ StageTimings MedianTimings(const PipelineStats& stats) {
   m.simplify_ms = med(&StageTimings::simplify_ms);
   m.texture_ms = med(&StageTimings::texture_ms);
   m.encode_ms = med(&StageTimings::encode_ms);
+  m.regions_ms = med(&StageTimings::regions_ms);
+  m.regions_cpu_ms = med(&StageTimings::regions_cpu_ms);
   m.acquire_cpu_ms = med(&StageTimings::acquire_cpu_ms);
   m.segment_cpu_ms = med(&StageTimings::segment_cpu_ms);
   m.fuse_cpu_ms = med(&StageTimings::fuse_cpu_ms);

@@ -34,6 +34,11 @@ struct StageTimings {
   double simplify_ms = 0;  // part of the fuse+mesh stage: the stream mesh (set by the stage itself)
   double texture_ms = 0;
   double encode_ms = 0;
+  // Active regions (server/regions/): occupancy of every configured region
+  // from the frame's mesh, wall and CPU time of the thread that ran it (set
+  // by whoever tracks regions; 0 without regions).
+  double regions_ms = 0;
+  double regions_cpu_ms = 0;
   // Serial mode only (0 otherwise): CPU time of the whole process (all
   // threads, worker pools included) while each stage ran, ms. With one stage
   // at a time this is that stage's CPU cost, which other load on the machine

@@ -1,6 +1,7 @@
 #include "server/record/inspect.h"
 
 #include <cstdio>
+#include <iterator>
 
 #include <nlohmann/json.hpp>
 
@@ -25,6 +26,7 @@ StatusOr<RecordingInspection> InspectRecording(const RecordingReader& reader, bo
       return payload.status().WithContext(reader.path() + ": offset " + std::to_string(m.offset) + ": " +
                                           protocol::MessageTypeName(m.header.type));
     in.messages += 1;
+    HOLO_CHECK(type < std::size(in.by_type));  // the reader passes recordable types only
     in.by_type[type] += 1;
     in.payload_bytes_by_type[type] += m.header.payload_length;
     if (last_time >= 0) in.max_message_gap_us = std::max(in.max_message_gap_us, m.time_us - last_time);
@@ -83,12 +85,13 @@ std::string InspectionText(const RecordingReader& reader, const RecordingInspect
   add("  duration   %s\n", FormatSeconds(s.duration_us).c_str());
   add("  size       %.3f MB (%llu bytes; %.2f MB per minute)\n", Mb(s.file_bytes),
       static_cast<unsigned long long>(s.file_bytes), Mb(static_cast<uint64_t>(BytesPerMinute(s))));
-  add("  messages   %llu: rig %llu, mesh %llu (key %llu, frames %lld..%lld), colour %llu, audio+pose %llu, stats %llu\n",
+  add("  messages   %llu: rig %llu, mesh %llu (key %llu, frames %lld..%lld), colour %llu, audio+pose %llu, stats %llu, "
+      "regions %llu\n",
       static_cast<unsigned long long>(in.messages), static_cast<unsigned long long>(in.rigs),
       static_cast<unsigned long long>(in.mesh_frames), static_cast<unsigned long long>(in.key_frames),
       static_cast<long long>(in.first_frame_index), static_cast<long long>(in.last_frame_index),
       static_cast<unsigned long long>(in.by_type[6]), static_cast<unsigned long long>(in.by_type[7]),
-      static_cast<unsigned long long>(in.by_type[13]));
+      static_cast<unsigned long long>(in.by_type[13]), static_cast<unsigned long long>(in.by_type[15]));
   if (in.mesh_frames > 0 && s.duration_us > 0)
     add("  video      %.2f fps, %.1f kB per mesh frame, %.3f Mbit/s geometry\n",
         static_cast<double>(in.mesh_frames > 1 ? in.mesh_frames - 1 : 0) * 1e6 / static_cast<double>(s.duration_us),
@@ -122,6 +125,7 @@ std::string InspectionJson(const RecordingReader& reader, const RecordingInspect
   j["key_frames"] = in.key_frames;
   j["audio_pose"] = in.by_type[7];
   j["color_frames"] = in.by_type[6];
+  j["regions"] = in.by_type[15];
   j["rigs"] = in.rigs;
   j["index_entries"] = s.index.size();
   j["max_key_gap_us"] = in.max_key_gap_us;

@@ -11,8 +11,8 @@ namespace holo::record {
 
 struct RecordingInspection {
   uint64_t messages = 0;
-  uint64_t by_type[14] = {};
-  uint64_t payload_bytes_by_type[14] = {};
+  uint64_t by_type[16] = {};  // indexed by message type (1..15)
+  uint64_t payload_bytes_by_type[16] = {};
   uint64_t mesh_frames = 0;
   uint64_t key_frames = 0;
   int64_t first_frame_index = -1, last_frame_index = -1;

@@ -8,7 +8,7 @@ namespace {
 bool Recordable(protocol::MessageType t) {
   using protocol::MessageType;
   return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats;
+         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 
 #include "common/log.h"
 
@@ -79,7 +80,7 @@ class PosixRecordingFile final : public RecordingFile {
 bool Recordable(protocol::MessageType t) {
   using protocol::MessageType;
   return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats;
+         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
 }
 
 std::string Seconds(int64_t us) {
@@ -250,7 +251,9 @@ Status RecordingWriter::WriteMessage(int64_t time_us, std::span<const uint8_t> f
   stats_.bytes += record_bytes;
   stats_.messages += 1;
   stats_.duration_us = time_us;
-  stats_.messages_by_type[static_cast<uint16_t>(header->type)] += 1;
+  const auto type_index = static_cast<uint16_t>(header->type);
+  HOLO_CHECK(type_index < std::size(stats_.messages_by_type));
+  stats_.messages_by_type[type_index] += 1;
   if (header->type == protocol::MessageType::kRig) {
     rig_offset_ = offset;
     have_rig_ = true;

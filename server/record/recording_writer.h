@@ -59,7 +59,7 @@ struct RecordingWriterStats {
   uint64_t key_frames = 0;
   uint64_t bytes = 0;        // file size so far (without the index)
   int64_t duration_us = 0;   // media time of the last message
-  uint64_t messages_by_type[14] = {};
+  uint64_t messages_by_type[16] = {};  // indexed by message type (1..15)
 };
 
 class RecordingWriter {
@@ -79,7 +79,7 @@ class RecordingWriter {
   // payload, not a fragment) exactly as received; `time_us` its media time
   // (µs since the recording started, non-decreasing). The first message must
   // be the Rig. Only content is recorded: Rig, MeshFrame, ColorFrame,
-  // AudioPose, Stats (InvalidArgument for other types).
+  // AudioPose, Stats, Regions (InvalidArgument for other types).
   // Errors: InvalidArgument (bad message; nothing written, the recording
   // goes on), OutOfRange (size limit: the recording is now closed),
   // Unavailable (disk full / write failure: the recording is closed with

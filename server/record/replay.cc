@@ -128,7 +128,8 @@ StatusOr<size_t> ReplaySource::Pump(const ReplayCallback& sink, size_t max_messa
       if (fast_forward_until_us_ >= 0) {
         if (m.time_us < fast_forward_until_us_) {
           const auto t = m.header.type;
-          if (t == protocol::MessageType::kAudioPose || t == protocol::MessageType::kStats) {
+          if (t == protocol::MessageType::kAudioPose || t == protocol::MessageType::kStats ||
+              t == protocol::MessageType::kRegions) {
             counters_.skipped += 1;
             continue;
           }

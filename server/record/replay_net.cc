@@ -73,6 +73,17 @@ Status RecordedPublisher::Publish(const std::vector<uint8_t>& bytes, const proto
       stats_.video_frames += 1;
       return OkStatus();
     }
+    case MessageType::kRegions:
+      // The recording carries active regions: announce them (as the live site
+      // did) so that viewers subscribe, now and at every later Welcome.
+      if (!regions_announced_) {
+        const size_t count = bytes.size() > protocol::kHeaderSize + 8 ? bytes[protocol::kHeaderSize + 8] : 0;
+        server_->AnnounceRegions(count);
+        regions_announced_ = true;
+      }
+      server_->PublishPriority(ToWire(bytes, h));
+      stats_.priority += 1;
+      return OkStatus();
     case MessageType::kAudioPose:
     case MessageType::kStats:
       server_->PublishPriority(ToWire(bytes, h));

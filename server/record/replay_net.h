@@ -60,6 +60,7 @@ class RecordedPublisher {
   std::shared_ptr<net::VideoFrame> held_;
   protocol::Header held_header_;
   RecordedPublisherStats stats_;
+  bool regions_announced_ = false;  // AnnounceRegions called (on the first Regions message)
 };
 
 struct ReplayServerOptions {

@@ -157,7 +157,9 @@ holo::StatusOr<holo::net::ClientOptions> RecorderClientOptions(const std::string
   co.token = token;
   co.name = name;
   co.decode = false;
-  co.subscribe = holo::net::kSubscribeAll;
+  // Regions too when the site announces them (recordings keep them; live
+  // segments do not: RecordLiveDir subscribes without them).
+  co.subscribe = holo::net::kSubscribeAll | holo::net::kSubscribeRegions;
   co.tls.enabled = tls;
   co.tls.ca_file = ca_file;
   co.connect_timeout_s = connect_timeout_s;
@@ -329,6 +331,7 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     // with "no common codec" (V1 packaging would need colour key frames at
     // every segment start).
     co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0};
+    co.subscribe = holo::net::kSubscribeAll;  // live segments carry no Regions (docs/regions.md)
     holo::Status check = co.Check();
     if (!check.ok()) return Fail(check);
     holo::net::ClientCallbacks cb;

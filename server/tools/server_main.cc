@@ -14,6 +14,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -33,6 +34,7 @@
 #include "server/pipeline/capture_site.h"
 #include "server/pods/pod_hub.h"
 #include "server/record/replay_command.h"
+#include "server/regions/regions.h"
 #include "server/stereo/stereo_depth.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
@@ -224,6 +226,11 @@ int main(int argc, char** argv) {
                  "footstep and the ball knocks when it bounces, in step with the picture; needs the synthetic "
                  "source and --pace or --truth-mesh), mic or mic:DEVICE, or a WAV file (looped)")
       ->capture_default_str();
+  std::string regions_path;
+  app.add_option("--regions", regions_path,
+                 "active regions: a YAML file of named boxes and spheres in the site's world frame; every frame the "
+                 "site reports which ones its reconstruction occupies (enter, stay, leave, volume) to viewers, "
+                 "recordings and --stats (docs/regions.md)");
   CLI11_PARSE(app, argc, argv);
   if (!replay.path.empty()) {
     replay.export_dir = export_dir;
@@ -270,6 +277,58 @@ int main(int argc, char** argv) {
       spdlog::info("holoport-server: session server '{}' on {}:{}{}, max {} viewers", net.name, net.host,
                    server->port(), net.tls.enabled ? " (TLS)" : "", net.max_viewers);
   }
+  // Active regions: tracked on every frame's mesh (the encode stage when
+  // streaming, else the sink), published at once on the priority queue to
+  // the viewers that subscribed to them.
+  std::unique_ptr<holo::regions::RegionTracker> region_tracker;
+  if (!regions_path.empty()) {
+    auto rc = holo::regions::LoadRegionsConfig(regions_path);
+    if (!rc.ok()) return Fail(rc.status().WithContext("--regions"));
+    region_tracker = std::make_unique<holo::regions::RegionTracker>(std::move(*rc));
+    if (server) server->AnnounceRegions(region_tracker->config().regions.size());
+    if (!quiet)
+      spdlog::info("holoport-server: {} active regions from {}", region_tracker->config().regions.size(),
+                   regions_path);
+  }
+  std::vector<std::string> region_event_lines;  // JSON lines of enter/leave events for the stats output
+  std::mutex region_event_mu;
+  auto track_regions = [&](int64_t frame, int64_t capture_wall_us, const holo::Mesh& mesh,
+                           holo::StageTimings* t) {
+    if (!region_tracker) return;
+    holo::Stopwatch sw;
+    const double cpu0 = holo::ThreadCpuTimeMs();
+    const holo::protocol::Regions& report = region_tracker->Update(frame, mesh.positions);
+    t->regions_ms = sw.ElapsedMs();
+    t->regions_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
+    if (server) {
+      holo::protocol::Header h;
+      h.stream_id = holo::net::kSiteStreamId;
+      h.sequence = static_cast<uint32_t>(frame);
+      h.capture_time_us = capture_wall_us;
+      server->PublishPriority(holo::net::MakeWireMessage(h, report, server->config().fragment_bytes));
+    }
+    for (const auto& g : report.regions) {
+      if (g.state != holo::protocol::RegionState::kEnter && g.state != holo::protocol::RegionState::kLeave) continue;
+      nlohmann::ordered_json j;
+      j["region_event"] = holo::protocol::RegionStateName(g.state);
+      j["region"] = g.name;
+      j["frame"] = frame;
+      j["occupied_litres"] = g.occupied_litres;
+      j["capture_us"] = capture_wall_us;
+      std::lock_guard<std::mutex> l(region_event_mu);
+      region_event_lines.push_back(j.dump());
+    }
+  };
+  // Writes the events noted since the last call (the sink's thread).
+  auto region_event_output = [&](FILE* out) {
+    std::vector<std::string> lines;
+    {
+      std::lock_guard<std::mutex> l(region_event_mu);
+      lines.swap(region_event_lines);
+    }
+    for (const auto& line : lines) std::fprintf(out, "%s\n", line.c_str());
+  };
+
   holo::net::SitePublisherOptions publish_options;
   publish_options.color = !no_color_stream;
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
@@ -599,6 +658,8 @@ int main(int argc, char** argv) {
           pods.push_back({static_cast<uint16_t>(p), &fs.frames[p].color, &gt.mask[p]});
       }
       const double r_ms = sw.ElapsedMs();
+      holo::StageTimings rt;
+      track_regions(i, capture_us, mesh, &rt);
       holo::net::PublishTimings pt;
       if (publisher) {
         holo::Status st = publisher->Publish(i, capture_us, mesh, pods, &pt);
@@ -628,7 +689,12 @@ int main(int argc, char** argv) {
       j["geometry_bytes"] = pt.geometry_bytes;
       j["color_bytes"] = pt.color_bytes;
       j["viewers"] = pt.viewers;
+      if (region_tracker) {
+        j["regions_ms"] = rt.regions_ms;
+        j["regions_cpu_ms"] = rt.regions_cpu_ms;
+      }
       std::fprintf(stats_out, "%s\n", j.dump().c_str());
+      region_event_output(stats_out);
       if ((i + 1) % 30 == 0) {
         net_line(i);
         if (!quiet)
@@ -679,6 +745,8 @@ int main(int argc, char** argv) {
       auto* e = static_cast<holo::net::EncodedFrame*>(w.encoded.get());
       // Capture time on the wall clock: now minus the time since acquisition.
       const int64_t capture_us = holo::net::WallUs() - (holo::RealClock::Instance().NowUs() - w.timings.acquired_us);
+      // Regions first: their events go out before the frame is encoded.
+      track_regions(w.frames.frame_index, capture_us, w.mesh, &w.timings);
       std::vector<holo::net::PodColor> pods;
       for (const auto& f : w.frames.frames)
         pods.push_back({static_cast<uint16_t>(f.pod_id), &f.color, &f.mask});
@@ -686,7 +754,17 @@ int main(int argc, char** argv) {
     };
   }
   double cpu_window = holo::ProcessCpuTimeMs();
+  std::vector<double> region_cpu_ms;  // per frame (sink thread)
   auto sink = [&](const holo::FrameWork& w) -> holo::Status {
+    holo::StageTimings regions_t;
+    if (!publisher) {  // no encode stage: regions here (no viewers to tell, only the stats)
+      track_regions(w.frames.frame_index,
+                    holo::net::WallUs() - (holo::RealClock::Instance().NowUs() - w.timings.acquired_us), w.mesh,
+                    &regions_t);
+    } else {
+      regions_t = w.timings;
+    }
+    if (region_tracker) region_cpu_ms.push_back(regions_t.regions_cpu_ms);
     if (!snapshot_path.empty()) {
       last_mesh = w.mesh;
       last_frame = w.frames.frame_index;
@@ -712,6 +790,10 @@ int main(int argc, char** argv) {
     j["encode_ms"] = t.encode_ms;
     j["latency_ms"] = t.latency_ms();
     j["encoded_latency_ms"] = t.encoded_latency_ms();
+    if (region_tracker) {
+      j["regions_ms"] = regions_t.regions_ms;
+      j["regions_cpu_ms"] = regions_t.regions_cpu_ms;
+    }
     if (serial) {  // CPU of each stage (one at a time: the process's CPU while it ran)
       j["acquire_cpu_ms"] = t.acquire_cpu_ms;
       j["segment_cpu_ms"] = t.segment_cpu_ms;
@@ -733,6 +815,7 @@ int main(int argc, char** argv) {
       j["viewers"] = pt.viewers;
     }
     std::fprintf(stats_out, "%s\n", j.dump().c_str());
+    region_event_output(stats_out);
     if (pod_hub) {
       // Pod capture (site clock) → textured (and encoded) mesh.
       int64_t capture = 0;
@@ -816,6 +899,12 @@ int main(int argc, char** argv) {
     if (!quiet) spdlog::info("holoport-server: snapshot of frame {} in {}", last_frame, snapshot_path);
   }
   const holo::StageTimings m = holo::MedianTimings(*stats);
+  if (!quiet && region_tracker && !region_cpu_ms.empty()) {
+    std::vector<double> v = region_cpu_ms;
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    spdlog::info("holoport-server: active regions: {} events, median {:.3f} CPU-ms per frame over {} regions",
+                 region_tracker->events(), v[v.size() / 2], region_tracker->config().regions.size());
+  }
   if (!quiet)
     spdlog::info(
         "holoport-server: {} frames in {:.2f} s = {:.1f} fps ({} camera frames skipped), {:.1f} CPU-ms per frame; "

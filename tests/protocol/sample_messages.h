@@ -34,6 +34,27 @@ inline Rig SampleRig() {
   return rig;
 }
 
+// Two regions (a box being entered, a sphere empty), frame 42.
+inline protocol::Regions SampleRegions() {
+  using namespace protocol;
+  Regions m;
+  m.frame_index = 42;
+  RegionReport box;
+  box.name = "table";
+  box.shape = RegionShape::kBox;
+  box.a = {-0.5f, 0.2f, 0.7f};
+  box.b = {0.5f, 0.8f, 1.1f};
+  box.state = RegionState::kEnter;
+  box.occupied_litres = 1.75f;
+  RegionReport ball;
+  ball.name = "lamp";
+  ball.shape = RegionShape::kSphere;
+  ball.a = {1.0f, -1.0f, 1.8f};
+  ball.b = {0.25f, 0, 0};
+  m.regions = {box, ball};
+  return m;
+}
+
 inline std::vector<protocol::Payload> SamplePayloads() {
   using namespace protocol;
   std::vector<Payload> v;
@@ -112,6 +133,7 @@ inline std::vector<protocol::Payload> SamplePayloads() {
   (void)EncodeDepth(depth, {}, &pf.depth);
   pf.color = cf.images[0].data;
   v.push_back(pf);
+  v.push_back(SampleRegions());
   return v;
 }
 
