@@ -41,7 +41,8 @@ StatusOr<std::unique_ptr<JitterBuffer>> JitterBuffer::Create(AudioCodec codec, C
 
 Status JitterBuffer::Insert(AudioPose frame) {
   HOLO_RETURN_IF_ERROR(ValidateVoiceFrame(frame));
-  if (frame.codec != decoder_->codec()) return DataLoss("voice frame codec differs from the stream's");
+  // The classic and the lean layout carry the same Opus packets: one decoder plays both.
+  if (IsOpus(frame.codec) != IsOpus(decoder_->codec())) return DataLoss("voice frame codec differs from the stream's");
   const int64_t now = clock_.NowUs();
   int64_t seq = 0;
   if (!started_) {
@@ -134,7 +135,14 @@ void JitterBuffer::DecodeNext() {
     auto decoded = decoder_->Decode(it->second.audio);
     if (decoded.ok()) {
       pcm = std::move(decoded).value();
-      pose_ = it->second.pose;
+      if (it->second.has_pose) {
+        pose_ = it->second.pose;
+      } else {
+        // A lean frame sent without its pose (every other frame): halfway
+        // between the last pose and the next frame's when that is here, else the last.
+        auto next = packets_.find(next_seq_ + 1);
+        if (next != packets_.end() && next->second.has_pose) pose_ = protocol::MidwayPose(pose_, next->second.pose);
+      }
       ++stats_.played;
       ok = true;
     }

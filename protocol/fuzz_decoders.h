@@ -31,6 +31,14 @@ int FuzzColor(std::span<const uint8_t> bytes);     // DecodeColor (C0, C1, …) 
 // D2) and colour blobs (DecodeDepth, DecodeColor). Not part of FuzzDecoders (whose
 // selector byte and corpus stay as they are); its own libFuzzer target.
 int FuzzPodFrame(std::span<const uint8_t> bytes);
+// An AudioPose payload under a fixed header (sequence 77, capture time
+// 1700000000123456 µs), meant for the lean layout (codec 3, PROTOCOL.md §9.1):
+// a lean frame that decodes must carry the header's sequence and time, a
+// pose within ±1 km and ±π, an Opus packet of 1..1275 bytes, and encode
+// back to a message that decodes to the same frame. Its own libFuzzer target
+// (holoport-fuzz-lean-audio-pose), not part of FuzzDecoders. Returns 0
+// (refused), 1 (a classic frame), 2 (a lean frame).
+int FuzzLeanAudioPose(std::span<const uint8_t> bytes);
 
 int FuzzDecoders(const uint8_t* data, size_t size);
 
