@@ -1,5 +1,6 @@
 // holoport-bench audio: voice bitrate, codec timings, interaural cues and
 // directivity measured on OpenAL Soft's loopback device (docs/audio.md).
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
 #include <memory>

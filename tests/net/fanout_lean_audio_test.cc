@@ -128,6 +128,7 @@ TEST(NetLeanAudio, NewPeersNegotiateLeanOldPeersKeepClassicBothWays) {
   protocol::AudioPose got;
   ASSERT_TRUE(Eventually([&] { return (*viewer)->PollAudio(&got); }));
   EXPECT_EQ(got, classic);
+  EXPECT_EQ(std::get<protocol::AudioPose>(NextAudio(*old_viewer).payload), classic);  // and the old viewer too
 
   // The site's own lean voice (PublishAudio) reaches the old viewer as classic.
   (*server)->PublishAudio(LeanFrame(100), kSiteVoiceStreamId);
