@@ -47,11 +47,13 @@ struct Run {
 
 // Every frame encoded, framed as a protocol message (32-byte header +
 // payload) and parsed back as a receiver would; kbit/s from those bytes.
-StatusOr<Run> Measure(const Speech& s, const VoiceEncoderOptions& o) {
+// With `loss` > 0 that share of frames (seeded, independent) is lost and the
+// decoder conceals it (from the next packet's in-band FEC when it has some).
+StatusOr<Run> Measure(const Speech& s, const VoiceEncoderOptions& o, double loss = 0.0) {
   HOLO_ASSIGN_OR_RETURN(auto enc, VoiceEncoder::Create(o));
   HOLO_ASSIGN_OR_RETURN(auto dec, VoiceDecoder::Create(o.codec));
   size_t wire = 0, opus = 0, frames = 0, wb = 0;
-  std::vector<float> out;
+  std::vector<AudioPose> got;
   for (size_t i = 0; i + kFrameSamples <= s.samples.size(); i += kFrameSamples, ++frames) {
     const HeadPose pose{1.0f + 0.001f * static_cast<float>(frames), -0.7f, 1.65f, 0.01f * static_cast<float>(frames), 0.05f, 0};
     HOLO_ASSIGN_OR_RETURN(AudioPose f, enc->EncodeFrame(std::span<const float>(s.samples).subspan(i, kFrameSamples),
@@ -61,10 +63,26 @@ StatusOr<Run> Measure(const Speech& s, const VoiceEncoderOptions& o) {
     wire += msg.size();
     opus += f.audio.size();
     HOLO_ASSIGN_OR_RETURN(protocol::Header h, protocol::DecodeHeader(msg.data(), msg.size()));
-    HOLO_ASSIGN_OR_RETURN(AudioPose got, ParseVoiceFrame(h, std::span<const uint8_t>(msg).subspan(protocol::kHeaderSize)));
-    HOLO_ASSIGN_OR_RETURN(std::vector<float> pcm, dec->Decode(got.audio));
+    HOLO_ASSIGN_OR_RETURN(AudioPose g, ParseVoiceFrame(h, std::span<const uint8_t>(msg).subspan(protocol::kHeaderSize)));
+    if (IsOpus(o.codec) && opus_packet_get_bandwidth(g.audio.data()) <= OPUS_BANDWIDTH_WIDEBAND) ++wb;
+    got.push_back(std::move(g));
+  }
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  std::vector<bool> lost(got.size());
+  for (size_t i = 0; i < got.size(); ++i) lost[i] = loss > 0 && u01(rng) < loss;
+  std::vector<float> out;
+  for (size_t i = 0; i < got.size(); ++i) {
+    if (lost[i]) {
+      bool fec = false;
+      const std::span<const uint8_t> next =
+          i + 1 < got.size() && !lost[i + 1] ? std::span<const uint8_t>(got[i + 1].audio) : std::span<const uint8_t>();
+      const std::vector<float> pcm = dec->Conceal(next, &fec);
+      out.insert(out.end(), pcm.begin(), pcm.end());
+      continue;
+    }
+    HOLO_ASSIGN_OR_RETURN(std::vector<float> pcm, dec->Decode(got[i].audio));
     out.insert(out.end(), pcm.begin(), pcm.end());
-    if (IsOpus(o.codec) && opus_packet_get_bandwidth(got.audio.data()) <= OPUS_BANDWIDTH_WIDEBAND) ++wb;
   }
   Run r;
   const double ms = static_cast<double>(frames) * 20.0;
@@ -189,13 +207,17 @@ int RunLeanFrames(const BenchArgs& args) {
     const char* frame;
     VoiceEncoderOptions o;
   };
-  VoiceEncoderOptions lean2 = LeanVoiceEncoderOptions();
-  lean2.pose_every = 2;
+  VoiceEncoderOptions lean1 = LeanVoiceEncoderOptions();
+  lean1.pose_every = 1;
   VoiceEncoderOptions lean24 = LeanVoiceEncoderOptions();
   lean24.bitrate_bps = 24000;
+  VoiceEncoderOptions classic14 = LeanVoiceEncoderOptions();
+  classic14.codec = AudioCodec::kOpus;
+  classic14.pose_every = 1;
   for (const Speech& s : speech) {
     for (const Format& f : {Format{"classic", VoiceEncoderOptions{}}, Format{"lean", LeanVoiceEncoderOptions()},
-                            Format{"lean_pose_every_2", lean2}, Format{"lean_opus_24k", lean24}}) {
+                            Format{"lean_pose_every_frame", lean1}, Format{"lean_opus_24k", lean24},
+                            Format{"classic_opus_lean_settings", classic14}}) {
       auto r = Measure(s, f.o);
       if (!r.ok()) {
         spdlog::error("{}", r.status().ToString());
@@ -214,6 +236,19 @@ int RunLeanFrames(const BenchArgs& args) {
       EmitFigure("audio", s.name, "fwsnrseg_db", r->fw_db, "dB", qf);
     }
   }
+  // Under packet loss (what in-band FEC is for): classic default vs lean.
+  for (const Speech& s : speech) {
+    for (double loss : {0.05, 0.10}) {
+      for (const Format& f : {Format{"classic", VoiceEncoderOptions{}}, Format{"lean", LeanVoiceEncoderOptions()}}) {
+        auto r = Measure(s, f.o, loss);
+        if (!r.ok()) return 1;
+        EmitFigure("audio", s.name, "fwsnrseg_db", r->fw_db, "dB",
+                   {{"frame", f.frame}, {"bitrate_kbps", std::to_string(f.o.bitrate_bps / 1000)},
+                    {"loss_pct", std::to_string(static_cast<int>(loss * 100))},
+                    {"concealment", "opus plc, in-band fec when the encoder made some"}});
+      }
+    }
+  }
   // 2. Opus settings tried (in the lean frame; wire kbit/s beside).
   struct Setting {
     int kbit;
@@ -224,15 +259,15 @@ int RunLeanFrames(const BenchArgs& args) {
     bool fec;
   };
   std::vector<Setting> settings;
-  for (int kbit : {12, 13, 14, 16, 20, 24})
-    for (OpusRateControl rc : {OpusRateControl::kVbr, OpusRateControl::kConstrainedVbr, OpusRateControl::kCbr})
-      settings.push_back({kbit, rc, true, 0, 9, true});
+  for (bool voip : {true, false})
+    for (int kbit : {12, 13, 14, 15, 16, 20, 24})
+      for (OpusRateControl rc : {OpusRateControl::kVbr, OpusRateControl::kConstrainedVbr, OpusRateControl::kCbr})
+        settings.push_back({kbit, rc, voip, 0, 9, true});
   for (int kbit : {14, 16}) {
-    settings.push_back({kbit, OpusRateControl::kVbr, false, 0, 9, true});   // application audio
-    settings.push_back({kbit, OpusRateControl::kVbr, true, 16000, 9, true});  // wideband at most
-    settings.push_back({kbit, OpusRateControl::kVbr, true, 0, 10, true});   // complexity 10
-    settings.push_back({kbit, OpusRateControl::kVbr, true, 0, 5, true});    // complexity 5
-    settings.push_back({kbit, OpusRateControl::kVbr, true, 0, 9, false});   // no FEC
+    settings.push_back({kbit, OpusRateControl::kVbr, false, 16000, 9, true});  // wideband at most
+    settings.push_back({kbit, OpusRateControl::kVbr, false, 0, 10, true});     // complexity 10
+    settings.push_back({kbit, OpusRateControl::kVbr, false, 0, 5, true});      // complexity 5
+    settings.push_back({kbit, OpusRateControl::kVbr, false, 0, 9, false});     // no FEC
   }
   for (const Speech& s : speech) {
     for (const Setting& st : settings) {
