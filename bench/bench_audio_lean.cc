@@ -159,7 +159,7 @@ int PoseFigures() {
   }
   // A moving head, pose every frame vs every other frame (midway between
   // its neighbours when the next frame is in the jitter buffer, else held).
-  std::vector<double> mm1, deg1, mm2, deg2, mmh, degh;
+  std::vector<double> mm1, deg1, mm2, deg2, mmh, degh, mme, dege;
   for (int f = 1; f + 1 < 50 * 60; ++f) {
     const HeadPose truth = MovingHead(f * 0.02);
     AddError(truth, protocol::QuantizeLeanPose(truth), &mm1, &deg1);
@@ -168,9 +168,13 @@ int PoseFigures() {
       const HeadPose next = protocol::QuantizeLeanPose(MovingHead((f + 1) * 0.02));
       AddError(truth, protocol::MidwayPose(prev, next), &mm2, &deg2);
       AddError(truth, prev, &mmh, &degh);
-    } else {
-      AddError(truth, protocol::QuantizeLeanPose(truth), &mm2, &deg2);
-      AddError(truth, protocol::QuantizeLeanPose(truth), &mmh, &degh);
+      if (f >= 3) {  // the next frame not there yet: on from the two poses before
+        const HeadPose prev2 = protocol::QuantizeLeanPose(MovingHead((f - 3) * 0.02));
+        AddError(truth, protocol::LerpPose(prev2, prev, 1.5f), &mme, &dege);
+      }
+    } else {  // a frame with its pose: the quantization error alone
+      for (auto* v : {&mm2, &mmh, &mme}) v->push_back(mm1.back());
+      for (auto* v : {&deg2, &degh, &dege}) v->push_back(deg1.back());
     }
   }
   struct Case {
@@ -180,6 +184,7 @@ int PoseFigures() {
   };
   for (const Case& c : {Case{"every_frame", "12", Errors(mm1, deg1)},
                         Case{"every_other_frame_interpolated", "6", Errors(mm2, deg2)},
+                        Case{"every_other_frame_extrapolated", "6", Errors(mme, dege)},
                         Case{"every_other_frame_held", "6", Errors(mmh, degh)}}) {
     EmitFigure("audio", "moving_head_60s", "pose_error_mm", c.e.max_mm, "mm",
                {{"frame", "lean"}, {"pose", c.name}, {"stat", "max"}, {"p95", F2(c.e.p95_mm)}, {"pose_bytes_per_frame", c.bytes},
@@ -306,6 +311,13 @@ int RunLeanFrames(const BenchArgs& args) {
       EmitFigure("audio", "bursts_30s", "mouth_to_ear_ms", l->median_ms, "ms",
                  {{"frame", lean ? "lean" : "classic"}, {"codec", lean ? "opus-lean" : "opus"},
                   {"jitter_ms", std::to_string(jitter)}, {"p95_ms", F1(l->p95_ms)}, {"jb_target_ms", F1(l->jb_target_ms)}});
+      if (lean) {
+        const double n = static_cast<double>(l->poses_interpolated + l->poses_extrapolated + l->poses_held);
+        EmitFigure("audio", "bursts_30s", "pose_interpolated_share", n > 0 ? l->poses_interpolated / n : 0.0, "ratio",
+                   {{"frame", "lean"}, {"jitter_ms", std::to_string(jitter)},
+                    {"extrapolated_share", F2(n > 0 ? l->poses_extrapolated / n : 0.0)},
+                    {"held_share", F2(n > 0 ? l->poses_held / n : 0.0)}});
+      }
     }
   }
   (void)args;

@@ -696,19 +696,19 @@ MessageType TypeOf(const Payload& p) {
 
 HeadPose QuantizeLeanPose(const HeadPose& pose) { return FromLean(ToLean(pose)); }
 
-HeadPose MidwayPose(const HeadPose& a, const HeadPose& b) {
+HeadPose LerpPose(const HeadPose& a, const HeadPose& b, float t) {
   constexpr double kTwoPi = 2.0 * 3.14159265358979323846;
-  auto mid_angle = [&](float u, float v) {
+  auto angle = [&](float u, float v) {
     const double d = std::remainder(static_cast<double>(v) - static_cast<double>(u), kTwoPi);
-    return static_cast<float>(std::remainder(static_cast<double>(u) + 0.5 * d, kTwoPi));
+    return static_cast<float>(std::remainder(static_cast<double>(u) + t * d, kTwoPi));
   };
   HeadPose m;
-  m.x = 0.5f * (a.x + b.x);
-  m.y = 0.5f * (a.y + b.y);
-  m.z = 0.5f * (a.z + b.z);
-  m.yaw = mid_angle(a.yaw, b.yaw);
-  m.pitch = mid_angle(a.pitch, b.pitch);
-  m.roll = mid_angle(a.roll, b.roll);
+  m.x = a.x + t * (b.x - a.x);
+  m.y = a.y + t * (b.y - a.y);
+  m.z = a.z + t * (b.z - a.z);
+  m.yaw = angle(a.yaw, b.yaw);
+  m.pitch = angle(a.pitch, b.pitch);
+  m.roll = angle(a.roll, b.roll);
   return m;
 }
 

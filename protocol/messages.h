@@ -223,10 +223,13 @@ struct AudioPose {
 // of the lean frame gets: error ≤ 0.5 mm and ≤ π/65536 rad (0.0028°) per
 // angle (plus a multiple of 2π for angles outside [−π, π)).
 HeadPose QuantizeLeanPose(const HeadPose& pose);
-// The pose halfway between `a` and `b`: positions averaged, each angle moved
-// half way along the shorter arc. Receivers fill a lean frame sent without a
-// pose with it (the frames before and after carry one).
-HeadPose MidwayPose(const HeadPose& a, const HeadPose& b);
+// The pose a fraction `t` of the way from `a` to `b` (t > 1 extrapolates):
+// positions linearly, each angle along the shorter arc, wrapped to [−π, π].
+// Receivers fill a lean frame sent without a pose with it: halfway (t = 0.5)
+// between the frames before and after, or from the last two poses when the
+// next frame is not there yet.
+HeadPose LerpPose(const HeadPose& a, const HeadPose& b, float t);
+inline HeadPose MidwayPose(const HeadPose& a, const HeadPose& b) { return LerpPose(a, b, 0.5f); }
 // Bytes of a lean AudioPose payload besides the Opus packet: codec + flags
 // (2), plus the pose when `has_pose` (12 bytes, 18 when a coordinate is beyond
 // ±32.767 m).

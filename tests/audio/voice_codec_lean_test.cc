@@ -98,7 +98,9 @@ TEST(LeanFrame, VoiceRoundTripThroughAMessage) {
     EXPECT_EQ(*parsed, *frame);
     EXPECT_EQ(parsed->sequence, 1000 + f);
     EXPECT_EQ(parsed->capture_time_us, 77000000 + 20000 * static_cast<int64_t>(f));
-    EXPECT_EQ(parsed->pose, protocol::QuantizeLeanPose(pose));
+    // The default sends the pose with even sequence numbers (LeanVoiceEncoderOptions().pose_every = 2).
+    EXPECT_EQ(parsed->has_pose, f % 2 == 0);
+    EXPECT_EQ(parsed->pose, parsed->has_pose ? protocol::QuantizeLeanPose(pose) : HeadPose{});
     EXPECT_TRUE((*dec)->Decode(parsed->audio).ok());
     // Without its header a lean frame is refused, with the reason.
     auto bare = ParseVoiceFrame(std::span<const uint8_t>(msg).subspan(protocol::kHeaderSize));
@@ -344,6 +346,12 @@ TEST(LeanFrame, JitterBufferInterpolatesPoseLessFrames) {
     if (static_cast<int>(std::lround(seq)) % 2 == 1) ++odd_seen;
   }
   EXPECT_GT(odd_seen, 10);
+  const JitterBufferStats st = (*jb)->stats();
+  std::printf("pose-less frames: %lld interpolated, %lld extrapolated, %lld held\n",
+              static_cast<long long>(st.poses_interpolated), static_cast<long long>(st.poses_extrapolated),
+              static_cast<long long>(st.poses_held));
+  EXPECT_GT(st.poses_interpolated + st.poses_extrapolated, 10);
+  EXPECT_LE(st.poses_held, 1);  // only before a second pose arrived
 }
 
 }  // namespace
