@@ -58,7 +58,9 @@ struct VoiceEncoderOptions {
   // OPUS_APPLICATION_VOIP (true) or OPUS_APPLICATION_AUDIO; both have the same
   // look-ahead (312 samples).
   bool voip_application = true;
-  OpusRateControl rate_control = OpusRateControl::kVbr;
+  // libopus's default, constrained VBR (unconstrained gives the same packets
+  // for speech at ≤ 24 kbit/s: SILK ignores the constraint; docs/audio.md).
+  OpusRateControl rate_control = OpusRateControl::kConstrainedVbr;
   // OPUS_SET_MAX_BANDWIDTH: 0 = libopus decides, else 8000 (narrowband),
   // 12000, 16000 (wideband), 24000 (super-wideband), 48000 (fullband): the
   // audio bandwidth in Hz × 2.

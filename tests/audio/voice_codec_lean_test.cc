@@ -306,16 +306,18 @@ TEST(LeanFrame, SameCodecDelay) {
 }
 
 // Frames sent with a pose every other frame: the jitter buffer plays the
-// pose-less ones halfway between their neighbours (along the shorter arc
-// across ±π), never a zero pose; classic and lean frames share one stream.
-TEST(LeanFrame, JitterBufferInterpolatesPoseLessFrames) {
+// pose-less ones on the line between their neighbours (along the shorter arc
+// across ±π), never a zero pose — halfway to the next frame's pose when it is
+// there, extrapolated from the two before when the next frame was lost;
+// classic and lean frames share one stream.
+JitterBufferStats PlayPoseEveryOtherFrame(bool lose_some) {
   VoiceEncoderOptions o = LeanVoiceEncoderOptions();
   o.pose_every = 2;
   auto enc = VoiceEncoder::Create(o);
-  ASSERT_TRUE(enc.ok());
+  HOLO_CHECK(enc.ok());
   SimulatedClock clock;
   auto jb = JitterBuffer::Create(AudioCodec::kOpusLean, clock);
-  ASSERT_TRUE(jb.ok());
+  HOLO_CHECK(jb.ok());
   const std::vector<float> speech = Fixture("speech_48k.wav");
   auto yaw_of = [](double x) { return std::remainder(3.0 + x, 2 * std::numbers::pi); };
   const int kFrames = 40;
@@ -328,11 +330,14 @@ TEST(LeanFrame, JitterBufferInterpolatesPoseLessFrames) {
       const HeadPose pose{static_cast<float>(x), 0.5f, 1.6f, static_cast<float>(yaw_of(x)), 0, 0};
       auto f = (*enc)->EncodeFrame(std::span<const float>(speech).subspan(s * kFrameSamples, kFrameSamples), s,
                                    s * kFrameUs, pose);
-      ASSERT_TRUE(f.ok());
+      HOLO_CHECK(f.ok());
       EXPECT_EQ(f->has_pose, s % 2 == 0);
       // Every fifth frame in the classic layout (an old sender's): same stream.
       const AudioPose frame = s % 5 == 4 ? protocol::ToClassicAudioPose(*f, protocol::QuantizeLeanPose(pose)) : *f;
-      ASSERT_TRUE((*jb)->Insert(frame).ok()) << s;
+      const bool lost = lose_some && s % 10 == 6;  // a frame with a pose, after a pose-less one
+      if (!lost) {
+        EXPECT_TRUE((*jb)->Insert(frame).ok()) << s;
+      }
     }
     clock.SetUs(s * kFrameUs + 10000);
     (*jb)->Pull();
@@ -340,18 +345,29 @@ TEST(LeanFrame, JitterBufferInterpolatesPoseLessFrames) {
     const HeadPose p = (*jb)->pose();
     if (p.x == 0.0f) continue;  // the first frame, or none played yet
     const double seq = p.x / 0.1;
-    EXPECT_NEAR(seq, std::round(seq), 1e-3) << "a pose between frames: x " << p.x;
+    EXPECT_NEAR(seq, std::round(seq), 1e-3) << "a pose off the line: x " << p.x;
     EXPECT_LT(AngleError(p.yaw, yaw_of(p.x)), 2e-3) << "x " << p.x << " yaw " << p.yaw;
     EXPECT_FLOAT_EQ(p.y, 0.5f);
     if (static_cast<int>(std::lround(seq)) % 2 == 1) ++odd_seen;
   }
   EXPECT_GT(odd_seen, 10);
   const JitterBufferStats st = (*jb)->stats();
-  std::printf("pose-less frames: %lld interpolated, %lld extrapolated, %lld held\n",
-              static_cast<long long>(st.poses_interpolated), static_cast<long long>(st.poses_extrapolated),
-              static_cast<long long>(st.poses_held));
-  EXPECT_GT(st.poses_interpolated + st.poses_extrapolated, 10);
+  std::printf("%s: pose-less frames %lld interpolated, %lld extrapolated, %lld held\n",
+              lose_some ? "with losses" : "no loss", static_cast<long long>(st.poses_interpolated),
+              static_cast<long long>(st.poses_extrapolated), static_cast<long long>(st.poses_held));
   EXPECT_LE(st.poses_held, 1);  // only before a second pose arrived
+  return st;
+}
+
+TEST(LeanFrame, JitterBufferInterpolatesPoseLessFrames) {
+  const JitterBufferStats st = PlayPoseEveryOtherFrame(false);
+  EXPECT_GT(st.poses_interpolated, 10);
+}
+
+TEST(LeanFrame, JitterBufferExtrapolatesWhenTheNextPoseIsLost) {
+  const JitterBufferStats st = PlayPoseEveryOtherFrame(true);
+  EXPECT_GE(st.poses_extrapolated, 3);
+  EXPECT_GT(st.poses_interpolated, 5);
 }
 
 }  // namespace
