@@ -1,12 +1,13 @@
 // holoport-bench audio: voice bitrate, codec timings, interaural cues and
 // directivity measured on OpenAL Soft's loopback device (docs/audio.md).
-#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cmath>
-#include <memory>
 #include <cstdio>
+#include <memory>
 #include <numbers>
 #include <random>
+
+#include <CLI/CLI.hpp>
 
 #include "audio/capture.h"
 #include "audio/echo_canceller.h"
