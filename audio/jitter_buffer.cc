@@ -41,7 +41,8 @@ StatusOr<std::unique_ptr<JitterBuffer>> JitterBuffer::Create(AudioCodec codec, C
 
 Status JitterBuffer::Insert(AudioPose frame) {
   HOLO_RETURN_IF_ERROR(ValidateVoiceFrame(frame));
-  if (frame.codec != decoder_->codec()) return DataLoss("voice frame codec differs from the stream's");
+  // The classic and the lean layout carry the same Opus packets: one decoder plays both.
+  if (IsOpus(frame.codec) != IsOpus(decoder_->codec())) return DataLoss("voice frame codec differs from the stream's");
   const int64_t now = clock_.NowUs();
   int64_t seq = 0;
   if (!started_) {
@@ -55,6 +56,7 @@ Status JitterBuffer::Insert(AudioPose frame) {
   if (seq > next_seq_ + static_cast<int64_t>(kMaxPackets)) {
     // The sender restarted or jumped far ahead: start over from this frame.
     packets_.clear();
+    carried_seq_ = carried_prev_seq_ = -1;
     fifo_.clear();
     frac_ = 0;
     transit_us_.clear();
@@ -134,7 +136,32 @@ void JitterBuffer::DecodeNext() {
     auto decoded = decoder_->Decode(it->second.audio);
     if (decoded.ok()) {
       pcm = std::move(decoded).value();
-      pose_ = it->second.pose;
+      if (it->second.has_pose) {
+        pose_ = it->second.pose;
+        carried_prev_pose_ = carried_pose_;
+        carried_prev_seq_ = carried_seq_;
+        carried_pose_ = pose_;
+        carried_seq_ = next_seq_;
+      } else {
+        // A lean frame sent without its pose (every other frame): halfway
+        // between the last pose and the next frame's when that is here, else
+        // on from the last two poses (a head moves smoothly over 20 ms).
+        auto next = packets_.find(next_seq_ + 1);
+        const int64_t since = next_seq_ - carried_seq_;  // frames since the last pose (> 0)
+        if (next != packets_.end() && next->second.has_pose && carried_seq_ >= 0 && since > 0 && since <= 3) {
+          const float t = static_cast<float>(since) / static_cast<float>(since + 1);
+          pose_ = protocol::LerpPose(carried_pose_, next->second.pose, t);
+          ++stats_.poses_interpolated;
+        } else if (carried_seq_ >= 0 && carried_prev_seq_ >= 0 && carried_seq_ > carried_prev_seq_ && since > 0 &&
+                   since <= 2 && carried_seq_ - carried_prev_seq_ <= 4) {
+          const float t = static_cast<float>(next_seq_ - carried_prev_seq_) /
+                          static_cast<float>(carried_seq_ - carried_prev_seq_);
+          pose_ = protocol::LerpPose(carried_prev_pose_, carried_pose_, t);
+          ++stats_.poses_extrapolated;
+        } else {
+          ++stats_.poses_held;
+        }
+      }
       ++stats_.played;
       ok = true;
     }

@@ -87,6 +87,12 @@ struct JitterBufferStats {
   int64_t sync_rebuffers = 0;  // playout restarts to grow the delay for lip sync
   double stretch = 1.0;        // current resampling ratio (input per output sample)
   double drift_estimate = 0.0; // integral term: estimated sender/receiver clock ratio − 1
+  // Lean frames sent without a pose (docs/audio.md "Lean frames"): played with
+  // the pose halfway to the next frame's (it was here), extrapolated from the
+  // last two poses, or held (no earlier pose to extrapolate from).
+  int64_t poses_interpolated = 0;
+  int64_t poses_extrapolated = 0;
+  int64_t poses_held = 0;
 };
 
 // Not thread-safe. `clock` is borrowed for the buffer's lifetime.
@@ -150,6 +156,9 @@ class JitterBuffer {
   int64_t anchor_capture_us_ = 0;
   int64_t last_seq32_ = 0;
   HeadPose pose_;
+  // The last two poses frames carried, and their sequence numbers (-1: none).
+  HeadPose carried_pose_, carried_prev_pose_;
+  int64_t carried_seq_ = -1, carried_prev_seq_ = -1;
   double sync_delay_ms_ = 0.0;
   int64_t last_pull_capture_us_ = 0;
   JitterBufferStats stats_;

@@ -198,6 +198,9 @@ StatusOr<MouthToEar> MeasureMouthToEar(const VoiceChainOptions& options, double 
   m.min_ms = delays.front();
   m.max_ms = delays.back();
   m.jb_target_ms = st.jitter_buffer.target_delay_ms;
+  m.poses_interpolated = st.jitter_buffer.poses_interpolated;
+  m.poses_extrapolated = st.jitter_buffer.poses_extrapolated;
+  m.poses_held = st.jitter_buffer.poses_held;
   return m;
 }
 

@@ -85,6 +85,8 @@ struct MouthToEar {
   double median_ms = 0, p95_ms = 0, min_ms = 0, max_ms = 0;
   int bursts = 0;
   double jb_target_ms = 0;  // jitter buffer target at the end
+  // Lean frames without a pose, how the receiver filled them (JitterBufferStats).
+  int64_t poses_interpolated = 0, poses_extrapolated = 0, poses_held = 0;
 };
 StatusOr<MouthToEar> MeasureMouthToEar(const VoiceChainOptions& options, double seconds = 30.0,
                                        double warmup_s = 5.0);

@@ -13,9 +13,31 @@ std::string OpusError(int code) { return std::string(opus_strerror(code)) + " ("
 
 }  // namespace
 
+bool IsOpus(AudioCodec codec) { return codec == AudioCodec::kOpus || codec == AudioCodec::kOpusLean; }
+
+VoiceEncoderOptions LeanVoiceEncoderOptions() {
+  VoiceEncoderOptions o;
+  o.codec = AudioCodec::kOpusLean;
+  o.bitrate_bps = 14000;
+  o.voip_application = false;
+  o.pose_every = 2;
+  return o;
+}
+
 Status VoiceEncoderOptions::Check() const {
-  if (codec != AudioCodec::kOpus && codec != AudioCodec::kPcm16) {
-    return InvalidArgument("codec must be opus or pcm, got " + std::to_string(static_cast<int>(codec)));
+  if (!IsOpus(codec) && codec != AudioCodec::kPcm16) {
+    return InvalidArgument("codec must be opus, opus-lean or pcm, got " + std::to_string(static_cast<int>(codec)));
+  }
+  if (max_bandwidth_hz != 0 && max_bandwidth_hz != 8000 && max_bandwidth_hz != 12000 && max_bandwidth_hz != 16000 &&
+      max_bandwidth_hz != 24000 && max_bandwidth_hz != 48000) {
+    return InvalidArgument("max_bandwidth_hz must be 0, 8000, 12000, 16000, 24000 or 48000, got " +
+                           std::to_string(max_bandwidth_hz));
+  }
+  if (pose_every != 1 && pose_every != 2) {
+    return InvalidArgument("pose_every must be 1 or 2, got " + std::to_string(pose_every));
+  }
+  if (pose_every != 1 && codec != AudioCodec::kOpusLean) {
+    return InvalidArgument("pose_every 2 needs the lean frame (codec opus-lean)");
   }
   if (bitrate_bps < 6000 || bitrate_bps > 510000) {
     return InvalidArgument("bitrate_bps must be in 6000..510000, got " + std::to_string(bitrate_bps));
@@ -33,15 +55,28 @@ StatusOr<std::unique_ptr<VoiceEncoder>> VoiceEncoder::Create(const VoiceEncoderO
   HOLO_RETURN_IF_ERROR(options.Check());
   std::unique_ptr<VoiceEncoder> e(new VoiceEncoder());
   e->options_ = options;
-  if (options.codec == AudioCodec::kOpus) {
+  if (IsOpus(options.codec)) {
     int err = 0;
-    e->enc_ = opus_encoder_create(kSampleRate, 1, OPUS_APPLICATION_VOIP, &err);
+    e->enc_ = opus_encoder_create(kSampleRate, 1,
+                                  options.voip_application ? OPUS_APPLICATION_VOIP : OPUS_APPLICATION_AUDIO, &err);
     if (err != OPUS_OK || e->enc_ == nullptr) return Internal("opus_encoder_create: " + OpusError(err));
+    int bandwidth = OPUS_BANDWIDTH_FULLBAND;
+    switch (options.max_bandwidth_hz) {
+      case 8000: bandwidth = OPUS_BANDWIDTH_NARROWBAND; break;
+      case 12000: bandwidth = OPUS_BANDWIDTH_MEDIUMBAND; break;
+      case 16000: bandwidth = OPUS_BANDWIDTH_WIDEBAND; break;
+      case 24000: bandwidth = OPUS_BANDWIDTH_SUPERWIDEBAND; break;
+      default: break;
+    }
     const int settings[][2] = {{OPUS_SET_BITRATE_REQUEST, options.bitrate_bps},
                                {OPUS_SET_INBAND_FEC_REQUEST, options.fec ? 1 : 0},
                                {OPUS_SET_PACKET_LOSS_PERC_REQUEST, options.expected_loss_pct},
                                {OPUS_SET_COMPLEXITY_REQUEST, options.complexity},
-                               {OPUS_SET_SIGNAL_REQUEST, OPUS_SIGNAL_VOICE}};
+                               {OPUS_SET_SIGNAL_REQUEST, OPUS_SIGNAL_VOICE},
+                               {OPUS_SET_VBR_REQUEST, options.rate_control == OpusRateControl::kCbr ? 0 : 1},
+                               {OPUS_SET_VBR_CONSTRAINT_REQUEST,
+                                options.rate_control == OpusRateControl::kConstrainedVbr ? 1 : 0},
+                               {OPUS_SET_MAX_BANDWIDTH_REQUEST, bandwidth}};
     for (const auto& s : settings) {
       err = opus_encoder_ctl(e->enc_, s[0], s[1]);
       if (err != OPUS_OK) return Internal("opus_encoder_ctl(" + std::to_string(s[0]) + "): " + OpusError(err));
@@ -54,7 +89,7 @@ VoiceEncoder::~VoiceEncoder() {
   if (enc_ != nullptr) opus_encoder_destroy(enc_);
 }
 
-int CodecDelaySamples(AudioCodec codec) { return codec == AudioCodec::kOpus ? 312 : 0; }
+int CodecDelaySamples(AudioCodec codec) { return IsOpus(codec) ? 312 : 0; }
 
 int64_t SkipStalledFrames(int64_t now_us, int64_t max_behind_us, int64_t* next_us, uint32_t* sequence) {
   const int64_t behind = now_us - *next_us;
@@ -106,16 +141,21 @@ StatusOr<AudioPose> VoiceEncoder::EncodeFrame(std::span<const float> pcm, uint32
   f.capture_time_us = capture_time_us;
   f.pose = pose;
   HOLO_ASSIGN_OR_RETURN(f.audio, Encode(pcm));
+  if (options_.codec == AudioCodec::kOpusLean) {
+    f.codec = AudioCodec::kOpus;  // ToLeanAudioPose converts an Opus frame
+    f.has_pose = sequence % static_cast<uint32_t>(options_.pose_every) == 0;
+    f = protocol::ToLeanAudioPose(std::move(f));
+  }
   return f;
 }
 
 StatusOr<std::unique_ptr<VoiceDecoder>> VoiceDecoder::Create(AudioCodec codec) {
-  if (codec != AudioCodec::kOpus && codec != AudioCodec::kPcm16) {
+  if (!IsOpus(codec) && codec != AudioCodec::kPcm16) {
     return InvalidArgument("unknown audio codec " + std::to_string(static_cast<int>(codec)));
   }
   std::unique_ptr<VoiceDecoder> d(new VoiceDecoder());
   d->codec_ = codec;
-  if (codec == AudioCodec::kOpus) {
+  if (IsOpus(codec)) {
     int err = 0;
     d->dec_ = opus_decoder_create(kSampleRate, 1, &err);
     if (err != OPUS_OK || d->dec_ == nullptr) return Internal("opus_decoder_create: " + OpusError(err));
@@ -190,7 +230,7 @@ Status ValidateVoiceFrame(const AudioPose& f) {
     if (f.audio.size() != 2 * kFrameSamples) {
       return DataLoss("PCM voice frame must be 1920 bytes, got " + std::to_string(f.audio.size()));
     }
-  } else if (f.codec == AudioCodec::kOpus) {
+  } else if (IsOpus(f.codec)) {
     if (f.audio.empty() || f.audio.size() > kMaxOpusPacket) {
       return DataLoss("Opus voice frame of " + std::to_string(f.audio.size()) + " bytes (must be 1..1275)");
     }
@@ -203,12 +243,24 @@ Status ValidateVoiceFrame(const AudioPose& f) {
   return OkStatus();
 }
 
-StatusOr<AudioPose> ParseVoiceFrame(std::span<const uint8_t> payload) {
-  HOLO_ASSIGN_OR_RETURN(protocol::Payload p, protocol::DecodePayload(protocol::MessageType::kAudioPose, payload));
+StatusOr<AudioPose> ParseVoiceFrame(const protocol::Header& header, std::span<const uint8_t> payload) {
+  if (header.type != protocol::MessageType::kAudioPose) {
+    return DataLoss(std::string("voice frame: header says ") + protocol::MessageTypeName(header.type));
+  }
+  HOLO_ASSIGN_OR_RETURN(protocol::Payload p, protocol::DecodePayload(header, payload));
   AudioPose* f = std::get_if<AudioPose>(&p);
   if (f == nullptr) return DataLoss("payload is not an AudioPose");
   HOLO_RETURN_IF_ERROR(ValidateVoiceFrame(*f));
   return std::move(*f);
+}
+
+StatusOr<AudioPose> ParseVoiceFrame(std::span<const uint8_t> payload) {
+  if (!payload.empty() && payload[0] == static_cast<uint8_t>(AudioCodec::kOpusLean)) {
+    return DataLoss("voice frame: a lean frame (codec 3) needs its message header for sequence and capture time");
+  }
+  protocol::Header h;
+  h.type = protocol::MessageType::kAudioPose;
+  return ParseVoiceFrame(h, payload);
 }
 
 std::vector<uint8_t> SerializeVoiceFrame(const AudioPose& frame) { return protocol::EncodePayload(frame); }

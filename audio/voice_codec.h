@@ -41,10 +41,34 @@ int CodecDelaySamples(AudioCodec codec);
 // skipped (0: not that far behind).
 int64_t SkipStalledFrames(int64_t now_us, int64_t max_behind_us, int64_t* next_us, uint32_t* sequence);
 
+// True for the codecs whose audio bytes are Opus packets (classic and lean
+// AudioPose layouts); one VoiceDecoder plays both.
+bool IsOpus(AudioCodec codec);
+
+// Opus rate control (OPUS_SET_VBR / OPUS_SET_VBR_CONSTRAINT).
+enum class OpusRateControl : uint8_t { kVbr, kConstrainedVbr, kCbr };
+
 struct VoiceEncoderOptions {
+  // kOpusLean: the same Opus packets in the lean AudioPose layout (PROTOCOL.md
+  // §9.1); EncodeFrame quantizes the pose as a receiver will see it.
   AudioCodec codec = AudioCodec::kOpus;
-  // Opus target bitrate, bit/s (6000..510000). Ignored for PCM.
+  // Opus target bitrate, bit/s (6000..510000). Ignored for PCM. The lean
+  // default (LeanVoiceEncoderOptions) is lower: docs/audio.md "Lean frames".
   int bitrate_bps = 24000;
+  // OPUS_APPLICATION_VOIP (true) or OPUS_APPLICATION_AUDIO; both have the same
+  // look-ahead (312 samples).
+  bool voip_application = true;
+  // libopus's default, constrained VBR (unconstrained gives the same packets
+  // for speech at ≤ 24 kbit/s: SILK ignores the constraint; docs/audio.md).
+  OpusRateControl rate_control = OpusRateControl::kConstrainedVbr;
+  // OPUS_SET_MAX_BANDWIDTH: 0 = libopus decides, else 8000 (narrowband),
+  // 12000, 16000 (wideband), 24000 (super-wideband), 48000 (fullband): the
+  // audio bandwidth in Hz × 2.
+  int max_bandwidth_hz = 0;
+  // Lean layout only: the head pose goes in every `pose_every`-th frame (1 or
+  // 2; frames whose sequence is a multiple of it); the receiver's jitter
+  // buffer interpolates the others.
+  int pose_every = 1;
   // Opus in-band forward error correction (the previous frame at lower quality).
   bool fec = true;
   // Loss the encoder plans FEC for, percent (0..100).
@@ -53,6 +77,10 @@ struct VoiceEncoderOptions {
   int complexity = 9;
   Status Check() const;
 };
+
+// The lean frame's settings, chosen by measurement (docs/audio.md "Lean
+// frames"): codec kOpusLean, Opus at the stated bitrate, the rest as above.
+VoiceEncoderOptions LeanVoiceEncoderOptions();
 
 // Encodes 20 ms frames. Not thread-safe; copies are deleted.
 class VoiceEncoder {
@@ -110,9 +138,14 @@ class VoiceDecoder {
 Status ValidateVoiceFrame(const AudioPose& frame);
 
 // Decodes an AudioPose payload (the bytes after the protocol header) and
-// validates it for the audio path. Safe on untrusted input.
+// validates it for the audio path. Safe on untrusted input. A lean frame
+// (codec 3) takes its sequence and capture time from `header`; the overload
+// without a header refuses lean frames (DataLoss naming the reason).
+StatusOr<AudioPose> ParseVoiceFrame(const protocol::Header& header, std::span<const uint8_t> payload);
 StatusOr<AudioPose> ParseVoiceFrame(std::span<const uint8_t> payload);
-// The payload bytes of `frame` (protocol::EncodePayload).
+// The payload bytes of `frame` (protocol::EncodePayload). For a lean frame
+// the message header must carry its sequence and capture time
+// (protocol::BindHeaderToPayload).
 std::vector<uint8_t> SerializeVoiceFrame(const AudioPose& frame);
 
 }  // namespace holo::audio

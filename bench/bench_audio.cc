@@ -3,8 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <numbers>
 #include <random>
+
+#include <CLI/CLI.hpp>
 
 #include "audio/capture.h"
 #include "audio/echo_canceller.h"
@@ -16,6 +19,7 @@
 #include "audio/voice_codec.h"
 #include "audio/wav.h"
 #include "bench.h"
+#include "bench_audio_lean.h"
 #include "common/clock.h"
 #include "common/log.h"
 
@@ -362,7 +366,15 @@ HOLO_REGISTER_BENCH_OPTIONS("audio",
                             [](CLI::App& app) -> BenchFn {
                               // Its rooms and signals are its own: no workload, no frame count.
                               DropCommonOptions(app, {"--workload", "--frames"});
-                              return RunAudio;
+                              auto lean_only = std::make_shared<bool>(false);
+                              app.add_flag("--lean-only", *lean_only,
+                                           "only the lean-frame figures (kbps per frame format, Opus settings, "
+                                           "pose error, mouth-to-ear)");
+                              return [lean_only](const BenchArgs& a) {
+                                if (*lean_only) return RunLeanFrames(a);
+                                const int rc = RunAudio(a);
+                                return rc != 0 ? rc : RunLeanFrames(a);
+                              };
                             });
 
 }  // namespace holo::bench

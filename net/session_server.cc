@@ -127,6 +127,39 @@ class Server::Impl {
   uint32_t rig_sequence = 0;
   std::atomic<uint32_t> audio_sequence{0};
 
+  // An AudioPose for viewers. A lean frame (codec 3) gets its classic twin
+  // (codec 2) for viewers that negotiated the classic layout; a lean frame
+  // sent without a pose gets the stream's last pose there.
+  WireMessagePtr AudioMessage(Header h, const protocol::AudioPose& a) {
+    WireMessagePtr m = MakeWireMessage(h, a, cfg.fragment_bytes);
+    if (a.codec != protocol::AudioCodec::kOpusLean) return m;
+    protocol::HeadPose fallback;
+    {
+      std::lock_guard<std::mutex> l(pose_mu);
+      if (last_pose.size() > 4096 && last_pose.count(h.stream_id) == 0) last_pose.clear();  // bounded
+      protocol::HeadPose& p = last_pose[h.stream_id];
+      if (a.has_pose) p = a.pose;
+      fallback = p;
+    }
+    return WithClassicAudio(m, MakeWireMessage(h, protocol::ToClassicAudioPose(a, fallback), cfg.fragment_bytes));
+  }
+  // The same for an AudioPose already encoded (a replayed recording): the
+  // message as it is when it is not a whole lean frame that decodes.
+  WireMessagePtr AudioMessage(const WireMessagePtr& m) {
+    if (m->type != MessageType::kAudioPose || m->classic_audio || m->frame_ends.size() != 1 ||
+        m->bytes.size() <= protocol::kHeaderSize ||
+        m->bytes[protocol::kHeaderSize] != static_cast<uint8_t>(protocol::AudioCodec::kOpusLean)) {
+      return m;
+    }
+    auto h = protocol::DecodeHeader(m->bytes.data(), m->bytes.size());
+    if (!h.ok()) return m;
+    auto p = protocol::DecodePayload(*h, std::span<const uint8_t>(m->bytes).subspan(protocol::kHeaderSize));
+    if (!p.ok()) return m;
+    return AudioMessage(*h, std::get<protocol::AudioPose>(*p));
+  }
+  std::mutex pose_mu;
+  std::map<uint32_t, protocol::HeadPose> last_pose;  // by stream id, lean frames' last pose
+
   struct Atomics {
     std::atomic<uint64_t> accepted{0}, welcomed{0}, refused{0}, rejected_pending{0}, violations{0},
         handshake_timeouts{0}, idle_timeouts{0}, priority_overflows{0}, video_frames_published{0},
@@ -203,7 +236,11 @@ class Session : public std::enable_shared_from_this<Session> {
     KickLocked();
   }
 
-  void EnqueuePriority(const WireMessagePtr& m) {
+  void EnqueuePriority(const WireMessagePtr& lean_or_other) {
+    // A viewer that did not negotiate lean frames gets their classic twin.
+    const WireMessagePtr& m = lean_or_other->classic_audio && !lean_audio_.load(std::memory_order_relaxed)
+                                  ? lean_or_other->classic_audio
+                                  : lean_or_other;
     const uint32_t bit = ContentBitOf(m->type);
     if (bit != 0 && !(subscription() & bit)) return;
     bool overflow = false;
@@ -369,7 +406,7 @@ class Session : public std::enable_shared_from_this<Session> {
         Header h = m.header;
         h.stream_id = kFirstParticipantStreamId + publisher_slot_;
         h.flags = 0;
-        auto msg = MakeWireMessage(h, a, srv_->cfg.fragment_bytes);
+        auto msg = srv_->AudioMessage(h, a);
         srv_->n.audio_published++;
         for (const auto& v : srv_->Viewers())
           if (v.get() != this) v->EnqueuePriority(msg);
@@ -470,7 +507,10 @@ class Session : public std::enable_shared_from_this<Session> {
       w.geometry_codec = srv_->geometry;
       w.color_codec = srv_->color;
     }
-    if (has(h.capabilities.audio, protocol::AudioCodec::kOpus)) {
+    // Lean frames (PROTOCOL.md §9.1) when the peer has them: 31 instead of 55 kbit/s a voice.
+    if (has(h.capabilities.audio, protocol::AudioCodec::kOpusLean)) {
+      w.audio_codec = protocol::AudioCodec::kOpusLean;
+    } else if (has(h.capabilities.audio, protocol::AudioCodec::kOpus)) {
       w.audio_codec = protocol::AudioCodec::kOpus;
     } else if (has(h.capabilities.audio, protocol::AudioCodec::kPcm16)) {
       w.audio_codec = protocol::AudioCodec::kPcm16;
@@ -501,6 +541,7 @@ class Session : public std::enable_shared_from_this<Session> {
       return;
     }
     registered_ = true;
+    lean_audio_ = w.audio_codec == protocol::AudioCodec::kOpusLean;
     srv_->n.welcomed++;
     if (IsViewerRole(h.role)) srv_->n.keyframe_requests++;  // a new viewer starts at a key frame
     Header hdr;
@@ -740,6 +781,7 @@ class Session : public std::enable_shared_from_this<Session> {
   uint64_t bytes_sent_ = 0, bytes_received_ = 0;
   double rtt_ms_ = -1, rtt_min_ms_ = -1;
   std::atomic<uint32_t> subscription_{0};
+  std::atomic<bool> lean_audio_{false};  // negotiated audio codec 3 (lean AudioPose frames)
   std::atomic<int> quality_{10};
 };
 
@@ -933,11 +975,14 @@ void Server::PublishAudio(const protocol::AudioPose& audio, uint32_t stream_id) 
   h.stream_id = stream_id;
   h.sequence = audio.sequence;
   h.capture_time_us = audio.capture_time_us;
-  PublishPriority(MakeWireMessage(h, audio, impl_->cfg.fragment_bytes));
+  PublishPriority(impl_->AudioMessage(h, audio));
 }
 
 void Server::PublishPriority(WireMessagePtr message) {
-  if (message->type == MessageType::kAudioPose) impl_->n.audio_published++;
+  if (message->type == MessageType::kAudioPose) {
+    impl_->n.audio_published++;
+    message = impl_->AudioMessage(message);
+  }
   for (const auto& v : impl_->Viewers()) v->EnqueuePriority(message);
 }
 

@@ -438,7 +438,8 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       case MessageType::kMeshFrame: OnMesh(raw); return;
       case MessageType::kColorFrame: OnColor(raw); return;
       case MessageType::kAudioPose: {
-        auto p = protocol::DecodePayload(t, raw.payload, limits);
+        // A lean frame's sequence and capture time are the header's.
+        auto p = protocol::DecodePayload(raw.header, raw.payload, limits);
         if (!p.ok()) return BadPayload(t, p.status());
         const auto& a = std::get<protocol::AudioPose>(*p);
         {
@@ -781,6 +782,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   Status last_decode_error;
   std::optional<protocol::Refuse> refusal;
   std::optional<protocol::Welcome> welcome;
+  protocol::HeadPose last_sent_pose;  // SendAudioPose: for a classic frame made from a lean one without pose
   std::optional<Rig> rig;
   std::optional<ReceivedRegions> latest_regions;
   std::deque<ReceivedFrame> frames;
@@ -932,7 +934,21 @@ void SiteClient::SendAudioPose(const protocol::AudioPose& audio) {
   h.stream_id = 0;
   h.sequence = audio.sequence;
   h.capture_time_us = audio.capture_time_us;
-  impl_->Post(Encode(h, audio));
+  protocol::AudioCodec negotiated = protocol::AudioCodec::kOpus;
+  protocol::HeadPose last_pose;
+  {
+    std::lock_guard<std::mutex> l(impl_->mu);
+    if (impl_->welcome) negotiated = impl_->welcome->audio_codec;
+    if (audio.has_pose) impl_->last_sent_pose = audio.pose;
+    last_pose = impl_->last_sent_pose;
+  }
+  if (audio.codec == protocol::AudioCodec::kOpus && negotiated == protocol::AudioCodec::kOpusLean) {
+    impl_->Post(Encode(h, protocol::ToLeanAudioPose(audio)));
+  } else if (audio.codec == protocol::AudioCodec::kOpusLean && negotiated != protocol::AudioCodec::kOpusLean) {
+    impl_->Post(Encode(h, protocol::ToClassicAudioPose(audio, last_pose)));
+  } else {
+    impl_->Post(Encode(h, audio));
+  }
 }
 
 void SiteClient::SendClientPose(const protocol::ClientPose& pose) {

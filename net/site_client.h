@@ -78,7 +78,8 @@ struct ClientOptions {
   uint32_t max_message_bytes = 64u << 20;
   protocol::Capabilities capabilities{{protocol::GeometryCodec::kG1, protocol::GeometryCodec::kG0},
                                       {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0, protocol::ColorCodec::kV1},
-                                      {protocol::AudioCodec::kOpus, protocol::AudioCodec::kPcm16}};
+                                      {protocol::AudioCodec::kOpusLean, protocol::AudioCodec::kOpus,
+                                       protocol::AudioCodec::kPcm16}};
   TlsClientConfig tls;
   // No connection: content messages come from Feed() (an HTTP broadcast
   // player, client/net/broadcast_player.h); the state is kConnected at once.
@@ -183,6 +184,9 @@ class SiteClient {
   bool LatestRegions(ReceivedRegions* out) const;
 
   // Sending (any thread; dropped and counted while not connected).
+  // An Opus frame goes out in the layout the site negotiated: lean (codec 3,
+  // pose quantized) or classic (codec 2; a lean frame without a pose then
+  // carries the last pose sent).
   void SendAudioPose(const protocol::AudioPose& audio);
   void SendClientPose(const protocol::ClientPose& pose);
   void SendControl(const protocol::Control& control);

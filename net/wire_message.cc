@@ -49,9 +49,15 @@ WireMessagePtr MakeWireMessageFromBytes(Header header, std::span<const uint8_t> 
 }
 
 WireMessagePtr MakeWireMessage(Header header, const protocol::Payload& payload, size_t fragment_bytes) {
-  header.type = protocol::TypeOf(payload);
+  protocol::BindHeaderToPayload(payload, &header);
   const std::vector<uint8_t> body = protocol::EncodePayload(payload);
   return MakeWireMessageFromBytes(header, body, fragment_bytes);
+}
+
+WireMessagePtr WithClassicAudio(const WireMessagePtr& lean, WireMessagePtr classic) {
+  auto m = std::make_shared<WireMessage>(*lean);
+  m->classic_audio = std::move(classic);
+  return m;
 }
 
 size_t VideoFrame::bytes() const {

@@ -37,15 +37,23 @@ struct WireMessage {
   std::vector<uint8_t> bytes;         // frames back to back (header + payload each)
   std::vector<uint32_t> frame_ends;   // end offset of every frame in `bytes`
   size_t payload_bytes = 0;           // the message's payload (all fragments)
+  // A lean AudioPose (codec 3, PROTOCOL.md §9.1) also in the classic layout
+  // (codec 2), for receivers that did not negotiate the lean one; else null.
+  std::shared_ptr<const WireMessage> classic_audio;
 };
 using WireMessagePtr = std::shared_ptr<const WireMessage>;
 
-// Encodes `payload` with `header` (type and length derived) into frames of
-// at most `fragment_bytes` payload each.
+// Encodes `payload` with `header` (type and length derived; for a lean
+// AudioPose also sequence and capture time: protocol::BindHeaderToPayload)
+// into frames of at most `fragment_bytes` payload each.
 WireMessagePtr MakeWireMessage(protocol::Header header, const protocol::Payload& payload, size_t fragment_bytes);
 // The same from already encoded payload bytes; `header.type` must be set.
 WireMessagePtr MakeWireMessageFromBytes(protocol::Header header, std::span<const uint8_t> payload,
                                         size_t fragment_bytes);
+
+// `lean` (an encoded lean AudioPose message) with `classic`, the same frame in
+// the classic layout, attached as its `classic_audio`.
+WireMessagePtr WithClassicAudio(const WireMessagePtr& lean, WireMessagePtr classic);
 
 // One video frame: its MeshFrame and (optional) ColorFrame. Queues hold and
 // drop frames as a whole.

@@ -1,6 +1,7 @@
 #include "protocol/fuzz_decoders.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "common/status.h"
 #include "protocol/color_codec.h"
@@ -98,6 +99,28 @@ int FuzzRegions(std::span<const uint8_t> body) {
   HOLO_CHECK_MSG(std::equal(again.begin(), again.end(), body.begin(), body.end()),
                  "regions payload does not re-encode to the same bytes");
   return 1;
+}
+
+int FuzzLeanAudioPose(std::span<const uint8_t> payload) {
+  Header h;
+  h.type = MessageType::kAudioPose;
+  h.sequence = 77;
+  h.capture_time_us = 1700000000123456;
+  auto p = DecodePayload(h, payload, FuzzLimits());
+  if (!p.ok()) return 0;
+  const auto& a = std::get<AudioPose>(*p);
+  if (a.codec != AudioCodec::kOpusLean) return 1;
+  HOLO_CHECK(a.sequence == h.sequence && a.capture_time_us == h.capture_time_us);
+  HOLO_CHECK(a.channels == 1 && a.sample_rate == 48000 && a.duration_us_div10 == 2000);
+  HOLO_CHECK(!a.audio.empty() && a.audio.size() <= 1275);
+  for (float v : {a.pose.x, a.pose.y, a.pose.z}) HOLO_CHECK(std::isfinite(v) && std::fabs(v) <= 1000.0f);
+  for (float v : {a.pose.yaw, a.pose.pitch, a.pose.roll}) HOLO_CHECK(std::isfinite(v) && std::fabs(v) <= 3.1416f);
+  if (!a.has_pose) HOLO_CHECK(a.pose == HeadPose{});
+  // What decodes encodes back to the same frame (quantization is idempotent).
+  auto again = DecodeMessage(EncodeMessage(Header{}, a), FuzzLimits());
+  HOLO_CHECK_MSG(again.ok(), "a decoded lean frame does not encode back");
+  HOLO_CHECK_MSG(std::get<AudioPose>(again->payload) == a, "lean frame changes through encode + decode");
+  return 2;
 }
 
 int FuzzDecoders(const uint8_t* data, size_t size) {

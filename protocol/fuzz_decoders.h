@@ -34,6 +34,14 @@ int FuzzPodFrame(std::span<const uint8_t> bytes);
 // A Regions payload (DecodePayload of type 15); what it accepts must
 // re-encode to the same bytes. Its own libFuzzer target (fuzz_regions).
 int FuzzRegions(std::span<const uint8_t> bytes);
+// An AudioPose payload under a fixed header (sequence 77, capture time
+// 1700000000123456 µs), meant for the lean layout (codec 3, PROTOCOL.md §9.1):
+// a lean frame that decodes must carry the header's sequence and time, a
+// pose within ±1 km and ±π, an Opus packet of 1..1275 bytes, and encode
+// back to a message that decodes to the same frame. Its own libFuzzer target
+// (holoport-fuzz-lean-audio-pose), not part of FuzzDecoders. Returns 0
+// (refused), 1 (a classic frame), 2 (a lean frame).
+int FuzzLeanAudioPose(std::span<const uint8_t> bytes);
 
 int FuzzDecoders(const uint8_t* data, size_t size);
 

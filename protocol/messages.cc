@@ -140,7 +140,7 @@ Status Read(ByteReader& r, const Limits& l, Hello* m) {
   if (m->min_version > m->max_version) return DataLoss("hello.min_version: greater than max_version");
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.geometry_codecs", 2, &m->capabilities.geometry));
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 4, &m->capabilities.color));
-  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.audio_codecs", 2, &m->capabilities.audio));
+  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.audio_codecs", kMaxAudioCodec, &m->capabilities.audio));
   HOLO_RETURN_IF_ERROR(r.String16("hello.access_token", l.max_token, &m->access_token));
   HOLO_RETURN_IF_ERROR(r.String16("hello.client_name", l.max_string, &m->client_name));
   return OkStatus();
@@ -164,7 +164,7 @@ Status Read(ByteReader& r, const Limits& l, Welcome* m) {
   HOLO_RETURN_IF_ERROR(r.U8("welcome.audio_codec", &a));
   if (g < 1 || g > 2) return DataLoss("welcome.geometry_codec: unknown codec " + Str(g));
   if (c < 1 || c > 4) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
-  if (a < 1 || a > 2) return DataLoss("welcome.audio_codec: unknown codec " + Str(a));
+  if (a < 1 || a > kMaxAudioCodec) return DataLoss("welcome.audio_codec: unknown codec " + Str(a));
   m->geometry_codec = static_cast<GeometryCodec>(g);
   m->color_codec = static_cast<ColorCodec>(c);
   m->audio_codec = static_cast<AudioCodec>(a);
@@ -265,7 +265,123 @@ Status Read(ByteReader& r, const Limits& l, ColorFrame* m) {
   return OkStatus();
 }
 
+// ---- lean AudioPose (codec 3, PROTOCOL.md §9.1)
+
+constexpr uint8_t kLeanHasPose = 1u << 0;
+constexpr uint8_t kLeanWidePosition = 1u << 1;
+constexpr uint8_t kLeanKnownFlags = kLeanHasPose | kLeanWidePosition;
+constexpr double kLeanAngleStep = 2.0 * 3.14159265358979323846 / 65536.0;  // rad
+constexpr int32_t kLeanMaxMm = 1000000;  // ±1 km: the audio path refuses heads farther out
+
+int32_t PositionMm(float v) {
+  if (!std::isfinite(v)) return 0;
+  const double mm = std::clamp(static_cast<double>(v) * 1000.0, -double{kLeanMaxMm}, double{kLeanMaxMm});
+  return static_cast<int32_t>(std::lrint(mm));
+}
+
+int16_t AngleSteps(float v) {
+  if (!std::isfinite(v)) return 0;
+  // remainder() puts the angle in [−π, π]; +π and −π are the same rotation.
+  const double a = std::remainder(static_cast<double>(v), 2.0 * 3.14159265358979323846);
+  long q = std::lrint(a / kLeanAngleStep);
+  if (q >= 32768) q -= 65536;
+  if (q < -32768) q += 65536;
+  return static_cast<int16_t>(q);
+}
+
+struct LeanPose {
+  std::array<int32_t, 3> mm{};
+  std::array<int16_t, 3> angle{};
+  bool wide = false;
+};
+
+LeanPose ToLean(const HeadPose& p) {
+  LeanPose q;
+  q.mm = {PositionMm(p.x), PositionMm(p.y), PositionMm(p.z)};
+  q.angle = {AngleSteps(p.yaw), AngleSteps(p.pitch), AngleSteps(p.roll)};
+  for (int32_t v : q.mm) q.wide = q.wide || v > 32767 || v < -32768;
+  return q;
+}
+
+HeadPose FromLean(const LeanPose& q) {
+  HeadPose p;
+  p.x = static_cast<float>(q.mm[0] * 1e-3);
+  p.y = static_cast<float>(q.mm[1] * 1e-3);
+  p.z = static_cast<float>(q.mm[2] * 1e-3);
+  p.yaw = static_cast<float>(q.angle[0] * kLeanAngleStep);
+  p.pitch = static_cast<float>(q.angle[1] * kLeanAngleStep);
+  p.roll = static_cast<float>(q.angle[2] * kLeanAngleStep);
+  return p;
+}
+
+void WriteLean(ByteWriter& w, const AudioPose& m) {
+  const LeanPose q = ToLean(m.pose);
+  uint8_t flags = 0;
+  if (m.has_pose) flags |= kLeanHasPose;
+  if (m.has_pose && q.wide) flags |= kLeanWidePosition;
+  w.U8(static_cast<uint8_t>(AudioCodec::kOpusLean));
+  w.U8(flags);
+  if (m.has_pose) {
+    for (int32_t v : q.mm) {
+      if (q.wide) {
+        w.I32(v);
+      } else {
+        w.U16(static_cast<uint16_t>(static_cast<int16_t>(v)));
+      }
+    }
+    for (int16_t a : q.angle) w.U16(static_cast<uint16_t>(a));
+  }
+  HOLO_CHECK(m.audio.size() <= 0xFFFF);
+  w.Bytes(m.audio);
+}
+
+Status ReadLean(ByteReader& r, AudioPose* m) {
+  m->codec = AudioCodec::kOpusLean;
+  m->channels = 1;
+  m->sample_rate = 48000;
+  m->duration_us_div10 = 2000;
+  m->sequence = 0;
+  m->capture_time_us = 0;
+  uint8_t flags = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("audio_pose.lean_flags", &flags));
+  if (flags & ~kLeanKnownFlags) return DataLoss("audio_pose.lean_flags: unknown flag bits set");
+  m->has_pose = (flags & kLeanHasPose) != 0;
+  if (!m->has_pose && (flags & kLeanWidePosition)) {
+    return DataLoss("audio_pose.lean_flags: wide position without a pose");
+  }
+  m->pose = {};
+  if (m->has_pose) {
+    LeanPose q;
+    q.wide = (flags & kLeanWidePosition) != 0;
+    for (int32_t& v : q.mm) {
+      if (q.wide) {
+        HOLO_RETURN_IF_ERROR(r.I32("audio_pose.lean_position", &v));
+        if (v > kLeanMaxMm || v < -kLeanMaxMm) return DataLoss("audio_pose.lean_position: beyond ±1 km");
+      } else {
+        uint16_t u = 0;
+        HOLO_RETURN_IF_ERROR(r.U16("audio_pose.lean_position", &u));
+        v = static_cast<int16_t>(u);
+      }
+    }
+    for (int16_t& a : q.angle) {
+      uint16_t u = 0;
+      HOLO_RETURN_IF_ERROR(r.U16("audio_pose.lean_angle", &u));
+      a = static_cast<int16_t>(u);
+    }
+    m->pose = FromLean(q);
+  }
+  // The Opus packet is the rest of the payload: RFC 6716 allows 1..1275 bytes.
+  const size_t n = r.remaining();
+  if (n == 0) return DataLoss("audio_pose.audio: lean frame without an Opus packet");
+  if (n > 1275) return DataLoss("audio_pose.audio: lean frame's Opus packet of " + Str(n) + " bytes exceeds 1275");
+  std::span<const uint8_t> b;
+  HOLO_RETURN_IF_ERROR(r.View("audio_pose.audio", n, &b));
+  m->audio.assign(b.begin(), b.end());
+  return OkStatus();
+}
+
 void Write(ByteWriter& w, const AudioPose& m) {
+  if (m.codec == AudioCodec::kOpusLean) return WriteLean(w, m);
   w.U8(static_cast<uint8_t>(m.codec));
   w.U8(m.channels);
   w.U16(m.duration_us_div10);
@@ -280,8 +396,10 @@ void Write(ByteWriter& w, const AudioPose& m) {
 Status Read(ByteReader& r, const Limits&, AudioPose* m) {
   uint8_t c = 0;
   HOLO_RETURN_IF_ERROR(r.U8("audio_pose.codec", &c));
-  if (c < 1 || c > 2) return DataLoss("audio_pose.codec: unknown audio codec " + Str(c));
+  if (c < 1 || c > kMaxAudioCodec) return DataLoss("audio_pose.codec: unknown audio codec " + Str(c));
+  if (c == static_cast<uint8_t>(AudioCodec::kOpusLean)) return ReadLean(r, m);
   m->codec = static_cast<AudioCodec>(c);
+  m->has_pose = true;
   HOLO_RETURN_IF_ERROR(r.U8("audio_pose.channels", &m->channels));
   if (m->channels < 1 || m->channels > 2) return DataLoss("audio_pose.channels: must be 1 or 2, got " + Str(m->channels));
   HOLO_RETURN_IF_ERROR(r.U16("audio_pose.duration", &m->duration_us_div10));
@@ -645,6 +763,56 @@ MessageType TypeOf(const Payload& p) {
   return kTypes[p.index()];
 }
 
+HeadPose QuantizeLeanPose(const HeadPose& pose) { return FromLean(ToLean(pose)); }
+
+HeadPose LerpPose(const HeadPose& a, const HeadPose& b, float t) {
+  constexpr double kTwoPi = 2.0 * 3.14159265358979323846;
+  auto angle = [&](float u, float v) {
+    const double d = std::remainder(static_cast<double>(v) - static_cast<double>(u), kTwoPi);
+    return static_cast<float>(std::remainder(static_cast<double>(u) + t * d, kTwoPi));
+  };
+  HeadPose m;
+  m.x = a.x + t * (b.x - a.x);
+  m.y = a.y + t * (b.y - a.y);
+  m.z = a.z + t * (b.z - a.z);
+  m.yaw = angle(a.yaw, b.yaw);
+  m.pitch = angle(a.pitch, b.pitch);
+  m.roll = angle(a.roll, b.roll);
+  return m;
+}
+
+size_t LeanAudioPoseOverhead(const AudioPose& frame) {
+  if (!frame.has_pose) return 2;
+  return ToLean(frame.pose).wide ? 2 + 12 + 6 : 2 + 12;
+}
+
+AudioPose ToLeanAudioPose(AudioPose frame) {
+  HOLO_CHECK(frame.codec == AudioCodec::kOpus || frame.codec == AudioCodec::kOpusLean);
+  frame.codec = AudioCodec::kOpusLean;
+  frame.channels = 1;
+  frame.sample_rate = 48000;
+  frame.duration_us_div10 = 2000;
+  if (frame.has_pose) frame.pose = QuantizeLeanPose(frame.pose);
+  else frame.pose = {};
+  return frame;
+}
+
+AudioPose ToClassicAudioPose(AudioPose frame, const HeadPose& fallback_pose) {
+  if (frame.codec != AudioCodec::kOpusLean) return frame;
+  frame.codec = AudioCodec::kOpus;
+  if (!frame.has_pose) frame.pose = fallback_pose;
+  frame.has_pose = true;
+  return frame;
+}
+
+void BindHeaderToPayload(const Payload& payload, Header* header) {
+  header->type = TypeOf(payload);
+  if (const auto* a = std::get_if<AudioPose>(&payload); a != nullptr && a->codec == AudioCodec::kOpusLean) {
+    header->sequence = a->sequence;
+    header->capture_time_us = a->capture_time_us;
+  }
+}
+
 std::vector<uint8_t> EncodePayload(const Payload& payload) {
   std::vector<uint8_t> out;
   ByteWriter w(&out);
@@ -674,10 +842,19 @@ StatusOr<Payload> DecodePayload(MessageType type, std::span<const uint8_t> bytes
   return DataLoss("unknown message type " + Str(static_cast<uint16_t>(type)));
 }
 
+StatusOr<Payload> DecodePayload(const Header& header, std::span<const uint8_t> bytes, const Limits& l) {
+  HOLO_ASSIGN_OR_RETURN(Payload p, DecodePayload(header.type, bytes, l));
+  if (auto* a = std::get_if<AudioPose>(&p); a != nullptr && a->codec == AudioCodec::kOpusLean) {
+    a->sequence = header.sequence;
+    a->capture_time_us = header.capture_time_us;
+  }
+  return p;
+}
+
 std::vector<uint8_t> EncodeMessage(Header header, const Payload& payload) {
   const std::vector<uint8_t> body = EncodePayload(payload);
   HOLO_CHECK(body.size() <= 0xFFFFFFFFull);
-  header.type = TypeOf(payload);
+  BindHeaderToPayload(payload, &header);
   header.payload_length = static_cast<uint32_t>(body.size());
   std::vector<uint8_t> out(kHeaderSize);
   EncodeHeader(header, out.data());
@@ -688,7 +865,7 @@ std::vector<uint8_t> EncodeMessage(Header header, const Payload& payload) {
 std::vector<std::vector<uint8_t>> EncodeFragmented(Header header, const Payload& payload, size_t fragment_bytes) {
   HOLO_CHECK(fragment_bytes > 0);
   const std::vector<uint8_t> body = EncodePayload(payload);
-  header.type = TypeOf(payload);
+  BindHeaderToPayload(payload, &header);
   std::vector<std::vector<uint8_t>> frames;
   size_t off = 0;
   do {
@@ -713,7 +890,7 @@ StatusOr<Message> DecodeMessage(std::span<const uint8_t> bytes, const Limits& li
     return DataLoss("header.payload_length: says " + Str(h.payload_length) + " bytes, message has " +
                     Str(bytes.size() - kHeaderSize));
   }
-  HOLO_ASSIGN_OR_RETURN(Payload p, DecodePayload(h.type, bytes.subspan(kHeaderSize), limits));
+  HOLO_ASSIGN_OR_RETURN(Payload p, DecodePayload(h, bytes.subspan(kHeaderSize), limits));
   return Message{h, std::move(p)};
 }
 
@@ -765,7 +942,7 @@ Status MessageAssembler::Add(Frame&& frame, bool* complete, Message* out) {
   auto it = partial_.find(key);
   const bool more = frame.header.flags & kFlagMoreFragments;
   if (it == partial_.end() && !more) {
-    HOLO_ASSIGN_OR_RETURN(Payload p, DecodePayload(frame.header.type, frame.payload, limits_));
+    HOLO_ASSIGN_OR_RETURN(Payload p, DecodePayload(frame.header, frame.payload, limits_));
     *out = Message{frame.header, std::move(p)};
     *complete = true;
     return OkStatus();
@@ -793,7 +970,7 @@ Status MessageAssembler::Add(Frame&& frame, bool* complete, Message* out) {
   h.payload_length = static_cast<uint32_t>(p.bytes.size());
   std::vector<uint8_t> bytes = std::move(p.bytes);
   partial_.erase(it);
-  HOLO_ASSIGN_OR_RETURN(Payload payload, DecodePayload(h.type, bytes, limits_));
+  HOLO_ASSIGN_OR_RETURN(Payload payload, DecodePayload(h, bytes, limits_));
   *out = Message{h, std::move(payload)};
   *complete = true;
   return OkStatus();

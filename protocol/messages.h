@@ -57,7 +57,11 @@ enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2 };
 // kV1: per-pod inter-frame video (protocol/video_codec.h); its blobs need a
 // VideoDecoder per pod stream, not DecodeColor.
 enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */, kV1 = 4 };
-enum class AudioCodec : uint8_t { kPcm16 = 1, kOpus = 2 };
+// kOpusLean: Opus in the lean AudioPose layout (PROTOCOL.md §9.1): sequence
+// and capture time come from the header, the head pose is quantized.
+enum class AudioCodec : uint8_t { kPcm16 = 1, kOpus = 2, kOpusLean = 3 };
+// The highest audio codec id this build knows.
+inline constexpr uint8_t kMaxAudioCodec = 3;
 // Depth codecs of PodFrame (protocol/depth_codec.h): D1 = zstd of
 // median-predicted residuals; D2 = plane-predicted residuals, context-modelled rANS.
 enum class DepthCodec : uint8_t { kD1 = 1, kD2 = 2 };
@@ -191,7 +195,12 @@ struct HeadPose {
 };
 
 // 20 ms of one participant's audio (one Opus packet, or PCM s16 mono) plus
-// where their head was.
+// where their head was. With `codec` kOpusLean the payload is the lean layout
+// (PROTOCOL.md §9.1): `channels`, `sample_rate` and `duration_us_div10` are
+// implied (1, 48000, 2000), `sequence` and `capture_time_us` travel in the
+// protocol header (EncodeMessage / MakeWireMessage copy them there, the
+// header overload of DecodePayload copies them back), and the pose is
+// quantized (LeanPoseQuantum).
 struct AudioPose {
   AudioCodec codec = AudioCodec::kOpus;
   uint8_t channels = 1;
@@ -200,9 +209,37 @@ struct AudioPose {
   uint32_t sequence = 0;
   int64_t capture_time_us = 0;
   HeadPose pose;
+  // Lean layout only: false = the frame carries no pose (the sender sends it
+  // every other frame); `pose` is then zero and the receiver keeps the pose
+  // it had (audio::JitterBuffer interpolates). Always true for codecs 1, 2.
+  bool has_pose = true;
   std::vector<uint8_t> audio;
   bool operator==(const AudioPose&) const = default;
 };
+
+// The lean layout's quantization of a head pose (PROTOCOL.md §9.1): position
+// in whole millimetres (i16, or i32 when a coordinate is beyond ±32.767 m),
+// angles wrapped to [−π, π) in steps of 2π/65536 rad. Non-finite values
+// become 0; positions are clamped to ±1 km. The result is what a receiver
+// of the lean frame gets: error ≤ 0.5 mm and ≤ π/65536 rad (0.0028°) per
+// angle (plus a multiple of 2π for angles outside [−π, π)).
+HeadPose QuantizeLeanPose(const HeadPose& pose);
+// The pose a fraction `t` of the way from `a` to `b` (t > 1 extrapolates):
+// positions linearly, each angle along the shorter arc, wrapped to [−π, π].
+// Receivers fill a lean frame sent without a pose with it: halfway (t = 0.5)
+// between the frames before and after, or from the last two poses when the
+// next frame is not there yet.
+HeadPose LerpPose(const HeadPose& a, const HeadPose& b, float t);
+inline HeadPose MidwayPose(const HeadPose& a, const HeadPose& b) { return LerpPose(a, b, 0.5f); }
+// Bytes of a lean AudioPose payload besides the Opus packet: codec + flags
+// (2), plus the pose when `has_pose` (12 bytes, 18 when a coordinate is beyond
+// ±32.767 m).
+size_t LeanAudioPoseOverhead(const AudioPose& frame);
+// `frame` in the lean layout (codec kOpusLean) from a classic Opus frame, and
+// back (lean → kOpus; a frame without pose gets `fallback_pose`). The Opus
+// bytes are copied unchanged.
+AudioPose ToLeanAudioPose(AudioPose frame);
+AudioPose ToClassicAudioPose(AudioPose frame, const HeadPose& fallback_pose = {});
 
 // A viewer's / thin client's head pose, sent at display rate.
 struct ClientPose {
@@ -329,6 +366,12 @@ using Payload = std::variant<Hello, Welcome, Refuse, RigMessage, MeshFrame, Colo
 
 MessageType TypeOf(const Payload& p);
 
+// Sets `header->type` from `payload`, and for a lean AudioPose (codec
+// kOpusLean) `header->sequence` and `header->capture_time_us` from the
+// frame: the lean payload does not carry them. Every encoder of a whole
+// message calls it (EncodeMessage, EncodeFragmented, net::MakeWireMessage).
+void BindHeaderToPayload(const Payload& payload, Header* header);
+
 // A whole message: header fields (payload_length and type are derived) + payload.
 struct Message {
   Header header;
@@ -339,7 +382,13 @@ struct Message {
 // HOLO_CHECKs invariants the caller controls (strings within u16, etc.).
 std::vector<uint8_t> EncodePayload(const Payload& payload);
 // Decodes the payload bytes of a message of type `type`. Safe on untrusted input.
+// A lean AudioPose decodes with sequence and capture time 0: use the overload
+// below, which takes them from the header.
 StatusOr<Payload> DecodePayload(MessageType type, std::span<const uint8_t> bytes, const Limits& limits = {});
+// The same for the payload of a message with `header` (type from
+// header.type); a lean AudioPose takes its sequence and capture time from it.
+// Safe on untrusted input.
+StatusOr<Payload> DecodePayload(const Header& header, std::span<const uint8_t> bytes, const Limits& limits = {});
 
 // Header + payload in one buffer (not fragmented). `header.type` and
 // `header.payload_length` are overwritten from the payload.

@@ -317,8 +317,13 @@ int main(int argc, char** argv) {
   app.add_option("--gap", gap_m, "face-to-face: distance between the two displays' rooms, m")->capture_default_str()->check(CLI::Range(0.0, 100.0));
   app.add_option("--duration", duration_s, "seconds of speech to play (the input repeats); 0 = one circle / one walk / the input once")
       ->capture_default_str()->check(CLI::Range(0.0, 600.0));
-  app.add_option("--codec", codec, "opus or pcm")->capture_default_str()->check(CLI::IsMember({"opus", "pcm"}));
-  app.add_option("--bitrate", bitrate, "Opus bitrate, bit/s")->capture_default_str()->check(CLI::Range(6000, 510000));
+  app.add_option("--codec", codec,
+                 "opus (classic frame), opus-lean (lean frame: PROTOCOL.md 9.1, its measured Opus settings) or pcm")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"opus", "opus-lean", "pcm"}));
+  auto* bitrate_opt = app.add_option("--bitrate", bitrate, "Opus bitrate, bit/s (opus-lean: 14000 unless given)")
+                          ->capture_default_str()
+                          ->check(CLI::Range(6000, 510000));
   app.add_flag("--no-fec", no_fec, "Opus without in-band FEC");
   app.add_option("--delay-ms", delay_ms, "network one-way delay, ms")->capture_default_str()->check(CLI::Range(0.0, 10000.0));
   app.add_option("--jitter-ms", jitter_ms, "network jitter: extra delay U(0, J) ms per packet")->capture_default_str()->check(CLI::Range(0.0, 10000.0));
@@ -401,7 +406,12 @@ int main(int argc, char** argv) {
 
   // ---- the chain
   VoiceChainOptions o;
-  o.encoder.codec = codec == "opus" ? AudioCodec::kOpus : AudioCodec::kPcm16;
+  if (codec == "opus-lean") {
+    o.encoder = LeanVoiceEncoderOptions();
+    if (bitrate_opt->count() == 0) bitrate = o.encoder.bitrate_bps;
+  } else {
+    o.encoder.codec = codec == "opus" ? AudioCodec::kOpus : AudioCodec::kPcm16;
+  }
   o.encoder.bitrate_bps = bitrate;
   o.encoder.fec = !no_fec;
   o.network.base_delay_ms = delay_ms;

@@ -251,8 +251,8 @@ StatusOr<std::unique_ptr<Participant>> Participant::Start(ParticipantOptions opt
     pub.tls.enabled = call.tls;
     pub.tls.ca_file = call.tls_ca_file;
     HOLO_ASSIGN_OR_RETURN(m.talker, SiteClient::Start(pub));
-    audio::VoiceEncoderOptions eo;
-    HOLO_ASSIGN_OR_RETURN(m.encoder, audio::VoiceEncoder::Create(eo));
+    // Lean frames; SiteClient sends them in the classic layout to a site that has only that.
+    HOLO_ASSIGN_OR_RETURN(m.encoder, audio::VoiceEncoder::Create(audio::LeanVoiceEncoderOptions()));
     m.voice_thread = std::thread([&m] { m.VoiceLoop(); });
   }
   m.audio_thread = std::thread([&m] { m.AudioLoop(); });

@@ -15,7 +15,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static auto opus = holo::audio::VoiceDecoder::Create(holo::audio::AudioCodec::kOpus);
   static auto pcm = holo::audio::VoiceDecoder::Create(holo::audio::AudioCodec::kPcm16);
   HOLO_CHECK(opus.ok() && pcm.ok());
-  auto& decoder = frame->codec == holo::audio::AudioCodec::kOpus ? *opus : *pcm;
+  auto& decoder = holo::audio::IsOpus(frame->codec) ? *opus : *pcm;
   auto samples = decoder->Decode(frame->audio);
   if (samples.ok()) HOLO_CHECK(samples->size() == holo::audio::kFrameSamples);
   return 0;

@@ -20,7 +20,7 @@ StatusOr<RecordingInspection> InspectRecording(const RecordingReader& reader, bo
     HOLO_ASSIGN_OR_RETURN(RecordedMessage m, reader.ReadAt(at));
     at = m.next_offset;
     const auto type = static_cast<uint16_t>(m.header.type);
-    auto payload = protocol::DecodePayload(m.header.type,
+    auto payload = protocol::DecodePayload(m.header,
                                            std::span<const uint8_t>(*m.bytes).subspan(protocol::kHeaderSize));
     if (!payload.ok())
       return payload.status().WithContext(reader.path() + ": offset " + std::to_string(m.offset) + ": " +

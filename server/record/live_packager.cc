@@ -209,7 +209,7 @@ Status LivePackager::AddMessage(std::span<const uint8_t> frame, int64_t receive_
   if (header->flags & protocol::kFlagMoreFragments) return reject("a fragment (reassemble first)");
   if (!Packaged(header->type))
     return reject(std::string("message type ") + protocol::MessageTypeName(header->type) + " is not broadcast");
-  auto payload = protocol::DecodePayload(header->type, frame.subspan(protocol::kHeaderSize), limits);
+  auto payload = protocol::DecodePayload(*header, frame.subspan(protocol::kHeaderSize), limits);
   if (!payload.ok()) return reject("message payload: " + payload.status().message());
 
   const int64_t t = MediaTime(receive_unix_us);

@@ -210,7 +210,7 @@ Status RecordingWriter::WriteMessage(int64_t time_us, std::span<const uint8_t> f
     return InvalidArgument("message time " + std::to_string(time_us) + " µs goes back (last " +
                            std::to_string(stats_.duration_us) + " µs)");
   if (options_.validate_payloads) {
-    auto payload = protocol::DecodePayload(header->type, frame.subspan(protocol::kHeaderSize), limits_);
+    auto payload = protocol::DecodePayload(*header, frame.subspan(protocol::kHeaderSize), limits_);
     if (!payload.ok()) return InvalidArgument("message payload: " + payload.status().message());
   }
   const bool key = header->type == protocol::MessageType::kMeshFrame && (header->flags & protocol::kFlagKeyFrame);

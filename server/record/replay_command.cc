@@ -217,7 +217,7 @@ int RunReplayCommand(const ReplayCommandOptions& o) {
     }
     int64_t frame_index = -1;
     if (h.type == protocol::MessageType::kMeshFrame && (!o.export_dir.empty() || stats != nullptr)) {
-      auto payload = protocol::DecodePayload(h.type, std::span<const uint8_t>(*frame).subspan(protocol::kHeaderSize));
+      auto payload = protocol::DecodePayload(h, std::span<const uint8_t>(*frame).subspan(protocol::kHeaderSize));
       if (!payload.ok()) {
         if (sink_error.ok()) sink_error = payload.status();
         return;

@@ -116,7 +116,7 @@ StatusOr<std::unique_ptr<ReplayServer>> ReplayServer::Start(std::shared_ptr<cons
   if (!sum.index.empty()) {
     auto m = reader->ReadAt(sum.index.front().offset);
     if (!m.ok()) return m.status();
-    auto p = protocol::DecodePayload(m->header.type,
+    auto p = protocol::DecodePayload(m->header,
                                      std::span<const uint8_t>(*m->bytes).subspan(protocol::kHeaderSize));
     if (p.ok() && std::holds_alternative<protocol::MeshFrame>(*p))
       rs->server_->SetPublishedCodecs(std::get<protocol::MeshFrame>(*p).codec, protocol::ColorCodec::kC1);

@@ -40,7 +40,9 @@ struct SiteVoiceOptions {
   // "synthetic", "mic", "mic:DEVICE" or the path of a WAV file ("off" is
   // handled by the caller: no SiteVoice).
   std::string source = "synthetic";
-  audio::VoiceEncoderOptions encoder;
+  // Lean frames (PROTOCOL.md §9.1) by default; the server sends viewers that
+  // only know the classic layout the same packets in it.
+  audio::VoiceEncoderOptions encoder = audio::LeanVoiceEncoderOptions();
   // Seed of the synthetic voice's syllables.
   uint64_t seed = 1;
 };

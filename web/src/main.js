@@ -262,8 +262,10 @@ async function handle(m) {
 }
 
 function playVoice(m) {
-  const a = parseAudioPose(m.payload);
+  const a = parseAudioPose(m.payload, m.header);
   state.audioChunks++;
+  // A lean frame sent without its pose (every other frame) keeps the last one.
+  if (!a.pose) a.pose = state.lastPose || { x: 0, y: 0, z: 0, yaw: 0, pitch: 0, roll: 0 };
   state.lastPose = a.pose;
   const aheadUs = m.timeUs - (nowUnixUs() - availStartUs - delayUs);
   if (aheadUs > -100000) voice.push(a, aheadUs);  // late voice is skipped, never stacked

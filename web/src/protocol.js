@@ -153,10 +153,51 @@ export function parseColorFrame(payload) {
   return { frameIndex, codec, images };
 }
 
-export function parseAudioPose(payload) {
+// Lean AudioPose (codec 3, PROTOCOL.md §9.1): sequence and capture time are
+// the header's; position in mm (i16, or i32 with flag 2), angles in steps of
+// 2π/65536 rad; the Opus packet is the rest of the payload (1..1275 bytes).
+// Without a pose (flag 1 clear) `pose` is null: the caller keeps the last one.
+const LEAN_ANGLE_STEP = 2 * Math.PI / 65536;
+function parseLeanAudioPose(r, header) {
+  if (!header) fail('audio_pose: a lean frame (codec 3) needs its message header');
+  const flags = r.u8('audio_pose.lean_flags');
+  if (flags & ~3) fail('audio_pose.lean_flags: unknown flag bits set');
+  const hasPose = (flags & 1) !== 0, wide = (flags & 2) !== 0;
+  if (wide && !hasPose) fail('audio_pose.lean_flags: wide position without a pose');
+  let pose = null;
+  if (hasPose) {
+    const mm = [];
+    for (let i = 0; i < 3; ++i) {
+      if (wide) {
+        const v = r.i32('audio_pose.lean_position');
+        if (v > 1000000 || v < -1000000) fail('audio_pose.lean_position: beyond ±1 km');
+        mm.push(v);
+      } else {
+        const u = r.u16('audio_pose.lean_position');
+        mm.push(u >= 32768 ? u - 65536 : u);
+      }
+    }
+    const ang = [];
+    for (let i = 0; i < 3; ++i) {
+      const u = r.u16('audio_pose.lean_angle');
+      ang.push((u >= 32768 ? u - 65536 : u) * LEAN_ANGLE_STEP);
+    }
+    pose = { x: mm[0] / 1000, y: mm[1] / 1000, z: mm[2] / 1000, yaw: ang[0], pitch: ang[1], roll: ang[2] };
+  }
+  const n = r.remaining();
+  if (n === 0) fail('audio_pose.audio: lean frame without an Opus packet');
+  if (n > 1275) fail(`audio_pose.audio: lean frame's Opus packet of ${n} bytes exceeds 1275`);
+  const audio = r.bytesView(n, 'audio_pose.audio');
+  return { codec: 3, channels: 1, durationUs: 20000, sampleRate: 48000, sequence: header.sequence,
+    captureUs: header.captureUs, pose, hasPose, audio };
+}
+
+// `header` (parseHeader's) is needed for lean frames (codec 3).
+export function parseAudioPose(payload, header = null) {
   const r = new Reader(payload);
   const codec = r.u8('audio_pose.codec');
-  if (codec < 1 || codec > 2) fail(`audio_pose.codec: unknown audio codec ${codec}`);
+  if (codec < 1 || codec > 3) fail(`audio_pose.codec: unknown audio codec ${codec}`);
+  if (codec === 3) return parseLeanAudioPose(r, header);
   const channels = r.u8('audio_pose.channels');
   if (channels < 1 || channels > 2) fail(`audio_pose.channels: must be 1 or 2, got ${channels}`);
   const duration = r.u16('audio_pose.duration');
@@ -173,5 +214,5 @@ export function parseAudioPose(payload) {
   if (codec === 1 && n !== Math.round(duration * 10 * sampleRate / 1e6) * channels * 2) {
     fail(`audio_pose.audio: ${n} PCM bytes do not match the duration`);
   }
-  return { codec, channels, durationUs: duration * 10, sampleRate, sequence, captureUs, pose, audio };
+  return { codec, channels, durationUs: duration * 10, sampleRate, sequence, captureUs, pose, hasPose: true, audio };
 }

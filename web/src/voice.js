@@ -60,7 +60,7 @@ export class SpatialVoice {
         for (let i = 0; i < n; ++i) ch[i] = dv.getInt16(2 * (i * a.channels + c), true) / 32768;
       }
       this.play(buf, when);
-    } else if (a.codec === 2 && globalThis.AudioDecoder) {
+    } else if ((a.codec === 2 || a.codec === 3) && globalThis.AudioDecoder) {  // classic or lean Opus frame
       this.decodeOpus(a, when);
     }
   }

@@ -46,7 +46,7 @@ const meshes = new Map(), colors = new Map();
 for (const m of messages) {
   if (m.header.type === MSG.MESH) meshes.set(parseMeshFrame(m.payload).frameIndex, m);
   if (m.header.type === MSG.COLOR) colors.set(parseColorFrame(m.payload).frameIndex, m);
-  if (m.header.type === MSG.AUDIO) parseAudioPose(m.payload);
+  if (m.header.type === MSG.AUDIO) parseAudioPose(m.payload, m.header);
 }
 
 // ---- geometry, exactly
@@ -199,6 +199,46 @@ for (let n = 1; n < recs.length; n += 7) {
   if (expectDecodeError(() => parseRecords(recs.subarray(0, n)), `records prefix ${n}`)) recRefused++;
 }
 console.log(`records: ${recRefused} truncated runs refused`);
+// Lean AudioPose (codec 3): PROTOCOL.md §9.1's example, byte for byte (the
+// C++ side pins the same bytes in tests/audio/lean_frame_test.cc).
+{
+  const lean = Uint8Array.from([0x03, 0x01, 0xd2, 0x04, 0x0c, 0xfe, 0x40, 0x06, 0x00, 0x40, 0xed, 0xfb, 0x00, 0x00,
+    0xf8, 0xff, 0xfe]);
+  const header = { type: MSG.AUDIO, sequence: 42, captureUs: 1000000 };
+  const a = parseAudioPose(lean, header);
+  check(a.codec === 3 && a.sequence === 42 && a.captureUs === 1000000 && a.sampleRate === 48000 && a.channels === 1,
+    `lean frame: fields ${JSON.stringify({ codec: a.codec, sequence: a.sequence, captureUs: a.captureUs })}`);
+  check(a.hasPose && Math.abs(a.pose.x - 1.234) < 1e-9 && Math.abs(a.pose.y + 0.5) < 1e-9 && Math.abs(a.pose.z - 1.6) < 1e-9,
+    `lean frame: position ${a.pose && [a.pose.x, a.pose.y, a.pose.z]}`);
+  check(Math.abs(a.pose.yaw - Math.PI / 2) < 1e-9 && Math.abs(a.pose.pitch + 0.1) < 1e-4 && a.pose.roll === 0,
+    `lean frame: angles ${a.pose && [a.pose.yaw, a.pose.pitch, a.pose.roll]}`);
+  check(a.audio.length === 3 && a.audio[0] === 0xf8, 'lean frame: the Opus packet is the rest of the payload');
+  const bare = parseAudioPose(Uint8Array.from([0x03, 0x00, 0xf8, 0xff, 0xfe]), header);
+  check(!bare.hasPose && bare.pose === null && bare.audio.length === 3, 'lean frame without a pose');
+  check(expectDecodeError(() => parseAudioPose(lean), 'lean without header'), 'a lean frame without its header is refused');
+  let leanRefused = 0;
+  for (let n = 0; n < lean.length; ++n) {
+    // Cut before the Opus packet: refused; within it: a shorter packet (valid on this layer).
+    if (expectDecodeError(() => parseAudioPose(lean.slice(0, n), header), `lean prefix ${n}`)) leanRefused++;
+    else check(n > 14, `lean prefix ${n} was accepted`);
+  }
+  check(leanRefused === 15, `lean: ${leanRefused} of 15 prefixes without Opus bytes refused`);
+  let leanFlipsOk = 0;
+  for (let i = 0; i < lean.length * 8; ++i) {
+    const b = lean.slice();
+    b[i >> 3] ^= 1 << (i & 7);
+    let f = null;
+    if (!expectDecodeError(() => { f = parseAudioPose(b, header); }, `lean flip ${i}`) && f) {
+      const p = f.pose || { x: 0, y: 0, z: 0, yaw: 0, pitch: 0, roll: 0 };
+      check([p.x, p.y, p.z, p.yaw, p.pitch, p.roll].every(Number.isFinite) && f.audio.length >= 1,
+        `lean flip ${i}: decoded an invalid frame`);
+      leanFlipsOk++;
+    }
+  }
+  console.log(`lean audio_pose: ${leanRefused} truncated prefixes refused; ${lean.length * 8} bit flips: ` +
+    `${lean.length * 8 - leanFlipsOk} refused, ${leanFlipsOk} decoded to valid frames`);
+}
+
 geometryMs.sort((a, b) => a - b);
 console.log(JSON.stringify({ figure: 'web_decode_node', geometry_ms_median: geometryMs[geometryMs.length >> 1] }));
 
