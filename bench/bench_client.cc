@@ -58,6 +58,7 @@ struct ClientBenchOptions {
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
   int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
+  std::string gpu_visibility;                    // 0 | 1: ProjectiveOptions::gpu_visibility (default: the renderer's)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -356,6 +357,8 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     if (options.max_pods_per_triangle >= 0) base.projective.max_pods_per_triangle = options.max_pods_per_triangle;
     q["pods_per_vertex"] = std::to_string(base.projective.pods_per_vertex);
     q["max_pods_per_triangle"] = std::to_string(base.projective.max_pods_per_triangle);
+    if (!options.gpu_visibility.empty()) base.projective.gpu_visibility = options.gpu_visibility == "1";
+    q["visibility"] = base.projective.gpu_visibility ? "gl" : "cpu";
     if (!(*renderer)->SetRemoteMesh(c.mesh).ok()) return 1;
     if (holo::Status s = (*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()); !s.ok())
       return Fail(s);
@@ -500,6 +503,9 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--max-pods-per-triangle", o->max_pods_per_triangle,
                  "pods a triangle is textured from at most (default: the renderer's)")
       ->check(CLI::Range(1, holo::render::Renderer::kMaxPods));
+  app.add_option("--gpu-visibility", o->gpu_visibility,
+                 "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
+      ->check(CLI::IsMember({"0", "1"}));
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 

@@ -11,6 +11,7 @@
 #include "client/render/gl_util.h"
 #include "client/render/view.h"
 #include "common/clock.h"
+#include "texture/mesh_renderer.h"
 
 namespace holo::render {
 namespace {
@@ -284,6 +285,7 @@ ProjectiveOptions ProjectiveOptions::Legacy() {
   o.use_masks = false;
   o.cull_back_faces = true;
   o.pods_per_vertex = 0;
+  o.gpu_visibility = true;
   return o;
 }
 
@@ -612,9 +614,75 @@ Status Renderer::SetPodImages(const Rig& rig, const std::vector<const ImageRgb8*
   return CheckGlError("SetPodImages");
 }
 
+Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
+  const int n = num_pods_;
+  while (static_cast<int>(pod_rasters_.size()) < n) pod_rasters_.push_back(std::make_unique<MeshRasterizer>());
+  pod_raw_z_.resize(n);
+  pod_flagged_z_.resize(n);
+  const float jump = options.discontinuity_jump_m, radius = options.discontinuity_radius_m;
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  for (int i = 0; i < n; ++i) {
+    const CameraModel& cam = pod_cameras_[i];
+    const int w = cam.intrinsics.width, h = cam.intrinsics.height;
+    MeshRasterizer& raster = *pod_rasters_[i];
+    raster.Rasterize(remote_positions_, remote_triangles_, cam, /*want_attributes=*/false, options.cull_back_faces,
+                     0.05f);
+    const std::vector<float>& iz = raster.inv_z();
+    std::vector<float>& raw = pod_raw_z_[i];
+    std::vector<float>& flagged = pod_flagged_z_[i];
+    raw.assign(static_cast<size_t>(w) * h, 0.0f);
+    flagged.assign(raw.size(), 0.0f);
+    const int x0 = raster.box_x0(), y0 = raster.box_y0(), x1 = raster.box_x1(), y1 = raster.box_y1();
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const size_t k = static_cast<size_t>(y) * w + x;
+        if (iz[k] > 0.0f) raw[k] = 1.0f / iz[k];
+      }
+    }
+    // Discontinuity flags as the GL pass (kEdgeFs) computes them: a
+    // neighbour at the radius (discontinuity_radius_m at this depth, 1..8
+    // px, clamped to the image) empty or more than the jump away.
+    static constexpr int kOffsets[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-1, -1}, {1, 1}, {-1, 1}, {1, -1}};
+    const float fx = static_cast<float>(cam.intrinsics.fx);
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const size_t k = static_cast<size_t>(y) * w + x;
+        const float z = raw[k];
+        if (z <= 0.0f) continue;
+        const int r = std::clamp(static_cast<int>(std::ceil(radius * fx / z)), 1, 8);
+        bool edge = false;
+        for (const auto& o : kOffsets) {
+          const int xx = std::clamp(x + o[0] * r, 0, w - 1), yy = std::clamp(y + o[1] * r, 0, h - 1);
+          const float zq = raw[static_cast<size_t>(yy) * w + xx];
+          edge |= zq <= 0.0f || std::abs(zq - z) > jump;
+        }
+        flagged[k] = edge ? -z : z;
+      }
+    }
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, w, h, 1, GL_RED, GL_FLOAT, raw.data());
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
+  for (int i = 0; i < n; ++i) {
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RED, GL_FLOAT,
+                    pod_flagged_z_[i].data());
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  edge_jump_m_ = jump;
+  edge_radius_m_ = radius;
+  cpu_maps_ = true;
+  vis_gpu_ = false;
+  vis_cull_ = options.cull_back_faces;
+  visibility_dirty_ = false;
+  selection_dirty_ = true;
+  return CheckGlError("pod visibility maps (CPU)");
+}
+
 Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
   if (num_pods_ == 0) return InvalidArgument("no pod images: call SetPodImages before projective texturing");
+  if (!options.gpu_visibility) return UpdateVisibilityCpu(options);
   constexpr float kNear = 0.05f, kFar = 100.0f;
   GLint old_fbo = 0;
   glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &old_fbo);
@@ -697,6 +765,9 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
   edge_jump_m_ = options.discontinuity_jump_m;
   edge_radius_m_ = options.discontinuity_radius_m;
+  cpu_maps_ = false;
+  vis_gpu_ = true;
+  vis_cull_ = options.cull_back_faces;
   visibility_dirty_ = false;
   selection_dirty_ = true;
   return CheckGlError("pod visibility pass");
@@ -811,17 +882,19 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     selection_stats_.mean_pods = n;
   } else {
     // The flagged depth maps of the visibility pass (camera z, negative
-    // near a discontinuity), read back once per mesh.
-    std::vector<std::vector<float>> depth(n);
+    // near a discontinuity): the CPU pass's, or read back once per mesh.
+    std::vector<std::vector<float>> readback;
+    if (!cpu_maps_) readback.resize(n);
+    const std::vector<std::vector<float>>& depth = cpu_maps_ ? pod_flagged_z_ : readback;
     GLint old_fbo = 0;
     glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
     glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
     glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    for (int i = 0; i < n; ++i) {
+    for (int i = 0; i < n && !cpu_maps_; ++i) {
       const Intrinsics& in = pod_cameras_[i].intrinsics;
-      depth[i].resize(static_cast<size_t>(in.width) * in.height);
+      readback[i].resize(static_cast<size_t>(in.width) * in.height);
       glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
-      glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, depth[i].data());
+      glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, readback[i].data());
     }
     glBindFramebuffer(GL_READ_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
     HOLO_RETURN_IF_ERROR(CheckGlError("pod depth readback"));
@@ -993,6 +1066,12 @@ void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
 Status Renderer::ReadPodDepth(int i, ImageFloat* out) {
   if (i < 0 || i >= num_pods_) return InvalidArgument("no pod " + std::to_string(i));
   if (visibility_dirty_) HOLO_RETURN_IF_ERROR(UpdateVisibility());
+  if (cpu_maps_) {
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    out->Resize(in.width, in.height);
+    std::copy(pod_raw_z_[i].begin(), pod_raw_z_[i].end(), out->data());
+    return OkStatus();
+  }
   GLint old_fbo = 0;
   glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
   glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
@@ -1017,7 +1096,8 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     HOLO_RETURN_IF_ERROR(settings.projective.Check());
     if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
     if (visibility_dirty_ || settings.projective.discontinuity_jump_m != edge_jump_m_ ||
-        settings.projective.discontinuity_radius_m != edge_radius_m_) {
+        settings.projective.discontinuity_radius_m != edge_radius_m_ ||
+        settings.projective.gpu_visibility != vis_gpu_ || settings.projective.cull_back_faces != vis_cull_) {
       HOLO_RETURN_IF_ERROR(UpdateVisibility(settings.projective));
     }
     const ProjectiveOptions& po = settings.projective;

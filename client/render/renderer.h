@@ -31,6 +31,10 @@
 #include "common/rig.h"
 #include "common/status.h"
 
+namespace holo {
+class MeshRasterizer;
+}
+
 namespace holo::render {
 
 enum class ColorMode { kVertexColor, kProjective };
@@ -85,6 +89,12 @@ struct ProjectiveOptions {
   // everywhere (one draw call, the renderer before selection existed).
   int pods_per_vertex = 3;
   int max_pods_per_triangle = 4;
+  // The pods' visibility maps (depth and discontinuity flags, once per mesh)
+  // from the CPU rasterizer (texture/mesh_renderer.h) and uploaded, or
+  // rendered by GL as before. On llvmpipe the CPU path is several times
+  // cheaper (8 small draws of the whole mesh cost GL more than the CPU's
+  // triangle setup); the maps are the same up to the rasterizers' rounding.
+  bool gpu_visibility = false;
   Status Check() const;
   // The renderer as it was before masks and edge weights (for before/after
   // comparisons): masks ignored, back faces culled in the pods' depth maps.
@@ -229,6 +239,14 @@ class Renderer {
   // Per-vertex pod bits of the remote mesh (attribute 3).
   unsigned remote_pods_vbo_ = 0;
   size_t remote_pods_vbo_bytes_ = 0;
+  // The CPU visibility path: one rasterizer per pod, and the maps of the
+  // last pass (camera z; flagged: negated near a discontinuity; 0 = empty),
+  // pod image size each.
+  std::vector<std::unique_ptr<MeshRasterizer>> pod_rasters_;
+  std::vector<std::vector<float>> pod_raw_z_, pod_flagged_z_;
+  bool cpu_maps_ = false;  // the last visibility pass was the CPU one
+  bool vis_gpu_ = false, vis_cull_ = false;
+  Status UpdateVisibilityCpu(const ProjectiveOptions& options);
   // CPU copy of the remote mesh (normals computed when missing) for the
   // pod selection, in the order the mesh came.
   std::vector<Eigen::Vector3f> remote_positions_, remote_normals_;
