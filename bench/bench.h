@@ -54,6 +54,8 @@ void EmitFigure(const std::string& bench, const std::string& workload, const std
                 const std::string& unit, const std::map<std::string, std::string>& qualifiers = {});
 
 double Median(std::vector<double> values);
+// `v` with `digits` digits after the point ("%.*f"), for qualifiers.
+std::string Fixed(double v, int digits);
 // CPU time of the whole process so far (all threads), ms: steadier than wall
 // time on a shared machine.
 double ProcessCpuMs();

@@ -57,18 +57,6 @@ Ears Measure(float azimuth_deg, float facing_offset_deg) {
   return e;
 }
 
-std::string Fmt(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.1f", v);
-  return b;
-}
-
-std::string Fmt3(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4f", v);
-  return b;
-}
-
 // Echo cancellation on a simulated loudspeaker call: 10 s of read speech
 // played as stereo (the far end), through a synthetic room (37 ms
 // playout → capture delay, RT60 0.25 s), picked up with −80 dBFS sensor noise;
@@ -152,13 +140,13 @@ int RunEchoAndHrtf() {
     const std::string name = AecEngineName(e);
     const std::string room = "speech_10s_room_rt60_0.25s_delay_37ms";
     EmitFigure("audio", room, "erle_db", f->erle_st, "dB",
-               {{"engine", name}, {"talk", "single"}, {"ns", "on"}, {"delay_estimated_ms", Fmt(f->delay_ms)},
-                {"cpu_ms_per_10ms", Fmt3(f->cpu_ms_per_10ms)}});
+               {{"engine", name}, {"talk", "single"}, {"ns", "on"}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)},
+                {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)}});
     EmitFigure("audio", room, "erle_db", f->erle_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"ns", "on"}, {"note", "lower bound: near-end distortion counts as echo"}});
     EmitFigure("audio", room, "fwsnrseg_db", f->q_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"against", "clean near-end"},
-                {"no_echo_db", Fmt(f->q_clean)}, {"echo_uncancelled_db", Fmt(f->q_mix)}});
+                {"no_echo_db", Fixed(f->q_clean, 1)}, {"echo_uncancelled_db", Fixed(f->q_mix, 1)}});
   }
   // Noise suppression: espeak-ng speech in white noise at 10 dB SNR, 1 s of noise first.
   {
@@ -211,9 +199,9 @@ int RunEchoAndHrtf() {
     const EarMeasurement m = MeasureEars(y, 2400, 21600, kSampleRate, 72);
     const std::string azs = std::to_string(az);
     EmitFigure("audio", "white_noise_1m", "itd_ms", m.itd_ms, "ms",
-               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_itd_ms", Fmt3(file->itd_ms)}});
+               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_itd_ms", Fixed(file->itd_ms, 4)}});
     EmitFigure("audio", "white_noise_1m", "ild_db", m.ild_db, "dB",
-               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_ild_db", Fmt(file->ild_db)}});
+               {{"azimuth_deg", azs}, {"hrtf", "sofa"}, {"file_ild_db", Fixed(file->ild_db, 1)}});
   }
   return 0;
 }
@@ -258,9 +246,9 @@ int RunAudio(const BenchArgs& args) {
     EmitFigure("audio", w, "kbps", kbps, "kbit/s", {{"codec", name}, {"includes", "audio+pose+header"}});
     // Per 20 ms frame: CPU time (steady on the shared machine), wall time beside it.
     EmitFigure("audio", w, "encode_ms", Median(enc_cpu), "ms",
-               {{"codec", name}, {"mode", "cpu"}, {"wall_ms", Fmt3(Median(enc_ms))}, {"runs", std::to_string(enc_ms.size())}});
+               {{"codec", name}, {"mode", "cpu"}, {"wall_ms", Fixed(Median(enc_ms), 4)}, {"runs", std::to_string(enc_ms.size())}});
     EmitFigure("audio", w, "decode_ms", Median(dec_cpu), "ms",
-               {{"codec", name}, {"mode", "cpu"}, {"wall_ms", Fmt3(Median(dec_ms))}, {"runs", std::to_string(dec_ms.size())}});
+               {{"codec", name}, {"mode", "cpu"}, {"wall_ms", Fixed(Median(dec_ms), 4)}, {"runs", std::to_string(dec_ms.size())}});
   }
   // Intelligibility of the Opus round trip against the PCM path (stated measures:
   // fwSNRseg after Hu & Loizou 2008, and waveform segmental SNR).
@@ -318,8 +306,8 @@ int RunAudio(const BenchArgs& args) {
       const double secs = static_cast<double>(frames_n) * 0.02;
       EmitFigure("audio", "espeak_speech", "fwsnrseg_db", FwSegSnrDb(*es, out, lag, kSampleRate), "dB",
                  {{"codec", "opus"}, {"bitrate_kbps", std::to_string(kbit)},
-                  {"opus_kbps", Fmt(static_cast<double>(opus_bytes) * 8 / secs / 1000)},
-                  {"wire_kbps_v1_frame", Fmt(static_cast<double>(wire_bytes) * 8 / secs / 1000)}});
+                  {"opus_kbps", Fixed(static_cast<double>(opus_bytes) * 8 / secs / 1000, 1)},
+                  {"wire_kbps_v1_frame", Fixed(static_cast<double>(wire_bytes) * 8 / secs / 1000, 1)}});
     }
   }
   for (AudioCodec codec : {AudioCodec::kOpus, AudioCodec::kPcm16}) {
@@ -339,8 +327,8 @@ int RunAudio(const BenchArgs& args) {
       EmitFigure("audio", "bursts_30s", "mouth_to_ear_ms", l->median_ms, "ms",
                  {{"codec", codec == AudioCodec::kOpus ? "opus" : "pcm"},
                   {"jitter_ms", std::to_string(jitter)},
-                  {"p95_ms", Fmt(l->p95_ms)},
-                  {"jb_target_ms", Fmt(l->jb_target_ms)},
+                  {"p95_ms", Fixed(l->p95_ms, 1)},
+                  {"jb_target_ms", Fixed(l->jb_target_ms, 1)},
                   {"bursts", std::to_string(l->bursts)},
                   {"includes", "framing 20 ms, codec look-ahead, network U(0,jitter) without base delay, jitter buffer, "
                                "10 ms playout-tick phase, one 20 ms block queued in OpenAL, HRTF; excludes encode/decode "

@@ -24,16 +24,6 @@ namespace {
 
 using namespace holo::audio;
 
-std::string F1(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.1f", v);
-  return b;
-}
-std::string F2(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.2f", v);
-  return b;
-}
 
 struct Speech {
   std::string name;  // workload
@@ -187,10 +177,10 @@ int PoseFigures() {
                         Case{"every_other_frame_extrapolated", "6", Errors(mme, dege)},
                         Case{"every_other_frame_held", "6", Errors(mmh, degh)}}) {
     EmitFigure("audio", "moving_head_60s", "pose_error_mm", c.e.max_mm, "mm",
-               {{"frame", "lean"}, {"pose", c.name}, {"stat", "max"}, {"p95", F2(c.e.p95_mm)}, {"pose_bytes_per_frame", c.bytes},
+               {{"frame", "lean"}, {"pose", c.name}, {"stat", "max"}, {"p95", Fixed(c.e.p95_mm, 2)}, {"pose_bytes_per_frame", c.bytes},
                 {"motion", "1.2 m/s walk, yaw +-60 deg at 0.5 Hz, pitch +-15 deg at 0.7 Hz"}});
     EmitFigure("audio", "moving_head_60s", "pose_error_deg", c.e.max_deg, "deg",
-               {{"frame", "lean"}, {"pose", c.name}, {"stat", "max"}, {"p95", F2(c.e.p95_deg)}, {"pose_bytes_per_frame", c.bytes}});
+               {{"frame", "lean"}, {"pose", c.name}, {"stat", "max"}, {"p95", Fixed(c.e.p95_deg, 2)}, {"pose_bytes_per_frame", c.bytes}});
   }
   return 0;
 }
@@ -231,8 +221,8 @@ int RunLeanFrames(const BenchArgs& args) {
       const std::map<std::string, std::string> q = {{"frame", f.frame},
                                                     {"codec", f.o.codec == AudioCodec::kOpusLean ? "opus-lean" : "opus"},
                                                     {"bitrate_kbps", std::to_string(f.o.bitrate_bps / 1000)},
-                                                    {"opus_kbps", F2(r->opus_kbps)},
-                                                    {"fields_bytes_per_frame", F1(r->fields_bytes)},
+                                                    {"opus_kbps", Fixed(r->opus_kbps, 2)},
+                                                    {"fields_bytes_per_frame", Fixed(r->fields_bytes, 1)},
                                                     {"header_bytes", "32"},
                                                     {"includes", "audio+pose+header"}};
       EmitFigure("audio", s.name, "kbps", r->wire_kbps, "kbit/s", q);
@@ -289,8 +279,8 @@ int RunLeanFrames(const BenchArgs& args) {
                  {{"frame", "lean"}, {"sweep", "opus"}, {"bitrate_kbps", std::to_string(st.kbit)},
                   {"rate_control", RateName(st.rc)}, {"application", st.voip ? "voip" : "audio"},
                   {"max_bandwidth", st.max_bw == 0 ? "auto" : "wideband"}, {"complexity", std::to_string(st.complexity)},
-                  {"fec", st.fec ? "on" : "off"}, {"opus_kbps", F2(r->opus_kbps)}, {"wire_kbps", F2(r->wire_kbps)},
-                  {"wideband_share", F2(r->wideband_share)}});
+                  {"fec", st.fec ? "on" : "off"}, {"opus_kbps", Fixed(r->opus_kbps, 2)}, {"wire_kbps", Fixed(r->wire_kbps, 2)},
+                  {"wideband_share", Fixed(r->wideband_share, 2)}});
     }
   }
   // 3. Pose.
@@ -310,13 +300,13 @@ int RunLeanFrames(const BenchArgs& args) {
       }
       EmitFigure("audio", "bursts_30s", "mouth_to_ear_ms", l->median_ms, "ms",
                  {{"frame", lean ? "lean" : "classic"}, {"codec", lean ? "opus-lean" : "opus"},
-                  {"jitter_ms", std::to_string(jitter)}, {"p95_ms", F1(l->p95_ms)}, {"jb_target_ms", F1(l->jb_target_ms)}});
+                  {"jitter_ms", std::to_string(jitter)}, {"p95_ms", Fixed(l->p95_ms, 1)}, {"jb_target_ms", Fixed(l->jb_target_ms, 1)}});
       if (lean) {
         const double n = static_cast<double>(l->poses_interpolated + l->poses_extrapolated + l->poses_held);
         EmitFigure("audio", "bursts_30s", "pose_interpolated_share", n > 0 ? l->poses_interpolated / n : 0.0, "ratio",
                    {{"frame", "lean"}, {"jitter_ms", std::to_string(jitter)},
-                    {"extrapolated_share", F2(n > 0 ? l->poses_extrapolated / n : 0.0)},
-                    {"held_share", F2(n > 0 ? l->poses_held / n : 0.0)}});
+                    {"extrapolated_share", Fixed(n > 0 ? l->poses_extrapolated / n : 0.0, 2)},
+                    {"held_share", Fixed(n > 0 ? l->poses_held / n : 0.0, 2)}});
       }
     }
   }

@@ -1,5 +1,7 @@
 #include "common/yaml_util.h"
 
+#include <cmath>
+
 namespace holo {
 
 Status KeyError(const std::string& key, const std::string& message) { return InvalidArgument(key + ": " + message); }
@@ -43,6 +45,22 @@ Status GetYamlBool(const YAML::Node& map, const std::string& key, const std::str
   } catch (const YAML::Exception&) {
     return KeyError(where + key, "must be true or false");
   }
+  return OkStatus();
+}
+
+Status GetYamlNumber(const YAML::Node& map, const std::string& key, const std::string& where, double* out) {
+  const YAML::Node n = map[key];
+  if (!n.IsDefined()) return OkStatus();
+  double v = 0;
+  try {
+    if (!n.IsScalar()) throw YAML::Exception(YAML::Mark(), "");
+    v = n.as<double>();
+  } catch (const YAML::Exception&) {
+    return KeyError(where + key,
+                    "must be a number, got '" + (n.IsScalar() ? n.Scalar() : std::string("(not a scalar)")) + "'");
+  }
+  if (!std::isfinite(v)) return KeyError(where + key, "must be a finite number, got " + n.Scalar());
+  *out = v;
   return OkStatus();
 }
 

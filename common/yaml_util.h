@@ -35,4 +35,9 @@ Status GetYamlString(const YAML::Node& map, const std::string& key, const std::s
 // or false"); an absent key leaves *out unchanged.
 Status GetYamlBool(const YAML::Node& map, const std::string& key, const std::string& where, bool* out);
 
+// Reads the optional number map[key] into *out ("<where><key>: must be a
+// number, got '…'", or "must be a finite number, got …" for .nan / .inf); an
+// absent key leaves *out unchanged. Ranges are the caller's.
+Status GetYamlNumber(const YAML::Node& map, const std::string& key, const std::string& where, double* out);
+
 }  // namespace holo

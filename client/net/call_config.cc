@@ -12,16 +12,10 @@ namespace holo::net {
 namespace {
 
 Status GetFloat(const YAML::Node& m, const std::string& key, const std::string& where, float lo, float hi, float* out) {
-  const YAML::Node n = m[key];
-  if (!n.IsDefined()) return OkStatus();
+  if (!m[key].IsDefined()) return OkStatus();
   double v = 0;
-  try {
-    if (!n.IsScalar()) throw YAML::Exception(YAML::Mark(), "");
-    v = n.as<double>();
-  } catch (const YAML::Exception&) {
-    return KeyError(where + key, "must be a number");
-  }
-  if (!std::isfinite(v) || v < lo || v > hi)
+  HOLO_RETURN_IF_ERROR(GetYamlNumber(m, key, where, &v));
+  if (v < lo || v > hi)
     return KeyError(where + key, "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
   *out = static_cast<float>(v);
   return OkStatus();

@@ -671,7 +671,6 @@ Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
   glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
   edge_jump_m_ = jump;
   edge_radius_m_ = radius;
-  cpu_maps_ = true;
   vis_gpu_ = false;
   vis_cull_ = options.cull_back_faces;
   visibility_dirty_ = false;
@@ -765,7 +764,6 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
   edge_jump_m_ = options.discontinuity_jump_m;
   edge_radius_m_ = options.discontinuity_radius_m;
-  cpu_maps_ = false;
   vis_gpu_ = true;
   vis_cull_ = options.cull_back_faces;
   visibility_dirty_ = false;
@@ -884,13 +882,13 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     // The flagged depth maps of the visibility pass (camera z, negative
     // near a discontinuity): the CPU pass's, or read back once per mesh.
     std::vector<std::vector<float>> readback;
-    if (!cpu_maps_) readback.resize(n);
-    const std::vector<std::vector<float>>& depth = cpu_maps_ ? pod_flagged_z_ : readback;
+    if (vis_gpu_) readback.resize(n);
+    const std::vector<std::vector<float>>& depth = vis_gpu_ ? readback : pod_flagged_z_;
     GLint old_fbo = 0;
     glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
     glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
     glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    for (int i = 0; i < n && !cpu_maps_; ++i) {
+    for (int i = 0; i < n && vis_gpu_; ++i) {
       const Intrinsics& in = pod_cameras_[i].intrinsics;
       readback[i].resize(static_cast<size_t>(in.width) * in.height);
       glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
@@ -1066,7 +1064,7 @@ void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
 Status Renderer::ReadPodDepth(int i, ImageFloat* out) {
   if (i < 0 || i >= num_pods_) return InvalidArgument("no pod " + std::to_string(i));
   if (visibility_dirty_) HOLO_RETURN_IF_ERROR(UpdateVisibility());
-  if (cpu_maps_) {
+  if (!vis_gpu_) {
     const Intrinsics& in = pod_cameras_[i].intrinsics;
     out->Resize(in.width, in.height);
     std::copy(pod_raw_z_[i].begin(), pod_raw_z_[i].end(), out->data());

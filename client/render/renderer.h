@@ -244,7 +244,7 @@ class Renderer {
   // pod image size each.
   std::vector<std::unique_ptr<MeshRasterizer>> pod_rasters_;
   std::vector<std::vector<float>> pod_raw_z_, pod_flagged_z_;
-  bool cpu_maps_ = false;  // the last visibility pass was the CPU one
+  // Options of the last visibility pass (GL or CPU maps, back faces culled).
   bool vis_gpu_ = false, vis_cull_ = false;
   Status UpdateVisibilityCpu(const ProjectiveOptions& options);
   // CPU copy of the remote mesh (normals computed when missing) for the

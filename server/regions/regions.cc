@@ -13,16 +13,9 @@ namespace holo::regions {
 namespace {
 
 Status GetFloat(const YAML::Node& map, const std::string& key, const std::string& where, float* out) {
-  const YAML::Node n = map[key];
-  if (!n.IsDefined()) return OkStatus();
-  double v = 0;
-  try {
-    if (!n.IsScalar()) throw YAML::Exception(YAML::Mark(), "");
-    v = n.as<double>();
-  } catch (const YAML::Exception&) {
-    return KeyError(where + key, "must be a number, got '" + (n.IsScalar() ? n.Scalar() : std::string("(not a scalar)")) + "'");
-  }
-  if (!std::isfinite(v) || std::abs(v) > 1e6) return KeyError(where + key, "must be a finite number, got " + n.Scalar());
+  double v = *out;
+  HOLO_RETURN_IF_ERROR(GetYamlNumber(map, key, where, &v));
+  if (std::abs(v) > 1e6) return KeyError(where + key, "must be a finite number, got " + map[key].Scalar());
   *out = static_cast<float>(v);
   return OkStatus();
 }
