@@ -512,12 +512,13 @@ int main(int argc, char** argv) {
     holo::voice::SiteVoiceOptions vo;
     vo.source = voice_spec;
     holo::voice::StudioTimeFn studio_time;
-    const bool camera_timeline = studio && !pod_hub && stereo_source == nullptr && (truth_mesh || pace > 0);
+    // The stereo source renders the studio's frame k as its frame k, so it keeps the camera timeline.
+    const bool camera_timeline = studio && !pod_hub && (truth_mesh || pace > 0);
     if (voice_spec == "synthetic" && !camera_timeline)
       return Fail(holo::InvalidArgument(
           "--voice synthetic needs the synthetic studio as the frame source, paced like cameras (--pace FPS, or "
           "--truth-mesh): the syllables follow what the cameras see"));
-    if (studio && !pod_hub && (truth_mesh || pace > 0)) {
+    if (camera_timeline) {
       const double studio_fps = studio->options().fps;
       studio_time = [&, studio_fps](int64_t t_us) {
         const int64_t start = capture_start_us.load();
