@@ -9,7 +9,8 @@
 # input in protocol/fuzz/corpus/<name>/ once the bug is fixed.
 # Prints one JSON line per target: {"fuzz":NAME,"seconds":S,"execs":N,"crashes":0,...}.
 # HOLO_FUZZ_ONLY="message wav" limits the run to those targets (and builds only them);
-# HOLO_FUZZ_NO_BUILD=1 runs the programs as built.
+# HOLO_FUZZ_NO_BUILD=1 runs the programs as built; HOLO_FUZZ_JOBS=N runs N targets at once
+# (default: one per core).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 case "${1:-}" in
@@ -38,27 +39,47 @@ if [[ -z "${HOLO_FUZZ_NO_BUILD:-}" ]]; then
   cmake --build "$BUILD" --parallel "$(nproc)" --target "${TARGETS[@]}" > /dev/null
 fi
 
-fail=0
-for name in "${NAMES[@]}"; do
-  exe="$BUILD/bin/holoport-fuzz-${name//_/-}"
-  seeds=protocol/fuzz/corpus/$name
+# One target: its JSON line on stdout; on a failure a reason on stderr and exit 1.
+run_one() {
+  local name=$1
+  local exe="$BUILD/bin/holoport-fuzz-${name//_/-}"
+  local seeds=protocol/fuzz/corpus/$name
   [[ "$name" == decoders ]] && seeds=tests/protocol/corpus
-  work="$BUILD/fuzz-corpus/$name" crashes="$BUILD/fuzz-crashes/$name"
+  local work="$BUILD/fuzz-corpus/$name" crashes="$BUILD/fuzz-crashes/$name"
   mkdir -p "$work" "$crashes" "$seeds"
-  log="$BUILD/fuzz-logs/$name.log"; mkdir -p "$(dirname "$log")"
-  rc=0
+  local log="$BUILD/fuzz-logs/$name.log"; mkdir -p "$(dirname "$log")"
+  local rc=0
   # -rss_limit_mb: a decoder must not need more than this for any input.
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
     "$exe" -max_total_time="$SECONDS_EACH" -rss_limit_mb=1024 -timeout=10 -max_len=65536 -print_final_stats=1 \
     -artifact_prefix="$crashes/" "$work" "$seeds" > "$log" 2>&1 || rc=$?
-  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
-  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | sed 's/cov: //')
+  local execs cov ncrash
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1) || true
+  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | sed 's/cov: //') || true
   ncrash=$(find "$crashes" -type f | wc -l)
   echo "{\"fuzz\":\"$name\",\"seconds\":$SECONDS_EACH,\"execs\":${execs:-0},\"coverage\":${cov:-0},\"crashes\":$ncrash,\"exit\":$rc}"
   if ((rc != 0)) || ((ncrash > 0)); then
-    echo "fuzz.sh: $name failed (exit $rc, $ncrash crash inputs in $crashes); log: $log" >&2
-    grep -m 20 -E 'ERROR|SUMMARY|runtime error|Check failed|#0 |#1 |#2 ' "$log" >&2 || true
-    fail=1
+    { echo "fuzz.sh: $name failed (exit $rc, $ncrash crash inputs in $crashes); log: $log"
+      grep -m 20 -E 'ERROR|SUMMARY|runtime error|Check failed|#0 |#1 |#2 ' "$log" || tail -n 3 "$log"; } >&2
+    return 1
   fi
+}
+
+# Targets run side by side, one per core (HOLO_FUZZ_JOBS overrides): each is
+# single-threaded, so N cores finish the list N times sooner.
+JOBS=${HOLO_FUZZ_JOBS:-$(nproc)}
+fail=0
+running=0
+for name in "${NAMES[@]}"; do
+  if ((running >= JOBS)); then
+    wait -n || fail=1
+    running=$((running - 1))
+  fi
+  run_one "$name" &
+  running=$((running + 1))
+done
+while ((running > 0)); do
+  wait -n || fail=1
+  running=$((running - 1))
 done
 exit $fail
