@@ -124,7 +124,7 @@ DoubleTalk MeasureDoubleTalk(const EchoCancellerOptions& o, float near_gain) {
 
 // The default engine (twopath) on the known echo path, near end 2.8 dB below
 // the echo: the near-end speech must come through within 3 dB of the same
-// processing without echo and ≥ 21 dB fwSNRseg (measured 23.6 dB vs 25.3 dB
+// processing without echo and ≥ 21 dB fwSNRseg (measured 24.5 dB vs 25.3 dB
 // without echo; speexdsp scored 14.4 dB, WebRTC's AEC 4.1 dB, the echo left
 // in 9.9 dB: docs/audio.md).
 TEST(EchoCanceller, DoubleTalkKeepsNearEndSpeech) {
@@ -137,10 +137,12 @@ TEST(EchoCanceller, DoubleTalkKeepsNearEndSpeech) {
 }
 
 // A quieter near end (8.9 dB below the echo): what is left of the echo
-// weighs more. Floor 15 dB (measured 17.7 dB; speexdsp 11.8 dB).
+// weighs more. Floor 20 dB and within 3 dB of no echo (measured 21.9 dB vs
+// 23.2 dB; speexdsp 11.8 dB).
 TEST(EchoCanceller, DoubleTalkQuietNearEnd) {
   const DoubleTalk r = MeasureDoubleTalk({}, 0.125f);
-  EXPECT_GE(r.q_dt, 15.0) << "double talk " << r.q_dt << " dB, no echo " << r.q_clean << " dB";
+  EXPECT_GE(r.q_dt, 20.0) << "double talk " << r.q_dt << " dB, no echo " << r.q_clean << " dB";
+  EXPECT_GE(r.q_dt, r.q_clean - 3.0) << "double talk " << r.q_dt << " dB, no echo " << r.q_clean << " dB";
   EXPECT_GT(r.q_dt, r.q_mix + 10.0) << "cancelled " << r.q_dt << " dB, echo left in " << r.q_mix << " dB";
 }
 
