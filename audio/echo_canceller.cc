@@ -155,6 +155,8 @@ class TwoPathFilter {
     w_fore_.assign(bins, {0, 0});
     x_prev_.assign(static_cast<size_t>(C_ * L_), 0.0f);
     power_.assign(static_cast<size_t>(K_), 0.0f);
+    err_power_.assign(static_cast<size_t>(K_), 0.0f);
+    err_floor_.assign(static_cast<size_t>(K_), 0.0f);
     time_.assign(static_cast<size_t>(N_), 0.0f);
     spec_.assign(static_cast<size_t>(K_), {0, 0});
     err_spec_.assign(static_cast<size_t>(K_), {0, 0});
@@ -260,8 +262,20 @@ class TwoPathFilter {
     for (float v : power_) mean += v;
     mean /= static_cast<float>(K_);
     const float reg = 1e-2f * mean + 1e-9f;  // bins the far end hardly excites do not blow up
-    for (int k = 0; k < K_; ++k)
-      err_spec_[static_cast<size_t>(k)] *= step_ / (static_cast<float>(P_) * power_[static_cast<size_t>(k)] + reg);
+    // Where the background's error is down to the microphone's noise floor
+    // there is no echo left to learn from, only noise to follow: the step
+    // shrinks there (1 − 3·floor/error). The floor per bin is the smoothed
+    // error power's minimum, allowed to rise 0.2 % per block (0.9 dB/s).
+    // Measured with −50 dBFS microphone noise: single-talk ERLE 20.8 → 25.0 dB;
+    // unchanged at −80 dBFS (docs/audio.md).
+    for (int k = 0; k < K_; ++k) {
+      const size_t b = static_cast<size_t>(k);
+      const float pe = std::norm(err_spec_[b]);
+      err_power_[b] = blocks_ <= 1 ? pe : 0.7f * err_power_[b] + 0.3f * pe;
+      err_floor_[b] = blocks_ <= 1 ? err_power_[b] : std::min(err_power_[b], err_floor_[b] * 1.002f);
+      const float keep = std::max(0.0f, 1.0f - 3.0f * err_floor_[b] / (err_power_[b] + 1e-20f));
+      err_spec_[b] *= keep * step_ / (static_cast<float>(P_) * power_[b] + reg);
+    }
     for (int j = 0; j < C_ * P_; ++j) {
       std::complex<float>* wj = w_back_.data() + static_cast<size_t>(j) * K_;
       const std::complex<float>* xj = x_spec_.data() + static_cast<size_t>(j) * K_;
@@ -279,6 +293,7 @@ class TwoPathFilter {
   Eigen::FFT<float> fft_;
   std::vector<std::complex<float>> x_spec_, w_back_, w_fore_, spec_, err_spec_;
   std::vector<float> x_prev_, power_, time_, y_back_, y_fore_;
+  std::vector<float> err_power_, err_floor_;  // background error power per bin, smoothed; its floor
   int64_t blocks_ = 0;
   int hold_ = 0;
   double smooth_back_ = 0, smooth_fore_ = 0, smooth_mic_ = 0;
