@@ -199,7 +199,11 @@ class TwoPathFilter {
       --hold_;
       return;
     }
-    Adapt();
+    // Nothing played (below −70 dBFS): nothing to learn, and a normalised
+    // step on a near-silent reference would only chase the near end.
+    double ref_energy = 0;
+    for (int i = 0; i < C_ * L_; ++i) ref_energy += static_cast<double>(ref[i]) * ref[i];
+    if (ref_energy > 1e-7 * C_ * L_) Adapt();
     smooth_back_ = 0.5 * smooth_back_ + 0.5 * e_back;
     smooth_fore_ = 0.5 * smooth_fore_ + 0.5 * e_fore;
     smooth_mic_ = 0.5 * smooth_mic_ + 0.5 * e_mic;
