@@ -135,8 +135,9 @@ class SpeexEngine : public EchoCanceller::Engine {
 // (overlap-save), so it is the exact block-LMS of a P·L-tap filter per channel.
 //
 // Two copies of the filter ("two-path"): the background adapts on every block
-// at a fixed normalised step (kTwoPathStep); the foreground makes the output and never
-// adapts by itself. The background is copied into the foreground only when
+// in which something was played, at a normalised step (kTwoPathStep, smaller
+// in bins already down to the noise floor); the foreground makes the output
+// and never adapts by itself. The background is copied into the foreground only when
 // its error has been clearly lower (< 0.7×, smoothed over two blocks) for two
 // blocks in a row and lower than the microphone itself. While the near end
 // talks the background's error holds the near-end speech, the background
@@ -144,6 +145,8 @@ class SpeexEngine : public EchoCanceller::Engine {
 // output filter keeps the echo path it learnt in single talk. That is the
 // double-talk protection, with no level threshold to tune (a Geigel detector
 // needs the echo path's loss; a coherence detector needs its own smoothing).
+// Measured: the echo residual under double talk stays at 27 dB against 36 dB
+// in single talk, 0.6 dB fwSNRseg from no echo (docs/audio.md).
 class TwoPathFilter {
  public:
   TwoPathFilter(int block, int partitions, int channels, float step)
