@@ -91,8 +91,9 @@ std::vector<float> Cancel(AecEngine e, bool aec, bool ns, const std::vector<floa
 // 5–10 s; 0.125: 8.9 dB below); `filter_ms` 0 is the engine's default.
 // `noise_std`: microphone noise (1e-4: −80 dBFS; 3e-3: −50 dBFS).
 // CPU per 10 ms block: median of `cpu_runs` single-talk runs.
+// `room`: the synthetic echo path (default RT60 0.25 s, IR 120 ms).
 StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns, float near_gain = 0.25f, int filter_ms = 0, float noise_std = 1e-4f,
-                                int cpu_runs = 1) {
+                                int cpu_runs = 1, const EchoPathOptions& room = {}) {
   const int rate = kSampleRate;
   HOLO_ASSIGN_OR_RETURN(auto far_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", rate));
   HOLO_ASSIGN_OR_RETURN(auto near_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", rate));
@@ -102,7 +103,7 @@ StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns, float near_gain = 0.25f, i
     far[2 * i] = far_m[i % far_m.size()];
     far[2 * i + 1] = i >= 15 ? 0.7f * far_m[(i - 15) % far_m.size()] : 0.0f;
   }
-  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath({}), far);
+  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath(room), far);
   std::mt19937 rng(5);
   std::normal_distribution<float> noise(0.0f, noise_std);
   std::vector<float> near(n, 0.0f), mic_st(n), mic_dt(n), mic_ne(n);
@@ -156,6 +157,7 @@ int RunEchoAndHrtf(const BenchArgs& args) {
     float near_gain;
     int filter_ms;  // 0: the engine's default
     float noise_std = 1e-4f;
+    double rt60_s = 0.25, ir_ms = 120;  // the room
   };
   const AecRun runs[] = {
       {AecEngine::kWebRtc, true, 0.25f, 0},   {AecEngine::kSpeex, true, 0.25f, 0},
@@ -164,12 +166,19 @@ int RunEchoAndHrtf(const BenchArgs& args) {
       {AecEngine::kTwoPath, false, 0.25f, 0}, {AecEngine::kSpeex, true, 0.125f, 0},
       {AecEngine::kTwoPath, true, 0.125f, 0}, {AecEngine::kSpeex, true, 0.25f, 0, 3e-3f},
       {AecEngine::kTwoPath, true, 0.25f, 0, 3e-3f},
+      // A more reverberant room: RT60 0.5 s, IR 300 ms.
+      {AecEngine::kSpeex, true, 0.25f, 0, 1e-4f, 0.5, 300},   {AecEngine::kTwoPath, true, 0.25f, 0, 1e-4f, 0.5, 300},
+      {AecEngine::kTwoPath, true, 0.25f, 250, 1e-4f, 0.5, 300}, {AecEngine::kTwoPath, true, 0.25f, 250},
   };
   for (const AecRun& run : runs) {
     // The engines at their defaults (the first three runs) get a CPU median.
-    const bool defaults = run.ns && run.filter_ms == 0 && run.near_gain == 0.25f && run.noise_std == 1e-4f;
+    const bool defaults =
+        run.ns && run.filter_ms == 0 && run.near_gain == 0.25f && run.noise_std == 1e-4f && run.rt60_s == 0.25;
+    EchoPathOptions room;
+    room.rt60_s = run.rt60_s;
+    room.ir_ms = run.ir_ms;
     auto f = MeasureAec(run.engine, run.ns, run.near_gain, run.filter_ms, run.noise_std,
-                        defaults ? std::max(1, args.repeats) : 1);
+                        defaults ? std::max(1, args.repeats) : 1, room);
     if (!f.ok()) {
       spdlog::error("{}", f.status().ToString());
       return 1;
@@ -178,17 +187,18 @@ int RunEchoAndHrtf(const BenchArgs& args) {
     eo.engine = run.engine;
     eo.filter_ms = run.filter_ms;
     const std::string name = AecEngineName(run.engine);
-    const std::string room = "speech_10s_room_rt60_0.25s_delay_37ms";
+    const std::string workload = run.rt60_s == 0.25 ? "speech_10s_room_rt60_0.25s_delay_37ms"
+                                                    : "speech_10s_room_rt60_0.5s_ir_300ms_delay_37ms";
     const std::string ns = run.ns ? "on" : "off", filter = std::to_string(eo.FilterMs()), near = Fixed(run.near_gain, 3);
     const std::string mic_noise = Fixed(20.0 * std::log10(run.noise_std), 0);
-    EmitFigure("audio", room, "erle_db", f->erle_st, "dB",
+    EmitFigure("audio", workload, "erle_db", f->erle_st, "dB",
                {{"engine", name}, {"talk", "single"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
                 {"mic_noise_dbfs", mic_noise}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)}, {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)},
                 {"cpu_runs", std::to_string(f->cpu_runs)}});
-    EmitFigure("audio", room, "erle_db", f->erle_dt, "dB",
+    EmitFigure("audio", workload, "erle_db", f->erle_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
                 {"mic_noise_dbfs", mic_noise}, {"note", "lower bound: near-end distortion counts as echo"}});
-    EmitFigure("audio", room, "fwsnrseg_db", f->q_dt, "dB",
+    EmitFigure("audio", workload, "fwsnrseg_db", f->q_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
                 {"mic_noise_dbfs", mic_noise}, {"against", "clean near-end"}, {"no_echo_db", Fixed(f->q_clean, 1)},
                 {"echo_uncancelled_db", Fixed(f->q_mix, 1)}});
