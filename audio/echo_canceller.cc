@@ -135,8 +135,9 @@ class SpeexEngine : public EchoCanceller::Engine {
 // (overlap-save), so it is the exact block-LMS of a P·L-tap filter per channel.
 //
 // Two copies of the filter ("two-path"): the background adapts on every block
-// in which something was played, at a normalised step (kTwoPathStep, smaller
-// in bins already down to the noise floor); the foreground makes the output
+// in which something was played, at a normalised step (kTwoPathStep, shared
+// between partitions in proportion to their weight, smaller in bins already
+// down to the noise floor); the foreground makes the output
 // and never adapts by itself. The background is copied into the foreground only when
 // its error has been clearly lower (< 0.7×, smoothed over two blocks) for two
 // blocks in a row and lower than the microphone itself. While the near end
@@ -160,6 +161,7 @@ class TwoPathFilter {
     power_.assign(static_cast<size_t>(K_), 0.0f);
     err_power_.assign(static_cast<size_t>(K_), 0.0f);
     err_floor_.assign(static_cast<size_t>(K_), 0.0f);
+    share_.assign(static_cast<size_t>(P_) * C_, 1.0f);
     time_.assign(static_cast<size_t>(N_), 0.0f);
     spec_.assign(static_cast<size_t>(K_), {0, 0});
     err_spec_.assign(static_cast<size_t>(K_), {0, 0});
@@ -283,10 +285,28 @@ class TwoPathFilter {
       const float keep = std::max(0.0f, 1.0f - 3.0f * err_floor_[b] / (err_power_[b] + 1e-20f));
       err_spec_[b] *= keep * step_ / (static_cast<float>(P_) * power_[b] + reg);
     }
-    for (int j = 0; j < C_ * P_; ++j) {
+    // Proportionate step (IPNLMS, α = 0, per partition): half of the step is
+    // shared evenly, half in proportion to each partition's coefficient norm,
+    // so the direct sound and early reflections converge faster than the
+    // near-empty late partitions. Measured (docs/audio.md): 140 ms, test room,
+    // single-talk ERLE 36.2 → 43.4 dB, fwSNRseg double talk 24.5 → 24.7 dB;
+    // 250 ms in a RT60 0.5 s room 25.4 → 28.8 dB.
+    const int J = C_ * P_;
+    double total = 0;
+    for (int j = 0; j < J; ++j) {
+      double e = 0;
+      const std::complex<float>* wj = w_back_.data() + static_cast<size_t>(j) * K_;
+      for (int k = 0; k < K_; ++k) e += std::norm(wj[k]);
+      share_[static_cast<size_t>(j)] = static_cast<float>(std::sqrt(e));
+      total += std::sqrt(e);
+    }
+    for (int j = 0; j < J; ++j)
+      share_[static_cast<size_t>(j)] = 0.5f + 0.5f * static_cast<float>(J * share_[static_cast<size_t>(j)] / (total + 1e-12));
+    for (int j = 0; j < J; ++j) {
       std::complex<float>* wj = w_back_.data() + static_cast<size_t>(j) * K_;
       const std::complex<float>* xj = x_spec_.data() + static_cast<size_t>(j) * K_;
-      for (int k = 0; k < K_; ++k) spec_[static_cast<size_t>(k)] = std::conj(xj[k]) * err_spec_[static_cast<size_t>(k)];
+      const float g = share_[static_cast<size_t>(j)];
+      for (int k = 0; k < K_; ++k) spec_[static_cast<size_t>(k)] = g * std::conj(xj[k]) * err_spec_[static_cast<size_t>(k)];
       // Gradient constraint: keep the first L taps of the correlation only.
       fft_.inv(time_.data(), spec_.data(), N_);
       std::fill(time_.begin() + L_, time_.end(), 0.0f);
@@ -301,6 +321,7 @@ class TwoPathFilter {
   std::vector<std::complex<float>> x_spec_, w_back_, w_fore_, spec_, err_spec_;
   std::vector<float> x_prev_, power_, time_, y_back_, y_fore_;
   std::vector<float> err_power_, err_floor_;  // background error power per bin, smoothed; its floor
+  std::vector<float> share_;                   // step share per partition (proportionate)
   int64_t blocks_ = 0;
   int hold_ = 0;
   double smooth_back_ = 0, smooth_fore_ = 0, smooth_mic_ = 0;
