@@ -124,7 +124,7 @@ DoubleTalk MeasureDoubleTalk(const EchoCancellerOptions& o, float near_gain) {
 
 // The default engine (twopath) on the known echo path, near end 2.8 dB below
 // the echo: the near-end speech must come through within 3 dB of the same
-// processing without echo and ≥ 21 dB fwSNRseg (measured 24.5 dB vs 25.3 dB
+// processing without echo and ≥ 21 dB fwSNRseg (measured 24.7 dB vs 25.3 dB
 // without echo; speexdsp scored 14.4 dB, WebRTC's AEC 4.1 dB, the echo left
 // in 9.9 dB: docs/audio.md).
 TEST(EchoCanceller, DoubleTalkKeepsNearEndSpeech) {
@@ -137,7 +137,7 @@ TEST(EchoCanceller, DoubleTalkKeepsNearEndSpeech) {
 }
 
 // A quieter near end (8.9 dB below the echo): what is left of the echo
-// weighs more. Floor 20 dB and within 3 dB of no echo (measured 21.9 dB vs
+// weighs more. Floor 20 dB and within 3 dB of no echo (measured 22.4 dB vs
 // 23.2 dB; speexdsp 11.8 dB).
 TEST(EchoCanceller, DoubleTalkQuietNearEnd) {
   const DoubleTalk r = MeasureDoubleTalk({}, 0.125f);
@@ -173,8 +173,8 @@ TEST(EchoCanceller, FollowsAnEchoPathChange) {
 // The far end pauses (faint −100 dBFS noise played) for 5 s while the near
 // end talks alone, then talks again. The near end must come through as
 // without echo, and the filter must not have learnt the near end in the
-// meantime: from 1 s after the far end is back its echo is ≥ 35 dB down
-// (measured 40.3 dB; 29.8 dB when the filter adapted on the faint noise).
+// meantime: from 1 s after the far end is back its echo is ≥ 38 dB down
+// (measured 43.0 dB; 34.2 dB when the filter adapted on the faint noise).
 TEST(EchoCanceller, NearEndAloneDoesNotUndoTheFilter) {
   const size_t n = 14 * kRate, pause = 4 * kRate, resume = 9 * kRate;
   const std::vector<float> speech = Load("espeak_speech_22k.wav");
@@ -195,7 +195,7 @@ TEST(EchoCanceller, NearEndAloneDoesNotUndoTheFilter) {
   const double erle = ErleDb(echo, r.out, {}, resume + kRate, n);
   std::printf("near end alone: fwSNRseg %.2f dB; far end back: ERLE %.1f dB\n", q, erle);
   EXPECT_GE(q, 22.0);
-  EXPECT_GE(erle, 35.0);
+  EXPECT_GE(erle, 38.0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Engines, EchoCancellerTest,
