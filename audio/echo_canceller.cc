@@ -137,9 +137,9 @@ class SpeexEngine : public EchoCanceller::Engine {
 // Two copies of the filter ("two-path"): the background adapts on every block
 // in which something was played, at a normalised step (kTwoPathStep, shared
 // between partitions in proportion to their weight, smaller in bins already
-// down to the noise floor); the foreground makes the output
-// and never adapts by itself. The background is copied into the foreground only when
-// its error has been clearly lower (< 0.7×, smoothed over two blocks) for two
+// down to the noise floor); the foreground makes the output and never adapts
+// by itself. The background is copied into the foreground only when its
+// error has been clearly lower (< 0.7×, smoothed over two blocks) for two
 // blocks in a row and lower than the microphone itself. While the near end
 // talks the background's error holds the near-end speech, the background
 // drifts, its error rises above the foreground's and nothing is copied: the
