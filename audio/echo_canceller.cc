@@ -239,7 +239,8 @@ class TwoPathFilter {
           std::fill(time_.begin(), time_.end(), 0.0f);
           for (int i = 0; i < L_; ++i) {
             const int64_t from = static_cast<int64_t>(p) * L_ + i + delta;
-            if (from >= 0 && from < static_cast<int64_t>(taps.size())) time_[static_cast<size_t>(i)] = taps[static_cast<size_t>(from)];
+            if (from >= 0 && from < static_cast<int64_t>(taps.size()))
+              time_[static_cast<size_t>(i)] = taps[static_cast<size_t>(from)];
           }
           fft_.fwd(Spectra(*w, c, p), time_.data(), N_);
         }
@@ -301,12 +302,14 @@ class TwoPathFilter {
       total += std::sqrt(e);
     }
     for (int j = 0; j < J; ++j)
-      share_[static_cast<size_t>(j)] = 0.5f + 0.5f * static_cast<float>(J * share_[static_cast<size_t>(j)] / (total + 1e-12));
+      share_[static_cast<size_t>(j)] =
+          0.5f + 0.5f * static_cast<float>(J * share_[static_cast<size_t>(j)] / (total + 1e-12));
     for (int j = 0; j < J; ++j) {
       std::complex<float>* wj = w_back_.data() + static_cast<size_t>(j) * K_;
       const std::complex<float>* xj = x_spec_.data() + static_cast<size_t>(j) * K_;
       const float g = share_[static_cast<size_t>(j)];
-      for (int k = 0; k < K_; ++k) spec_[static_cast<size_t>(k)] = g * std::conj(xj[k]) * err_spec_[static_cast<size_t>(k)];
+      for (int k = 0; k < K_; ++k)
+        spec_[static_cast<size_t>(k)] = g * std::conj(xj[k]) * err_spec_[static_cast<size_t>(k)];
       // Gradient constraint: keep the first L taps of the correlation only.
       fft_.inv(time_.data(), spec_.data(), N_);
       std::fill(time_.begin() + L_, time_.end(), 0.0f);

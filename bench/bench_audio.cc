@@ -92,8 +92,8 @@ std::vector<float> Cancel(AecEngine e, bool aec, bool ns, const std::vector<floa
 // `noise_std`: microphone noise (1e-4: −80 dBFS; 3e-3: −50 dBFS).
 // CPU per 10 ms block: median of `cpu_runs` single-talk runs.
 // `room`: the synthetic echo path (default RT60 0.25 s, IR 120 ms).
-StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns, float near_gain = 0.25f, int filter_ms = 0, float noise_std = 1e-4f,
-                                int cpu_runs = 1, const EchoPathOptions& room = {}) {
+StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns, float near_gain = 0.25f, int filter_ms = 0,
+                                float noise_std = 1e-4f, int cpu_runs = 1, const EchoPathOptions& room = {}) {
   const int rate = kSampleRate;
   HOLO_ASSIGN_OR_RETURN(auto far_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", rate));
   HOLO_ASSIGN_OR_RETURN(auto near_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", rate));
@@ -189,11 +189,13 @@ int RunEchoAndHrtf(const BenchArgs& args) {
     const std::string name = AecEngineName(run.engine);
     const std::string workload = run.rt60_s == 0.25 ? "speech_10s_room_rt60_0.25s_delay_37ms"
                                                     : "speech_10s_room_rt60_0.5s_ir_300ms_delay_37ms";
-    const std::string ns = run.ns ? "on" : "off", filter = std::to_string(eo.FilterMs()), near = Fixed(run.near_gain, 3);
+    const std::string ns = run.ns ? "on" : "off", filter = std::to_string(eo.FilterMs());
+    const std::string near = Fixed(run.near_gain, 3);
     const std::string mic_noise = Fixed(20.0 * std::log10(run.noise_std), 0);
     EmitFigure("audio", workload, "erle_db", f->erle_st, "dB",
                {{"engine", name}, {"talk", "single"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
-                {"mic_noise_dbfs", mic_noise}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)}, {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)},
+                {"mic_noise_dbfs", mic_noise}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)},
+                {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)},
                 {"cpu_runs", std::to_string(f->cpu_runs)}});
     EmitFigure("audio", workload, "erle_db", f->erle_dt, "dB",
                {{"engine", name}, {"talk", "double"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
