@@ -10,10 +10,27 @@
 // adaptive filter sees the echo a few ms after its reference; the filter's
 // tail covers the room's reverberation after that.
 //
-// Two engines, chosen by measurement (docs/audio.md, `holoport-bench audio`):
-// speexdsp's MDF echo canceller (two-speaker multichannel mode) + its
-// preprocessor (residual echo suppression and noise suppression), and the
-// WebRTC audio processing module (AEC with extended filter + NS).
+// Three engines, the default chosen by measurement (docs/audio.md,
+// `holoport-bench audio`):
+// * twopath (default): a two-path partitioned-block frequency-domain adaptive
+//   filter written here (one 140 ms filter per ear; a background filter
+//   adapts, the output's foreground filter takes its coefficients only when
+//   they cancel clearly better, so double talk cannot make the output filter
+//   diverge), then speexdsp's preprocessor for noise suppression only.
+//   Written here because measurement showed where speexdsp loses the near
+//   end under double talk: its 80 ms filter cannot cover the room's tail
+//   (linear ERLE ≈ 18 dB in single talk), with a filter long enough it
+//   diverges while both talk (linear ERLE 27 → 12 dB), and its residual echo
+//   suppressor then lowers the near end. No residual echo suppressor here:
+//   the linear filter alone keeps single-talk ERLE at 43 dB on the test room
+//   (24.7 dB with a −50 dBFS microphone). When the delay estimate moves, the
+//   filter's taps move with it instead of re-converging. Near-end fwSNRseg
+//   under double talk: 24.7 dB vs 25.1 dB without echo (speexdsp 14.4 dB).
+//   140 ms suits rooms up to RT60 ≈ 0.3 s; set filter_ms 250 for ≈ 0.5 s.
+// * speex: speexdsp's MDF echo canceller (two-speaker multichannel mode) + its
+//   preprocessor (residual echo suppression and noise suppression).
+// * webrtc: the WebRTC audio processing module 0.3 (AEC with extended filter
+//   + NS).
 #pragma once
 
 #include <cstdint>
@@ -27,13 +44,13 @@
 
 namespace holo::audio {
 
-enum class AecEngine { kSpeex, kWebRtc };
+enum class AecEngine { kTwoPath, kSpeex, kWebRtc };
 const char* AecEngineName(AecEngine e);
-StatusOr<AecEngine> ParseAecEngine(const std::string& name);  // "speex" | "webrtc"
+StatusOr<AecEngine> ParseAecEngine(const std::string& name);  // "twopath" | "speex" | "webrtc"
 
 struct EchoCancellerOptions {
   // Engine; the default is the one that measured best (docs/audio.md).
-  AecEngine engine = AecEngine::kSpeex;
+  AecEngine engine = AecEngine::kTwoPath;
   // Cancel the echo of the played audio (off with headphones).
   bool echo_cancellation = true;
   // Suppress stationary noise.
@@ -41,10 +58,11 @@ struct EchoCancellerOptions {
   int sample_rate = 48000;  // 16000, 32000 or 48000
   // Residual echo suppression after the linear filter: 0 low, 1 moderate,
   // 2 high (WebRTC's levels; speexdsp: −20/−30/−40 dB with a far end, and half
-  // that while the near end talks too).
+  // that while the near end talks too). twopath has no residual suppressor.
   int suppression = 0;
-  // speexdsp: adaptive filter length after the aligned delay, ms (room tail).
-  int filter_ms = 80;
+  // twopath and speexdsp: adaptive filter length after the aligned delay, ms
+  // (the room's tail). 0: the engine's measured best, FilterMs().
+  int filter_ms = 0;
   // Reference = the mean of both ears (one adaptive filter) instead of one
   // per ear. The ears carry filtered copies of the same voices, so two filters
   // see nearly collinear inputs (speexdsp converges slowly), and WebRTC's AEC
@@ -57,6 +75,10 @@ struct EchoCancellerOptions {
   // margin for the filter), ms.
   int align_margin_ms = 8;
   Status Check() const;
+  // filter_ms, or the engine's default when 0: twopath 140 ms, speexdsp 80 ms
+  // (longer measured worse for speexdsp: it converges slower and diverges more
+  // under double talk).
+  int FilterMs() const;
 };
 
 // Not thread-safe: the audio thread that plays should hand its blocks to the

@@ -63,12 +63,14 @@ Ears Measure(float azimuth_deg, float facing_offset_deg) {
 // the near-end talker (espeak-ng speech) starts at 5 s.
 struct AecFigures {
   double erle_st = 0, erle_dt = 0, q_dt = 0, q_clean = 0, q_mix = 0, delay_ms = -1, cpu_ms_per_10ms = 0;
+  int cpu_runs = 0;
 };
 
 std::vector<float> Cancel(AecEngine e, bool aec, bool ns, const std::vector<float>& far, const std::vector<float>& mic,
-                          double* delay_ms, double* cpu_ms) {
+                          double* delay_ms, double* cpu_ms, int filter_ms = 0) {
   EchoCancellerOptions o;
   o.engine = e;
+  o.filter_ms = filter_ms;
   o.echo_cancellation = aec;
   o.noise_suppression = ns;
   auto ec = EchoCanceller::Create(o);
@@ -85,7 +87,13 @@ std::vector<float> Cancel(AecEngine e, bool aec, bool ns, const std::vector<floa
   return out;
 }
 
-StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
+// `near_gain` scales the near-end talker (0.25: 2.8 dB below the echo over
+// 5–10 s; 0.125: 8.9 dB below); `filter_ms` 0 is the engine's default.
+// `noise_std`: microphone noise (1e-4: −80 dBFS; 3e-3: −50 dBFS).
+// CPU per 10 ms block: median of `cpu_runs` single-talk runs.
+// `room`: the synthetic echo path (default RT60 0.25 s, IR 120 ms).
+StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns, float near_gain = 0.25f, int filter_ms = 0,
+                                float noise_std = 1e-4f, int cpu_runs = 1, const EchoPathOptions& room = {}) {
   const int rate = kSampleRate;
   HOLO_ASSIGN_OR_RETURN(auto far_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", rate));
   HOLO_ASSIGN_OR_RETURN(auto near_m, ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/espeak_speech_22k.wav", rate));
@@ -95,22 +103,31 @@ StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
     far[2 * i] = far_m[i % far_m.size()];
     far[2 * i + 1] = i >= 15 ? 0.7f * far_m[(i - 15) % far_m.size()] : 0.0f;
   }
-  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath({}), far);
+  const std::vector<float> echo = ApplyEchoPath(MakeEchoPath(room), far);
   std::mt19937 rng(5);
-  std::normal_distribution<float> noise(0.0f, 1e-4f);
-  std::vector<float> near(n, 0.0f), mic_st(n), mic_dt(n);
+  std::normal_distribution<float> noise(0.0f, noise_std);
+  std::vector<float> near(n, 0.0f), mic_st(n), mic_dt(n), mic_ne(n);
   const size_t t5 = 5 * static_cast<size_t>(rate);
-  for (size_t i = 0; i < near_m.size() && t5 + i < n; ++i) near[t5 + i] = 0.25f * near_m[i];
+  for (size_t i = 0; i < near_m.size() && t5 + i < n; ++i) near[t5 + i] = near_gain * near_m[i];
   for (size_t i = 0; i < n; ++i) {
     const float z = noise(rng);
     mic_st[i] = echo[i] + z;
     mic_dt[i] = echo[i] + near[i] + z;
+    mic_ne[i] = near[i] + z;  // no echo: the same near end and noise
   }
   AecFigures f;
-  const auto st = Cancel(e, true, ns, far, mic_st, &f.delay_ms, &f.cpu_ms_per_10ms);
-  const auto dt = Cancel(e, true, ns, far, mic_dt, nullptr, nullptr);
+  const auto st = Cancel(e, true, ns, far, mic_st, &f.delay_ms, &f.cpu_ms_per_10ms, filter_ms);
+  std::vector<double> cpu = {f.cpu_ms_per_10ms};
+  for (int r = 1; r < cpu_runs; ++r) {
+    double c = 0;
+    (void)Cancel(e, true, ns, far, mic_st, nullptr, &c, filter_ms);
+    cpu.push_back(c);
+  }
+  f.cpu_ms_per_10ms = Median(cpu);
+  f.cpu_runs = static_cast<int>(cpu.size());
+  const auto dt = Cancel(e, true, ns, far, mic_dt, nullptr, nullptr, filter_ms);
   const std::vector<float> silent(far.size(), 0.0f);
-  const auto clean = Cancel(e, true, ns, silent, near, nullptr, nullptr);
+  const auto clean = Cancel(e, true, ns, silent, mic_ne, nullptr, nullptr, filter_ms);
   if (st.size() != n || dt.size() != n || clean.size() != n) return Internal("echo canceller failed");
   f.erle_st = ErleDb(echo, st, {}, 4 * static_cast<size_t>(rate), n);
   // The suppressors delay their output by a few ms (overlap-add): compare at the best lag.
@@ -130,23 +147,63 @@ StatusOr<AecFigures> MeasureAec(AecEngine e, bool ns) {
   return f;
 }
 
-int RunEchoAndHrtf() {
-  for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex}) {
-    auto f = MeasureAec(e, true);
+int RunEchoAndHrtf(const BenchArgs& args) {
+  // Each engine at its defaults (twopath is the default), then the steps
+  // that led to it: filter length, noise suppression off; then harder
+  // conditions: a quieter near end, a noisier microphone.
+  struct AecRun {
+    AecEngine engine;
+    bool ns;
+    float near_gain;
+    int filter_ms;  // 0: the engine's default
+    float noise_std = 1e-4f;
+    double rt60_s = 0.25, ir_ms = 120;  // the room
+  };
+  const AecRun runs[] = {
+      {AecEngine::kWebRtc, true, 0.25f, 0},   {AecEngine::kSpeex, true, 0.25f, 0},
+      {AecEngine::kTwoPath, true, 0.25f, 0},  {AecEngine::kSpeex, true, 0.25f, 140},
+      {AecEngine::kTwoPath, true, 0.25f, 80}, {AecEngine::kSpeex, false, 0.25f, 0},
+      {AecEngine::kTwoPath, false, 0.25f, 0}, {AecEngine::kSpeex, true, 0.125f, 0},
+      {AecEngine::kTwoPath, true, 0.125f, 0}, {AecEngine::kSpeex, true, 0.25f, 0, 3e-3f},
+      {AecEngine::kTwoPath, true, 0.25f, 0, 3e-3f},
+      // A more reverberant room: RT60 0.5 s, IR 300 ms.
+      {AecEngine::kSpeex, true, 0.25f, 0, 1e-4f, 0.5, 300},   {AecEngine::kTwoPath, true, 0.25f, 0, 1e-4f, 0.5, 300},
+      {AecEngine::kTwoPath, true, 0.25f, 250, 1e-4f, 0.5, 300}, {AecEngine::kTwoPath, true, 0.25f, 250},
+  };
+  for (const AecRun& run : runs) {
+    // The engines at their defaults (the first three runs) get a CPU median.
+    const bool defaults =
+        run.ns && run.filter_ms == 0 && run.near_gain == 0.25f && run.noise_std == 1e-4f && run.rt60_s == 0.25;
+    EchoPathOptions room;
+    room.rt60_s = run.rt60_s;
+    room.ir_ms = run.ir_ms;
+    auto f = MeasureAec(run.engine, run.ns, run.near_gain, run.filter_ms, run.noise_std,
+                        defaults ? std::max(1, args.repeats) : 1, room);
     if (!f.ok()) {
       spdlog::error("{}", f.status().ToString());
       return 1;
     }
-    const std::string name = AecEngineName(e);
-    const std::string room = "speech_10s_room_rt60_0.25s_delay_37ms";
-    EmitFigure("audio", room, "erle_db", f->erle_st, "dB",
-               {{"engine", name}, {"talk", "single"}, {"ns", "on"}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)},
-                {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)}});
-    EmitFigure("audio", room, "erle_db", f->erle_dt, "dB",
-               {{"engine", name}, {"talk", "double"}, {"ns", "on"}, {"note", "lower bound: near-end distortion counts as echo"}});
-    EmitFigure("audio", room, "fwsnrseg_db", f->q_dt, "dB",
-               {{"engine", name}, {"talk", "double"}, {"against", "clean near-end"},
-                {"no_echo_db", Fixed(f->q_clean, 1)}, {"echo_uncancelled_db", Fixed(f->q_mix, 1)}});
+    EchoCancellerOptions eo;
+    eo.engine = run.engine;
+    eo.filter_ms = run.filter_ms;
+    const std::string name = AecEngineName(run.engine);
+    const std::string workload = run.rt60_s == 0.25 ? "speech_10s_room_rt60_0.25s_delay_37ms"
+                                                    : "speech_10s_room_rt60_0.5s_ir_300ms_delay_37ms";
+    const std::string ns = run.ns ? "on" : "off", filter = std::to_string(eo.FilterMs());
+    const std::string near = Fixed(run.near_gain, 3);
+    const std::string mic_noise = Fixed(20.0 * std::log10(run.noise_std), 0);
+    EmitFigure("audio", workload, "erle_db", f->erle_st, "dB",
+               {{"engine", name}, {"talk", "single"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
+                {"mic_noise_dbfs", mic_noise}, {"delay_estimated_ms", Fixed(f->delay_ms, 1)},
+                {"cpu_ms_per_10ms", Fixed(f->cpu_ms_per_10ms, 4)},
+                {"cpu_runs", std::to_string(f->cpu_runs)}});
+    EmitFigure("audio", workload, "erle_db", f->erle_dt, "dB",
+               {{"engine", name}, {"talk", "double"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
+                {"mic_noise_dbfs", mic_noise}, {"note", "lower bound: near-end distortion counts as echo"}});
+    EmitFigure("audio", workload, "fwsnrseg_db", f->q_dt, "dB",
+               {{"engine", name}, {"talk", "double"}, {"ns", ns}, {"filter_ms", filter}, {"near_gain", near},
+                {"mic_noise_dbfs", mic_noise}, {"against", "clean near-end"}, {"no_echo_db", Fixed(f->q_clean, 1)},
+                {"echo_uncancelled_db", Fixed(f->q_mix, 1)}});
   }
   // Noise suppression: espeak-ng speech in white noise at 10 dB SNR, 1 s of noise first.
   {
@@ -165,7 +222,7 @@ int RunEchoAndHrtf() {
     std::vector<float> noisy = clean;
     for (float& v : noisy) v += noise(rng);
     const std::vector<float> silent(2 * noisy.size(), 0.0f);
-    for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex}) {
+    for (AecEngine e : {AecEngine::kWebRtc, AecEngine::kSpeex, AecEngine::kTwoPath}) {
       const auto out = Cancel(e, false, true, silent, noisy, nullptr, nullptr);
       EmitFigure("audio", "espeak_speech_white_noise_10db", "ns_snr_gain_db",
                  NoiseSuppressionGainDb(clean, noisy, out, lead), "dB", {{"engine", AecEngineName(e)}});
@@ -207,7 +264,7 @@ int RunEchoAndHrtf() {
 }
 
 int RunAudio(const BenchArgs& args) {
-  if (const int rc = RunEchoAndHrtf(); rc != 0) return rc;
+  if (const int rc = RunEchoAndHrtf(args); rc != 0) return rc;
   const std::string w = "speech_48k";
   auto speech = ReadMonoWav(std::string(HOLO_SOURCE_DIR) + "/tests/data/audio/speech_48k.wav", kSampleRate);
   if (!speech.ok()) {
