@@ -226,6 +226,7 @@ StatusOr<std::unique_ptr<Participant>> Participant::Start(ParticipantOptions opt
   }
   if (m.o.aec) {
     audio::EchoCancellerOptions eo;
+    eo.filter_ms = m.o.aec_filter_ms;
     HOLO_ASSIGN_OR_RETURN(m.aec, audio::EchoCanceller::Create(eo));
   }
 

@@ -54,6 +54,9 @@ struct ParticipantOptions {
   // spatializer played (loudspeakers: on; headphones: off). Noise suppression
   // runs whenever this is on.
   bool aec = false;
+  // The canceller's filter length, ms (0: the engine's default, 140 ms: rooms
+  // up to RT60 ≈ 0.3 s; ≈ 250 for RT60 ≈ 0.5 s; docs/audio.md).
+  int aec_filter_ms = 0;
   HeadPoseFn head;  // default: SyntheticHead(t)
   // Lip sync of the remote voices with the remote picture (effective when
   // the viewer reports displayed pictures to av_sync()).

@@ -121,6 +121,11 @@ int main(int argc, char** argv) {
                  "voices: on (loudspeakers) or off (headphones)")
       ->capture_default_str()
       ->check(CLI::IsMember({"on", "off"}));
+  app.add_option("--aec-filter-ms", o.aec_filter_ms,
+                 "--call --aec on: the echo canceller's filter length, ms: 0 = its default (140 ms, rooms up to "
+                 "RT60 0.3 s); about 250 for a reverberant room (RT60 0.5 s)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000));
   app.add_option("--hrtf", o.hrtf_sofa,
                  "--call: a personal HRTF, SOFA file (SimpleFreeFieldHRIR), for the spatialized voices; default: "
                  "OpenAL Soft's built-in set")

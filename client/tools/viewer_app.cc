@@ -269,6 +269,7 @@ class Viewer {
       po.audio_in = o_.audio_in;
       po.audio_out = o_.audio_out;
       po.aec = o_.aec;
+      po.aec_filter_ms = o_.aec_filter_ms;
       po.hrtf_sofa = o_.hrtf_sofa;
       po.view_template = co;
       po.av_sync = SyncOptions();

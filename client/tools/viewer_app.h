@@ -54,6 +54,7 @@ struct ViewerOptions {
   std::string audio_in;   // --call: own voice (WAV); empty: a tone
   std::string audio_out;  // --call: spatialized stereo WAV of the remote voices; --connect/--http: the site's voices (mono)
   bool aec = false;       // --call: echo cancellation + noise suppression of the own voice
+  int aec_filter_ms = 0;  // --call: its filter length, ms (0: the engine's default)
   std::string hrtf_sofa;  // --call: personal HRTF (SOFA); empty: OpenAL Soft's
   double seconds = 0;     // network: stop after this long (0: --frames decides)
   // Network: voice and picture in sync (audio/av_sync.h): the stream that

@@ -72,6 +72,12 @@ int main(int argc, char** argv) {
                                "loudspeakers, off with headphones)")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
+  int aec_filter_ms = 0;
+  app.add_option("--aec-filter-ms", aec_filter_ms,
+                 "--config --aec on: the echo canceller's filter length, ms: 0 = its default (140 ms, rooms up "
+                 "to RT60 0.3 s); about 250 for a reverberant room (RT60 0.5 s)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000));
   app.add_option("--hrtf", hrtf_sofa, "--config: personal HRTF, a SOFA file (SimpleFreeFieldHRIR) for the "
                                       "spatialized output (default: OpenAL Soft's built-in set)");
   CLI11_PARSE(app, argc, argv);
@@ -110,6 +116,7 @@ int main(int argc, char** argv) {
     po.audio_in = audio_in;
     po.audio_out = audio_out;
     po.aec = po_aec;
+    po.aec_filter_ms = aec_filter_ms;
     po.hrtf_sofa = hrtf_sofa;
     po.view_template = view;
     auto p = holo::net::Participant::Start(po, cb);
