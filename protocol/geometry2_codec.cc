@@ -1,0 +1,530 @@
+#include "protocol/geometry2_codec.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "common/metrics/triangle_index.h"
+#include "protocol/byte_io.h"
+#include "protocol/rans_coder.h"
+
+namespace holo::protocol {
+namespace {
+
+using rans::TokenReader;
+using rans::TokenWriter;
+using rans::UnZigZag;
+using rans::ZigZag;
+
+constexpr uint8_t kKindKeyframe = 0;
+constexpr uint8_t kKindPredicted = 1;
+constexpr size_t kHeaderBytes = 16;
+constexpr int32_t kUnitsPerStep = 16;      // reference position units per keyframe grid step
+constexpr int32_t kMaxCoord = 1 << 22;     // reference positions are clamped to ±this (units)
+constexpr int32_t kMaxSteps = 4095;        // largest |displacement|, steps
+constexpr uint32_t kMaxStepUnits = 4096;   // largest displacement step, units
+constexpr uint32_t kContexts = 8;          // displacement residual contexts
+constexpr float kFarCap = 0.05f;           // error samples farther than this count as this, metres
+
+std::string Str(uint64_t v) { return std::to_string(v); }
+
+// PROTOCOL.md §7.1 "Reference hash".
+uint32_t HashPositions(const std::vector<std::array<int32_t, 3>>& pos) {
+  uint64_t h = 14695981039346656037ull;
+  for (const auto& p : pos)
+    for (int32_t c : p) h = (h ^ static_cast<uint32_t>(c)) * 1099511628211ull;
+  return static_cast<uint32_t>(h ^ (h >> 32));
+}
+
+// PROTOCOL.md §7.1 "Normals": integer area-weighted face normals summed at the
+// corners, one smoothing pass (each vertex sums its triangles' corner sums),
+// all in wrapping 64-bit integers; then one sqrt and three divides in double.
+void ComputeNormals(const std::vector<std::array<int32_t, 3>>& pos, const std::vector<std::array<uint32_t, 3>>& tris,
+                    std::vector<std::array<double, 3>>* out) {
+  thread_local std::vector<std::array<uint64_t, 3>> s1, s2;
+  const size_t nv = pos.size();
+  s1.assign(nv, {0, 0, 0});
+  for (const auto& t : tris) {
+    const auto &a = pos[t[0]], &b = pos[t[1]], &c = pos[t[2]];
+    // |coordinates| ≤ 2^22: edges ≤ 2^23, each product ≤ 2^46, no overflow here.
+    const int64_t e1[3] = {int64_t{b[0]} - a[0], int64_t{b[1]} - a[1], int64_t{b[2]} - a[2]};
+    const int64_t e2[3] = {int64_t{c[0]} - a[0], int64_t{c[1]} - a[1], int64_t{c[2]} - a[2]};
+    const int64_t n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+    for (uint32_t v : t)
+      for (int k = 0; k < 3; ++k) s1[v][k] += static_cast<uint64_t>(n[k]);
+  }
+  s2.assign(nv, {0, 0, 0});
+  for (const auto& t : tris) {
+    uint64_t s[3];
+    for (int k = 0; k < 3; ++k) s[k] = s1[t[0]][k] + s1[t[1]][k] + s1[t[2]][k];
+    for (uint32_t v : t)
+      for (int k = 0; k < 3; ++k) s2[v][k] += s[k];
+  }
+  out->resize(nv);
+  for (size_t i = 0; i < nv; ++i) {
+    const double x = static_cast<double>(static_cast<int64_t>(s2[i][0]));
+    const double y = static_cast<double>(static_cast<int64_t>(s2[i][1]));
+    const double z = static_cast<double>(static_cast<int64_t>(s2[i][2]));
+    const double len2 = x * x + y * y + z * z;
+    if (len2 > 0) {
+      const double len = std::sqrt(len2);
+      (*out)[i] = {x / len, y / len, z / len};
+    } else {
+      (*out)[i] = {0, 0, 0};
+    }
+  }
+}
+
+// For every vertex, its neighbours (across an edge) with a smaller index,
+// ascending, as CSR.
+void BuildAdjacency(size_t nv, const std::vector<std::array<uint32_t, 3>>& tris, std::vector<uint32_t>* start,
+                    std::vector<uint32_t>* adj) {
+  start->assign(nv + 1, 0);
+  for (const auto& t : tris)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[e], b = t[(e + 1) % 3];
+      if (a != b) ++(*start)[std::max(a, b) + 1];
+    }
+  for (size_t v = 0; v < nv; ++v) (*start)[v + 1] += (*start)[v];
+  adj->assign((*start)[nv], 0);
+  std::vector<uint32_t> fill(start->begin(), start->end() - 1);
+  for (const auto& t : tris)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[e], b = t[(e + 1) % 3];
+      if (a != b) (*adj)[fill[std::max(a, b)]++] = std::min(a, b);
+    }
+  // Sort and deduplicate each list, compacting in place.
+  uint32_t w = 0;
+  for (size_t v = 0; v < nv; ++v) {
+    const uint32_t b = (*start)[v], e = (*start)[v + 1];
+    std::sort(adj->begin() + b, adj->begin() + e);
+    (*start)[v] = w;
+    for (uint32_t i = b; i < e; ++i)
+      if (i == b || (*adj)[i] != (*adj)[i - 1]) (*adj)[w++] = (*adj)[i];
+  }
+  (*start)[nv] = w;
+  adj->resize(w);
+}
+
+// PROTOCOL.md §7.1 "Prediction": the rounded mean of the decoded neighbours'
+// displacements; context from the mean magnitude of their residuals.
+inline void Predict(const Geometry2Reference& ref, const int32_t* k, const int32_t* absres, uint32_t v, int32_t* pred,
+                    uint32_t* ctx) {
+  const uint32_t b = ref.adj_start[v], e = ref.adj_start[v + 1];
+  const int64_t c = e - b;
+  if (c == 0) {
+    *pred = 0;
+    *ctx = 0;
+    return;
+  }
+  int64_t s = 0, a = 0;
+  for (uint32_t i = b; i < e; ++i) {
+    s += k[ref.adj[i]];
+    a += absres[ref.adj[i]];
+  }
+  *pred = static_cast<int32_t>(s >= 0 ? (s + c / 2) / c : -((-s + c / 2) / c));
+  const auto mean_abs = static_cast<uint64_t>((a + c - 1) / c);
+  *ctx = 1 + std::min<uint32_t>(static_cast<uint32_t>(std::bit_width(mean_abs)), 6);
+}
+
+// PROTOCOL.md §7.1 "Update": position += round(k · step · normal), clamped.
+void ApplyDisplacements(const Geometry2Reference& ref, const std::vector<int32_t>& k, int32_t step_units,
+                        std::vector<std::array<int32_t, 3>>* out) {
+  const size_t nv = ref.pos.size();
+  out->resize(nv);
+  for (size_t i = 0; i < nv; ++i) {
+    std::array<int32_t, 3> p = ref.pos[i];
+    if (k[i] != 0) {
+      const double d = static_cast<double>(int64_t{k[i]} * step_units);
+      for (int c = 0; c < 3; ++c) {
+        const long long delta = std::llround(d * ref.normals[i][c]);
+        p[c] = static_cast<int32_t>(std::clamp<long long>(p[c] + delta, -kMaxCoord, kMaxCoord));
+      }
+    }
+    (*out)[i] = p;
+  }
+}
+
+// The reference of a keyframe: the decoded G1 mesh `m` and the grid of its
+// blob `g1` (origin at byte 12, step at byte 24, PROTOCOL.md §7).
+Status ReferenceFromKeyframe(std::span<const uint8_t> g1, const Mesh& m, uint32_t id, Geometry2Reference* ref) {
+  ByteReader r(g1.subspan(std::min<size_t>(12, g1.size())));
+  float origin[3], step = 0;
+  for (float& f : origin) HOLO_RETURN_IF_ERROR(r.F32("g2.keyframe.origin", &f));
+  HOLO_RETURN_IF_ERROR(r.F32("g2.keyframe.step", &step));
+  ref->valid = false;
+  ref->keyframe_id = id;
+  ref->frame_index = 0;
+  std::copy(origin, origin + 3, ref->origin);
+  ref->unit = step / static_cast<float>(kUnitsPerStep);
+  const size_t nv = m.num_vertices();
+  ref->pos.resize(nv);
+  for (size_t v = 0; v < nv; ++v)
+    for (int c = 0; c < 3; ++c) {
+      // Decoded G1 positions are origin + step·q exactly; this recovers q.
+      const long q = std::lround((m.positions[v][c] - origin[c]) / step);
+      if (q < 0 || q > 65535) return DataLoss("g2.keyframe: vertex " + Str(v) + " is off the G1 grid");
+      ref->pos[v][c] = static_cast<int32_t>(q) * kUnitsPerStep;
+    }
+  ref->triangles = m.triangles;
+  ref->colors = m.colors;
+  ComputeNormals(ref->pos, ref->triangles, &ref->normals);
+  BuildAdjacency(nv, ref->triangles, &ref->adj_start, &ref->adj);
+  ref->hash = HashPositions(ref->pos);
+  ref->valid = true;
+  return OkStatus();
+}
+
+void WriteHeader(ByteWriter& w, uint8_t kind, uint32_t id, uint32_t index, uint32_t nv) {
+  w.U8(kG2CodecId);
+  w.U8(kind);
+  w.U16(0);
+  w.U32(id);
+  w.U32(index);
+  w.U32(nv);
+}
+
+Status ReadHeader(ByteReader& r, Geometry2BlobInfo* info) {
+  uint8_t codec = 0, kind = 0;
+  uint16_t reserved = 0;
+  HOLO_RETURN_IF_ERROR(r.U8("g2.codec", &codec));
+  if (codec != kG2CodecId) return DataLoss("g2.codec: " + Str(codec) + " is not G2 (3)");
+  HOLO_RETURN_IF_ERROR(r.U8("g2.kind", &kind));
+  if (kind != kKindKeyframe && kind != kKindPredicted) return DataLoss("g2.kind: " + Str(kind) + " is neither 0 nor 1");
+  HOLO_RETURN_IF_ERROR(r.U16("g2.reserved", &reserved));
+  if (reserved != 0) return DataLoss("g2.reserved: must be zero");
+  HOLO_RETURN_IF_ERROR(r.U32("g2.keyframe_id", &info->keyframe_id));
+  HOLO_RETURN_IF_ERROR(r.U32("g2.frame_index", &info->frame_index));
+  HOLO_RETURN_IF_ERROR(r.U32("g2.num_vertices", &info->num_vertices));
+  info->keyframe = kind == kKindKeyframe;
+  if (info->keyframe != (info->frame_index == 0)) {
+    return DataLoss("g2.frame_index: " + Str(info->frame_index) + (info->keyframe ? " on a keyframe (must be 0)" : " on a predicted frame (must be ≥ 1)"));
+  }
+  return OkStatus();
+}
+
+Eigen::Vector3f FaceNormal(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& c) {
+  const Eigen::Vector3f n = (b - a).cross(c - a);
+  const float len = n.norm();
+  return len > 0 ? Eigen::Vector3f(n / len) : Eigen::Vector3f::Zero();
+}
+
+struct EncoderScratch {
+  Mesh decoded;
+  std::vector<float> target;
+  std::vector<int32_t> k, absres;
+  std::vector<std::array<int32_t, 3>> pos;
+  std::vector<std::array<double, 3>> normals;
+  std::vector<uint16_t> syms;
+  std::vector<uint8_t> coded, g1;
+};
+EncoderScratch& Scratch() {
+  thread_local EncoderScratch s;
+  return s;
+}
+
+}  // namespace
+
+void Geometry2Reference::ToMesh(Mesh* mesh) const {
+  const size_t nv = pos.size();
+  mesh->positions.resize(nv);
+  mesh->normals.resize(nv);
+  for (size_t v = 0; v < nv; ++v) {
+    for (int c = 0; c < 3; ++c) mesh->positions[v][c] = origin[c] + static_cast<float>(pos[v][c]) * unit;
+    const auto& n = normals[v];
+    mesh->normals[v] = n[0] == 0 && n[1] == 0 && n[2] == 0
+                           ? Eigen::Vector3f::UnitZ()
+                           : Eigen::Vector3f(static_cast<float>(n[0]), static_cast<float>(n[1]), static_cast<float>(n[2]));
+  }
+  mesh->colors = colors;
+  mesh->triangles = triangles;
+}
+
+Status Geometry2EncodeOptions::Check() const {
+  HOLO_RETURN_IF_ERROR(keyframe.Check());
+  if (keyframe.codec != GeometryCodec::kG1) return InvalidArgument("keyframe.codec must be G1");
+  if (!(displacement_step_m >= keyframe.position_step_m / kUnitsPerStep && displacement_step_m <= 0.01f)) {
+    return InvalidArgument("displacement_step_m must be in [keyframe step / 16, 0.01], got " +
+                           std::to_string(displacement_step_m));
+  }
+  if (!(dead_zone_steps >= 0.5f && dead_zone_steps <= 4.0f)) {
+    return InvalidArgument("dead_zone_steps must be in [0.5, 4], got " + std::to_string(dead_zone_steps));
+  }
+  if (!(max_displacement_m > 0 && max_displacement_m <= 0.2f)) {
+    return InvalidArgument("max_displacement_m must be in (0, 0.2], got " + std::to_string(max_displacement_m));
+  }
+  if (!(max_rms_m > 0) || !(far_m > 0) || !(max_far_fraction >= 0 && max_far_fraction <= 1) ||
+      !(max_flipped_fraction >= 0 && max_flipped_fraction <= 1)) {
+    return InvalidArgument("max_rms_m and far_m must be > 0, max_far_fraction and max_flipped_fraction in [0, 1]");
+  }
+  if (max_group_frames < 1 || max_group_frames > 65535) {
+    return InvalidArgument("max_group_frames must be in [1, 65535], got " + std::to_string(max_group_frames));
+  }
+  return OkStatus();
+}
+
+Geometry2Encoder::Geometry2Encoder(const Geometry2EncodeOptions& options) : options_(options), status_(options.Check()) {}
+
+Status Geometry2Encoder::EncodeKeyframe(const Mesh& mesh, std::vector<uint8_t>* out) {
+  EncoderScratch& sc = Scratch();
+  GeometryEncodeOptions ko = options_.keyframe;
+  ko.normals = NormalMode::kNone;  // G2 computes its own
+  sc.g1.clear();
+  HOLO_RETURN_IF_ERROR(EncodeGeometry(mesh, ko, &sc.g1));
+  if (Status s = DecodeGeometry(sc.g1, &sc.decoded); !s.ok()) {
+    return InvalidArgument("keyframe does not decode within the protocol limits: " + s.message());
+  }
+  Geometry2Reference ref;
+  HOLO_RETURN_IF_ERROR(ReferenceFromKeyframe(sc.g1, sc.decoded, next_keyframe_id_, &ref));
+  ++next_keyframe_id_;
+  ByteWriter w(out);
+  WriteHeader(w, kKindKeyframe, ref.keyframe_id, 0, static_cast<uint32_t>(ref.pos.size()));
+  w.Bytes(sc.g1);
+  ref_ = std::move(ref);
+  key_face_normals_.resize(ref_.triangles.size());
+  for (size_t t = 0; t < ref_.triangles.size(); ++t) {
+    const auto& tr = ref_.triangles[t];
+    key_face_normals_[t] = FaceNormal(sc.decoded.positions[tr[0]], sc.decoded.positions[tr[1]], sc.decoded.positions[tr[2]]);
+  }
+  force_keyframe_ = false;
+  return OkStatus();
+}
+
+StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vector<uint8_t>* out,
+                                                     Geometry2FrameInfo* info) {
+  EncoderScratch& sc = Scratch();
+  const Geometry2EncodeOptions& o = options_;
+  HOLO_ASSIGN_OR_RETURN(const metrics::TriangleIndex index, metrics::TriangleIndex::Build(mesh));
+  ref_.ToMesh(&sc.decoded);
+  const size_t nv = ref_.pos.size();
+  const float maxd = o.max_displacement_m;
+
+  // Target displacement of every reference vertex along its normal: a
+  // ray–plane step onto the nearest triangle of the new mesh, twice (NaN: no
+  // surface facing the same way within reach).
+  sc.target.assign(nv, std::numeric_limits<float>::quiet_NaN());
+  for (size_t v = 0; v < nv; ++v) {
+    const auto& nd = ref_.normals[v];
+    if (nd[0] == 0 && nd[1] == 0 && nd[2] == 0) continue;
+    const Eigen::Vector3f n(static_cast<float>(nd[0]), static_cast<float>(nd[1]), static_cast<float>(nd[2]));
+    const Eigen::Vector3f& p = sc.decoded.positions[v];
+    float t = 0;
+    bool hit = false;
+    for (int iter = 0; iter < 2; ++iter) {
+      const Eigen::Vector3f at = p + t * n;
+      const metrics::ClosestPoint q = index.Query(at, maxd);
+      if (!q.found()) break;
+      const auto& tr = mesh.triangles[q.triangle];
+      const Eigen::Vector3f m = FaceNormal(mesh.positions[tr[0]], mesh.positions[tr[1]], mesh.positions[tr[2]]);
+      const float denom = n.dot(m);
+      if (!(denom >= 0.3f)) break;  // the nearest surface faces elsewhere (e.g. the far side of a thin part)
+      t = std::clamp(t + (q.point - at).dot(m) / denom, -maxd, maxd);
+      hit = true;
+    }
+    if (hit) sc.target[v] = t;
+  }
+
+  // Quantize in vertex order against the neighbours' prediction, exactly as
+  // the decoder will reconstruct.
+  const auto step_units = static_cast<int32_t>(
+      std::clamp<long>(std::lround(o.displacement_step_m / ref_.unit), 1, static_cast<long>(kMaxStepUnits)));
+  const float step_m = static_cast<float>(step_units) * ref_.unit;
+  sc.k.assign(nv, 0);
+  sc.absres.assign(nv, 0);
+  TokenWriter tw(kContexts, nv, &sc.syms);
+  for (uint32_t v = 0; v < nv; ++v) {
+    int32_t pred = 0;
+    uint32_t ctx = 0;
+    Predict(ref_, sc.k.data(), sc.absres.data(), v, &pred, &ctx);
+    int32_t r = 0;
+    if (!std::isnan(sc.target[v])) {
+      const float x = sc.target[v] / step_m - static_cast<float>(pred);
+      if (std::fabs(x) >= o.dead_zone_steps) r = static_cast<int32_t>(std::lround(x));
+      r = std::clamp(r, -kMaxSteps - pred, kMaxSteps - pred);
+    }
+    sc.k[v] = pred + r;
+    sc.absres[v] = std::abs(r);
+    tw.PutValue(ctx, ZigZag(r));
+  }
+  ApplyDisplacements(ref_, sc.k, step_units, &sc.pos);
+  ComputeNormals(sc.pos, ref_.triangles, &sc.normals);
+
+  // Check the frame the decoder would show against the input, both ways.
+  for (size_t v = 0; v < nv; ++v)
+    for (int c = 0; c < 3; ++c)
+      sc.decoded.positions[v][c] = ref_.origin[c] + static_cast<float>(sc.pos[v][c]) * ref_.unit;
+  double se = 0, mx = 0;
+  size_t far = 0;
+  for (size_t v = 0; v < nv; ++v) {
+    const float d = std::min(index.Query(sc.decoded.positions[v], kFarCap).distance, kFarCap);
+    se += double{d} * d;
+    mx = std::max<double>(mx, d);
+    far += d > o.far_m;
+  }
+  HOLO_ASSIGN_OR_RETURN(const metrics::TriangleIndex back, metrics::TriangleIndex::Build(sc.decoded));
+  for (const Eigen::Vector3f& p : mesh.positions) {
+    const float d = std::min(back.Query(p, kFarCap).distance, kFarCap);
+    se += double{d} * d;
+    mx = std::max<double>(mx, d);
+    far += d > o.far_m;
+  }
+  const double samples = static_cast<double>(nv + mesh.num_vertices());
+  size_t flipped = 0;
+  for (size_t t = 0; t < ref_.triangles.size(); ++t) {
+    const auto& tr = ref_.triangles[t];
+    const Eigen::Vector3f n =
+        FaceNormal(sc.decoded.positions[tr[0]], sc.decoded.positions[tr[1]], sc.decoded.positions[tr[2]]);
+    flipped += n.dot(key_face_normals_[t]) < 0;
+  }
+  info->rms_m = samples > 0 ? std::sqrt(se / samples) : 0;
+  info->max_m = mx;
+  info->far_fraction = samples > 0 ? static_cast<double>(far) / samples : 0;
+  info->flipped_fraction = ref_.triangles.empty() ? 0 : static_cast<double>(flipped) / ref_.triangles.size();
+  if (info->rms_m > o.max_rms_m) return std::string("rms");
+  if (info->far_fraction > o.max_far_fraction) return std::string("far");
+  if (info->flipped_fraction > o.max_flipped_fraction) return std::string("flipped");
+
+  ByteWriter w(out);
+  WriteHeader(w, kKindPredicted, ref_.keyframe_id, ref_.frame_index + 1, static_cast<uint32_t>(nv));
+  w.U32(ref_.hash);
+  w.U16(static_cast<uint16_t>(step_units));
+  w.U16(0);
+  sc.coded.clear();
+  tw.Finish(&sc.coded);
+  w.Bytes(sc.coded);
+  ref_.pos.swap(sc.pos);
+  ref_.normals.swap(sc.normals);
+  ref_.hash = HashPositions(ref_.pos);
+  ++ref_.frame_index;
+  info->keyframe_id = ref_.keyframe_id;
+  info->frame_index = ref_.frame_index;
+  return std::string();
+}
+
+Status Geometry2Encoder::Encode(const Mesh& mesh, std::vector<uint8_t>* out, Geometry2FrameInfo* info) {
+  HOLO_RETURN_IF_ERROR(status_);
+  if (Status s = CheckMesh(mesh); !s.ok()) return InvalidArgument(s.message());
+  Geometry2FrameInfo local;
+  if (info == nullptr) info = &local;
+  *info = {};
+  std::string reason;
+  if (!ref_.valid) {
+    reason = "first";
+  } else if (force_keyframe_) {
+    reason = "requested";
+  } else if (ref_.frame_index + 1 >= static_cast<uint32_t>(options_.max_group_frames)) {
+    reason = "group-length";
+  } else if (mesh.triangles.empty() || ref_.triangles.empty()) {
+    reason = "empty";
+  } else {
+    HOLO_ASSIGN_OR_RETURN(reason, TryPredicted(mesh, out, info));
+    if (reason.empty()) return OkStatus();
+  }
+  const Geometry2FrameInfo tried = *info;
+  info->keyframe = true;
+  info->reason = reason;
+  HOLO_RETURN_IF_ERROR(EncodeKeyframe(mesh, out));
+  info->keyframe_id = ref_.keyframe_id;
+  info->frame_index = 0;
+  info->rms_m = tried.rms_m;
+  return OkStatus();
+}
+
+StatusOr<Geometry2BlobInfo> PeekGeometry2(std::span<const uint8_t> blob) {
+  ByteReader r(blob);
+  Geometry2BlobInfo info;
+  HOLO_RETURN_IF_ERROR(ReadHeader(r, &info));
+  return info;
+}
+
+Status Geometry2Decoder::Decode(std::span<const uint8_t> blob, Mesh* mesh, const Limits& limits) {
+  ClearMesh(mesh);
+  ByteReader r(blob);
+  Geometry2BlobInfo h;
+  HOLO_RETURN_IF_ERROR(ReadHeader(r, &h));
+  if (h.num_vertices > limits.max_vertices) {
+    return DataLoss("g2.num_vertices: " + Str(h.num_vertices) + " exceeds limit " + Str(limits.max_vertices));
+  }
+  const std::span<const uint8_t> rest = blob.subspan(r.position());
+  if (h.keyframe) {
+    if (rest.empty() || rest[0] != static_cast<uint8_t>(GeometryCodec::kG1)) {
+      return DataLoss("g2.keyframe: not a G1 blob");
+    }
+    Mesh& m = *mesh;
+    if (Status s = DecodeGeometry(rest, &m, limits); !s.ok()) return DataLoss("g2.keyframe: " + s.message());
+    if (m.num_vertices() != h.num_vertices) {
+      ClearMesh(mesh);
+      return DataLoss("g2.num_vertices: " + Str(h.num_vertices) + " but the keyframe has " + Str(m.num_vertices()));
+    }
+    if (Status s = ReferenceFromKeyframe(rest, m, h.keyframe_id, &next_); !s.ok()) {
+      ClearMesh(mesh);
+      return s;
+    }
+    std::swap(ref_, next_);
+    ref_.ToMesh(mesh);
+    return OkStatus();
+  }
+
+  uint32_t hash = 0;
+  uint16_t step_units = 0, reserved = 0;
+  HOLO_RETURN_IF_ERROR(r.U32("g2.reference_hash", &hash));
+  HOLO_RETURN_IF_ERROR(r.U16("g2.step_units", &step_units));
+  HOLO_RETURN_IF_ERROR(r.U16("g2.reserved2", &reserved));
+  if (step_units < 1 || step_units > kMaxStepUnits) {
+    return DataLoss("g2.step_units: " + Str(step_units) + " not in 1.." + Str(kMaxStepUnits));
+  }
+  if (reserved != 0) return DataLoss("g2.reserved2: must be zero");
+  const std::string frame =
+      "g2: predicted frame " + Str(h.frame_index) + " of keyframe " + Str(h.keyframe_id);
+  if (!ref_.valid) return NotFound(frame + " needs its reference, and this decoder has no keyframe yet");
+  if (h.keyframe_id != ref_.keyframe_id) {
+    return NotFound(frame + " does not follow this decoder's keyframe " + Str(ref_.keyframe_id) +
+                    " (keyframe id mismatch: wait for or request a keyframe)");
+  }
+  if (h.frame_index != ref_.frame_index + 1) {
+    return NotFound(frame + " needs frame " + Str(h.frame_index - 1) + " as its reference, this decoder holds frame " +
+                    Str(ref_.frame_index) + " (frame counter mismatch: a frame was lost)");
+  }
+  if (h.num_vertices != ref_.pos.size()) {
+    return NotFound(frame + " has " + Str(h.num_vertices) + " vertices, the reference " + Str(ref_.pos.size()) +
+                    " (vertex count mismatch)");
+  }
+  if (hash != ref_.hash) {
+    return NotFound(frame + ": reference hash " + Str(hash) + " differs from this decoder's " + Str(ref_.hash) +
+                    " (the reference positions differ)");
+  }
+  TokenReader tr;
+  HOLO_RETURN_IF_ERROR(tr.Init(blob.subspan(r.position()), kContexts, "g2.displacements"));
+  const size_t nv = ref_.pos.size();
+  if (nv > tr.MaxSymbols()) {
+    return DataLoss("g2.displacements: " + Str(nv) + " values cannot fit in " + Str(blob.size() - r.position()) + " bytes");
+  }
+  EncoderScratch& sc = Scratch();
+  sc.k.assign(nv, 0);
+  sc.absres.assign(nv, 0);
+  for (uint32_t v = 0; v < nv; ++v) {
+    int32_t pred = 0;
+    uint32_t ctx = 0;
+    Predict(ref_, sc.k.data(), sc.absres.data(), v, &pred, &ctx);
+    const uint32_t z = tr.GetValue(ctx);
+    if (!tr.ok()) break;
+    const int64_t k = int64_t{pred} + UnZigZag(z);
+    if (k < -kMaxSteps || k > kMaxSteps) {
+      return DataLoss("g2.displacements: vertex " + Str(v) + " moves more than " + Str(kMaxSteps) + " steps");
+    }
+    sc.k[v] = static_cast<int32_t>(k);
+    sc.absres[v] = static_cast<int32_t>(std::abs(k - pred));
+  }
+  HOLO_RETURN_IF_ERROR(tr.Finish());
+  ApplyDisplacements(ref_, sc.k, step_units, &sc.pos);
+  ref_.pos.swap(sc.pos);
+  ComputeNormals(ref_.pos, ref_.triangles, &ref_.normals);
+  ref_.hash = HashPositions(ref_.pos);
+  ++ref_.frame_index;
+  ref_.ToMesh(mesh);
+  return OkStatus();
+}
+
+}  // namespace holo::protocol
