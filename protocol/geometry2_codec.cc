@@ -213,7 +213,7 @@ Eigen::Vector3f FaceNormal(const Eigen::Vector3f& a, const Eigen::Vector3f& b, c
 
 struct EncoderScratch {
   Mesh decoded;
-  std::vector<float> target;
+  std::vector<float> target, smoothed;
   std::vector<int32_t> k, absres;
   std::vector<std::array<int32_t, 3>> pos;
   std::vector<std::array<double, 3>> normals;
@@ -259,6 +259,9 @@ Status Geometry2EncodeOptions::Check() const {
       !(max_flipped_fraction >= 0 && max_flipped_fraction <= 1)) {
     return InvalidArgument("max_rms_m and far_m must be > 0, max_far_fraction and max_flipped_fraction in [0, 1]");
   }
+  if (smooth_passes < 0 || smooth_passes > 8) {
+    return InvalidArgument("smooth_passes must be in [0, 8], got " + std::to_string(smooth_passes));
+  }
   if (max_group_frames < 1 || max_group_frames > 65535) {
     return InvalidArgument("max_group_frames must be in [1, 65535], got " + std::to_string(max_group_frames));
   }
@@ -284,9 +287,27 @@ Status Geometry2Encoder::EncodeKeyframe(const Mesh& mesh, std::vector<uint8_t>* 
   w.Bytes(sc.g1);
   ref_ = std::move(ref);
   key_face_normals_.resize(ref_.triangles.size());
+  key_area_ = 0;
   for (size_t t = 0; t < ref_.triangles.size(); ++t) {
     const auto& tr = ref_.triangles[t];
-    key_face_normals_[t] = FaceNormal(sc.decoded.positions[tr[0]], sc.decoded.positions[tr[1]], sc.decoded.positions[tr[2]]);
+    const Eigen::Vector3f& a = sc.decoded.positions[tr[0]];
+    // Area-weighted (twice the area): slivers that turn over do not count.
+    key_face_normals_[t] = (sc.decoded.positions[tr[1]] - a).cross(sc.decoded.positions[tr[2]] - a);
+    key_area_ += key_face_normals_[t].norm();
+  }
+  // Every vertex's one-ring, for the encoder's smoothing.
+  {
+    const size_t nv = ref_.pos.size();
+    ring_start_.assign(nv + 1, 0);
+    for (const auto& t : ref_.triangles)
+      for (int e = 0; e < 3; ++e) ++ring_start_[t[e] + 1];
+    for (size_t v = 0; v < nv; ++v) ring_start_[v + 1] += ring_start_[v];
+    ring_.assign(ring_start_[nv], 0);
+    std::vector<uint32_t> fill(ring_start_.begin(), ring_start_.end() - 1);
+    // Each corner lists the next corner of its triangle: over a closed fan
+    // that is every neighbour once (open fans miss one; good enough here).
+    for (const auto& t : ref_.triangles)
+      for (int e = 0; e < 3; ++e) ring_[fill[t[e]]++] = t[(e + 1) % 3];
   }
   force_keyframe_ = false;
   return OkStatus();
@@ -324,6 +345,30 @@ StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vect
       hit = true;
     }
     if (hit) sc.target[v] = t;
+  }
+
+  // Low-pass the targets over each one-ring (valid targets only): a re-fused
+  // surface ripples by fractions of a millimetre from frame to frame, and
+  // following that noise vertex by vertex costs bits and turns slivers over.
+  for (int pass = 0; pass < o.smooth_passes; ++pass) {
+    sc.smoothed.resize(nv);
+    for (size_t v = 0; v < nv; ++v) {
+      if (std::isnan(sc.target[v])) {
+        sc.smoothed[v] = sc.target[v];
+        continue;
+      }
+      float sum = sc.target[v];
+      int n = 1;
+      for (uint32_t i = ring_start_[v]; i < ring_start_[v + 1]; ++i) {
+        const float t = sc.target[ring_[i]];
+        if (!std::isnan(t)) {
+          sum += t;
+          ++n;
+        }
+      }
+      sc.smoothed[v] = sum / static_cast<float>(n);
+    }
+    sc.target.swap(sc.smoothed);
   }
 
   // Quantize in vertex order against the neighbours' prediction, exactly as
@@ -371,17 +416,17 @@ StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vect
     far += d > o.far_m;
   }
   const double samples = static_cast<double>(nv + mesh.num_vertices());
-  size_t flipped = 0;
+  double flipped = 0;
   for (size_t t = 0; t < ref_.triangles.size(); ++t) {
     const auto& tr = ref_.triangles[t];
-    const Eigen::Vector3f n =
-        FaceNormal(sc.decoded.positions[tr[0]], sc.decoded.positions[tr[1]], sc.decoded.positions[tr[2]]);
-    flipped += n.dot(key_face_normals_[t]) < 0;
+    const Eigen::Vector3f& a = sc.decoded.positions[tr[0]];
+    const Eigen::Vector3f n = (sc.decoded.positions[tr[1]] - a).cross(sc.decoded.positions[tr[2]] - a);
+    if (n.dot(key_face_normals_[t]) < 0) flipped += key_face_normals_[t].norm();
   }
   info->rms_m = samples > 0 ? std::sqrt(se / samples) : 0;
   info->max_m = mx;
   info->far_fraction = samples > 0 ? static_cast<double>(far) / samples : 0;
-  info->flipped_fraction = ref_.triangles.empty() ? 0 : static_cast<double>(flipped) / ref_.triangles.size();
+  info->flipped_fraction = key_area_ > 0 ? flipped / key_area_ : 0;
   if (info->rms_m > o.max_rms_m) return std::string("rms");
   if (info->far_fraction > o.max_far_fraction) return std::string("far");
   if (info->flipped_fraction > o.max_flipped_fraction) return std::string("flipped");

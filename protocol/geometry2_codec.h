@@ -48,6 +48,10 @@ struct Geometry2EncodeOptions {
   // A residual (displacement minus its prediction, in steps) of magnitude below
   // this is sent as 0 (a dead zone: ≥ 0.5 rounds, larger trades error for bits).
   float dead_zone_steps = 0.5f;
+  // Passes of one-ring averaging of the target displacements before they
+  // are quantized (0..8): the re-fused surface's frame-to-frame ripple is
+  // noise, not motion.
+  int smooth_passes = 1;
   // The encoder searches the new surface this far along ±normal, metres; a
   // vertex with nothing closer keeps its predicted displacement.
   float max_displacement_m = 0.03f;
@@ -59,8 +63,9 @@ struct Geometry2EncodeOptions {
   // `far_m` (new or vanished parts, e.g. a hand coming into view).
   float far_m = 0.01f;
   float max_far_fraction = 0.01f;
-  // … or if more than this fraction of the triangles face away (> 90°) from
-  // their orientation in the keyframe (folds).
+  // … or if triangles holding more than this fraction of the keyframe's area
+  // face away (> 90°) from their orientation in the keyframe (folds; slivers
+  // that turn over weigh little).
   float max_flipped_fraction = 0.005f;
   // … or after this many frames in a group (keyframe included), 1..65535.
   int max_group_frames = 30;
@@ -75,7 +80,7 @@ struct Geometry2FrameInfo {
   std::string reason;
   uint32_t keyframe_id = 0, frame_index = 0;
   // Predicted frames: the checked two-sided error (RMS and largest distance,
-  // metres), the share of far samples and of flipped triangles. The error of
+  // metres), the share of far samples and of flipped (keyframe) area. The error of
   // a predicted frame that was replaced by a keyframe is reported too.
   double rms_m = 0, max_m = 0, far_fraction = 0, flipped_fraction = 0;
 };
@@ -135,7 +140,9 @@ class Geometry2Encoder {
   bool force_keyframe_ = false;
   uint32_t next_keyframe_id_ = 1;
   Geometry2Reference ref_;
-  std::vector<Eigen::Vector3f> key_face_normals_;  // the keyframe's unit face normals (zero if degenerate)
+  std::vector<Eigen::Vector3f> key_face_normals_;  // the keyframe's face normals, length = twice the area
+  double key_area_ = 0;                            // their summed lengths
+  std::vector<uint32_t> ring_start_, ring_;        // every vertex's one-ring (CSR)
 };
 
 // Decodes a G2 stream (one decoder per stream). Safe on untrusted input:
