@@ -3,17 +3,21 @@
 //                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard]
 //                       [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
-//                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
+//                       [--content fused|temporal|truth] [--full-mesh] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
 //                       [--g2-step-mm=S] [--g2-max-rms-mm=R] [--g2-keyframe-step-mm=S] [--g2-dead-zone=Z] [--g2-group=N]
+//                       [--g2-smooth=N] [--g2-max-disp-mm=D] [--g2-far-fraction=F]
 // Unknown options are refused (exit 2); --name value and --name=value both work.
 //
 // --content truth (the default): the studio's ground-truth foreground mesh and
 // the pods' images with exact masks, frames 0, 1, 2, ... (consecutive, as a
 // video codec sees them). --content fused: the real capture site run
 // in-process (CaptureSite, MaskSource::kSegment, background learned from the
-// empty room, the workload's voxel size): the site's fused, textured mesh and
-// the pods' images with the site's own segmentation masks. Default frames:
+// empty room, the workload's voxel size): the site's fused, textured mesh —
+// the compact stream mesh the live server sends (StreamMeshOptions defaults:
+// every 2nd voxel, ≤ 20 k triangles; qualifier mesh "site-stream"), or with
+// --full-mesh the full-resolution one ("site-fused") — and the pods' images
+// with the site's own segmentation masks. Default frames:
 // 4 on truth, 60 on fused (a video codec needs a sequence; --frames N).
 //
 // Video colour (V1, protocol/video_codec.h) runs as codec "video" with a
@@ -108,6 +112,7 @@ double NowMs() {
 // "--name value" and "--name=value").
 struct CodecsOptions {
   bool synthetic = false, hash = false;
+  bool full_mesh = false;  // fused: the full-resolution mesh, not the stream mesh the live server sends
   std::string only;                         // "G1,C1": only these codecs
   std::string content = "truth";            // truth | fused
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
@@ -122,7 +127,8 @@ struct CodecsOptions {
   int peer_jpeg_quality = 90;  // the jpeg-box peer's TurboJPEG quality
   // G2 options (unset: Geometry2EncodeOptions' defaults), millimetres.
   std::optional<float> g2_step_mm, g2_max_rms_mm, g2_keyframe_step_mm, g2_dead_zone;
-  std::optional<int> g2_group;
+  std::optional<int> g2_group, g2_smooth;
+  std::optional<float> g2_max_disp_mm, g2_far_fraction;
 };
 
 struct PodImageInput {
@@ -413,7 +419,7 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
 // frames and keeps, per frame, the site's fused textured mesh and the pods'
 // colour images with the masks the site used. Returns the frames kept, or -1
 // (error printed).
-int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs) {
+int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal, std::vector<FrameInput>* inputs) {
   auto studio = SyntheticStudio::Create(wl.rig, wl.studio);
   StudioOptions empty_options = wl.studio;
   empty_options.empty_room = true;
@@ -426,6 +432,11 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
   o.masks = MaskSource::kSegment;
   o.tsdf.voxel_size = wl.voxel_size_m;
   o.pipeline.max_frames = frames;
+  // The live server's default (holoport-server --stream-step 2 --stream-triangles 20000).
+  o.stream_mesh = stream_mesh;
+  // --content temporal: the site's temporal fusion (docs/temporal.md: the
+  // previous volume tracked non-rigidly and fused into), not a fresh volume per frame.
+  o.temporal = temporal;
   auto site = CaptureSite::Create(studio->get(), empty->get(), studio->get(), o);
   if (!site.ok()) {
     spdlog::error("codecs: capture site: {}", site.status().ToString());
@@ -510,11 +521,11 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     }
   }
   const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || co.synthetic;
-  if (synthetic && content == "fused") {
+  if (synthetic && (content == "fused" || content == "temporal")) {
     spdlog::error("codecs: --content fused needs the studio (not --synthetic)");
     return 2;
   }
-  const int frames = args.frames > 0 ? args.frames : (content == "fused" ? 60 : 4);
+  const int frames = args.frames > 0 ? args.frames : (content == "truth" ? 4 : 60);
   std::string workload = args.workload;
   std::map<std::string, std::string> q0;
   std::vector<FrameInput> inputs(frames);
@@ -542,10 +553,10 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       spdlog::error("codecs: {}", wl.status().ToString());
       return 2;
     }
-    if (content == "fused") {
-      const int got = FusedInputs(*wl, frames, &inputs);
+    if (content == "fused" || content == "temporal") {
+      const int got = FusedInputs(*wl, frames, !co.full_mesh, content == "temporal", &inputs);
       if (got < 0) return 1;
-      q0["mesh"] = "site-fused";
+      q0["mesh"] = co.full_mesh ? "site-fused" : "site-stream";
       q0["masks"] = "segment";
     } else {
     SyntheticStudio studio(wl->rig, wl->studio);
@@ -716,9 +727,18 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     if (co.g2_keyframe_step_mm) o.keyframe.position_step_m = *co.g2_keyframe_step_mm / 1000.0f;
     if (co.g2_dead_zone) o.dead_zone_steps = *co.g2_dead_zone;
     if (co.g2_group) o.max_group_frames = *co.g2_group;
+    if (co.g2_smooth) o.smooth_passes = *co.g2_smooth;
+    if (co.g2_far_fraction) o.max_far_fraction = *co.g2_far_fraction;
+    if (co.g2_max_disp_mm) o.max_displacement_m = *co.g2_max_disp_mm / 1000.0f;
     if (const Status st = o.Check(); !st.ok()) {
       spdlog::error("codecs: G2 options: {}", st.ToString());
       return 2;
+    }
+    if (!args.json) {  // how much the site's mesh itself changes from frame to frame
+      for (size_t f = 1; f < inputs.size() && f < 6; ++f) {
+        const SurfaceError se = TwoSidedSurfaceError(inputs[f - 1].mesh, inputs[f].mesh);
+        spdlog::info("G2: site mesh frame {} vs {}: two-sided rms {:.3f} mm, max {:.1f} mm", f - 1, f, se.rms_mm, se.max_mm);
+      }
     }
     Figures fig;
     std::vector<double> key_bytes, pred_bytes, key_enc_cpu, pred_enc_cpu, key_dec_cpu, pred_dec_cpu;
@@ -757,8 +777,10 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
           fig.a.push_back(se.rms_mm);
           fig.b.push_back(se.max_mm);
           if (!args.json) {
-            spdlog::info("G2 frame {}: {} {} B, rms {:.3f} mm, max {:.1f} mm{}", fig.bytes.size() - 1,
-                         info.keyframe ? "key" : "pred", blob.size(), se.rms_mm, se.max_mm,
+            spdlog::info("G2 frame {}: {} {} B, rms {:.3f} mm, max {:.1f} mm; checked rms {:.3f} mm far {:.4f} "
+                         "flipped {:.4f}{}",
+                         fig.bytes.size() - 1, info.keyframe ? "key" : "pred", blob.size(), se.rms_mm, se.max_mm,
+                         info.rms_m * 1000, info.far_fraction, info.flipped_fraction,
                          info.keyframe ? " (" + info.reason + ")" : "");
           }
         }
@@ -769,7 +791,8 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
                                              {"max_group_frames", std::to_string(o.max_group_frames)},
                                              {"displacement_step_mm", Fixed(o.displacement_step_m * 1000, 2)},
                                              {"keyframe_step_mm", Fixed(o.keyframe.position_step_m * 1000, 2)},
-                                             {"max_rms_mm", Fixed(o.max_rms_m * 1000, 2)}};
+                                             {"max_rms_mm", Fixed(o.max_rms_m * 1000, 2)},
+                                             {"max_far_fraction", Fixed(o.max_far_fraction, 3)}};
     const double bytes = Mean(fig.bytes);
     bytes_of["G2"] = bytes;
     emit("G2", "bytes_per_frame", bytes, "B", extra);
@@ -1213,9 +1236,13 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
 
 BenchFn SetupCodecs(CLI::App& app) {
   auto co = std::make_shared<CodecsOptions>();
-  app.add_option("--content", co->content, "truth (the studio's ground truth) or fused (the capture site's output)")
-      ->check(CLI::IsMember({"truth", "fused"}))
+  app.add_option("--content", co->content,
+                 "truth (the studio's ground truth), fused (the capture site's output) or temporal (the site with "
+                 "temporal fusion)")
+      ->check(CLI::IsMember({"truth", "fused", "temporal"}))
       ->capture_default_str();
+  app.add_flag("--full-mesh", co->full_mesh,
+               "fused: the site's full-resolution mesh instead of the stream mesh (20 k triangles) the live server sends");
   app.add_flag("--synthetic", co->synthetic, "workload synthetic-sphere (a noisy blob) instead of the studio");
   app.add_option("--only", co->only, "only these codecs, comma-separated (e.g. G1,C1)");
   app.add_flag("--hash", co->hash, "print a hash of every geometry blob of the first repeat to stderr");
@@ -1247,6 +1274,10 @@ BenchFn SetupCodecs(CLI::App& app) {
   app.add_option("--g2-keyframe-step-mm", co->g2_keyframe_step_mm, "G2 keyframes' G1 position step, mm");
   app.add_option("--g2-dead-zone", co->g2_dead_zone, "G2 residual dead zone, steps (0.5 = plain rounding)");
   app.add_option("--g2-group", co->g2_group, "G2 longest group of frames (keyframe included)");
+  app.add_option("--g2-far-fraction", co->g2_far_fraction,
+                 "G2 keyframe when more than this share of the error samples is farther than 1 cm");
+  app.add_option("--g2-smooth", co->g2_smooth, "G2 one-ring smoothing passes of the target displacements");
+  app.add_option("--g2-max-disp-mm", co->g2_max_disp_mm, "G2 farthest surface search along a normal, mm");
   return [co](const BenchArgs& args) { return RunCodecs(args, *co); };
 }
 

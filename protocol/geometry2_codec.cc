@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <span>
+#include <unordered_map>
 
 #include "common/metrics/triangle_index.h"
 #include "protocol/byte_io.h"
@@ -25,7 +27,11 @@ constexpr int32_t kUnitsPerStep = 16;      // reference position units per keyfr
 constexpr int32_t kMaxCoord = 1 << 22;     // reference positions are clamped to ±this (units)
 constexpr int32_t kMaxSteps = 4095;        // largest |displacement|, steps
 constexpr uint32_t kMaxStepUnits = 4096;   // largest displacement step, units
-constexpr uint32_t kContexts = 8;          // displacement residual contexts
+constexpr uint32_t kContexts = 15;         // 0..7 displacement residuals, 8 motion flag, 9..14 motion
+constexpr int32_t kClusterCell = 96 * kUnitsPerStep;  // cluster cube edge, units (96 keyframe steps)
+constexpr int32_t kTransUnits = 8;         // motion translation step, units
+constexpr int32_t kRotScale = 4096;        // motion rotation: quaternion vector part × this
+constexpr int32_t kMaxTrans = kMaxCoord / kTransUnits;
 constexpr float kFarCap = 0.05f;           // error samples farther than this count as this, metres
 
 std::string Str(uint64_t v) { return std::to_string(v); }
@@ -108,6 +114,83 @@ void BuildAdjacency(size_t nv, const std::vector<std::array<uint32_t, 3>>& tris,
   adj->resize(w);
 }
 
+// PROTOCOL.md §7.1 "Clusters": the keyframe's vertices grouped by connected
+// component and by cube of kClusterCell units, as CSR lists of vertices;
+// clusters ordered by their smallest vertex, the vertices of each ascending.
+void BuildClusters(const std::vector<std::array<int32_t, 3>>& pos, const std::vector<std::array<uint32_t, 3>>& tris,
+                   std::vector<uint32_t>* start, std::vector<uint32_t>* verts, std::vector<uint32_t>* root_of) {
+  const size_t nv = pos.size();
+  std::vector<uint32_t> parent(nv);
+  for (size_t v = 0; v < nv; ++v) parent[v] = static_cast<uint32_t>(v);
+  auto find = [&](uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : tris)
+    for (int e = 1; e < 3; ++e) {
+      const uint32_t a = find(t[0]), b = find(t[e]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the root is the smallest vertex
+    }
+  // Cluster = (component root, cell of the keyframe grid): keyframe positions
+  // are 0..65535·16, so a cell index is below 2^10 and a root below 2^22.
+  std::unordered_map<uint64_t, uint32_t> id_of;
+  std::vector<uint32_t> label(nv);
+  root_of->clear();
+  uint32_t n = 0;
+  for (size_t v = 0; v < nv; ++v) {
+    uint64_t key = find(static_cast<uint32_t>(v));
+    for (int k = 0; k < 3; ++k) key = (key << 10) | static_cast<uint64_t>(pos[v][k] / kClusterCell);
+    auto [it, added] = id_of.emplace(key, n);
+    if (added) {
+      ++n;
+      root_of->push_back(find(static_cast<uint32_t>(v)));
+    }
+    label[v] = it->second;
+  }
+  start->assign(n + 1, 0);
+  for (size_t v = 0; v < nv; ++v) ++(*start)[label[v] + 1];
+  for (uint32_t c = 0; c < n; ++c) (*start)[c + 1] += (*start)[c];
+  verts->assign(nv, 0);
+  std::vector<uint32_t> fill(start->begin(), start->end() - 1);
+  for (size_t v = 0; v < nv; ++v) (*verts)[fill[label[v]]++] = static_cast<uint32_t>(v);
+}
+
+// A rigid motion of one component on the wire (PROTOCOL.md §7.1 "Rigid motions").
+struct RigidMotion {
+  uint32_t component = 0;    // the cluster
+  int32_t t[3] = {0, 0, 0};  // translation, kTransUnits units
+  int32_t q[3] = {0, 0, 0};  // quaternion vector part × kRotScale
+};
+
+// PROTOCOL.md §7.1 "Rigid motions": P' = c + t + round(R (P − c)), c the
+// component's truncated integer centroid, R from the quaternion.
+void ApplyRigid(const Geometry2Reference& ref, const RigidMotion& m, std::vector<std::array<int32_t, 3>>* pos) {
+  const uint32_t b = ref.comp_start[m.component], e = ref.comp_start[m.component + 1];
+  const auto n = static_cast<int64_t>(e - b);
+  int64_t sum[3] = {0, 0, 0};
+  for (uint32_t i = b; i < e; ++i)
+    for (int k = 0; k < 3; ++k) sum[k] += (*pos)[ref.comp_verts[i]][k];
+  int64_t c[3];
+  for (int k = 0; k < 3; ++k) c[k] = sum[k] / n;
+  const double x = m.q[0] / static_cast<double>(kRotScale), y = m.q[1] / static_cast<double>(kRotScale),
+               z = m.q[2] / static_cast<double>(kRotScale);
+  const double w2 = 1.0 - ((x * x + y * y) + z * z);
+  const double w = w2 > 0 ? std::sqrt(w2) : 0.0;
+  const double r[3][3] = {{1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)},
+                          {2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)},
+                          {2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)}};
+  for (uint32_t i = b; i < e; ++i) {
+    std::array<int32_t, 3>& p = (*pos)[ref.comp_verts[i]];
+    const double d[3] = {static_cast<double>(p[0] - c[0]), static_cast<double>(p[1] - c[1]),
+                         static_cast<double>(p[2] - c[2])};
+    for (int k = 0; k < 3; ++k) {
+      const long long rot = std::llround((r[k][0] * d[0] + r[k][1] * d[1]) + r[k][2] * d[2]);
+      p[k] = static_cast<int32_t>(
+          std::clamp<long long>(c[k] + int64_t{m.t[k]} * kTransUnits + rot, -kMaxCoord, kMaxCoord));
+    }
+  }
+}
+
 // PROTOCOL.md §7.1 "Prediction": the rounded mean of the decoded neighbours'
 // displacements; context from the mean magnitude of their residuals.
 inline void Predict(const Geometry2Reference& ref, const int32_t* k, const int32_t* absres, uint32_t v, int32_t* pred,
@@ -130,20 +213,17 @@ inline void Predict(const Geometry2Reference& ref, const int32_t* k, const int32
 }
 
 // PROTOCOL.md §7.1 "Update": position += round(k · step · normal), clamped.
-void ApplyDisplacements(const Geometry2Reference& ref, const std::vector<int32_t>& k, int32_t step_units,
-                        std::vector<std::array<int32_t, 3>>* out) {
-  const size_t nv = ref.pos.size();
-  out->resize(nv);
+void ApplyDisplacements(const std::vector<std::array<double, 3>>& normals, const std::vector<int32_t>& k,
+                        int32_t step_units, std::vector<std::array<int32_t, 3>>* pos) {
+  const size_t nv = pos->size();
   for (size_t i = 0; i < nv; ++i) {
-    std::array<int32_t, 3> p = ref.pos[i];
-    if (k[i] != 0) {
-      const double d = static_cast<double>(int64_t{k[i]} * step_units);
-      for (int c = 0; c < 3; ++c) {
-        const long long delta = std::llround(d * ref.normals[i][c]);
-        p[c] = static_cast<int32_t>(std::clamp<long long>(p[c] + delta, -kMaxCoord, kMaxCoord));
-      }
+    if (k[i] == 0) continue;
+    std::array<int32_t, 3>& p = (*pos)[i];
+    const double d = static_cast<double>(int64_t{k[i]} * step_units);
+    for (int c = 0; c < 3; ++c) {
+      const long long delta = std::llround(d * normals[i][c]);
+      p[c] = static_cast<int32_t>(std::clamp<long long>(p[c] + delta, -kMaxCoord, kMaxCoord));
     }
-    (*out)[i] = p;
   }
 }
 
@@ -172,6 +252,7 @@ Status ReferenceFromKeyframe(std::span<const uint8_t> g1, const Mesh& m, uint32_
   ref->colors = m.colors;
   ComputeNormals(ref->pos, ref->triangles, &ref->normals);
   BuildAdjacency(nv, ref->triangles, &ref->adj_start, &ref->adj);
+  BuildClusters(ref->pos, ref->triangles, &ref->comp_start, &ref->comp_verts, &ref->cluster_root);
   ref->hash = HashPositions(ref->pos);
   ref->valid = true;
   return OkStatus();
@@ -211,12 +292,90 @@ Eigen::Vector3f FaceNormal(const Eigen::Vector3f& a, const Eigen::Vector3f& b, c
   return len > 0 ? Eigen::Vector3f(n / len) : Eigen::Vector3f::Zero();
 }
 
+// Point-to-plane ICP of one component of the reference (float positions
+// `fpos`, unit normals `fnrm`) onto the new mesh: the motion
+// p → R (p − g) + g + t about the component's centroid g. False if the
+// component does not find enough of the new surface or the motion does not
+// bring it closer.
+bool EstimateRigid(std::span<const uint32_t> verts, std::span<const float> radii,
+                   const std::vector<Eigen::Vector3f>& fpos, const std::vector<Eigen::Vector3f>& fnrm,
+                   const metrics::TriangleIndex& index, const Mesh& mesh, Eigen::Matrix3d* R, Eigen::Vector3d* g,
+                   Eigen::Vector3d* t) {
+  const uint32_t b = 0, e = static_cast<uint32_t>(verts.size());
+  if (e == 0) return false;
+  const uint32_t stride = std::max<uint32_t>(1, e / 1500);
+  // The initial motion (*R, *t about *g) re-expressed about this set's centroid.
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  for (uint32_t v : verts) c += fpos[v].cast<double>();
+  c /= static_cast<double>(e);
+  *t = *R * (c - *g) + *g + *t - c;
+  *g = c;
+  const Eigen::Matrix3d R0 = *R;
+  const Eigen::Vector3d t0 = *t;
+  struct RefView {
+    std::span<const uint32_t> comp_verts;
+  } ref{verts};
+  // Capped squared distance of the samples under the current motion.
+  auto cost = [&](const Eigen::Matrix3d& r, const Eigen::Vector3d& tr) {
+    double se = 0;
+    for (uint32_t i = b; i < e; i += stride) {
+      const Eigen::Vector3d p = r * (fpos[ref.comp_verts[i]].cast<double>() - *g) + *g + tr;
+      const float d = std::min(index.Query(p.cast<float>(), 0.03f).distance, 0.03f);
+      se += double{d} * d;
+    }
+    return se;
+  };
+  for (float radius : radii) {
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
+    int count = 0;
+    for (uint32_t i = b; i < e; i += stride) {
+      const uint32_t v = ref.comp_verts[i];
+      if (fnrm[v].isZero()) continue;
+      const Eigen::Vector3d pc = *R * (fpos[v].cast<double>() - *g);
+      const Eigen::Vector3d p = pc + *g + *t;
+      const Eigen::Vector3d n = *R * fnrm[v].cast<double>();
+      const metrics::ClosestPoint q = index.Query(p.cast<float>(), radius);
+      if (!q.found()) continue;
+      const auto& tr = mesh.triangles[q.triangle];
+      const Eigen::Vector3d m =
+          FaceNormal(mesh.positions[tr[0]], mesh.positions[tr[1]], mesh.positions[tr[2]]).cast<double>();
+      if (!(n.dot(m) >= 0.3)) continue;
+      Eigen::Matrix<double, 6, 1> J;
+      J << pc.cross(m), m;
+      A += J * J.transpose();
+      rhs += J * (q.point.cast<double>() - p).dot(m);
+      ++count;
+    }
+    if (count < 6) return false;
+    // A little damping: a ball's rotation is not observable from its shape.
+    A += 1e-4 * count * 1e-2 * Eigen::Matrix<double, 6, 6>::Identity();
+    const Eigen::Matrix<double, 6, 1> x = A.ldlt().solve(rhs);
+    if (!x.allFinite()) return false;
+    const Eigen::Vector3d w = x.head<3>();
+    const double angle = w.norm();
+    const Eigen::Matrix3d dR =
+        angle > 0 ? Eigen::AngleAxisd(angle, w / angle).toRotationMatrix() : Eigen::Matrix3d::Identity();
+    *R = dR * *R;
+    *t = dR * *t + x.tail<3>();
+  }
+  const double before = cost(R0, t0), after = cost(*R, *t);
+  if (!(after < 0.9 * before)) {
+    *R = R0;
+    *t = t0;
+    return false;
+  }
+  return true;
+}
+
 struct EncoderScratch {
   Mesh decoded;
+  std::vector<Eigen::Vector3f> fnrm;
   std::vector<float> target, smoothed;
   std::vector<int32_t> k, absres;
   std::vector<std::array<int32_t, 3>> pos;
-  std::vector<std::array<double, 3>> normals;
+  std::vector<std::array<double, 3>> normals, rigid_normals;
+  std::vector<RigidMotion> motions;
   std::vector<uint16_t> syms;
   std::vector<uint8_t> coded, g1;
 };
@@ -259,6 +418,7 @@ Status Geometry2EncodeOptions::Check() const {
       !(max_flipped_fraction >= 0 && max_flipped_fraction <= 1)) {
     return InvalidArgument("max_rms_m and far_m must be > 0, max_far_fraction and max_flipped_fraction in [0, 1]");
   }
+  if (rigid_min_vertices < 0) return InvalidArgument("rigid_min_vertices must be ≥ 0");
   if (smooth_passes < 0 || smooth_passes > 8) {
     return InvalidArgument("smooth_passes must be in [0, 8], got " + std::to_string(smooth_passes));
   }
@@ -295,6 +455,21 @@ Status Geometry2Encoder::EncodeKeyframe(const Mesh& mesh, std::vector<uint8_t>* 
     key_face_normals_[t] = (sc.decoded.positions[tr[1]] - a).cross(sc.decoded.positions[tr[2]] - a);
     key_area_ += key_face_normals_[t].norm();
   }
+  // The clusters of every component (components in order of their root).
+  {
+    std::vector<uint32_t> order(ref_.cluster_root.size());
+    for (uint32_t c = 0; c < order.size(); ++c) order[c] = c;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t a, uint32_t b) { return ref_.cluster_root[a] < ref_.cluster_root[b]; });
+    comp_clusters_ = order;
+    comp_clusters_start_.assign(1, 0);
+    for (uint32_t j = 1; j <= order.size(); ++j) {
+      if (j == order.size() || ref_.cluster_root[order[j]] != ref_.cluster_root[order[j - 1]]) {
+        comp_clusters_start_.push_back(j);
+      }
+    }
+    if (order.empty()) comp_clusters_start_.assign(1, 0);
+  }
   // Every vertex's one-ring, for the encoder's smoothing.
   {
     const size_t nv = ref_.pos.size();
@@ -322,12 +497,88 @@ StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vect
   const size_t nv = ref_.pos.size();
   const float maxd = o.max_displacement_m;
 
+  // Rigid motions of the components that move as a whole.
+  sc.pos = ref_.pos;
+  sc.motions.clear();
+  const auto ncomp = static_cast<uint32_t>(ref_.comp_start.size() - 1);
+  if (o.rigid_min_vertices > 0) {
+    sc.fnrm.resize(nv);
+    for (size_t v = 0; v < nv; ++v)
+      sc.fnrm[v] = Eigen::Vector3f(static_cast<float>(ref_.normals[v][0]), static_cast<float>(ref_.normals[v][1]),
+                                   static_cast<float>(ref_.normals[v][2]));
+    // Whole components first (a ball, a prop, a person turning), then every
+    // cluster of a component from its component's motion (limbs); a cluster
+    // that finds nothing better keeps the component's motion.
+    static constexpr float kWide[] = {0.15f, 0.12f, 0.09f, 0.06f, 0.04f, 0.03f, 0.02f, 0.02f};
+    static constexpr float kNarrow[] = {0.04f, 0.03f, 0.02f, 0.02f};
+    std::vector<uint32_t> members;
+    for (size_t comp = 0; comp + 1 < comp_clusters_start_.size(); ++comp) {
+      members.clear();
+      for (uint32_t j = comp_clusters_start_[comp]; j < comp_clusters_start_[comp + 1]; ++j) {
+        const uint32_t cl = comp_clusters_[j];
+        members.insert(members.end(), ref_.comp_verts.begin() + ref_.comp_start[cl],
+                       ref_.comp_verts.begin() + ref_.comp_start[cl + 1]);
+      }
+      Eigen::Matrix3d Rc = Eigen::Matrix3d::Identity();
+      Eigen::Vector3d gc = Eigen::Vector3d::Zero(), tc = Eigen::Vector3d::Zero();
+      bool comp_moved = false;
+      if (members.size() >= static_cast<size_t>(o.rigid_min_vertices)) {
+        comp_moved = EstimateRigid(members, kWide, sc.decoded.positions, sc.fnrm, index, mesh, &Rc, &gc, &tc);
+      }
+      for (uint32_t j = comp_clusters_start_[comp]; j < comp_clusters_start_[comp + 1]; ++j) {
+        const uint32_t c = comp_clusters_[j];
+        Eigen::Matrix3d R = Rc;
+        Eigen::Vector3d g = gc, t = tc;
+        const std::span<const uint32_t> verts(ref_.comp_verts.data() + ref_.comp_start[c],
+                                              ref_.comp_start[c + 1] - ref_.comp_start[c]);
+        bool moved = comp_moved;
+        if (verts.size() >= 6) moved |= EstimateRigid(verts, comp_moved ? std::span<const float>(kNarrow) : std::span<const float>(kWide),
+                                                     sc.decoded.positions, sc.fnrm, index, mesh, &R, &g, &t);
+        if (!moved) continue;
+      // The same motion about the decoder's pivot: the truncated integer centroid.
+      const uint32_t b = ref_.comp_start[c], e = ref_.comp_start[c + 1];
+      int64_t sum[3] = {0, 0, 0};
+      for (uint32_t i = b; i < e; ++i)
+        for (int k = 0; k < 3; ++k) sum[k] += ref_.pos[ref_.comp_verts[i]][k];
+      Eigen::Vector3d cm;
+      for (int k = 0; k < 3; ++k) {
+        cm[k] = ref_.origin[k] + static_cast<double>(sum[k] / static_cast<int64_t>(e - b)) * ref_.unit;
+      }
+      const Eigen::Vector3d tw = R * (cm - g) + g + t - cm;
+      Eigen::Quaterniond q(R);
+      if (q.w() < 0) q.coeffs() = -q.coeffs();
+      RigidMotion m;
+      m.component = c;
+      bool moves = false;
+      for (int k = 0; k < 3; ++k) {
+        m.t[k] = static_cast<int32_t>(
+            std::clamp<long long>(std::llround(tw[k] / ref_.unit / kTransUnits), -kMaxTrans, kMaxTrans));
+        m.q[k] = static_cast<int32_t>(std::clamp<long long>(std::llround(q.vec()[k] * kRotScale), -kRotScale, kRotScale));
+        moves |= m.t[k] != 0 || m.q[k] != 0;
+      }
+      if (!moves) continue;
+      ApplyRigid(ref_, m, &sc.pos);
+      sc.motions.push_back(m);
+      }
+    }
+    std::sort(sc.motions.begin(), sc.motions.end(),
+              [](const RigidMotion& a, const RigidMotion& b) { return a.component < b.component; });
+  }
+  if (sc.motions.empty()) {
+    sc.rigid_normals = ref_.normals;
+  } else {
+    ComputeNormals(sc.pos, ref_.triangles, &sc.rigid_normals);
+    for (size_t v = 0; v < nv; ++v)
+      for (int c = 0; c < 3; ++c)
+        sc.decoded.positions[v][c] = ref_.origin[c] + static_cast<float>(sc.pos[v][c]) * ref_.unit;
+  }
+
   // Target displacement of every reference vertex along its normal: a
   // ray–plane step onto the nearest triangle of the new mesh, twice (NaN: no
   // surface facing the same way within reach).
   sc.target.assign(nv, std::numeric_limits<float>::quiet_NaN());
   for (size_t v = 0; v < nv; ++v) {
-    const auto& nd = ref_.normals[v];
+    const auto& nd = sc.rigid_normals[v];
     if (nd[0] == 0 && nd[1] == 0 && nd[2] == 0) continue;
     const Eigen::Vector3f n(static_cast<float>(nd[0]), static_cast<float>(nd[1]), static_cast<float>(nd[2]));
     const Eigen::Vector3f& p = sc.decoded.positions[v];
@@ -378,7 +629,20 @@ StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vect
   const float step_m = static_cast<float>(step_units) * ref_.unit;
   sc.k.assign(nv, 0);
   sc.absres.assign(nv, 0);
-  TokenWriter tw(kContexts, nv, &sc.syms);
+  TokenWriter tw(kContexts, nv + ncomp, &sc.syms);
+  {  // PROTOCOL.md §7.1 "Motions": per cluster a flag, then the motion as deltas to the last one sent
+    RigidMotion last;
+    size_t next = 0;
+    for (uint32_t c = 0; c < ncomp; ++c) {
+      const bool moved = next < sc.motions.size() && sc.motions[next].component == c;
+      tw.PutValue(8, moved ? 1 : 0);
+      if (!moved) continue;
+      const RigidMotion& m = sc.motions[next++];
+      for (int k = 0; k < 3; ++k) tw.PutValue(9 + k, ZigZag(m.t[k] - last.t[k]));
+      for (int k = 0; k < 3; ++k) tw.PutValue(12 + k, ZigZag(m.q[k] - last.q[k]));
+      last = m;
+    }
+  }
   for (uint32_t v = 0; v < nv; ++v) {
     int32_t pred = 0;
     uint32_t ctx = 0;
@@ -393,7 +657,7 @@ StatusOr<std::string> Geometry2Encoder::TryPredicted(const Mesh& mesh, std::vect
     sc.absres[v] = std::abs(r);
     tw.PutValue(ctx, ZigZag(r));
   }
-  ApplyDisplacements(ref_, sc.k, step_units, &sc.pos);
+  ApplyDisplacements(sc.rigid_normals, sc.k, step_units, &sc.pos);
   ComputeNormals(sc.pos, ref_.triangles, &sc.normals);
 
   // Check the frame the decoder would show against the input, both ways.
@@ -474,6 +738,9 @@ Status Geometry2Encoder::Encode(const Mesh& mesh, std::vector<uint8_t>* out, Geo
   info->keyframe_id = ref_.keyframe_id;
   info->frame_index = 0;
   info->rms_m = tried.rms_m;
+  info->max_m = tried.max_m;
+  info->far_fraction = tried.far_fraction;
+  info->flipped_fraction = tried.flipped_fraction;
   return OkStatus();
 }
 
@@ -540,13 +807,41 @@ Status Geometry2Decoder::Decode(std::span<const uint8_t> blob, Mesh* mesh, const
     return NotFound(frame + ": reference hash " + Str(hash) + " differs from this decoder's " + Str(ref_.hash) +
                     " (the reference positions differ)");
   }
+  EncoderScratch& sc = Scratch();
   TokenReader tr;
   HOLO_RETURN_IF_ERROR(tr.Init(blob.subspan(r.position()), kContexts, "g2.displacements"));
   const size_t nv = ref_.pos.size();
-  if (nv > tr.MaxSymbols()) {
-    return DataLoss("g2.displacements: " + Str(nv) + " values cannot fit in " + Str(blob.size() - r.position()) + " bytes");
+  const auto ncomp = static_cast<uint32_t>(ref_.comp_start.size() - 1);
+  if (nv + ncomp > tr.MaxSymbols()) {
+    return DataLoss("g2.displacements: " + Str(nv + ncomp) + " values cannot fit in " + Str(blob.size() - r.position()) +
+                    " bytes");
   }
-  EncoderScratch& sc = Scratch();
+  sc.motions.clear();
+  {
+    RigidMotion last;
+    for (uint32_t c = 0; c < ncomp && tr.ok(); ++c) {
+      const uint32_t moved = tr.GetValue(8);
+      if (moved > 1) return DataLoss("g2.motion: cluster " + Str(c) + " has flag " + Str(moved));
+      if (!moved) continue;
+      RigidMotion m;
+      m.component = c;
+      int64_t q2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const int64_t t = int64_t{last.t[k]} + UnZigZag(tr.GetValue(9 + k));
+        if (t < -kMaxTrans || t > kMaxTrans) return DataLoss("g2.motion: cluster " + Str(c) + " translation out of range");
+        m.t[k] = static_cast<int32_t>(t);
+      }
+      for (int k = 0; k < 3; ++k) {
+        const int64_t q = int64_t{last.q[k]} + UnZigZag(tr.GetValue(12 + k));
+        if (q < -kRotScale || q > kRotScale) return DataLoss("g2.motion: cluster " + Str(c) + " rotation out of range");
+        m.q[k] = static_cast<int32_t>(q);
+        q2 += q * q;
+      }
+      if (q2 > int64_t{kRotScale} * kRotScale) return DataLoss("g2.motion: cluster " + Str(c) + " rotation is not a unit quaternion");
+      sc.motions.push_back(m);
+      last = m;
+    }
+  }
   sc.k.assign(nv, 0);
   sc.absres.assign(nv, 0);
   for (uint32_t v = 0; v < nv; ++v) {
@@ -563,7 +858,14 @@ Status Geometry2Decoder::Decode(std::span<const uint8_t> blob, Mesh* mesh, const
     sc.absres[v] = static_cast<int32_t>(std::abs(k - pred));
   }
   HOLO_RETURN_IF_ERROR(tr.Finish());
-  ApplyDisplacements(ref_, sc.k, step_units, &sc.pos);
+  sc.pos = ref_.pos;
+  for (const RigidMotion& m : sc.motions) ApplyRigid(ref_, m, &sc.pos);
+  if (!sc.motions.empty()) {
+    ComputeNormals(sc.pos, ref_.triangles, &sc.rigid_normals);
+    ApplyDisplacements(sc.rigid_normals, sc.k, step_units, &sc.pos);
+  } else {
+    ApplyDisplacements(ref_.normals, sc.k, step_units, &sc.pos);
+  }
   ref_.pos.swap(sc.pos);
   ComputeNormals(ref_.pos, ref_.triangles, &ref_.normals);
   ref_.hash = HashPositions(ref_.pos);

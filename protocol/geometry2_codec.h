@@ -52,6 +52,11 @@ struct Geometry2EncodeOptions {
   // are quantized (0..8): the re-fused surface's frame-to-frame ripple is
   // noise, not motion.
   int smooth_passes = 1;
+  // Connected components with at least this many vertices get a rigid
+  // motion (found by point-to-plane ICP) before the per-vertex displacements:
+  // a ball or a prop moves centimetres per frame, far more than a vertex can
+  // follow along its normal. 0 disables rigid motions.
+  int rigid_min_vertices = 30;
   // The encoder searches the new surface this far along ±normal, metres; a
   // vertex with nothing closer keeps its predicted displacement.
   float max_displacement_m = 0.03f;
@@ -66,7 +71,7 @@ struct Geometry2EncodeOptions {
   // … or if triangles holding more than this fraction of the keyframe's area
   // face away (> 90°) from their orientation in the keyframe (folds; slivers
   // that turn over weigh little).
-  float max_flipped_fraction = 0.005f;
+  float max_flipped_fraction = 0.02f;
   // … or after this many frames in a group (keyframe included), 1..65535.
   int max_group_frames = 30;
   Status Check() const;
@@ -103,6 +108,8 @@ struct Geometry2Reference {
   std::vector<std::array<uint8_t, 3>> colors;   // the keyframe's (empty if none)
   std::vector<std::array<double, 3>> normals;   // unit (or zero) normals of `pos` by the G2 rule
   std::vector<uint32_t> adj_start, adj;         // neighbours (CSR) of every vertex with a smaller index
+  std::vector<uint32_t> comp_start, comp_verts; // clusters (CSR of vertex lists, by first vertex)
+  std::vector<uint32_t> cluster_root;           // per cluster: the smallest vertex of its connected component
   uint32_t hash = 0;                            // PROTOCOL.md §7.1 hash of `pos`
   void ToMesh(Mesh* mesh) const;
 };
@@ -143,6 +150,7 @@ class Geometry2Encoder {
   std::vector<Eigen::Vector3f> key_face_normals_;  // the keyframe's face normals, length = twice the area
   double key_area_ = 0;                            // their summed lengths
   std::vector<uint32_t> ring_start_, ring_;        // every vertex's one-ring (CSR)
+  std::vector<uint32_t> comp_clusters_start_, comp_clusters_;  // the clusters of every component (CSR)
 };
 
 // Decodes a G2 stream (one decoder per stream). Safe on untrusted input:
