@@ -1,25 +1,34 @@
 // Temporal geometry codec G2 (PROTOCOL.md §7.1): groups of frames that share
 // one keyframe's topology.
 //   keyframe  — a G1 blob (protocol/geometry_codec.h) behind a 16-byte G2 header;
-//   predicted — the previous *decoded* mesh with every vertex moved along its
-//               own vertex normal by a scalar displacement: an integer number
-//               of steps per vertex, predicted from the already-decoded
-//               neighbours and rANS-coded (protocol/rans_coder.h).
-// The encoder picks each displacement as the distance along ±normal to the
-// new frame's mesh (a ray–plane step on the nearest triangle, twice), checks
-// the two-sided point-to-surface RMS between the decoded mesh and the new mesh
-// and falls back to a keyframe when that bound, the group length or the
-// triangle quality (triangles flipped against the keyframe) would break.
-// Tangential drift is not coded: the viewer colours the surface from the
-// pods' images (projective texturing), so only the shape has to match.
+//   predicted — the previous *decoded* mesh, moved in two steps: a rigid
+//               motion per cluster (connected component × 9.6 cm cube of the
+//               keyframe), then every vertex along its own vertex normal by
+//               an integer number of displacement steps, predicted from the
+//               already-decoded neighbours; all rANS-coded
+//               (protocol/rans_coder.h).
+// The encoder finds the motions by point-to-plane ICP (each component, then
+// each of its clusters) and each displacement as the distance along ±normal
+// to the new frame's mesh (a ray–plane step on the nearest triangle, twice),
+// checks the two-sided point-to-surface RMS between the decoded mesh and the
+// new mesh and falls back to a keyframe when that bound, the share of far
+// samples, the group length or the triangle quality (keyframe area turned
+// over) would break. Tangential drift is not coded: the viewer colours the
+// surface from the pods' images (projective texturing), so only the shape
+// has to match.
+//
+// Why rigid clusters: the studio's people and props move centimetres per
+// frame (a bouncing ball up to ~7 cm, a forearm ~3 cm); normal displacements
+// alone left 9–10 mm RMS on the studio's ground truth, with the motions
+// 0.4 mm at ~1.6 KB per predicted frame (docs/codecs.md).
 //
 // Both sides keep the same reference in integers (positions in 1/16 of the
-// keyframe's grid step) and compute normals by a fixed rule (integer cross
-// products, one correctly rounded sqrt and divide in double), so the encoder's
-// reference and the decoder's are bit-identical on every IEEE-754 platform
-// (this file is compiled with -ffp-contract=off). Each predicted frame names
-// its reference (keyframe id, frame counter, hash of the reference positions);
-// a decoder without that exact reference refuses it.
+// keyframe's grid step) and compute normals and motions by a fixed rule
+// (integer cross products; correctly rounded double +, ×, /, sqrt only), so
+// the encoder's reference and the decoder's are bit-identical on every
+// IEEE-754 platform (this file is compiled with -ffp-contract=off). Each
+// predicted frame names its reference (keyframe id, frame counter, hash of
+// the reference positions); a decoder without that exact reference refuses it.
 #pragma once
 
 #include <array>
