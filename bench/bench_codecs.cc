@@ -6,7 +6,7 @@
 //                       [--content fused|temporal|truth] [--full-mesh] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
 //                       [--g2-step-mm=S] [--g2-max-rms-mm=R] [--g2-keyframe-step-mm=S] [--g2-dead-zone=Z] [--g2-group=N]
-//                       [--g2-smooth=N] [--g2-max-disp-mm=D] [--g2-far-fraction=F]
+//                       [--g2-smooth=N] [--g2-max-disp-mm=D] [--g2-far-fraction=F] [--g2-no-backoff]
 // Unknown options are refused (exit 2); --name value and --name=value both work.
 //
 // --content truth (the default): the studio's ground-truth foreground mesh and
@@ -128,6 +128,7 @@ struct CodecsOptions {
   // G2 options (unset: Geometry2EncodeOptions' defaults), millimetres.
   std::optional<float> g2_step_mm, g2_max_rms_mm, g2_keyframe_step_mm, g2_dead_zone;
   std::optional<int> g2_group, g2_smooth;
+  bool g2_no_backoff = false;
   std::optional<float> g2_max_disp_mm, g2_far_fraction;
 };
 
@@ -728,6 +729,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     if (co.g2_dead_zone) o.dead_zone_steps = *co.g2_dead_zone;
     if (co.g2_group) o.max_group_frames = *co.g2_group;
     if (co.g2_smooth) o.smooth_passes = *co.g2_smooth;
+    if (co.g2_no_backoff) o.backoff = false;
     if (co.g2_far_fraction) o.max_far_fraction = *co.g2_far_fraction;
     if (co.g2_max_disp_mm) o.max_displacement_m = *co.g2_max_disp_mm / 1000.0f;
     if (const Status st = o.Check(); !st.ok()) {
@@ -1276,6 +1278,7 @@ BenchFn SetupCodecs(CLI::App& app) {
   app.add_option("--g2-group", co->g2_group, "G2 longest group of frames (keyframe included)");
   app.add_option("--g2-far-fraction", co->g2_far_fraction,
                  "G2 keyframe when more than this share of the error samples is farther than 1 cm");
+  app.add_flag("--g2-no-backoff", co->g2_no_backoff, "G2 tries a predicted frame every frame (no back-off)");
   app.add_option("--g2-smooth", co->g2_smooth, "G2 one-ring smoothing passes of the target displacements");
   app.add_option("--g2-max-disp-mm", co->g2_max_disp_mm, "G2 farthest surface search along a normal, mm");
   return [co](const BenchArgs& args) { return RunCodecs(args, *co); };

@@ -727,9 +727,23 @@ Status Geometry2Encoder::Encode(const Mesh& mesh, std::vector<uint8_t>* out, Geo
     reason = "group-length";
   } else if (mesh.triangles.empty() || ref_.triangles.empty()) {
     reason = "empty";
+  } else if (skip_left_ > 0) {
+    --skip_left_;
+    reason = "backoff";
   } else {
+    const bool right_after_keyframe = ref_.frame_index == 0;
     HOLO_ASSIGN_OR_RETURN(reason, TryPredicted(mesh, out, info));
-    if (reason.empty()) return OkStatus();
+    if (reason.empty()) {
+      failures_after_keyframe_ = 0;
+      return OkStatus();
+    }
+    // Content that cannot be predicted even one frame after a keyframe (a
+    // flickering mesh) costs the attempt every frame: back off, 1, 3, 7, 15
+    // frames, until a prediction succeeds again.
+    if (right_after_keyframe && options_.backoff) {
+      failures_after_keyframe_ = std::min(failures_after_keyframe_ + 1, 4);
+      skip_left_ = (1 << failures_after_keyframe_) - 1;
+    }
   }
   const Geometry2FrameInfo tried = *info;
   info->keyframe = true;

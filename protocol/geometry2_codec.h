@@ -83,6 +83,11 @@ struct Geometry2EncodeOptions {
   float max_flipped_fraction = 0.02f;
   // … or after this many frames in a group (keyframe included), 1..65535.
   int max_group_frames = 30;
+  // When even the frame right after a keyframe cannot be predicted, skip the
+  // (costly) attempt for the next 1, 3, 7, then 15 frames (reason "backoff")
+  // until one succeeds: on content that never predicts (the per-frame fused
+  // mesh, docs/codecs.md) the encoder then costs about what G1 costs.
+  bool backoff = true;
   Status Check() const;
 };
 
@@ -90,7 +95,7 @@ struct Geometry2EncodeOptions {
 struct Geometry2FrameInfo {
   bool keyframe = false;
   // Why a keyframe was sent: "first", "requested", "group-length", "rms",
-  // "far", "flipped", "empty"; "" for a predicted frame.
+  // "far", "flipped", "empty", "backoff"; "" for a predicted frame.
   std::string reason;
   uint32_t keyframe_id = 0, frame_index = 0;
   // Predicted frames: the checked two-sided error (RMS and largest distance,
@@ -154,6 +159,7 @@ class Geometry2Encoder {
   Geometry2EncodeOptions options_;
   Status status_;
   bool force_keyframe_ = false;
+  int failures_after_keyframe_ = 0, skip_left_ = 0;  // the back-off
   uint32_t next_keyframe_id_ = 1;
   Geometry2Reference ref_;
   std::vector<Eigen::Vector3f> key_face_normals_;  // the keyframe's face normals, length = twice the area

@@ -6,6 +6,7 @@
 //   HOLO_WRITE_CORPUS=1 build/tests/protocol_codec_geometry2_test
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -151,6 +152,17 @@ bool SameMesh(const Mesh& a, const Mesh& b) {
   return a.positions == b.positions && a.normals == b.normals && a.colors == b.colors && a.triangles == b.triangles;
 }
 
+// Two bodies side by side: the second one appears or vanishes.
+Mesh TwoBodies(int frame, float voxel) {
+  Mesh two = MovingBody(frame, voxel);
+  const Mesh other = MovingBody(frame, voxel);
+  const auto base = static_cast<uint32_t>(two.positions.size());
+  for (const auto& p : other.positions) two.positions.push_back(p + Eigen::Vector3f(0.6f, 0, 0));
+  two.colors.insert(two.colors.end(), other.colors.begin(), other.colors.end());
+  for (auto t : other.triangles) two.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  return two;
+}
+
 TEST(Geometry2Codec, MovingSequenceRoundTripWithinTheBound) {
   const Coded& c = Sequence();
   Geometry2Encoder enc;  // a second encoder: the encoder's view of the decoded meshes
@@ -199,12 +211,7 @@ TEST(Geometry2Codec, KeyframeWhenTheShapeChangesTooMuchOrOnRequest) {
   EXPECT_FALSE(info.keyframe) << info.reason;
   EXPECT_LT(info.rms_m, Geometry2EncodeOptions{}.max_rms_m);
   // A part that appears (a second body) cannot be predicted: a keyframe.
-  Mesh two = MovingBody(11, 0.012f);
-  Mesh other = MovingBody(11, 0.012f);
-  const auto base = static_cast<uint32_t>(two.positions.size());
-  for (auto& p : other.positions) two.positions.push_back(p + Eigen::Vector3f(0.6f, 0, 0));
-  two.colors.insert(two.colors.end(), other.colors.begin(), other.colors.end());
-  for (auto t : other.triangles) two.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const Mesh two = TwoBodies(11, 0.012f);
   ASSERT_TRUE(enc.Encode(two, &blob, &info).ok());
   EXPECT_TRUE(info.keyframe);
   EXPECT_TRUE(info.reason == "rms" || info.reason == "far") << info.reason;
@@ -225,6 +232,27 @@ TEST(Geometry2Codec, KeyframeWhenTheShapeChangesTooMuchOrOnRequest) {
     key.push_back(info.keyframe);
   }
   EXPECT_EQ(key, (std::vector<bool>{true, false, true, false, true}));
+}
+
+TEST(Geometry2Codec, BacksOffOnContentThatNeverPredicts) {
+  for (bool backoff : {true, false}) {
+    Geometry2EncodeOptions o;
+    o.backoff = backoff;
+    Geometry2Encoder enc(o);
+    std::vector<std::string> reasons;
+    for (int f = 0; f < 8; ++f) {
+      std::vector<uint8_t> blob;
+      Geometry2FrameInfo info;
+      ASSERT_TRUE(enc.Encode(f % 2 ? TwoBodies(0, 0.02f) : MovingBody(0, 0.02f), &blob, &info).ok());
+      ASSERT_TRUE(info.keyframe);
+      reasons.push_back(info.reason == "far" ? "rms" : info.reason);
+    }
+    if (backoff) {
+      EXPECT_EQ(reasons, (std::vector<std::string>{"first", "rms", "backoff", "rms", "backoff", "backoff", "backoff", "rms"}));
+    } else {
+      EXPECT_EQ(std::count(reasons.begin(), reasons.end(), "backoff"), 0);
+    }
+  }
 }
 
 TEST(Geometry2Codec, ViewerJoiningMidStreamDecodesFromTheNextKeyframe) {
