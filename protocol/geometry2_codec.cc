@@ -22,7 +22,6 @@ using rans::ZigZag;
 
 constexpr uint8_t kKindKeyframe = 0;
 constexpr uint8_t kKindPredicted = 1;
-constexpr size_t kHeaderBytes = 16;
 constexpr int32_t kUnitsPerStep = 16;      // reference position units per keyframe grid step
 constexpr int32_t kMaxCoord = 1 << 22;     // reference positions are clamped to ±this (units)
 constexpr int32_t kMaxSteps = 4095;        // largest |displacement|, steps
