@@ -3,16 +3,21 @@
 //                       [--fill-pad|--fill-push-pull|--fill-mean] [--fast-dct] [--quant-standard]
 //                       [--no-optimize-huffman] [--no-pack]
 //                       [--mask-zstd-level=L] [--huffman-refresh=N] [--peer-jpeg-quality=Q] [--hash]
-//                       [--content fused|truth] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
+//                       [--content fused|temporal|truth] [--full-mesh] [--video=x264-444,x264-420,vpx-vp9-444,vpx-vp9-420[@CRF],...]
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
+//                       [--g2-step-mm=S] [--g2-max-rms-mm=R] [--g2-keyframe-step-mm=S] [--g2-dead-zone=Z] [--g2-group=N]
+//                       [--g2-smooth=N] [--g2-max-disp-mm=D] [--g2-far-fraction=F] [--g2-no-backoff]
 // Unknown options are refused (exit 2); --name value and --name=value both work.
 //
 // --content truth (the default): the studio's ground-truth foreground mesh and
 // the pods' images with exact masks, frames 0, 1, 2, ... (consecutive, as a
 // video codec sees them). --content fused: the real capture site run
 // in-process (CaptureSite, MaskSource::kSegment, background learned from the
-// empty room, the workload's voxel size): the site's fused, textured mesh and
-// the pods' images with the site's own segmentation masks. Default frames:
+// empty room, the workload's voxel size): the site's fused, textured mesh —
+// the compact stream mesh the live server sends (StreamMeshOptions defaults:
+// every 2nd voxel, ≤ 20 k triangles; qualifier mesh "site-stream"), or with
+// --full-mesh the full-resolution one ("site-fused") — and the pods' images
+// with the site's own segmentation masks. Default frames:
 // 4 on truth, 60 on fused (a video codec needs a sequence; --frames N).
 //
 // Video colour (V1, protocol/video_codec.h) runs as codec "video" with a
@@ -28,6 +33,13 @@
 // "G1-normals" (normals sent) and "G1-lossless-color"; normal errors are
 // angles to the input's normals, and "area-weighted-unquantized" shows how
 // much of that is the method rather than the quantization.
+//
+// G2 (temporal geometry, protocol/geometry2_codec.h) runs as codec "G2": one
+// encoder and one decoder over the sequence; bytes are the mean (keyframes
+// included), `keyframe_ratio` the share of keyframes, `geom_rms_mm` the mean
+// over frames of the two-sided point-to-surface RMS between the decoded mesh
+// and the site's mesh (G2 keeps the keyframe's vertices, so a vertex map does
+// not apply); G1 reports the same measure as `geom_surface_rms_mm`.
 //
 // Depth codecs D1 and D2 (PROTOCOL.md §8) on every pod's depth image of the
 // truth content (the studio's noisy pod depth, as holoport-pod sends it),
@@ -72,6 +84,8 @@
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 #include "protocol/draco_peer.h"
+#include "common/metrics/triangle_index.h"
+#include "protocol/geometry2_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
 
@@ -98,6 +112,7 @@ double NowMs() {
 // "--name value" and "--name=value").
 struct CodecsOptions {
   bool synthetic = false, hash = false;
+  bool full_mesh = false;  // fused: the full-resolution mesh, not the stream mesh the live server sends
   std::string only;                         // "G1,C1": only these codecs
   std::string content = "truth";            // truth | fused
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
@@ -110,6 +125,11 @@ struct CodecsOptions {
   bool chroma444 = false, chroma420 = false, fill_pad = false, fill_push_pull = false, fill_mean = false;
   bool fast_dct = false, quant_standard = false, no_optimize_huffman = false, no_pack = false;
   int peer_jpeg_quality = 90;  // the jpeg-box peer's TurboJPEG quality
+  // G2 options (unset: Geometry2EncodeOptions' defaults), millimetres.
+  std::optional<float> g2_step_mm, g2_max_rms_mm, g2_keyframe_step_mm, g2_dead_zone;
+  std::optional<int> g2_group, g2_smooth;
+  bool g2_no_backoff = false;
+  std::optional<float> g2_max_disp_mm, g2_far_fraction;
 };
 
 struct PodImageInput {
@@ -350,6 +370,33 @@ GeomError ErrorByNearest(const Mesh& in, const Mesh& out) {
   return {n ? std::sqrt(sum / n) : 0, mx};
 }
 
+// Two-sided point-to-surface distance between `decoded` and the site's mesh
+// `truth`: every vertex of each to the other's surface (TriangleIndex, one
+// thread), distances capped at 10 cm. What a viewer sees of the shape,
+// whatever the vertices are; G2 moves vertices along their normals only.
+struct SurfaceError {
+  double rms_mm = 0, max_mm = 0;
+};
+SurfaceError TwoSidedSurfaceError(const Mesh& decoded, const Mesh& truth) {
+  auto a = metrics::TriangleIndex::Build(decoded);
+  auto b = metrics::TriangleIndex::Build(truth);
+  if (!a.ok() || !b.ok()) return {-1, -1};
+  constexpr float kCap = 0.1f;
+  double se = 0, mx = 0;
+  for (float d : b->DistanceBatch(decoded.positions, kCap, 1)) {
+    d = std::min(d, kCap);
+    se += double{d} * d;
+    mx = std::max<double>(mx, d);
+  }
+  for (float d : a->DistanceBatch(truth.positions, kCap, 1)) {
+    d = std::min(d, kCap);
+    se += double{d} * d;
+    mx = std::max<double>(mx, d);
+  }
+  const double n = static_cast<double>(decoded.num_vertices() + truth.num_vertices());
+  return {n > 0 ? std::sqrt(se / n) * 1000.0 : 0, mx * 1000.0};
+}
+
 // PSNR over foreground pixels (RGB), capped at 99 dB for lossless results.
 double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
   double se = 0;
@@ -373,7 +420,7 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
 // frames and keeps, per frame, the site's fused textured mesh and the pods'
 // colour images with the masks the site used. Returns the frames kept, or -1
 // (error printed).
-int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs) {
+int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal, std::vector<FrameInput>* inputs) {
   auto studio = SyntheticStudio::Create(wl.rig, wl.studio);
   StudioOptions empty_options = wl.studio;
   empty_options.empty_room = true;
@@ -386,6 +433,11 @@ int FusedInputs(const Workload& wl, int frames, std::vector<FrameInput>* inputs)
   o.masks = MaskSource::kSegment;
   o.tsdf.voxel_size = wl.voxel_size_m;
   o.pipeline.max_frames = frames;
+  // The live server's default (holoport-server --stream-step 2 --stream-triangles 20000).
+  o.stream_mesh = stream_mesh;
+  // --content temporal: the site's temporal fusion (docs/temporal.md: the
+  // previous volume tracked non-rigidly and fused into), not a fresh volume per frame.
+  o.temporal = temporal;
   auto site = CaptureSite::Create(studio->get(), empty->get(), studio->get(), o);
   if (!site.ok()) {
     spdlog::error("codecs: capture site: {}", site.status().ToString());
@@ -418,6 +470,7 @@ struct Figures {
   std::vector<double> bytes, enc, dec, enc_cpu, dec_cpu, a, b;  // a, b: rms/max mm or psnr
   std::vector<double> n_mean, n_p99, n_max;                      // normal angle errors, degrees
   std::vector<double> vcol_psnr;                                 // vertex colour PSNR
+  std::vector<double> srms, smax;                                // two-sided surface error, mm
 };
 
 int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
@@ -469,11 +522,11 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     }
   }
   const bool synthetic = !HOLO_BENCH_HAVE_STUDIO || co.synthetic;
-  if (synthetic && content == "fused") {
+  if (synthetic && (content == "fused" || content == "temporal")) {
     spdlog::error("codecs: --content fused needs the studio (not --synthetic)");
     return 2;
   }
-  const int frames = args.frames > 0 ? args.frames : (content == "fused" ? 60 : 4);
+  const int frames = args.frames > 0 ? args.frames : (content == "truth" ? 4 : 60);
   std::string workload = args.workload;
   std::map<std::string, std::string> q0;
   std::vector<FrameInput> inputs(frames);
@@ -501,10 +554,10 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       spdlog::error("codecs: {}", wl.status().ToString());
       return 2;
     }
-    if (content == "fused") {
-      const int got = FusedInputs(*wl, frames, &inputs);
+    if (content == "fused" || content == "temporal") {
+      const int got = FusedInputs(*wl, frames, !co.full_mesh, content == "temporal", &inputs);
       if (got < 0) return 1;
-      q0["mesh"] = "site-fused";
+      q0["mesh"] = co.full_mesh ? "site-fused" : "site-stream";
       q0["masks"] = "segment";
     } else {
     SyntheticStudio studio(wl->rig, wl->studio);
@@ -620,6 +673,11 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
           fig.a.push_back(e.rms_mm);
           fig.b.push_back(e.max_mm);
           if (e.color_psnr_db >= 0) fig.vcol_psnr.push_back(e.color_psnr_db);
+          if (run.name == "G1") {  // the measure G2 is held to, for the comparison
+            const SurfaceError se = TwoSidedSurfaceError(out, in.mesh);
+            fig.srms.push_back(se.rms_mm);
+            fig.smax.push_back(se.max_mm);
+          }
           if (e.normal_mean_deg >= 0) {
             fig.n_mean.push_back(e.normal_mean_deg);
             fig.n_p99.push_back(e.normal_p99_deg);
@@ -646,11 +704,130 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
     if (!fig.vcol_psnr.empty()) emit(run.name, "vertex_color_psnr_db", Median(fig.vcol_psnr), "dB", extra);
+    if (!fig.srms.empty()) {
+      extra["error"] = "two-sided-surface";
+      emit(run.name, "geom_surface_rms_mm", Mean(fig.srms), "mm", extra);
+      emit(run.name, "geom_surface_max_mm", *std::max_element(fig.smax.begin(), fig.smax.end()), "mm", extra);
+      extra.erase("error");
+    }
     if (!fig.n_mean.empty()) {  // vs the input's normals; G1 recomputes them from the decoded triangles
       emit(run.name, "normal_mean_deg", Median(fig.n_mean), "deg", extra);
       emit(run.name, "normal_p99_deg", Median(fig.n_p99), "deg", extra);
       emit(run.name, "normal_max_deg", *std::max_element(fig.n_max.begin(), fig.n_max.end()), "deg", extra);
     }
+  }
+  // ---- G2 (temporal): one encoder and one decoder over the frame sequence
+  // (fresh ones per repeat). Bytes are the mean over the sequence, keyframes
+  // included; the error is the two-sided surface distance between the
+  // decoded mesh and the site's mesh of the same frame.
+  if (wanted("G2")) {
+    protocol::Geometry2EncodeOptions o;
+    o.keyframe.chroma_shift = chroma_shift;
+    if (co.g2_step_mm) o.displacement_step_m = *co.g2_step_mm / 1000.0f;
+    if (co.g2_max_rms_mm) o.max_rms_m = *co.g2_max_rms_mm / 1000.0f;
+    if (co.g2_keyframe_step_mm) o.keyframe.position_step_m = *co.g2_keyframe_step_mm / 1000.0f;
+    if (co.g2_dead_zone) o.dead_zone_steps = *co.g2_dead_zone;
+    if (co.g2_group) o.max_group_frames = *co.g2_group;
+    if (co.g2_smooth) o.smooth_passes = *co.g2_smooth;
+    if (co.g2_no_backoff) o.backoff = false;
+    if (co.g2_far_fraction) o.max_far_fraction = *co.g2_far_fraction;
+    if (co.g2_max_disp_mm) o.max_displacement_m = *co.g2_max_disp_mm / 1000.0f;
+    if (const Status st = o.Check(); !st.ok()) {
+      spdlog::error("codecs: G2 options: {}", st.ToString());
+      return 2;
+    }
+    if (!args.json) {  // how much the site's mesh itself changes from frame to frame
+      for (size_t f = 1; f < inputs.size() && f < 6; ++f) {
+        const SurfaceError se = TwoSidedSurfaceError(inputs[f - 1].mesh, inputs[f].mesh);
+        spdlog::info("G2: site mesh frame {} vs {}: two-sided rms {:.3f} mm, max {:.1f} mm", f - 1, f, se.rms_mm, se.max_mm);
+      }
+    }
+    Figures fig;
+    std::vector<double> key_bytes, pred_bytes, key_enc_cpu, pred_enc_cpu, key_dec_cpu, pred_dec_cpu;
+    std::map<std::string, int> reasons;
+    std::vector<uint8_t> blob;
+    Mesh out;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      protocol::Geometry2Encoder enc(o);
+      protocol::Geometry2Decoder dec;
+      for (const FrameInput& in : inputs) {
+        blob.clear();
+        protocol::Geometry2FrameInfo info;
+        const double c0 = holo::ThreadCpuTimeMs();
+        const double t0 = NowMs();
+        const Status es = enc.Encode(in.mesh, &blob, &info);
+        const double t1 = NowMs();
+        const double c1 = holo::ThreadCpuTimeMs();
+        const Status ds = es.ok() ? dec.Decode(blob, &out) : es;
+        const double t2 = NowMs();
+        const double c2 = holo::ThreadCpuTimeMs();
+        if (!ds.ok()) {
+          spdlog::error("codecs: G2 failed: {}", ds.ToString());
+          return 1;
+        }
+        fig.enc.push_back(t1 - t0);
+        fig.dec.push_back(t2 - t1);
+        fig.enc_cpu.push_back(c1 - c0);
+        fig.dec_cpu.push_back(c2 - c1);
+        (info.keyframe ? key_enc_cpu : pred_enc_cpu).push_back(c1 - c0);
+        (info.keyframe ? key_dec_cpu : pred_dec_cpu).push_back(c2 - c1);
+        if (rep == 0) {
+          fig.bytes.push_back(static_cast<double>(blob.size()));
+          (info.keyframe ? key_bytes : pred_bytes).push_back(static_cast<double>(blob.size()));
+          if (info.keyframe) ++reasons[info.reason];
+          const SurfaceError se = TwoSidedSurfaceError(out, in.mesh);
+          fig.a.push_back(se.rms_mm);
+          fig.b.push_back(se.max_mm);
+          if (!args.json) {
+            spdlog::info("G2 frame {}: {} {} B, rms {:.3f} mm, max {:.1f} mm; checked rms {:.3f} mm far {:.4f} "
+                         "flipped {:.4f}{}",
+                         fig.bytes.size() - 1, info.keyframe ? "key" : "pred", blob.size(), se.rms_mm, se.max_mm,
+                         info.rms_m * 1000, info.far_fraction, info.flipped_fraction,
+                         info.keyframe ? " (" + info.reason + ")" : "");
+          }
+        }
+      }
+    }
+    std::map<std::string, std::string> extra{{"frames", std::to_string(inputs.size())},
+                                             {"error", "two-sided-surface"},
+                                             {"max_group_frames", std::to_string(o.max_group_frames)},
+                                             {"displacement_step_mm", Fixed(o.displacement_step_m * 1000, 2)},
+                                             {"keyframe_step_mm", Fixed(o.keyframe.position_step_m * 1000, 2)},
+                                             {"max_rms_mm", Fixed(o.max_rms_m * 1000, 2)},
+                                             {"max_far_fraction", Fixed(o.max_far_fraction, 3)}};
+    const double bytes = Mean(fig.bytes);
+    bytes_of["G2"] = bytes;
+    emit("G2", "bytes_per_frame", bytes, "B", extra);
+    emit("G2", "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit("G2", "keyframe_ratio", static_cast<double>(key_bytes.size()) / static_cast<double>(fig.bytes.size()), "1",
+         extra);
+    if (!key_bytes.empty()) emit("G2", "keyframe_bytes", Mean(key_bytes), "B", extra);
+    if (!pred_bytes.empty()) emit("G2", "predicted_bytes", Mean(pred_bytes), "B", extra);
+    for (const auto& [reason, n] : reasons) {
+      auto e = extra;
+      e["reason"] = reason;
+      emit("G2", "keyframes", n, "1", e);
+    }
+    emit("G2", "encode_ms", Median(fig.enc), "ms", extra);
+    emit("G2", "decode_ms", Median(fig.dec), "ms", extra);
+    emit("G2", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit("G2", "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit("G2", "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
+    emit("G2", "decode_cpu_ms_mean", Mean(fig.dec_cpu), "ms", extra);
+    if (!pred_enc_cpu.empty()) {
+      emit("G2", "predicted_encode_cpu_ms", Median(pred_enc_cpu), "ms", extra);
+      emit("G2", "predicted_decode_cpu_ms", Median(pred_dec_cpu), "ms", extra);
+    }
+    if (!key_enc_cpu.empty()) {
+      emit("G2", "keyframe_encode_cpu_ms", Median(key_enc_cpu), "ms", extra);
+      emit("G2", "keyframe_decode_cpu_ms", Median(key_dec_cpu), "ms", extra);
+    }
+    geom_cpu_of["G2"] = Mean(fig.enc_cpu) + Mean(fig.dec_cpu);
+    emit("G2", "geom_rms_mm", Mean(fig.a), "mm", extra);
+    emit("G2", "geom_rms_mm_worst_frame", *std::max_element(fig.a.begin(), fig.a.end()), "mm", extra);
+    emit("G2", "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
+    emit("G2", "geom_surface_rms_mm", Mean(fig.a), "mm", extra);
+    if (bytes_of.count("G1")) emit("G2", "bytes_ratio_vs_G1", bytes / bytes_of["G1"], "1", {{"peer", "G1"}});
   }
   for (const GeomRun& run : runs) {
     // Where G1's bytes go: its u32-length streams after the 29 bytes of prefix and G1 header
@@ -1061,9 +1238,13 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
 
 BenchFn SetupCodecs(CLI::App& app) {
   auto co = std::make_shared<CodecsOptions>();
-  app.add_option("--content", co->content, "truth (the studio's ground truth) or fused (the capture site's output)")
-      ->check(CLI::IsMember({"truth", "fused"}))
+  app.add_option("--content", co->content,
+                 "truth (the studio's ground truth), fused (the capture site's output) or temporal (the site with "
+                 "temporal fusion)")
+      ->check(CLI::IsMember({"truth", "fused", "temporal"}))
       ->capture_default_str();
+  app.add_flag("--full-mesh", co->full_mesh,
+               "fused: the site's full-resolution mesh instead of the stream mesh (20 k triangles) the live server sends");
   app.add_flag("--synthetic", co->synthetic, "workload synthetic-sphere (a noisy blob) instead of the studio");
   app.add_option("--only", co->only, "only these codecs, comma-separated (e.g. G1,C1)");
   app.add_flag("--hash", co->hash, "print a hash of every geometry blob of the first repeat to stderr");
@@ -1090,6 +1271,16 @@ BenchFn SetupCodecs(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--video-preset", co->video_preset, "V1 encoder preset (default: the library's)");
   app.add_option("--keyframe-interval", co->keyframe_interval, "V1 frames between key frames");
+  app.add_option("--g2-step-mm", co->g2_step_mm, "G2 displacement step, mm");
+  app.add_option("--g2-max-rms-mm", co->g2_max_rms_mm, "G2 keyframe when the two-sided RMS would exceed this, mm");
+  app.add_option("--g2-keyframe-step-mm", co->g2_keyframe_step_mm, "G2 keyframes' G1 position step, mm");
+  app.add_option("--g2-dead-zone", co->g2_dead_zone, "G2 residual dead zone, steps (0.5 = plain rounding)");
+  app.add_option("--g2-group", co->g2_group, "G2 longest group of frames (keyframe included)");
+  app.add_option("--g2-far-fraction", co->g2_far_fraction,
+                 "G2 keyframe when more than this share of the error samples is farther than 1 cm");
+  app.add_flag("--g2-no-backoff", co->g2_no_backoff, "G2 tries a predicted frame every frame (no back-off)");
+  app.add_option("--g2-smooth", co->g2_smooth, "G2 one-ring smoothing passes of the target displacements");
+  app.add_option("--g2-max-disp-mm", co->g2_max_disp_mm, "G2 farthest surface search along a normal, mm");
   return [co](const BenchArgs& args) { return RunCodecs(args, *co); };
 }
 

@@ -6,6 +6,7 @@
 #include "common/status.h"
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
+#include "protocol/geometry2_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
 
@@ -121,6 +122,48 @@ int FuzzLeanAudioPose(std::span<const uint8_t> payload) {
   HOLO_CHECK_MSG(again.ok(), "a decoded lean frame does not encode back");
   HOLO_CHECK_MSG(std::get<AudioPose>(again->payload) == a, "lean frame changes through encode + decode");
   return 2;
+}
+
+int FuzzGeometry2(std::span<const uint8_t> body) {
+  const Limits limits = FuzzLimits();
+  Geometry2Decoder decoder;
+  Mesh mesh;
+  int decoded = 0;
+  bool had_keyframe = false;
+  size_t off = 0;
+  while (off < body.size()) {
+    size_t n = body.size() - off;
+    if (n >= 2) {
+      const size_t len = body[off] | (size_t{body[off + 1]} << 8);
+      off += 2;
+      n = std::min(len, body.size() - off);
+    }
+    const std::span<const uint8_t> blob = body.subspan(off, n);
+    off += n;
+    if (!decoder.Decode(blob, &mesh, limits).ok()) {
+      HOLO_CHECK_MSG(mesh.positions.empty() && mesh.triangles.empty(), "a refused G2 blob left a mesh behind");
+      continue;
+    }
+    auto info = PeekGeometry2(blob);
+    HOLO_CHECK(info.ok());
+    HOLO_CHECK_MSG(info->keyframe || had_keyframe, "a predicted G2 frame decoded without a keyframe");
+    had_keyframe |= info->keyframe;
+    HOLO_CHECK_MSG(CheckMesh(mesh).ok(), "decoded G2 mesh does not validate");
+    HOLO_CHECK(mesh.num_vertices() == info->num_vertices && mesh.normals.size() == mesh.num_vertices());
+    ++decoded;
+  }
+  return decoded;
+}
+
+std::vector<uint8_t> Geometry2FuzzInput(const std::vector<std::vector<uint8_t>>& blobs) {
+  std::vector<uint8_t> out;
+  for (const auto& b : blobs) {
+    HOLO_CHECK(b.size() < 65536);
+    out.push_back(static_cast<uint8_t>(b.size()));
+    out.push_back(static_cast<uint8_t>(b.size() >> 8));
+    out.insert(out.end(), b.begin(), b.end());
+  }
+  return out;
 }
 
 int FuzzDecoders(const uint8_t* data, size_t size) {

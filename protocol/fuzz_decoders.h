@@ -42,6 +42,17 @@ int FuzzRegions(std::span<const uint8_t> bytes);
 // (holoport-fuzz-lean-audio-pose), not part of FuzzDecoders. Returns 0
 // (refused), 1 (a classic frame), 2 (a lean frame).
 int FuzzLeanAudioPose(std::span<const uint8_t> bytes);
+// A G2 geometry stream (protocol/geometry2_codec.h) through one fresh
+// Geometry2Decoder: the input is a sequence of blobs, each `u16 length` +
+// bytes (a short last one is fed as it is), so that keyframes and the
+// predicted frames that follow them are reached. Anything accepted must be
+// a mesh that passes CheckMesh with the header's vertex count; a predicted
+// frame is never accepted before a keyframe. Its own libFuzzer target
+// (holoport-fuzz-geometry2), not part of FuzzDecoders. Returns the number of
+// blobs decoded.
+int FuzzGeometry2(std::span<const uint8_t> bytes);
+// The input format of FuzzGeometry2 for `blobs` (each < 64 KiB).
+std::vector<uint8_t> Geometry2FuzzInput(const std::vector<std::vector<uint8_t>>& blobs);
 
 int FuzzDecoders(const uint8_t* data, size_t size);
 
