@@ -84,6 +84,7 @@
 #include "protocol/color_codec.h"
 #include "protocol/depth_codec.h"
 #include "protocol/draco_peer.h"
+#include "common/metrics/mesh_shapes.h"
 #include "common/metrics/triangle_index.h"
 #include "protocol/geometry2_codec.h"
 #include "protocol/geometry_codec.h"
@@ -185,85 +186,14 @@ Mesh SyntheticBlob(int frame, float voxel) {
   const float half = radius * 1.3f;
   const Eigen::Vector3f lo = center - Eigen::Vector3f::Constant(half);
   const int n = static_cast<int>(std::ceil(2 * half / voxel)) + 1;
-  std::vector<float> val(static_cast<size_t>(n) * n * n);
-  auto id = [n](int i, int j, int k) { return (static_cast<size_t>(k) * n + j) * n + i; };
-  auto pos = [&](int i, int j, int k) { return Eigen::Vector3f(lo + voxel * Eigen::Vector3f(i, j, k)); };
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) val[id(i, j, k)] = sdf(pos(i, j, k));
-  Mesh m;
-  std::unordered_map<uint64_t, uint32_t> edge_vertex;
   const ValueNoise tint(99 + frame);
-  auto vertex = [&](size_t a, Eigen::Vector3f pa, size_t b, Eigen::Vector3f pb) {
-    if (a > b) {  // one vertex per lattice edge, whichever tetrahedron reaches it first
-      std::swap(a, b);
-      std::swap(pa, pb);
-    }
-    const uint64_t key = (static_cast<uint64_t>(a) << 32) | b;
-    auto it = edge_vertex.find(key);
-    if (it != edge_vertex.end()) return it->second;
-    const float va = val[a], vb = val[b];
-    const Eigen::Vector3f p = pa + (va / (va - vb)) * (pb - pa);
-    const auto idx = static_cast<uint32_t>(m.positions.size());
-    m.positions.push_back(p);
-    const float t = 0.5f + 0.5f * tint(p * 0.5f);
-    m.colors.push_back({static_cast<uint8_t>(90 + 120 * t), static_cast<uint8_t>(60 + 80 * (p.z() - lo.z()) / (2 * half)),
-                        static_cast<uint8_t>(150 - 90 * t)});
-    edge_vertex.emplace(key, idx);
-    return idx;
-  };
-  static constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
-                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
-  static constexpr int kTets[6][4] = {{0, 5, 1, 6}, {0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6}, {0, 7, 4, 6}, {0, 4, 5, 6}};
-  for (int k = 0; k + 1 < n; ++k)
-    for (int j = 0; j + 1 < n; ++j)
-      for (int i = 0; i + 1 < n; ++i) {
-        size_t cid[8];
-        Eigen::Vector3f cp[8];
-        int inside = 0;
-        for (int c = 0; c < 8; ++c) {
-          cid[c] = id(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
-          cp[c] = pos(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
-          inside += val[cid[c]] < 0;
-        }
-        if (inside == 0 || inside == 8) continue;
-        for (const auto& tet : kTets) {
-          std::vector<int> in, out;
-          for (int c : tet) (val[cid[c]] < 0 ? in : out).push_back(c);
-          if (in.empty() || out.empty()) continue;
-          Eigen::Vector3f gin = Eigen::Vector3f::Zero(), gout = Eigen::Vector3f::Zero();
-          for (int c : in) gin += cp[c] / static_cast<float>(in.size());
-          for (int c : out) gout += cp[c] / static_cast<float>(out.size());
-          const Eigen::Vector3f outward = gout - gin;
-          auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
-            if (a == b || b == c || a == c) return;
-            const Eigen::Vector3f nrm = (m.positions[b] - m.positions[a]).cross(m.positions[c] - m.positions[a]);
-            if (nrm.dot(outward) < 0) std::swap(b, c);
-            m.triangles.push_back({a, b, c});
-          };
-          auto v = [&](int a, int b) { return vertex(cid[a], cp[a], cid[b], cp[b]); };
-          if (in.size() == 1 || in.size() == 3) {
-            const int s = in.size() == 1 ? in[0] : out[0];
-            const std::vector<int>& o = in.size() == 1 ? out : in;
-            emit(v(s, o[0]), v(s, o[1]), v(s, o[2]));
-          } else {
-            const uint32_t a = v(in[0], out[0]), b = v(in[0], out[1]), c = v(in[1], out[1]), d = v(in[1], out[0]);
-            emit(a, b, c);
-            emit(a, c, d);
-          }
-        }
-      }
-  // Normals from the SDF gradient, as TSDF meshing does.
-  m.normals.resize(m.positions.size());
-  const float e = voxel * 0.5f;
-  for (size_t i = 0; i < m.positions.size(); ++i) {
-    const Eigen::Vector3f& p = m.positions[i];
-    Eigen::Vector3f g(sdf(p + Eigen::Vector3f(e, 0, 0)) - sdf(p - Eigen::Vector3f(e, 0, 0)),
-                      sdf(p + Eigen::Vector3f(0, e, 0)) - sdf(p - Eigen::Vector3f(0, e, 0)),
-                      sdf(p + Eigen::Vector3f(0, 0, e)) - sdf(p - Eigen::Vector3f(0, 0, e)));
-    m.normals[i] = g.norm() > 0 ? Eigen::Vector3f(g.normalized()) : Eigen::Vector3f::UnitZ();
-  }
-  return m;
+  return metrics::MakeSdfMesh(sdf, lo, Eigen::Vector3i::Constant(n), voxel,
+                              [&](const Eigen::Vector3f& p, uint32_t) -> std::array<uint8_t, 3> {
+                                const float t = 0.5f + 0.5f * tint(p * 0.5f);
+                                return {static_cast<uint8_t>(90 + 120 * t),
+                                        static_cast<uint8_t>(60 + 80 * (p.z() - lo.z()) / (2 * half)),
+                                        static_cast<uint8_t>(150 - 90 * t)};
+                              });
 }
 
 // A person-sized textured silhouette (ellipse + head) with mild sensor noise.

@@ -3,6 +3,10 @@
 // outside (for the plane: seen from +z), and fill per-vertex normals.
 #pragma once
 
+#include <array>
+#include <cstdint>
+#include <functional>
+
 #include <Eigen/Core>
 
 #include "common/mesh.h"
@@ -28,5 +32,16 @@ Mesh MakeBoxMesh(const Eigen::Vector3f& center, const Eigen::Vector3f& size, int
 // Rectangle in the plane z = center.z, `size_x` × `size_y` metres, split into
 // `cells_x` × `cells_y` quads (two triangles each); normal +z.
 Mesh MakePlaneMesh(const Eigen::Vector3f& center, float size_x, float size_y, int cells_x, int cells_y);
+
+// The zero level of a signed distance function (negative inside) by marching
+// tetrahedra (6 per cube) over the lattice lo + voxel·(i, j, k), 0 ≤ i <
+// samples.x() and so on: one vertex per crossed lattice edge, at the linear
+// zero crossing; triangles wound to face outward; colour per vertex from
+// `color(position, vertex index)`. No normals (the shape of a re-extracted
+// fused surface, for codec tests and benchmarks). `samples` ≥ 2 on each axis,
+// `voxel` > 0 (HOLO_CHECKed).
+Mesh MakeSdfMesh(const std::function<float(const Eigen::Vector3f&)>& sdf, const Eigen::Vector3f& lo,
+                 const Eigen::Vector3i& samples, float voxel,
+                 const std::function<std::array<uint8_t, 3>(const Eigen::Vector3f&, uint32_t)>& color);
 
 }  // namespace holo::metrics

@@ -15,6 +15,7 @@
 #include <memory>
 #include <unordered_map>
 
+#include "common/metrics/mesh_shapes.h"
 #include "common/metrics/triangle_index.h"
 #include "protocol/fuzz_decoders.h"
 #include "protocol/geometry2_codec.h"
@@ -40,70 +41,10 @@ inline Mesh MovingBody(int frame, float voxel) {
   const Eigen::Vector3f lo(-0.17f, -0.17f, 1.33f);
   const int nx = static_cast<int>(0.52f / voxel) + 1, ny = static_cast<int>(0.42f / voxel) + 1,
             nz = static_cast<int>(0.34f / voxel) + 1;
-  auto id = [&](int i, int j, int k) { return (static_cast<size_t>(k) * ny + j) * nx + i; };
-  auto pos = [&](int i, int j, int k) { return Eigen::Vector3f(lo + voxel * Eigen::Vector3f(i, j, k)); };
-  std::vector<float> val(static_cast<size_t>(nx) * ny * nz);
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) val[id(i, j, k)] = sdf(pos(i, j, k));
-  Mesh m;
-  std::unordered_map<uint64_t, uint32_t> edge_vertex;
-  auto vertex = [&](size_t a, Eigen::Vector3f pa, size_t b, Eigen::Vector3f pb) {
-    if (a > b) {
-      std::swap(a, b);
-      std::swap(pa, pb);
-    }
-    const uint64_t key = (static_cast<uint64_t>(a) << 32) | b;
-    if (auto it = edge_vertex.find(key); it != edge_vertex.end()) return it->second;
-    const float va = val[a], vb = val[b];
-    const auto idx = static_cast<uint32_t>(m.positions.size());
-    m.positions.push_back(pa + (va / (va - vb)) * (pb - pa));
-    m.colors.push_back({static_cast<uint8_t>(100 + idx % 50), 120, 140});
-    edge_vertex.emplace(key, idx);
-    return idx;
-  };
-  static constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
-                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
-  static constexpr int kTets[6][4] = {{0, 5, 1, 6}, {0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6}, {0, 7, 4, 6}, {0, 4, 5, 6}};
-  for (int k = 0; k + 1 < nz; ++k)
-    for (int j = 0; j + 1 < ny; ++j)
-      for (int i = 0; i + 1 < nx; ++i) {
-        size_t cid[8];
-        Eigen::Vector3f cp[8];
-        int inside = 0;
-        for (int c = 0; c < 8; ++c) {
-          cid[c] = id(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
-          cp[c] = pos(i + kCorner[c][0], j + kCorner[c][1], k + kCorner[c][2]);
-          inside += val[cid[c]] < 0;
-        }
-        if (inside == 0 || inside == 8) continue;
-        for (const auto& tet : kTets) {
-          std::vector<int> in, out;
-          for (int c : tet) (val[cid[c]] < 0 ? in : out).push_back(c);
-          if (in.empty() || out.empty()) continue;
-          Eigen::Vector3f gin = Eigen::Vector3f::Zero(), gout = Eigen::Vector3f::Zero();
-          for (int c : in) gin += cp[c] / static_cast<float>(in.size());
-          for (int c : out) gout += cp[c] / static_cast<float>(out.size());
-          const Eigen::Vector3f outward = gout - gin;
-          auto emit = [&](uint32_t a, uint32_t b, uint32_t c) {
-            if (a == b || b == c || a == c) return;
-            const Eigen::Vector3f n = (m.positions[b] - m.positions[a]).cross(m.positions[c] - m.positions[a]);
-            if (n.dot(outward) < 0) std::swap(b, c);
-            m.triangles.push_back({a, b, c});
-          };
-          auto v = [&](int a, int b) { return vertex(cid[a], cp[a], cid[b], cp[b]); };
-          if (in.size() == 1 || in.size() == 3) {
-            const int s = in.size() == 1 ? in[0] : out[0];
-            const std::vector<int>& o = in.size() == 1 ? out : in;
-            emit(v(s, o[0]), v(s, o[1]), v(s, o[2]));
-          } else {
-            const uint32_t a = v(in[0], out[0]), b = v(in[0], out[1]), c = v(in[1], out[1]), d = v(in[1], out[0]);
-            emit(a, b, c);
-            emit(a, c, d);
-          }
-        }
-      }
-  return m;
+  return metrics::MakeSdfMesh(sdf, lo, Eigen::Vector3i(nx, ny, nz), voxel,
+                              [](const Eigen::Vector3f&, uint32_t idx) -> std::array<uint8_t, 3> {
+                                return {static_cast<uint8_t>(100 + idx % 50), 120, 140};
+                              });
 }
 
 // Two-sided RMS point-to-surface distance (vertices of each to the other's
