@@ -528,6 +528,13 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     for (auto& [k, val] : extra) q[k] = val;
     EmitFigure("codecs", workload, metric, v, unit, q);
   };
+  // Median wall and CPU time per frame of one codec's encode and decode.
+  auto emit_times = [&](const std::string& codec, const Figures& fig, const std::map<std::string, std::string>& extra) {
+    emit(codec, "encode_ms", Median(fig.enc), "ms", extra);
+    emit(codec, "decode_ms", Median(fig.dec), "ms", extra);
+    emit(codec, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
+    emit(codec, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+  };
 
   std::map<std::string, double> bytes_of, codec_cpu_of, geom_cpu_of;
   // ---- geometry
@@ -626,10 +633,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     bytes_of[run.name] = bytes;
     emit(run.name, "bytes_per_frame", bytes, "B", extra);
     emit(run.name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
-    emit(run.name, "encode_ms", Median(fig.enc), "ms", extra);
-    emit(run.name, "decode_ms", Median(fig.dec), "ms", extra);
-    emit(run.name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
-    emit(run.name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit_times(run.name, fig, extra);
     geom_cpu_of[run.name] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
     emit(run.name, "geom_rms_mm", Median(fig.a), "mm", extra);
     emit(run.name, "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
@@ -738,10 +742,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       e["reason"] = reason;
       emit("G2", "keyframes", n, "1", e);
     }
-    emit("G2", "encode_ms", Median(fig.enc), "ms", extra);
-    emit("G2", "decode_ms", Median(fig.dec), "ms", extra);
-    emit("G2", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
-    emit("G2", "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit_times("G2", fig, extra);
     emit("G2", "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
     emit("G2", "decode_cpu_ms_mean", Mean(fig.dec_cpu), "ms", extra);
     if (!pred_enc_cpu.empty()) {
@@ -869,10 +870,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     }
     emit(name, "bytes_per_frame", bytes, "B", extra);
     emit(name, "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
-    emit(name, "encode_ms", Median(fig.enc), "ms", extra);
-    emit(name, "decode_ms", Median(fig.dec), "ms", extra);
-    emit(name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
-    emit(name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit_times(name, fig, extra);
     emit(name, "codec_cpu_ms", Median(fig.enc_cpu) + Median(fig.dec_cpu), "ms", extra);
     codec_cpu_of[name] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
     // The mean includes the frames whose Huffman tables were optimized (one in huffman_refresh per pod).
@@ -966,10 +964,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit(name, "bytes_per_pod_frame", bytes, "B", extra);
     emit(name, "bits_per_pixel", bytes * 8 / static_cast<double>(inputs[0].pods[0].depth.num_pixels()), "bit", extra);
     emit(name, "depth_mbps_per_pod", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
-    emit(name, "encode_ms", Median(fig.enc), "ms", extra);
-    emit(name, "decode_ms", Median(fig.dec), "ms", extra);
-    emit(name, "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
-    emit(name, "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit_times(name, fig, extra);
     emit(name, "codec_cpu_ms", depth_cpu_of[name], "ms", extra);
     if (pod_color_bytes > 0) {
       extra["color"] = "C1-q60-no-mask";
@@ -1056,10 +1051,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("video", "keyframe_bytes_per_pod", Mean(key_bytes), "B", extra);
     emit("video", "delta_bytes_per_pod", Mean(delta_bytes), "B", extra);
     emit("video", "mask_bytes_per_pod", Mean(mask_bytes), "B", extra);
-    emit("video", "encode_ms", Median(fig.enc), "ms", extra);
-    emit("video", "decode_ms", Median(fig.dec), "ms", extra);
-    emit("video", "encode_cpu_ms", Median(fig.enc_cpu), "ms", extra);
-    emit("video", "decode_cpu_ms", Median(fig.dec_cpu), "ms", extra);
+    emit_times("video", fig, extra);
     emit("video", "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
     emit("video", "decode_cpu_ms_mean", Mean(fig.dec_cpu), "ms", extra);
     video_cpu_of[run.label] = Mean(fig.enc_cpu) + Mean(fig.dec_cpu);
