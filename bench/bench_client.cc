@@ -59,6 +59,8 @@ struct ClientBenchOptions {
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
   int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
   std::string gpu_visibility;                    // 0 | 1: ProjectiveOptions::gpu_visibility (default: the renderer's)
+  int bake_texels = -1;                          // ProjectiveOptions::bake_texels_per_edge (-1: the renderer's)
+  float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -266,6 +268,12 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
   return holo::OkStatus();
 }
 
+// What the render figures compare: per-vertex colour, projective texturing
+// blended per fragment, and the same baked once per mesh into an atlas.
+constexpr std::pair<holo::render::ColorMode, bool> kVariants[] = {{holo::render::ColorMode::kVertexColor, false},
+                                                                   {holo::render::ColorMode::kProjective, false},
+                                                                   {holo::render::ColorMode::kProjective, true}};
+
 int Fail(const holo::Status& s) {
   spdlog::error("client: {}", s.ToString());
   return 1;
@@ -354,6 +362,8 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       q["depth_prepass"] = base.depth_prepass ? "true" : "false";
     }
     if (options.pods_per_vertex >= 0) base.projective.pods_per_vertex = options.pods_per_vertex;
+    if (options.bake_texels > 0) base.projective.bake_texels_per_edge = options.bake_texels;
+    if (options.bake_density >= 0) base.projective.bake_texels_per_pod_pixel = options.bake_density;
     if (options.max_pods_per_triangle >= 0) base.projective.max_pods_per_triangle = options.max_pods_per_triangle;
     q["pods_per_vertex"] = std::to_string(base.projective.pods_per_vertex);
     q["max_pods_per_triangle"] = std::to_string(base.projective.max_pods_per_triangle);
@@ -366,9 +376,10 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     {
       auto small = holo::render::OffscreenTarget::Create(640, 480);
       if (!small.ok()) return Fail(small.status());
-      for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
+      for (const auto& [mode, bake] : kVariants) {
         holo::render::RenderSettings settings = base;
         settings.mode = mode;
+        settings.projective.bake = bake;
         Quality qual;
         if (holo::Status s = MeasureQuality(renderer->get(), small->get(), studio->get(), studio_frame, settings,
                                             &qual);
@@ -376,6 +387,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
           return Fail(s);
         auto qm = q;
         qm["mode"] = holo::render::ColorModeName(mode);
+        if (mode == holo::render::ColorMode::kProjective) qm["baked"] = bake ? "true" : "false";
         qm["resolution"] = "640x480";
         qm["views"] = "4";
         qm["region"] = "truth";
@@ -410,12 +422,43 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     EmitFigure("client", args.workload, "upload_ms", Median(upload_ms), "ms", q);
     EmitFigure("client", args.workload, "visibility_ms", Median(vis_ms), "ms", q);
     EmitFigure("client", args.workload, "visibility_cpu_ms", Median(vis_cpu), "ms", q);
+    // The atlas bake (per mesh, after visibility and the pod selection).
+    {
+      std::vector<double> bake_ms, bake_cpu;
+      holo::render::ProjectiveOptions po = base.projective;
+      po.bake = true;
+      for (int r = 0; r < 5; ++r) {
+        if (!(*renderer)->SetRemoteMesh(c.mesh).ok() ||
+            !(*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()).ok() ||
+            !(*renderer)->UpdateVisibility(po).ok())
+          return 1;
+        holo::render::FinishGl();
+        // The pod selection first (timed on its own below), then the bake
+        // alone.
+        if (!(*renderer)->UpdateAtlas(po).ok()) return 1;
+        const double cpu0 = ProcessCpuMs();
+        holo::Stopwatch sw;
+        if (holo::Status s = (*renderer)->UpdateAtlas(po); !s.ok()) return Fail(s);
+        holo::render::FinishGl();
+        bake_ms.push_back(sw.ElapsedMs());
+        bake_cpu.push_back(ProcessCpuMs() - cpu0);
+      }
+      const auto& st = (*renderer)->atlas_stats();
+      auto qb = q;
+      qb["texels_per_edge"] = std::to_string(base.projective.bake_texels_per_edge);
+      qb["texels_per_pod_pixel"] = fmt::format("{:g}", base.projective.bake_texels_per_pod_pixel);
+      qb["atlas"] = std::to_string(st.width) + "x" + std::to_string(st.height);
+      EmitFigure("client", args.workload, "bake_ms", Median(bake_ms), "ms", qb);
+      EmitFigure("client", args.workload, "bake_cpu_ms", Median(bake_cpu), "ms", qb);
+      EmitFigure("client", args.workload, "bake_texels", static_cast<double>(st.texels), "", qb);
+    }
     for (const auto& [width, height] : resolutions) {
       auto target = holo::render::OffscreenTarget::Create(width, height);
       if (!target.ok()) return Fail(target.status());
-      for (auto mode : {holo::render::ColorMode::kVertexColor, holo::render::ColorMode::kProjective}) {
+      for (const auto& [mode, bake] : kVariants) {
         holo::render::RenderSettings settings = base;
         settings.mode = mode;
+        settings.projective.bake = bake;
         (*target)->Bind();
         std::vector<double> ms, cpu;
         for (int i = -5; i < frames; ++i) {  // 5 warm-up frames
@@ -431,6 +474,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         }
         auto qm = q;
         qm["mode"] = holo::render::ColorModeName(mode);
+        if (mode == holo::render::ColorMode::kProjective) qm["baked"] = bake ? "true" : "false";
         qm["frames"] = std::to_string(frames);
         qm["resolution"] = std::to_string(width) + "x" + std::to_string(height);
         EmitFigure("client", args.workload, "render_ms", Median(ms), "ms", qm);
@@ -503,6 +547,12 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--max-pods-per-triangle", o->max_pods_per_triangle,
                  "pods a triangle is textured from at most (default: the renderer's)")
       ->check(CLI::Range(1, holo::render::Renderer::kMaxPods));
+  app.add_option("--bake-texels", o->bake_texels,
+                 "atlas texels along a triangle's edge for the baked projective mode (default: the renderer's)")
+      ->check(CLI::Range(1, 16));
+  app.add_option("--bake-density", o->bake_density,
+                 "atlas texels per pod pixel of a triangle's edge, 0 = always --bake-texels (default: the renderer's)")
+      ->check(CLI::Range(0.0, 64.0));
   app.add_option("--gpu-visibility", o->gpu_visibility,
                  "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));

@@ -84,6 +84,7 @@ struct LiveOptions {
   int decoders = 4;
   bool render = true;
   int width = 960, height = 540;
+  std::string color = "projective";  // rendering viewer: projective | projective-fragment
   int prerender = 60;
   int serial_frames = 30;
   int quality_frames = 6;
@@ -389,6 +390,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
       (*target)->Bind();
       render::RenderSettings settings;
       settings.mode = render::ColorMode::kProjective;
+      settings.projective.bake = o.color == "projective";
       const auto t0 = std::chrono::steady_clock::now();
       int64_t kept_every = 0;
       net::ReceivedFrame rf;
@@ -651,8 +653,9 @@ int Run(const BenchArgs& args, LiveOptions o) {
     emit("latency_p50_ms", metrics::Percentile(lat_shown, 50), "ms", {{"at", "displayed"}, {"viewer", "render"}});
     emit("latency_p99_ms", metrics::Percentile(lat_shown, 99), "ms", {{"at", "displayed"}, {"viewer", "render"}});
     emit("latency_p50_ms", metrics::Percentile(lat_dec, 50), "ms", {{"at", "received"}, {"viewer", "render"}});
-    emit("render_ms", Median(render_ms), "ms", {{"viewer", "render"}, {"resolution", res}});
-    emit("render_cpu_ms", Median(render_cpu_ms), "ms", {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}});
+    emit("render_ms", Median(render_ms), "ms", {{"viewer", "render"}, {"resolution", res}, {"color", o.color}});
+    emit("render_cpu_ms", Median(render_cpu_ms), "ms",
+         {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}, {"color", o.color}});
     emit("mbps", static_cast<double>(render_bytes1 - render_bytes0) * 8.0 / (window_s * 1e6), "Mbit/s",
          {{"viewer", "render"}});
   }
@@ -700,6 +703,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
         if (!(*renderer)->SetRemoteMesh(k.mesh).ok() || !(*renderer)->SetPodImages(workload->rig, images).ok()) continue;
         render::RenderSettings settings;
         settings.mode = render::ColorMode::kProjective;
+        settings.projective.bake = o.color == "projective";
         settings.background = {0, 0, 0};
         for (const NovelView& v : views) {
           if (!(*renderer)->Render(v.camera, settings, {0, 0, o.width, o.height}).ok()) continue;
@@ -721,8 +725,9 @@ int Run(const BenchArgs& args, LiveOptions o) {
     }
     if (!chamfer.empty()) emit("chamfer_mm", Median(chamfer), "mm", {{"at", "viewer"}, {"frames", std::to_string(chamfer.size())}});
     if (!psnr.empty()) {
-      emit("novel_view_psnr_db", Median(psnr), "dB", {{"at", "viewer"}, {"mode", "projective"}, {"views", std::to_string(psnr.size())}});
-      emit("novel_view_ssim", Median(ssim), "", {{"at", "viewer"}, {"mode", "projective"}});
+      emit("novel_view_psnr_db", Median(psnr), "dB",
+           {{"at", "viewer"}, {"mode", "projective"}, {"color", o.color}, {"views", std::to_string(psnr.size())}});
+      emit("novel_view_ssim", Median(ssim), "", {{"at", "viewer"}, {"mode", "projective"}, {"color", o.color}});
     }
   }
   if (o.keep_dir.empty()) {
@@ -749,6 +754,10 @@ BenchFn SetupLive(CLI::App& app) {
     app.add_option("--decoders", o.decoders, "viewers that only decode")->check(CLI::Range(0, 32));
     app.add_option("--width", o.width, "rendering viewer's width")->check(CLI::Range(64, 4096));
     app.add_option("--height", o.height, "rendering viewer's height")->check(CLI::Range(64, 4096));
+    app.add_option("--color", o.color,
+                   "rendering viewer: projective (pods' images baked once per mesh into an atlas) or "
+                   "projective-fragment (blended per pixel)")
+        ->check(CLI::IsMember({"projective", "projective-fragment"}));
     app.add_flag(
         "--no-render", [options](int64_t) { options->render = false; },
         "no rendering viewer (and no novel-view figures)");

@@ -8,9 +8,11 @@
 
 #include <epoxy/gl.h>
 
+#include "client/render/atlas.h"
 #include "client/render/gl_util.h"
 #include "client/render/view.h"
 #include "common/clock.h"
+#include "common/worker_pool.h"
 #include "texture/mesh_renderer.h"
 
 namespace holo::render {
@@ -242,6 +244,33 @@ void main() {
 }
 )";
 
+// The baked atlas (ProjectiveOptions::bake): one bilinear fetch per pixel.
+constexpr const char* kBakedVs = R"(#version 330 core
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec2 a_uv;
+uniform mat4 u_clip_from_local;
+uniform mat4 u_local_from_remote;
+out vec2 v_uv;
+invariant gl_Position;
+void main() {
+  v_uv = a_uv;
+  gl_Position = u_clip_from_local * (u_local_from_remote * vec4(a_pos, 1.0));
+}
+)";
+constexpr const char* kBakedFs = R"(#version 330 core
+in vec2 v_uv;
+uniform sampler2D u_atlas;
+out vec4 o_color;
+void main() { o_color = vec4(texture(u_atlas, v_uv).rgb, 1.0); }
+)";
+
+// One vertex of the baked mesh: a triangle corner and its atlas coordinate.
+struct BakedVertex {
+  float p[3];
+  float uv[2];
+};
+static_assert(sizeof(BakedVertex) == 20);
+
 GLint Loc(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
 
 void SetMat4(GLuint program, const char* name, const Eigen::Matrix4f& m) {
@@ -277,6 +306,12 @@ Status ProjectiveOptions::Check() const {
   if (max_pods_per_triangle < 1 || max_pods_per_triangle > Renderer::kMaxPods) {
     return InvalidArgument("max_pods_per_triangle must be in [1, " + std::to_string(Renderer::kMaxPods) + "]");
   }
+  if (bake_texels_per_edge < 1 || bake_texels_per_edge > 16) {
+    return InvalidArgument("bake_texels_per_edge must be in [1, 16]");
+  }
+  if (!(bake_texels_per_pod_pixel >= 0 && bake_texels_per_pod_pixel <= 64)) {
+    return InvalidArgument("bake_texels_per_pod_pixel must be in [0, 64]");
+  }
   return OkStatus();
 }
 
@@ -286,6 +321,7 @@ ProjectiveOptions ProjectiveOptions::Legacy() {
   o.cull_back_faces = true;
   o.pods_per_vertex = 0;
   o.gpu_visibility = true;
+  o.bake = false;
   return o;
 }
 
@@ -360,6 +396,9 @@ Status ReadViewportRgb(const Viewport& vp, ImageRgb8* out) {
 Renderer::~Renderer() {
   FreeMesh(&remote_);
   FreeMesh(&local_);
+  FreeMesh(&baked_);
+  if (atlas_tex_) glDeleteTextures(1, &atlas_tex_);
+  if (baked_program_) glDeleteProgram(baked_program_);
   for (unsigned p : draw_programs_) {
     if (p) glDeleteProgram(p);
   }
@@ -392,6 +431,10 @@ Status Renderer::Init() {
   HOLO_RETURN_IF_ERROR(DrawProgram(0).status());
   HOLO_ASSIGN_OR_RETURN(depth_program_, BuildProgram("pod depth", depth_vs.c_str(), kDepthFs));
   HOLO_ASSIGN_OR_RETURN(edge_program_, BuildProgram("pod discontinuities", kEdgeVs, kEdgeFs));
+  HOLO_ASSIGN_OR_RETURN(baked_program_, BuildProgram("baked atlas", kBakedVs, kBakedFs));
+  glUseProgram(baked_program_);
+  glUniform1i(Loc(baked_program_, "u_atlas"), 0);
+  glUseProgram(0);
   glGenVertexArrays(1, &empty_vao_);
   // Meshes without per-vertex pod bits (the local mesh) read this constant:
   // every pod allowed.
@@ -512,6 +555,12 @@ Status Renderer::SetRemoteMesh(const Mesh& mesh) {
   pod_sets_.clear();
   selection_dirty_ = true;
   remote_has_colors_ = !mesh.colors.empty() && mesh.colors.size() == mesh.positions.size();
+  if (remote_has_colors_) {
+    remote_colors_ = mesh.colors;
+  } else {
+    remote_colors_.clear();
+  }
+  atlas_dirty_ = true;
   remote_min_ = Eigen::Vector3f::Constant(1e30f);
   remote_max_ = Eigen::Vector3f::Constant(-1e30f);
   for (const auto& p : mesh.positions) {
@@ -675,6 +724,7 @@ Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
   vis_cull_ = options.cull_back_faces;
   visibility_dirty_ = false;
   selection_dirty_ = true;
+  flagged_on_cpu_ = true;
   return CheckGlError("pod visibility maps (CPU)");
 }
 
@@ -768,6 +818,7 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   vis_cull_ = options.cull_back_faces;
   visibility_dirty_ = false;
   selection_dirty_ = true;
+  flagged_on_cpu_ = false;
   return CheckGlError("pod visibility pass");
 }
 
@@ -780,8 +831,9 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
     const ImageRgb8& img = pod_images_[i];
     const int w = img.width(), h = img.height();
     const size_t npx = static_cast<size_t>(w) * h;
-    rgba_scratch_.resize(npx * 4);
-    uint8_t* out = rgba_scratch_.data();
+    pod_rgba_.resize(num_pods_);
+    pod_rgba_[i].resize(npx * 4);
+    uint8_t* out = pod_rgba_[i].data();
     const uint8_t* in = img.data();
     if (!use_masks) {
       for (size_t k = 0; k < npx; ++k) {
@@ -864,6 +916,7 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
   const size_t nv = remote_positions_.size();
   const size_t nt = remote_triangles_.size();
   std::vector<uint16_t> vertex_pods(nv, 0xFFFFu);
+  triangle_pods_.assign(nt, 0);
   std::vector<std::array<uint32_t, 3>> ordered;
   pod_sets_.clear();
   selection_stats_ = {};
@@ -881,21 +934,8 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
   } else {
     // The flagged depth maps of the visibility pass (camera z, negative
     // near a discontinuity): the CPU pass's, or read back once per mesh.
-    std::vector<std::vector<float>> readback;
-    if (vis_gpu_) readback.resize(n);
-    const std::vector<std::vector<float>>& depth = vis_gpu_ ? readback : pod_flagged_z_;
-    GLint old_fbo = 0;
-    glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
-    glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    for (int i = 0; i < n && vis_gpu_; ++i) {
-      const Intrinsics& in = pod_cameras_[i].intrinsics;
-      readback[i].resize(static_cast<size_t>(in.width) * in.height);
-      glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
-      glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, readback[i].data());
-    }
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
-    HOLO_RETURN_IF_ERROR(CheckGlError("pod depth readback"));
+    HOLO_RETURN_IF_ERROR(FlaggedDepthOnCpu());
+    const std::vector<std::vector<float>>& depth = pod_flagged_z_;
     // Per pod: camera from world, and without distortion the pixel
     // projection folded into one 3×4 matrix (rows: u·z, v·z, z).
     std::vector<Eigen::Matrix<float, 3, 4>> projection(n);
@@ -997,6 +1037,7 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
       }
       if (count == 0) ++selection_stats_.uncoloured_triangles;
       slots += static_cast<size_t>(count);
+      triangle_pods_[t] = bits;
       keyed[t] = {bits, static_cast<uint32_t>(t)};
     }
     std::sort(keyed.begin(), keyed.end());
@@ -1015,6 +1056,13 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     }
     selection_stats_.mean_pods = nt ? static_cast<double>(slots) / static_cast<double>(nt) : 0.0;
   }
+  vertex_pods_ = vertex_pods;
+  if (!select) {
+    const uint16_t all_bits = static_cast<uint16_t>((1u << n) - 1u);
+    vertex_pods_.assign(nv, all_bits);
+    triangle_pods_.assign(nt, all_bits);
+  }
+  atlas_dirty_ = true;
   glBindVertexArray(remote_.vao);
   glBindBuffer(GL_ARRAY_BUFFER, remote_pods_vbo_);
   if (nv > 0) glBufferSubData(GL_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(nv * sizeof(uint16_t)), vertex_pods.data());
@@ -1030,6 +1078,155 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
   selection_stats_.select_ms = sw.ElapsedMs();
   selection_stats_.select_cpu_ms = ThreadCpuTimeMs() - cpu0;
   return CheckGlError("pod selection");
+}
+
+Status Renderer::FlaggedDepthOnCpu() {
+  if (flagged_on_cpu_) return OkStatus();
+  const int n = num_pods_;
+  pod_flagged_z_.resize(n);
+  GLint old_fbo = 0;
+  glGetIntegerv(GL_READ_FRAMEBUFFER_BINDING, &old_fbo);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, pod_fbo_);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  for (int i = 0; i < n; ++i) {
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    pod_flagged_z_[i].resize(static_cast<size_t>(in.width) * in.height);
+    glFramebufferTextureLayer(GL_READ_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, pod_depth_tex_, 0, i);
+    glReadPixels(0, 0, in.width, in.height, GL_RED, GL_FLOAT, pod_flagged_z_[i].data());
+  }
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, static_cast<GLuint>(old_fbo));
+  HOLO_RETURN_IF_ERROR(CheckGlError("pod depth readback"));
+  flagged_on_cpu_ = true;
+  return OkStatus();
+}
+
+bool Renderer::AtlasCurrent(const ProjectiveOptions& options) const {
+  const bool visibility = !visibility_dirty_ && options.discontinuity_jump_m == edge_jump_m_ &&
+                          options.discontinuity_radius_m == edge_radius_m_ && options.gpu_visibility == vis_gpu_ &&
+                          options.cull_back_faces == vis_cull_;
+  const bool textures = !textures_dirty_ && options.use_masks == tex_use_masks_ &&
+                        options.mask_erode_px == tex_erode_ && options.mask_feather_px == tex_feather_ &&
+                        options.edge_floor_weight == tex_floor_;
+  const bool selection = !selection_dirty_ && options.pods_per_vertex == sel_per_vertex_ &&
+                         options.max_pods_per_triangle == sel_per_triangle_ && options.alpha == sel_alpha_;
+  return visibility && textures && selection && !atlas_dirty_ && atlas_texels_ == options.bake_texels_per_edge &&
+         atlas_density_ == options.bake_texels_per_pod_pixel &&
+         atlas_tol_ == options.visibility_tolerance_m && atlas_edge_ == options.discontinuity_weight &&
+         atlas_conf_ == options.min_mask_confidence;
+}
+
+Status Renderer::UpdateAtlas(const ProjectiveOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  if (num_pods_ == 0) return InvalidArgument("no pod images: call SetPodImages before projective texturing");
+  if (visibility_dirty_ || options.discontinuity_jump_m != edge_jump_m_ ||
+      options.discontinuity_radius_m != edge_radius_m_ || options.gpu_visibility != vis_gpu_ ||
+      options.cull_back_faces != vis_cull_) {
+    HOLO_RETURN_IF_ERROR(UpdateVisibility(options));
+  }
+  if (textures_dirty_ || options.use_masks != tex_use_masks_ || options.mask_erode_px != tex_erode_ ||
+      options.mask_feather_px != tex_feather_ || options.edge_floor_weight != tex_floor_) {
+    UploadPodTextures(options);
+  }
+  if (selection_dirty_ || options.pods_per_vertex != sel_per_vertex_ ||
+      options.max_pods_per_triangle != sel_per_triangle_ || options.alpha != sel_alpha_) {
+    HOLO_RETURN_IF_ERROR(SelectPods(options));
+  }
+  HOLO_RETURN_IF_ERROR(FlaggedDepthOnCpu());
+  Stopwatch sw;
+  if (!bake_pool_) bake_pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
+  std::vector<AtlasPod> pods(num_pods_);
+  for (int i = 0; i < num_pods_; ++i) {
+    pods[i].camera = &pod_cameras_[i];
+    pods[i].flagged_z = pod_flagged_z_[i].data();
+    pods[i].rgba = pod_rgba_[i].data();
+  }
+  AtlasMeshInput in;
+  in.positions = &remote_positions_;
+  in.normals = &remote_normals_;
+  in.colors = &remote_colors_;
+  in.triangles = &remote_triangles_;
+  in.vertex_pods = &vertex_pods_;
+  in.triangle_pods = &triangle_pods_;
+  AtlasBakeOptions bo;
+  bo.texels_per_edge = options.bake_texels_per_edge;
+  bo.texels_per_pod_pixel = options.bake_texels_per_pod_pixel;
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  bo.max_width = std::min(2048, static_cast<int>(max_size));
+  bo.max_height = static_cast<int>(max_size);
+  bo.alpha = options.alpha;
+  bo.visibility_tolerance_m = options.visibility_tolerance_m;
+  bo.discontinuity_weight = options.discontinuity_weight;
+  bo.min_mask_confidence =
+      options.use_masks && !pod_masks_.empty() && remote_has_colors_ ? options.min_mask_confidence : 0.0f;
+  Atlas atlas;
+  atlas_stats_ = {};
+  const Status baked = BakeAtlas(in, pods, bo, bake_pool_.get(), &atlas);
+  atlas_texels_ = options.bake_texels_per_edge;
+  atlas_density_ = options.bake_texels_per_pod_pixel;
+  atlas_tol_ = options.visibility_tolerance_m;
+  atlas_edge_ = options.discontinuity_weight;
+  atlas_conf_ = options.min_mask_confidence;
+  atlas_dirty_ = false;
+  if (baked.code() == StatusCode::kOutOfRange) {
+    // Too many triangles for one atlas texture: per-fragment blending.
+    atlas_stats_.fallback = true;
+    baked_vertices_ = 0;
+    return OkStatus();
+  }
+  HOLO_RETURN_IF_ERROR(baked);
+  if (!atlas_tex_) glGenTextures(1, &atlas_tex_);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, atlas_tex_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, std::max(1, atlas.width), std::max(1, atlas.height), 0, GL_RGBA,
+               GL_UNSIGNED_BYTE, atlas.rgba.empty() ? nullptr : atlas.rgba.data());
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  glBindTexture(GL_TEXTURE_2D, 0);
+  const size_t nt = remote_triangles_.size();
+  std::vector<BakedVertex> verts(nt * 3);
+  for (size_t t = 0; t < nt; ++t) {
+    for (int k = 0; k < 3; ++k) {
+      BakedVertex& v = verts[3 * t + k];
+      const Eigen::Vector3f& p = remote_positions_[remote_triangles_[t][k]];
+      v.p[0] = p.x();
+      v.p[1] = p.y();
+      v.p[2] = p.z();
+      v.uv[0] = atlas.uv[3 * t + k][0];
+      v.uv[1] = atlas.uv[3 * t + k][1];
+    }
+  }
+  if (!baked_.vao) {
+    glGenVertexArrays(1, &baked_.vao);
+    glGenBuffers(1, &baked_.vbo);
+    glBindVertexArray(baked_.vao);
+    glBindBuffer(GL_ARRAY_BUFFER, baked_.vbo);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(BakedVertex), reinterpret_cast<void*>(offsetof(BakedVertex, p)));
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 2, GL_FLOAT, GL_FALSE, sizeof(BakedVertex),
+                          reinterpret_cast<void*>(offsetof(BakedVertex, uv)));
+  }
+  glBindVertexArray(baked_.vao);
+  glBindBuffer(GL_ARRAY_BUFFER, baked_.vbo);
+  const size_t bytes = verts.size() * sizeof(BakedVertex);
+  if (bytes > baked_.vbo_bytes) {
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(bytes), verts.data(), GL_DYNAMIC_DRAW);
+    baked_.vbo_bytes = bytes;
+  } else if (bytes > 0) {
+    glBufferSubData(GL_ARRAY_BUFFER, 0, static_cast<GLsizeiptr>(bytes), verts.data());
+  }
+  glBindVertexArray(0);
+  baked_vertices_ = verts.size();
+  atlas_stats_.width = atlas.width;
+  atlas_stats_.height = atlas.height;
+  atlas_stats_.texels = atlas.texels_baked;
+  atlas_stats_.samples = atlas.samples;
+  atlas_stats_.bake_ms = sw.ElapsedMs();
+  return CheckGlError("atlas bake");
 }
 
 void Renderer::PodBox(const CameraModel& cam, int box[4]) const {
@@ -1090,7 +1287,15 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     return InvalidArgument("need 0 < near_m < far_m");
   }
   const bool projective = settings.mode == ColorMode::kProjective;
-  if (projective) {
+  bool baked = false;
+  if (projective && settings.projective.bake) {
+    if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
+    if (!AtlasCurrent(settings.projective)) {
+      HOLO_RETURN_IF_ERROR(UpdateAtlas(settings.projective));
+    }
+    baked = !atlas_stats_.fallback;
+  }
+  if (projective && !baked) {
     HOLO_RETURN_IF_ERROR(settings.projective.Check());
     if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
     if (visibility_dirty_ || settings.projective.discontinuity_jump_m != edge_jump_m_ ||
@@ -1150,6 +1355,18 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   }
   if (!projective) {
     Draw(remote_);
+  } else if (baked) {
+    glUseProgram(baked_program_);
+    SetMat4(baked_program_, "u_clip_from_local", clip_from_local);
+    SetMat4(baked_program_, "u_local_from_remote", local_from_remote);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, atlas_tex_);
+    if (baked_vertices_ > 0) {
+      glBindVertexArray(baked_.vao);
+      glDrawArrays(GL_TRIANGLES, 0, static_cast<GLsizei>(baked_vertices_));
+      glBindVertexArray(0);
+    }
+    glBindTexture(GL_TEXTURE_2D, 0);
   } else {
     if (settings.depth_prepass) {
       // Depth first with the cheap colour program, then the projective

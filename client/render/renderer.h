@@ -33,6 +33,7 @@
 
 namespace holo {
 class MeshRasterizer;
+class WorkerPool;
 }
 
 namespace holo::render {
@@ -95,6 +96,20 @@ struct ProjectiveOptions {
   // cheaper (8 small draws of the whole mesh cost GL more than the CPU's
   // triangle setup); the maps are the same up to the rasterizers' rounding.
   bool gpu_visibility = false;
+  // Bake the blended colours once per mesh into a texture atlas on the CPU
+  // (client/render/atlas.h: the same weights without the view-dependent
+  // term β), then draw each frame with one texture fetch per pixel: the
+  // per-frame cost no longer depends on the pods, and it is paid once per
+  // mesh, not once per displayed frame. Off: blend per fragment as above
+  // (with β). `bake_texels_per_edge`: atlas texels along a triangle's edge
+  // (its cell holds (L+1)² texels). A mesh too large for the atlas is drawn
+  // per fragment.
+  bool bake = true;
+  int bake_texels_per_edge = 4;
+  // Fewer texels for triangles small in their pods' images: texels along an
+  // edge per pod pixel of that edge (1..bake_texels_per_edge; 0 = always
+  // bake_texels_per_edge). AtlasBakeOptions::texels_per_pod_pixel.
+  float bake_texels_per_pod_pixel = 1.0f;
   Status Check() const;
   // The renderer as it was before masks and edge weights (for before/after
   // comparisons): masks ignored, back faces culled in the pods' depth maps.
@@ -185,6 +200,11 @@ class Renderer {
   // with other discontinuity options, does it).
   Status UpdateVisibility(const ProjectiveOptions& options = {});
 
+  // Bakes the projective colours into the atlas now (ProjectiveOptions::bake;
+  // otherwise the first baked Render after a new mesh, new pod images or
+  // other options does it, after UpdateVisibility and the pod selection).
+  Status UpdateAtlas(const ProjectiveOptions& options = {});
+
   // Draws into `vp` of the bound draw framebuffer as seen by `camera` (local
   // world coordinates; its intrinsics should match vp's size).
   Status Render(const CameraModel& camera, const RenderSettings& settings, const Viewport& vp);
@@ -207,6 +227,16 @@ class Renderer {
     double select_cpu_ms = 0;      // CPU time of the calling thread in it
   };
   const SelectionStats& selection_stats() const { return selection_stats_; }
+
+  // What the last atlas bake produced (ProjectiveOptions::bake).
+  struct AtlasStats {
+    int width = 0, height = 0;  // atlas texels
+    size_t texels = 0;          // texels baked
+    size_t samples = 0;         // pod samples taken (texel × pod in view)
+    double bake_ms = 0;         // wall time of the bake and its upload
+    bool fallback = false;      // the mesh did not fit: drawn per fragment
+  };
+  const AtlasStats& atlas_stats() const { return atlas_stats_; }
 
  private:
   struct GpuMesh {
@@ -233,6 +263,11 @@ class Renderer {
   // Uploads the pods' images as premultiplied RGBA (alpha = the texel's mask
   // weight, see ProjectiveOptions) for `options`.
   void UploadPodTextures(const ProjectiveOptions& options);
+  // Makes sure pod_flagged_z_ holds the flagged depth maps of the last
+  // visibility pass (reads the GL maps back once when GL made them).
+  Status FlaggedDepthOnCpu();
+  // True when the atlas is current for `options`.
+  bool AtlasCurrent(const ProjectiveOptions& options) const;
 
   std::array<unsigned, kMaxPods + 1> draw_programs_{};
   unsigned depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
@@ -244,6 +279,7 @@ class Renderer {
   // pod image size each.
   std::vector<std::unique_ptr<MeshRasterizer>> pod_rasters_;
   std::vector<std::vector<float>> pod_raw_z_, pod_flagged_z_;
+  bool flagged_on_cpu_ = false;  // pod_flagged_z_ matches the last visibility pass
   // Options of the last visibility pass (GL or CPU maps, back faces culled).
   bool vis_gpu_ = false, vis_cull_ = false;
   Status UpdateVisibilityCpu(const ProjectiveOptions& options);
@@ -251,6 +287,20 @@ class Renderer {
   // pod selection, in the order the mesh came.
   std::vector<Eigen::Vector3f> remote_positions_, remote_normals_;
   std::vector<std::array<uint32_t, 3>> remote_triangles_;
+  std::vector<std::array<uint8_t, 3>> remote_colors_;  // empty = none
+  // The last pod selection per vertex and per triangle (mesh order; bit i =
+  // pod i), for the atlas bake.
+  std::vector<uint16_t> vertex_pods_, triangle_pods_;
+  // The baked atlas (ProjectiveOptions::bake): texture, one vertex per
+  // triangle corner (position, atlas coordinate), and what it was baked with.
+  unsigned atlas_tex_ = 0, baked_program_ = 0;
+  GpuMesh baked_;
+  size_t baked_vertices_ = 0;
+  bool atlas_dirty_ = true;
+  int atlas_texels_ = -1;
+  float atlas_tol_ = -1, atlas_edge_ = -1, atlas_conf_ = -1, atlas_density_ = -1;
+  AtlasStats atlas_stats_;
+  std::unique_ptr<WorkerPool> bake_pool_;
   // One draw call per pod set: the pods (rig order) and the index range.
   struct PodSet {
     std::array<int, kMaxPods> pods{};
@@ -264,6 +314,8 @@ class Renderer {
   SelectionStats selection_stats_;
   // Mask weight (alpha) of every pod texel as uploaded; empty = no masks.
   std::vector<std::vector<uint8_t>> pod_alpha_;
+  // Every pod's image as uploaded (RGBA premultiplied by the mask weight).
+  std::vector<std::vector<uint8_t>> pod_rgba_;
   GpuMesh remote_, local_;
   Eigen::Vector3f remote_min_ = Eigen::Vector3f::Constant(1e30f), remote_max_ = Eigen::Vector3f::Constant(-1e30f);
   // The remote mesh carries per-vertex colours (a live site streaming pod

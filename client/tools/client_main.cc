@@ -73,9 +73,12 @@ int main(int argc, char** argv) {
   app.add_option("--hfov", o.hfov_deg, "horizontal field of view of each view, degrees")
       ->capture_default_str()
       ->check(CLI::Range(10.0f, 150.0f));
-  app.add_option("--color", o.color, "projective (from the pods' images) or vertex (per-vertex colour)")
+  app.add_option("--color", o.color,
+                 "projective (the pods' images blended once per mesh into a texture atlas), projective-fragment "
+                 "(blended per pixel, with the view-dependent term; costlier on a CPU GL) or vertex (per-vertex "
+                 "colour)")
       ->capture_default_str()
-      ->check(CLI::IsMember({"projective", "vertex"}));
+      ->check(CLI::IsMember({"projective", "projective-fragment", "vertex"}));
   app.add_option("--miniature", o.miniature_scale,
                  "miniature mode: scale the remote room by SCALE (e.g. 0.2) onto a table top")
       ->check(CLI::Range(0.01f, 10.0f));

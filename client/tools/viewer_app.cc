@@ -113,12 +113,13 @@ class Viewer {
       return InvalidArgument("--width/--height must be in 16..8192, got " + std::to_string(o_.width) + "x" +
                              std::to_string(o_.height));
     }
-    if (o_.color == "projective") {
+    if (o_.color == "projective" || o_.color == "projective-fragment") {
       mode_ = ColorMode::kProjective;
+      bake_ = o_.color == "projective";
     } else if (o_.color == "vertex") {
       mode_ = ColorMode::kVertexColor;
     } else {
-      return InvalidArgument("--color must be projective or vertex, got '" + o_.color + "'");
+      return InvalidArgument("--color must be projective, projective-fragment or vertex, got '" + o_.color + "'");
     }
     HOLO_ASSIGN_OR_RETURN(layout_, render::MakeMosaicLayout(o_.views, o_.width, o_.height));
     if (o_.miniature_scale != 0.0f) {
@@ -431,7 +432,13 @@ class Viewer {
         frame_has_images_ = false;
       }
     }
-    if (mode_ == ColorMode::kProjective && frame_has_images_) HOLO_RETURN_IF_ERROR(renderer_->UpdateVisibility());
+    // The per-mesh work (pods' visibility maps; with the atlas also the pod
+    // selection and the bake) belongs to the upload, not to the frames drawn.
+    if (mode_ == ColorMode::kProjective && frame_has_images_) {
+      render::ProjectiveOptions po;
+      po.bake = bake_;
+      HOLO_RETURN_IF_ERROR(bake_ ? renderer_->UpdateAtlas(po) : renderer_->UpdateVisibility(po));
+    }
     glFinish();
     stats_.upload_ms.push_back(sw.ElapsedMs());
     return OkStatus();
@@ -441,6 +448,7 @@ class Viewer {
   Status Draw(double t, int fb_width, int fb_height) {
     render::RenderSettings settings;
     settings.mode = frame_has_images_ ? mode_ : ColorMode::kVertexColor;
+    settings.projective.bake = bake_;
     settings.local_from_remote =
         o_.miniature_scale != 0.0f || o_.remote_placed ? mini_.LocalFromRemote() : Eigen::Matrix4f::Identity();
     if (participant_ && o_.miniature_scale == 0.0f && !o_.remote_placed) settings.local_from_remote = call_local_from_remote_;
@@ -1114,6 +1122,7 @@ class Viewer {
  private:
   ViewerOptions o_;
   ColorMode mode_ = ColorMode::kProjective;
+  bool bake_ = true;  // projective colours baked once per mesh (--color projective)
   render::MosaicLayout layout_;
   render::Miniature mini_;
   render::CameraController controller_;

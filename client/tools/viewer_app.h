@@ -22,7 +22,10 @@ struct ViewerOptions {
   Eigen::Vector3f miniature_at = Eigen::Vector3f(0.0f, 0.0f, 0.75f);
   float miniature_yaw_deg = 0.0f;
   std::string pose_trace;  // CSV (time, x, y, z, yaw, pitch, roll); empty = orbit
-  std::string color = "projective";  // or "vertex"
+  // "projective" (the pods' images blended once per mesh into an atlas),
+  // "projective-fragment" (blended per pixel, with the view-dependent term)
+  // or "vertex"
+  std::string color = "projective";
   // "", "table", a PLY of the local site, or synthetic:WORKLOAD (the local
   // site's people, live from a second studio)
   std::string local;

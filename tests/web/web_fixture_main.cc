@@ -228,6 +228,9 @@ Status Render(const std::string& recording, int64_t frame, const std::vector<flo
     HOLO_RETURN_IF_ERROR(renderer->SetPodImages(rig.rig, ip, mp));
     HOLO_RETURN_IF_ERROR(renderer->UpdateVisibility());
     settings.mode = render::ColorMode::kProjective;
+    // The browser blends per fragment (with the view-dependent term): the
+    // native reference does the same, not the baked atlas.
+    settings.projective.bake = false;
   }
   target_fb->Bind();
   glViewport(0, 0, w, h);
