@@ -669,9 +669,9 @@ Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
   pod_raw_z_.resize(n);
   pod_flagged_z_.resize(n);
   const float jump = options.discontinuity_jump_m, radius = options.discontinuity_radius_m;
-  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  for (int i = 0; i < n; ++i) {
+  // Pods in parallel (each has its own rasterizer and maps), uploads after.
+  if (!pool_) pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
+  pool_->ParallelFor(n, [&](int i) {
     const CameraModel& cam = pod_cameras_[i];
     const int w = cam.intrinsics.width, h = cam.intrinsics.height;
     MeshRasterizer& raster = *pod_rasters_[i];
@@ -709,7 +709,12 @@ Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
         flagged[k] = edge ? -z : z;
       }
     }
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, w, h, 1, GL_RED, GL_FLOAT, raw.data());
+  });
+  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  for (int i = 0; i < n; ++i) {
+    const Intrinsics& in = pod_cameras_[i].intrinsics;
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RED, GL_FLOAT, pod_raw_z_[i].data());
   }
   glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
   for (int i = 0; i < n; ++i) {
@@ -960,8 +965,9 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     const float tol = 2.0f * options.visibility_tolerance_m;
     const bool masks = !pod_alpha_.empty();
     std::vector<float> weight(nv * n, 0.0f);
-    // Pod by pod: one depth map (and mask) stays in cache.
-    for (int i = 0; i < n; ++i) {
+    // Pod by pod (one depth map and mask stay in cache), pods in parallel.
+    if (!pool_) pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
+    pool_->ParallelFor(n, [&](int i) {
       const CameraModel& cam = pod_cameras_[i];
       for (size_t v = 0; v < nv; ++v) {
         const Eigen::Vector3f& p = remote_positions_[v];
@@ -997,7 +1003,7 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
         if (masks) wgt *= pod_alpha_[i][static_cast<size_t>(y) * w + x] / 255.0f;
         weight[v * n + i] = wgt;
       }
-    }
+    });
     // Each vertex keeps its `pods_per_vertex` best pods.
     const int keep = std::min(options.pods_per_vertex, n);
     std::array<int, kMaxPods> order{};
@@ -1133,7 +1139,7 @@ Status Renderer::UpdateAtlas(const ProjectiveOptions& options) {
   }
   HOLO_RETURN_IF_ERROR(FlaggedDepthOnCpu());
   Stopwatch sw;
-  if (!bake_pool_) bake_pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
+  if (!pool_) pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
   std::vector<AtlasPod> pods(num_pods_);
   for (int i = 0; i < num_pods_; ++i) {
     pods[i].camera = &pod_cameras_[i];
@@ -1161,7 +1167,7 @@ Status Renderer::UpdateAtlas(const ProjectiveOptions& options) {
       options.use_masks && !pod_masks_.empty() && remote_has_colors_ ? options.min_mask_confidence : 0.0f;
   Atlas atlas;
   atlas_stats_ = {};
-  const Status baked = BakeAtlas(in, pods, bo, bake_pool_.get(), &atlas);
+  const Status baked = BakeAtlas(in, pods, bo, pool_.get(), &atlas);
   atlas_texels_ = options.bake_texels_per_edge;
   atlas_density_ = options.bake_texels_per_pod_pixel;
   atlas_tol_ = options.visibility_tolerance_m;

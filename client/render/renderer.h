@@ -224,7 +224,7 @@ class Renderer {
     size_t capped_triangles = 0;   // triangles whose vertices kept more than max_pods_per_triangle pods
     size_t uncoloured_triangles = 0;  // no pod sees any of their vertices: per-vertex colour
     double select_ms = 0;          // wall time of the selection (readback + choice + index upload)
-    double select_cpu_ms = 0;      // CPU time of the calling thread in it
+    double select_cpu_ms = 0;      // CPU time of the calling thread in it (pods run on a pool: not all CPU)
   };
   const SelectionStats& selection_stats() const { return selection_stats_; }
 
@@ -300,7 +300,9 @@ class Renderer {
   int atlas_texels_ = -1;
   float atlas_tol_ = -1, atlas_edge_ = -1, atlas_conf_ = -1, atlas_density_ = -1;
   AtlasStats atlas_stats_;
-  std::unique_ptr<WorkerPool> bake_pool_;
+  // Threads for the per-mesh CPU work (visibility maps, pod selection, atlas
+  // bake), as many as the machine has.
+  std::unique_ptr<WorkerPool> pool_;
   // One draw call per pod set: the pods (rig order) and the index range.
   struct PodSet {
     std::array<int, kMaxPods> pods{};
