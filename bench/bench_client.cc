@@ -30,6 +30,7 @@
 #include "common/file_util.h"
 #include "common/image_io.h"
 #include "common/log.h"
+#include "common/metrics/triangle_index.h"
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
 #include "protocol/color_codec.h"
@@ -122,12 +123,14 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
                               const holo::TextureOptions& texture_options, ViewerContent* full,
                               ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
+  if (std::getenv("EXP_NONOISE")) so.depth_noise = false;
   HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
   so.empty_room = true;
   HOLO_ASSIGN_OR_RETURN(auto empty, holo::SyntheticStudio::Create(workload.rig, so));
   holo::CaptureSiteOptions o;
-  o.masks = holo::MaskSource::kSegment;
+  o.masks = std::getenv("EXP_EXACT") ? holo::MaskSource::kTruth : holo::MaskSource::kSegment;
   o.tsdf.voxel_size = workload.voxel_size_m;
+  if (const char* e = std::getenv("EXP_VOXEL")) o.tsdf.voxel_size = std::atof(e);
   o.pipeline.serial = true;
   o.pipeline.max_frames = frame + 1;
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
@@ -168,6 +171,36 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
     m->colors.clear();
     HOLO_RETURN_IF_ERROR(texturer.Apply(kept, m));
+  }
+  if (std::getenv("EXP_SIGNED")) {
+    holo::RgbdFrameSet fs2;
+    holo::StudioGroundTruth gt;
+    studio->RenderFrame(frame, &fs2, &gt);
+    auto idx = holo::metrics::TriangleIndex::Build(gt.foreground_mesh);
+    if (idx.ok()) {
+      for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
+        std::vector<float> sd;
+        for (const auto& p : m->positions) {
+          auto c = idx->Query(p, 0.05f);
+          if (!c.found()) continue;
+          const auto& t = gt.foreground_mesh.triangles[c.triangle];
+          const auto& P = gt.foreground_mesh.positions;
+          Eigen::Vector3f n = (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]).normalized();
+          sd.push_back((p - c.point).dot(n) >= 0 ? c.distance : -c.distance);
+        }
+        std::sort(sd.begin(), sd.end());
+        double mean = 0; for (float v : sd) mean += v; mean /= sd.size();
+        fprintf(stderr, "EXP signed mm: n %zu mean %.2f p10 %.2f p25 %.2f p50 %.2f p75 %.2f p90 %.2f\n", sd.size(), mean*1e3,
+                sd[sd.size()/10]*1e3, sd[sd.size()/4]*1e3, sd[sd.size()/2]*1e3, sd[3*sd.size()/4]*1e3, sd[9*sd.size()/10]*1e3);
+      }
+    }
+  }
+  if (const char* e = std::getenv("EXP_PUSH_MM")) {
+    const float d = std::atof(e) * 0.001f;
+    for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
+      if (m->normals.size() != m->positions.size()) m->ComputeNormals();
+      for (size_t i = 0; i < m->positions.size(); ++i) m->positions[i] += d * m->normals[i].normalized();
+    }
   }
   return holo::OkStatus();
 }

@@ -7,7 +7,8 @@
 //   holoport-bench fusion --dataset DIR [--voxel-mm 10] [--depth-max-m 3] ...
 //   options: --no-peer (skip Open3D), --keep DIR (write the peer's input and
 //            meshes there and keep them), --decimate N (triangle budget for the
-//            decimation figure; 0 = off), --min-weight W (TsdfOptions::min_weight)
+//            decimation figure; 0 = off), --min-weight W (TsdfOptions::min_weight),
+//            --behind-band B (TsdfOptions::behind_band)
 //
 // Stages are computed by functions returning figures (RunOurFusion,
 // RunOpen3dPeer) so that segmentation, texturing and the pipeline can add
@@ -220,7 +221,7 @@ std::string MakeWorkDir(const std::string& keep) {
 struct ExtraArgs {
   std::string dataset, keep;
   bool peer = true;
-  double voxel_mm = 0, depth_max_m = 0, min_weight = 0;
+  double voxel_mm = 0, depth_max_m = 0, min_weight = 0, behind_band = 0;
   long decimate = -1;
   // Whole-pipeline figures (our segmentation + texturing), see fusion_pipeline.h.
   bool pipeline = true, pipeline_only = false;
@@ -236,6 +237,10 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
   app.add_option("--voxel-mm", a->voxel_mm, "TSDF voxel size, mm (default: the workload's)");
   app.add_option("--depth-max-m", a->depth_max_m, "largest depth integrated, m (default 5)");
   app.add_option("--min-weight", a->min_weight, "TSDF minimum weight to extract");
+  app.add_option("--behind-band", a->behind_band,
+                 "TSDF: observations behind the surface count this many truncation distances deep (default: "
+                 "TsdfOptions'; 1 = the classic drop)")
+      ->check(CLI::Range(1.0, 4.0));
   app.add_option("--decimate", a->decimate, "also decimate to this many triangles");
   app.add_flag("--no-pipeline{false}", a->pipeline, "skip the whole-pipeline figures");
   app.add_flag("--pipeline-only", a->pipeline_only, "only the whole-pipeline figures");
@@ -277,6 +282,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   cfg.tsdf.voxel_size = extra.voxel_mm > 0 ? static_cast<float>(extra.voxel_mm / 1000) : workload->voxel_size_m;
   cfg.tsdf.max_depth_m = extra.depth_max_m > 0 ? static_cast<float>(extra.depth_max_m) : 5.0f;
   if (extra.min_weight > 0) cfg.tsdf.min_weight = static_cast<float>(extra.min_weight);
+  if (extra.behind_band > 0) cfg.tsdf.behind_band = static_cast<float>(extra.behind_band);
   cfg.repeats = args.repeats;
   if (extra.decimate >= 0) cfg.decimate_to = static_cast<size_t>(extra.decimate);
   const int frames = args.frames > 0 ? args.frames : 10;
@@ -376,7 +382,8 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   EmitFigure("fusion", wl, "ms", Median(total_ms), "ms", q("fuse_mesh_cleanup"));
   EmitFigure("fusion", wl, "cpu_ms", Median(fuse_cpu_ms), "ms", q("fuse"));
   EmitFigure("fusion", wl, "cpu_ms", Median(mesh_cpu_ms), "ms", q("mesh"));
-  EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm", Q({{"voxel_mm", voxel_mm}, {"mesh", "cleaned"}}));
+  EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm",
+             Q({{"voxel_mm", voxel_mm}, {"mesh", "cleaned"}, {"behind_band", fmt::format("{:g}", cfg.tsdf.behind_band)}}));
   EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer_raw), "mm", Q({{"voxel_mm", voxel_mm}, {"mesh", "raw"}}));
   EmitFigure("fusion", wl, "completeness", Mean(completeness), "fraction", Q({{"voxel_mm", voxel_mm}, {"threshold_mm", "10"}}));
   EmitFigure("fusion", wl, "hausdorff_mm", Mean(hausdorff), "mm", Q({{"voxel_mm", voxel_mm}}));
@@ -507,7 +514,9 @@ int RunFusionBench(const BenchArgs& args, const ExtraArgs& extra) {
   if (!extra.dataset.empty()) return RunDataset(args, extra);
   const int rc = extra.pipeline_only ? 0 : RunWorkload(args, extra);
   if (rc != 0 || !extra.pipeline) return rc;
-  return RunPipelineFigures(args, extra.pipeline_options);
+  PipelineBenchOptions pipeline = extra.pipeline_options;
+  if (extra.behind_band > 0) pipeline.behind_band = extra.behind_band;
+  return RunPipelineFigures(args, pipeline);
 }
 
 BenchFn SetupFusion(CLI::App& app) {

@@ -43,6 +43,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   CaptureSiteOptions site_options;
   site_options.masks = MaskSource::kSegment;
   site_options.tsdf.voxel_size = workload->voxel_size_m;
+  if (options.behind_band >= 0) site_options.tsdf.behind_band = static_cast<float>(options.behind_band);
   site_options.pipeline.max_frames = options.frames;
   if (options.texture_cluster_mm >= 0)
     site_options.texture_options.cluster_size_m = static_cast<float>(options.texture_cluster_mm * 1e-3);

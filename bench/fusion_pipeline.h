@@ -25,6 +25,8 @@ struct PipelineBenchOptions {
   // Segmenter overrides (< 0: the capture site's defaults).
   int seg_iterations = -1, seg_downsample = -1;
   double seg_grid_px = -1;
+  // TsdfOptions::behind_band override (< 0: the default).
+  double behind_band = -1;
   // Frames of the serial run that measures CPU-ms per stage (0: skip it).
   int cpu_frames = 20;
 };

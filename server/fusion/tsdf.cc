@@ -62,6 +62,8 @@ Status TsdfOptions::Check() const {
     return InvalidArgument("voxel_size must be > 0, got " + Num(voxel_size));
   if (!(truncation_voxels >= 1) || !std::isfinite(truncation_voxels))
     return InvalidArgument("truncation_voxels must be >= 1, got " + Num(truncation_voxels));
+  if (!(behind_band >= 1 && behind_band <= 4))
+    return InvalidArgument("behind_band must be in [1, 4], got " + Num(behind_band));
   if (!(max_depth_m > 0) || !(max_depth_m <= 65.535f))
     return InvalidArgument("max_depth_m must be in (0, 65.535], got " + Num(max_depth_m));
   if (!(min_depth_m >= 0) || !(min_depth_m < max_depth_m))
@@ -399,7 +401,7 @@ struct SubBox {
 // path: any camera, optional edge filter.
 template <bool kDistorted, bool kRegistered>
 void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                   const SubBox& box, BlockAccumulator* acc) {
+                   float behind, const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const float inv_trunc = 1.0f / trunc;
@@ -425,10 +427,10 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
         const uint16_t d = v.depth[pixel];
         if (d == 0) continue;
         const float sdf = static_cast<float>(d) * 0.001f - p.z();
-        if (sdf < -trunc) continue;
+        if (sdf < -behind) continue;
         if (sdf < 0 && v.edge && v.edge[pixel]) continue;
         const int idx = row + i;
-        acc->tsdf[idx] += std::min(1.0f, sdf * inv_trunc);
+        acc->tsdf[idx] += std::max(-1.0f, std::min(1.0f, sdf * inv_trunc));
         acc->weight[idx] += 1.0f;
         if (sdf >= trunc || !v.with_color) continue;
         const uint8_t* c = kRegistered ? v.color + 3 * pixel : NonRegisteredColor(v, p);
@@ -443,7 +445,7 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
 // time with SSE2 (part of every x86-64 CPU). Same arithmetic as the general
 // path up to float rounding order.
 void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                       const SubBox& box, BlockAccumulator* acc) {
+                       float behind, const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const __m128 lane = _mm_setr_ps(0, 1, 2, 3);
@@ -452,7 +454,8 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
   const __m128 cx = _mm_set1_ps(v.cx + 0.5f), cy = _mm_set1_ps(v.cy + 0.5f);
   const __m128 wf = _mm_set1_ps(static_cast<float>(v.width)), hf = _mm_set1_ps(static_cast<float>(v.height));
   const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), min_z = _mm_set1_ps(kMinProjectZ);
-  const __m128 mm = _mm_set1_ps(0.001f), neg_trunc = _mm_set1_ps(-trunc), pos_trunc = _mm_set1_ps(trunc);
+  const __m128 mm = _mm_set1_ps(0.001f), neg_behind = _mm_set1_ps(-behind), pos_trunc = _mm_set1_ps(trunc);
+  const __m128 minus_one = _mm_set1_ps(-1.0f);
   const __m128 inv_trunc = _mm_set1_ps(1.0f / trunc);
   alignas(16) int32_t pix[4];
   alignas(16) float depth[4];
@@ -483,10 +486,10 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
         for (int l = 0; l < 4; ++l) depth[l] = static_cast<float>(v.depth[pix[l]]);
         const __m128 d = _mm_and_ps(ok, _mm_load_ps(depth));
         const __m128 sdf = _mm_sub_ps(_mm_mul_ps(d, mm), pz);
-        const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, neg_trunc));
+        const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, neg_behind));
         const int upd_bits = _mm_movemask_ps(upd);
         if (upd_bits == 0) continue;
-        const __m128 t = _mm_min_ps(one, _mm_mul_ps(sdf, inv_trunc));
+        const __m128 t = _mm_max_ps(minus_one, _mm_min_ps(one, _mm_mul_ps(sdf, inv_trunc)));
         float* at = acc->tsdf + row + half;
         float* aw = acc->weight + row + half;
         _mm_store_ps(at, _mm_add_ps(_mm_load_ps(at), _mm_and_ps(upd, t)));
@@ -508,8 +511,8 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
 // A 4³ sub-block is handled two rows per vector.
 template <bool kColor>
 __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin,
-                                                       float voxel, float trunc, const SubBox& box,
-                                                       BlockAccumulator* acc) {
+                                                       float voxel, float trunc, float behind,
+                                                       const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const bool full = box.side == 8;
@@ -520,7 +523,8 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
   const __m256 cx = _mm256_set1_ps(v.cx + 0.5f), cy = _mm256_set1_ps(v.cy + 0.5f);
   const __m256 wf = _mm256_set1_ps(static_cast<float>(v.width)), hf = _mm256_set1_ps(static_cast<float>(v.height));
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), min_z = _mm256_set1_ps(kMinProjectZ);
-  const __m256 mm = _mm256_set1_ps(0.001f), neg_trunc = _mm256_set1_ps(-trunc), pos_trunc = _mm256_set1_ps(trunc);
+  const __m256 mm = _mm256_set1_ps(0.001f), neg_behind = _mm256_set1_ps(-behind), pos_trunc = _mm256_set1_ps(trunc);
+  const __m256 minus_one = _mm256_set1_ps(-1.0f);
   const __m256 inv_trunc = _mm256_set1_ps(1.0f / trunc);
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
   const int* depth_words = reinterpret_cast<const int*>(v.depth);  // v.depth is padded by one pixel
@@ -546,8 +550,9 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
       const __m256i raw = _mm256_and_si256(_mm256_i32gather_epi32(depth_words, idx, 2), low16);
       const __m256 d = _mm256_and_ps(ok, _mm256_cvtepi32_ps(raw));
       const __m256 sdf = _mm256_sub_ps(_mm256_mul_ps(d, mm), pz);
-      const __m256 upd = _mm256_and_ps(_mm256_cmp_ps(d, zero, _CMP_GT_OQ), _mm256_cmp_ps(sdf, neg_trunc, _CMP_GE_OQ));
-      const __m256 t = _mm256_and_ps(upd, _mm256_min_ps(one, _mm256_mul_ps(sdf, inv_trunc)));
+      const __m256 upd = _mm256_and_ps(_mm256_cmp_ps(d, zero, _CMP_GT_OQ), _mm256_cmp_ps(sdf, neg_behind, _CMP_GE_OQ));
+      const __m256 t =
+          _mm256_and_ps(upd, _mm256_max_ps(minus_one, _mm256_min_ps(one, _mm256_mul_ps(sdf, inv_trunc))));
       const __m256 wt = _mm256_and_ps(upd, one);
       const int row0 = kBlockSide * j + kBlockSide * kBlockSide * k + box.i0;
       const int row1 = full ? row0 + 4 : row0 + kBlockSide;  // accumulator index of lane 4
@@ -693,6 +698,7 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   Scratch& s = *scratch_;
   const size_t num_pods = rig.pods.size();
   const float trunc = options_.truncation_voxels * options_.voxel_size;
+  const float behind = trunc * options_.behind_band;
   const auto min_mm = static_cast<uint16_t>(std::ceil(options_.min_depth_m * 1000.0f));
   const auto max_mm = static_cast<uint16_t>(std::floor(options_.max_depth_m * 1000.0f));
   s.views.resize(num_pods);
@@ -831,23 +837,23 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
         auto project = [&](const SubBox& box) {
 #if defined(HOLO_FUSION_AVX2)
           if (v.avx2 && !v.edge) {
-            if (with_color) IntegrateViewAvx2<true>(v, lo, voxel, trunc, box, &acc);
-            else IntegrateViewAvx2<false>(v, lo, voxel, trunc, box, &acc);
+            if (with_color) IntegrateViewAvx2<true>(v, lo, voxel, trunc, behind, box, &acc);
+            else IntegrateViewAvx2<false>(v, lo, voxel, trunc, behind, box, &acc);
             return;
           }
 #endif
 #if defined(__SSE2__)
           if (!v.distorted && v.registered && !v.edge) {
-            IntegrateViewSse2(v, lo, voxel, trunc, box, &acc);
+            IntegrateViewSse2(v, lo, voxel, trunc, behind, box, &acc);
             return;
           }
 #endif
           if (v.distorted) {
-            if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, box, &acc);
-            else IntegrateView<true, false>(v, lo, voxel, trunc, box, &acc);
+            if (v.registered) IntegrateView<true, true>(v, lo, voxel, trunc, behind, box, &acc);
+            else IntegrateView<true, false>(v, lo, voxel, trunc, behind, box, &acc);
           } else {
-            if (v.registered) IntegrateView<false, true>(v, lo, voxel, trunc, box, &acc);
-            else IntegrateView<false, false>(v, lo, voxel, trunc, box, &acc);
+            if (v.registered) IntegrateView<false, true>(v, lo, voxel, trunc, behind, box, &acc);
+            else IntegrateView<false, false>(v, lo, voxel, trunc, behind, box, &acc);
           }
         };
         auto free_space = [&](const SubBox& box) {

@@ -32,6 +32,17 @@ struct TsdfOptions {
   float voxel_size = 0.005f;
   // Truncation distance, in voxels (Open3D's sdf_trunc = this · voxel_size).
   float truncation_voxels = 4.0f;
+  // Observations behind the measured surface count up to this many
+  // truncation distances deep, clamped to −1 (1 = dropped beyond one
+  // truncation distance, as KinectFusion and Open3D do). Dropping them while
+  // the ones in front are only clamped at +1 biases the average outward
+  // wherever depth noise is comparable to the truncation: on the studio
+  // (σ ≈ 19 mm at 2.5 m, 32 mm truncation at S8-QVGA) the surface sat 2.8 mm
+  // inside the person (median signed distance) with 1; with 1.5 it is
+  // −0.7 mm, Chamfer 6.59 → 5.90 mm, completeness 0.852 → 0.867
+  // (docs/fusion.md). Only voxels the truncation band's blocks reach are
+  // updated, as before.
+  float behind_band = 1.5f;
   // Depth beyond this is ignored, metres.
   float max_depth_m = 5.0f;
   // Depth nearer than this is ignored, metres.
