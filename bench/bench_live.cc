@@ -405,11 +405,18 @@ int Run(const BenchArgs& args, LiveOptions o) {
         Status s = (*renderer)->SetRemoteMesh(rf.mesh);
         if (s.ok() && rig && rf.has_color) {
           std::vector<const ImageRgb8*> images(rig->pods.size(), nullptr);
-          bool all = true;
-          for (const auto& d : rf.images)
-            if (d.pod_id < images.size()) images[d.pod_id] = &d.image;
+          std::vector<const ImageGray8*> masks(rig->pods.size(), nullptr);
+          bool all = true, all_masks = true;
+          for (const auto& d : rf.images) {
+            if (d.pod_id >= images.size()) continue;
+            images[d.pod_id] = &d.image;
+            masks[d.pod_id] = &d.mask;
+            all_masks = all_masks && d.mask.width() == d.image.width() && d.mask.height() == d.image.height();
+          }
           for (const auto* p : images) all = all && p != nullptr;
-          if (all) s = (*renderer)->SetPodImages(*rig, images);
+          // With the decoder's masks, as holoport-client does (C1/V1 images are
+          // black outside them).
+          if (all) s = (*renderer)->SetPodImages(*rig, images, all_masks ? masks : std::vector<const ImageGray8*>{});
         }
         if (!s.ok()) {
           render_status = s;
@@ -698,9 +705,20 @@ int Run(const BenchArgs& args, LiveOptions o) {
         auto d = metrics::ComputeMeshDistance(k.mesh, truth_mesh);
         if (d.ok()) chamfer.push_back(d->chamfer_mm);
         std::vector<const ImageRgb8*> images(workload->rig.pods.size(), nullptr);
-        for (const auto& im : k.images)
-          if (im.pod_id < images.size()) images[im.pod_id] = &im.image;
-        if (!(*renderer)->SetRemoteMesh(k.mesh).ok() || !(*renderer)->SetPodImages(workload->rig, images).ok()) continue;
+        std::vector<const ImageGray8*> masks(workload->rig.pods.size(), nullptr);
+        bool all_masks = true;
+        for (const auto& im : k.images) {
+          if (im.pod_id >= images.size()) continue;
+          images[im.pod_id] = &im.image;
+          masks[im.pod_id] = &im.mask;
+          all_masks = all_masks && im.mask.width() == im.image.width() && im.mask.height() == im.image.height();
+        }
+        for (const auto* p : images) all_masks = all_masks && p != nullptr;
+        if (!(*renderer)->SetRemoteMesh(k.mesh).ok() ||
+            !(*renderer)
+                 ->SetPodImages(workload->rig, images, all_masks ? masks : std::vector<const ImageGray8*>{})
+                 .ok())
+          continue;
         render::RenderSettings settings;
         settings.mode = render::ColorMode::kProjective;
         settings.projective.bake = o.color == "projective";
