@@ -180,6 +180,26 @@ struct KeptFrame {
   std::vector<net::DecodedImage> images;
 };
 
+// Hands a received frame's pod images to the renderer with the decoder's
+// masks, as holoport-client does (C1/V1 images are black outside them);
+// without masks when any is missing or of another size. Unavailable when a
+// pod's image is missing.
+Status SetDecodedPodImages(render::Renderer* renderer, const Rig& rig, const std::vector<net::DecodedImage>& decoded) {
+  std::vector<const ImageRgb8*> images(rig.pods.size(), nullptr);
+  std::vector<const ImageGray8*> masks(rig.pods.size(), nullptr);
+  bool all_masks = true;
+  for (const auto& d : decoded) {
+    if (d.pod_id >= images.size()) continue;
+    images[d.pod_id] = &d.image;
+    masks[d.pod_id] = &d.mask;
+    all_masks = all_masks && d.mask.width() == d.image.width() && d.mask.height() == d.image.height();
+  }
+  for (const auto* p : images) {
+    if (!p) return Unavailable("a pod's image is missing");
+  }
+  return renderer->SetPodImages(rig, images, all_masks ? masks : std::vector<const ImageGray8*>{});
+}
+
 StatusOr<std::unique_ptr<net::SiteClient>> StartViewer(uint16_t port, const std::string& name,
                                                        net::ClientCallbacks cb) {
   net::ClientOptions o;
@@ -404,19 +424,8 @@ int Run(const BenchArgs& args, LiveOptions o) {
         auto rig = render_client->rig();
         Status s = (*renderer)->SetRemoteMesh(rf.mesh);
         if (s.ok() && rig && rf.has_color) {
-          std::vector<const ImageRgb8*> images(rig->pods.size(), nullptr);
-          std::vector<const ImageGray8*> masks(rig->pods.size(), nullptr);
-          bool all = true, all_masks = true;
-          for (const auto& d : rf.images) {
-            if (d.pod_id >= images.size()) continue;
-            images[d.pod_id] = &d.image;
-            masks[d.pod_id] = &d.mask;
-            all_masks = all_masks && d.mask.width() == d.image.width() && d.mask.height() == d.image.height();
-          }
-          for (const auto* p : images) all = all && p != nullptr;
-          // With the decoder's masks, as holoport-client does (C1/V1 images are
-          // black outside them).
-          if (all) s = (*renderer)->SetPodImages(*rig, images, all_masks ? masks : std::vector<const ImageGray8*>{});
+          const Status pods = SetDecodedPodImages(renderer->get(), *rig, rf.images);
+          if (pods.code() != StatusCode::kUnavailable) s = pods;  // a frame without every pod: keep the last images
         }
         if (!s.ok()) {
           render_status = s;
@@ -704,20 +713,8 @@ int Run(const BenchArgs& args, LiveOptions o) {
         const Mesh truth_mesh = (*studio)->ForegroundMesh(f);
         auto d = metrics::ComputeMeshDistance(k.mesh, truth_mesh);
         if (d.ok()) chamfer.push_back(d->chamfer_mm);
-        std::vector<const ImageRgb8*> images(workload->rig.pods.size(), nullptr);
-        std::vector<const ImageGray8*> masks(workload->rig.pods.size(), nullptr);
-        bool all_masks = true;
-        for (const auto& im : k.images) {
-          if (im.pod_id >= images.size()) continue;
-          images[im.pod_id] = &im.image;
-          masks[im.pod_id] = &im.mask;
-          all_masks = all_masks && im.mask.width() == im.image.width() && im.mask.height() == im.image.height();
-        }
-        for (const auto* p : images) all_masks = all_masks && p != nullptr;
         if (!(*renderer)->SetRemoteMesh(k.mesh).ok() ||
-            !(*renderer)
-                 ->SetPodImages(workload->rig, images, all_masks ? masks : std::vector<const ImageGray8*>{})
-                 .ok())
+            !SetDecodedPodImages(renderer->get(), workload->rig, k.images).ok())
           continue;
         render::RenderSettings settings;
         settings.mode = render::ColorMode::kProjective;
