@@ -56,6 +56,7 @@
 
 #include "bench.h"
 #include "bench_process.h"
+#include "client/net/av_sync_cli.h"
 #include "client/net/site_av_sync.h"
 #include "client/render/gl_context.h"
 #include "client/render/renderer.h"
@@ -92,7 +93,6 @@ struct LiveOptions {
   std::string keep_dir;  // keep the site's logs here
   std::vector<std::string> site_args;  // passed on to holoport-server
   std::string voice = "synthetic";     // the site's --voice
-  bool av_sync = true;
   double delay_voice_ms = 0, delay_picture_ms = 0;  // injected at every viewer
   audio::AvSyncOptions sync;                         // the viewers' lip sync bounds
   std::string av_trace;                              // CSV of every offset measured (renderer, decoder 0)
@@ -319,7 +319,6 @@ int Run(const BenchArgs& args, LiveOptions o) {
   auto sync_options = [&] {
     net::SiteAvSyncOptions so;
     so.sync = o.sync;
-    so.sync.enabled = o.av_sync;
     so.sync.keep_trace = !o.av_trace.empty();
     so.voice.inject_delay_ms = o.delay_voice_ms;
     so.inject_picture_delay_ms = o.delay_picture_ms;
@@ -581,7 +580,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
     emit("mbps", Median(mbps), "Mbit/s", {{"viewer", "decode"}});
   }
   // Voice and picture in sync, per viewer kind.
-  const std::string sync_state = o.av_sync ? "on" : "off";
+  const std::string sync_state = o.sync.enabled ? "on" : "off";
   auto emit_av = [&](const std::string& viewer, const std::vector<audio::AvSyncStats>& v) {
     int64_t offsets = 0, early = 0, late = 0, pictures = 0, held = 0, capped = 0;
     std::vector<double> p50, voice_delay, picture_hold, unsynced;
@@ -783,24 +782,7 @@ BenchFn SetupLive(CLI::App& app) {
     app.add_option("--site", o.site_binary, "holoport-server binary (default: next to this program)");
     app.add_option("--keep", o.keep_dir, "keep the site's logs and stats in this directory");
     app.add_option("--voice", o.voice, "the site's voice: synthetic, off, or a WAV file (--voice of holoport-server)");
-    app.add_option("--av-sync", [options](const std::vector<std::string>& v) {
-                     options->av_sync = v.at(0) == "on";
-                     return true;
-                   }, "viewers play voice and picture in sync: on or off (off: the offset each would have alone)")
-        ->check(CLI::IsMember({"on", "off"}));
-    app.add_option("--hold-pictures", [options](const std::vector<std::string>& v) {
-                     options->sync.hold_pictures = v.at(0) == "on";
-                     return true;
-                   }, "lip sync: pictures wait for their voice (on, default) or only for a slower voice (off)")
-        ->check(CLI::IsMember({"on", "off"}));
-    app.add_option("--max-voice-delay-ms", o.sync.max_voice_delay_ms,
-                   "lip sync: the voice waits at most this long for a later picture")
-        ->capture_default_str()
-        ->check(CLI::Range(0.0, 10000.0));
-    app.add_option("--max-picture-delay-ms", o.sync.max_picture_delay_ms,
-                   "lip sync: a picture waits at most this long for a later voice")
-        ->capture_default_str()
-        ->check(CLI::Range(0.0, 10000.0));
+    net::AddAvSyncOptions(app, &o.sync);
     app.add_option("--av-trace", o.av_trace,
                    "write every voice/picture offset measured by the rendering viewer and the first decoding viewer "
                    "to this CSV (display and capture time, delays, hold, voice target, offset)");

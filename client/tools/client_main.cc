@@ -12,6 +12,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "client/net/av_sync_cli.h"
 #include "client/offload/offload_main.h"
 #include "client/tools/viewer_app.h"
 #include "common/log.h"
@@ -133,28 +134,7 @@ int main(int argc, char** argv) {
                  "--call: a personal HRTF, SOFA file (SimpleFreeFieldHRIR), for the spatialized voices; default: "
                  "OpenAL Soft's built-in set")
       ->check(CLI::ExistingFile);
-  std::string av_sync = "on";
-  app.add_option("--av-sync", av_sync,
-                 "--connect/--http/--call: play the site's voices and show its pictures so that what was captured "
-                 "at the same instant is heard and seen together (the stream that arrives first waits for the "
-                 "other): on, or off (each as soon as it can; the offset is still measured and reported)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"on", "off"}));
-  std::string hold_pictures = "on";
-  app.add_option("--hold-pictures", hold_pictures,
-                 "lip sync: on (the voice waits until 90 % of the pictures are there and each earlier picture waits "
-                 "for its voice: in sync even when picture delays spread, for that much more picture delay) or off "
-                 "(pictures wait only for a slower voice; the voice follows their median)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"on", "off"}));
-  app.add_option("--max-voice-delay-ms", o.max_voice_delay_ms,
-                 "lip sync: the voice waits at most this long for a later picture (beyond, it leads the picture)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 10000.0));
-  app.add_option("--max-picture-delay-ms", o.max_picture_delay_ms,
-                 "lip sync: a picture waits at most this long for a later voice (beyond, the voice lags)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 10000.0));
+  holo::net::AddAvSyncOptions(app, &o.sync);
   app.add_option("--delay-voice-ms", o.delay_voice_ms,
                  "test: hold every arriving voice frame this long (a slower voice path)")
       ->check(CLI::Range(0.0, 10000.0));
@@ -180,8 +160,6 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.aec = aec == "on";
-  o.av_sync = av_sync == "on";
-  o.hold_pictures = hold_pictures == "on";
   if ((!o.audio_in.empty() || o.aec || !o.hrtf_sofa.empty()) && o.call.empty()) {
     spdlog::error("holoport-client: --audio-in/--aec/--hrtf need --call");
     return 2;

@@ -371,14 +371,7 @@ class Viewer {
     return OkStatus();
   }
 
-  audio::AvSyncOptions SyncOptions() const {
-    audio::AvSyncOptions a;
-    a.enabled = o_.av_sync;
-    a.hold_pictures = o_.hold_pictures;
-    a.max_voice_delay_ms = o_.max_voice_delay_ms;
-    a.max_picture_delay_ms = o_.max_picture_delay_ms;
-    return a;
-  }
+  audio::AvSyncOptions SyncOptions() const { return o_.sync; }
 
   // world_from_camera of the centre view at time t (seconds from start).
   Pose ViewPose(double t) const {
@@ -539,7 +532,7 @@ class Viewer {
         char sync[160];
         std::snprintf(sync, sizeof sync, "\nA/V OFFSET %+.0f MS (P50)  VOICE +%.0f MS  PICTURE +%.0f MS%s",
                       as.av_offset_ms_p50, std::max(0.0, as.voice_target_ms - as.voice_natural_ms),
-                      as.picture_sync_delay_ms, o_.av_sync ? "" : "  (SYNC OFF)");
+                      as.picture_sync_delay_ms, o_.sync.enabled ? "" : "  (SYNC OFF)");
         std::strncat(audio, sync, sizeof audio - std::strlen(audio) - 1);
       }
     }
@@ -1043,8 +1036,8 @@ class Viewer {
       {
         const audio::AvSyncStats as = av_sync_->stats();
         const net::RemoteVoicesStats vs = av_sync_->voice_stats();
-        j["av_sync"] = {{"enabled", o_.av_sync},
-                        {"hold_pictures", o_.hold_pictures},
+        j["av_sync"] = {{"enabled", o_.sync.enabled},
+                        {"hold_pictures", o_.sync.hold_pictures},
                         {"av_offset_ms_p50", as.av_offset_ms_p50},
                         {"av_offset_ms_p99", as.av_offset_ms_p99},
                         {"av_offset_ms_p1", as.av_offset_ms_p1},
@@ -1065,8 +1058,8 @@ class Viewer {
                         {"pictures_hold_capped", as.pictures_hold_capped},
                         {"voice_delay_capped", as.voice_delay_capped},
                         {"pictures_skipped", av_sync_->pictures_skipped()},
-                        {"max_voice_delay_ms", o_.max_voice_delay_ms},
-                        {"max_picture_delay_ms", o_.max_picture_delay_ms},
+                        {"max_voice_delay_ms", o_.sync.max_voice_delay_ms},
+                        {"max_picture_delay_ms", o_.sync.max_picture_delay_ms},
                         {"injected_voice_delay_ms", o_.delay_voice_ms},
                         {"injected_picture_delay_ms", o_.delay_picture_ms}};
         if (!participant_) {

@@ -7,6 +7,8 @@
 
 #include <Eigen/Core>
 
+#include "audio/av_sync.h"
+
 namespace holo::client {
 
 struct ViewerOptions {
@@ -63,10 +65,7 @@ struct ViewerOptions {
   // Network: voice and picture in sync (audio/av_sync.h): the stream that
   // arrives first waits for the other, within these bounds (ms). Off: each
   // plays as soon as it can (offsets are still measured).
-  bool av_sync = true;
-  bool hold_pictures = true;  // pictures wait for their voice (a picture jitter buffer)
-  double max_voice_delay_ms = 1000;
-  double max_picture_delay_ms = 300;
+  audio::AvSyncOptions sync;
   // Test hooks: every voice frame / picture waits this long on arrival (ms).
   double delay_voice_ms = 0;
   double delay_picture_ms = 0;
