@@ -484,6 +484,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       EmitFigure("client", args.workload, "bake_ms", Median(bake_ms), "ms", qb);
       EmitFigure("client", args.workload, "bake_cpu_ms", Median(bake_cpu), "ms", qb);
       EmitFigure("client", args.workload, "bake_texels", static_cast<double>(st.texels), "", qb);
+      EmitFigure("client", args.workload, "bake_samples", static_cast<double>(st.samples), "", qb);
     }
     for (const auto& [width, height] : resolutions) {
       auto target = holo::render::OffscreenTarget::Create(width, height);

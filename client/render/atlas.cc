@@ -18,6 +18,7 @@ Status AtlasBakeOptions::Check() const {
   if (!(texels_per_pod_pixel >= 0 && texels_per_pod_pixel <= 64)) {
     return InvalidArgument("atlas texels_per_pod_pixel must be in [0, 64]");
   }
+  if (!(min_pod_weight >= 0 && min_pod_weight <= 1)) return InvalidArgument("atlas min_pod_weight must be in [0, 1]");
   if (max_width < texels_per_edge + 1 || max_height < texels_per_edge + 1) {
     return InvalidArgument("atlas max_width/max_height must hold one cell");
   }
@@ -222,10 +223,20 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
       my_texels += static_cast<size_t>(texels_per_cell);
       std::fill(accum, accum + 5 * texels_per_cell, 0.0f);
       // Pod by pod (its maps stay in cache), every texel of the cell.
+      // Pods far weaker than the triangle's strongest add little but cost
+      // as much (min_pod_weight).
+      float max_sum = 0;
+      for (int pi = 0; pi < n; ++pi) {
+        if (bits & (1u << pi)) {
+          max_sum = std::max(max_sum, facing[tri[0] * n + pi] + facing[tri[1] * n + pi] + facing[tri[2] * n + pi]);
+        }
+      }
+      const float min_sum = options.min_pod_weight * max_sum;
       for (int pi = 0; pi < n; ++pi) {
         if (!(bits & (1u << pi))) continue;
         const float cw0 = facing[tri[0] * n + pi], cw1 = facing[tri[1] * n + pi], cw2 = facing[tri[2] * n + pi];
         if (!(cw0 > 0 || cw1 > 0 || cw2 > 0)) continue;
+        if (cw0 + cw1 + cw2 < min_sum) continue;
         const PodInfo& p = info[pi];
         const Eigen::Vector3f q0 = p.projection * pos[tri[0]].homogeneous();
         const Eigen::Vector3f q1 = p.projection * pos[tri[1]].homogeneous();
