@@ -60,6 +60,7 @@ struct ClientBenchOptions {
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
   int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
   std::string gpu_visibility;                    // 0 | 1: ProjectiveOptions::gpu_visibility (default: the renderer's)
+  float behind_band = -1;                        // the site's TsdfOptions::behind_band (fused; -1: the default)
   int bake_texels = -1;                          // ProjectiveOptions::bake_texels_per_edge (-1: the renderer's)
   float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
 };
@@ -79,6 +80,9 @@ struct ViewerContent {
   std::string content;  // "truth" | "fused"
   std::string mesh_name;  // "truth", "fused_full", "fused_reduced"
   holo::Mesh mesh;
+  // Fused: p10, p50, p90 of the vertices' signed distance to the true
+  // surface (mm, positive outside; within 5 cm of it). Empty for the truth.
+  std::vector<double> signed_mm;
   std::vector<holo::ImageRgb8> images;
   std::vector<holo::ImageGray8> masks;  // empty = none (whole images)
   std::vector<const holo::ImageRgb8*> ImagePtrs() const {
@@ -120,17 +124,16 @@ holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStu
 // the mesh decimated to `reduced_triangles` (quadric decimation of
 // CleanupMesh) and re-textured by the site's texturer: the stream mesh size.
 holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles,
-                              const holo::TextureOptions& texture_options, ViewerContent* full,
+                              const holo::TextureOptions& texture_options, float behind_band, ViewerContent* full,
                               ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
-  if (std::getenv("EXP_NONOISE")) so.depth_noise = false;
   HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
   so.empty_room = true;
   HOLO_ASSIGN_OR_RETURN(auto empty, holo::SyntheticStudio::Create(workload.rig, so));
   holo::CaptureSiteOptions o;
-  o.masks = std::getenv("EXP_EXACT") ? holo::MaskSource::kTruth : holo::MaskSource::kSegment;
+  o.masks = holo::MaskSource::kSegment;
   o.tsdf.voxel_size = workload.voxel_size_m;
-  if (const char* e = std::getenv("EXP_VOXEL")) o.tsdf.voxel_size = std::atof(e);
+  if (behind_band > 0) o.tsdf.behind_band = behind_band;
   o.pipeline.serial = true;
   o.pipeline.max_frames = frame + 1;
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
@@ -172,35 +175,25 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
     m->colors.clear();
     HOLO_RETURN_IF_ERROR(texturer.Apply(kept, m));
   }
-  if (std::getenv("EXP_SIGNED")) {
-    holo::RgbdFrameSet fs2;
-    holo::StudioGroundTruth gt;
-    studio->RenderFrame(frame, &fs2, &gt);
-    auto idx = holo::metrics::TriangleIndex::Build(gt.foreground_mesh);
-    if (idx.ok()) {
-      for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
-        std::vector<float> sd;
-        for (const auto& p : m->positions) {
-          auto c = idx->Query(p, 0.05f);
-          if (!c.found()) continue;
-          const auto& t = gt.foreground_mesh.triangles[c.triangle];
-          const auto& P = gt.foreground_mesh.positions;
-          Eigen::Vector3f n = (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]).normalized();
-          sd.push_back((p - c.point).dot(n) >= 0 ? c.distance : -c.distance);
-        }
-        std::sort(sd.begin(), sd.end());
-        double mean = 0; for (float v : sd) mean += v; mean /= sd.size();
-        fprintf(stderr, "EXP signed mm: n %zu mean %.2f p10 %.2f p25 %.2f p50 %.2f p75 %.2f p90 %.2f\n", sd.size(), mean*1e3,
-                sd[sd.size()/10]*1e3, sd[sd.size()/4]*1e3, sd[sd.size()/2]*1e3, sd[3*sd.size()/4]*1e3, sd[9*sd.size()/10]*1e3);
-      }
+  // Signed distance of every vertex to the true surface (positive outside):
+  // a fused surface that sits inside or outside the person shows here.
+  holo::RgbdFrameSet truth_frames;
+  holo::StudioGroundTruth gt;
+  studio->RenderFrame(frame, &truth_frames, &gt);
+  HOLO_ASSIGN_OR_RETURN(auto index, holo::metrics::TriangleIndex::Build(gt.foreground_mesh));
+  const auto& tp = gt.foreground_mesh.positions;
+  for (ViewerContent* c : {full, reduced}) {
+    std::vector<double> sd;
+    for (const auto& p : c->mesh.positions) {
+      const auto q = index.Query(p, 0.05f);
+      if (!q.found()) continue;
+      const auto& t = gt.foreground_mesh.triangles[q.triangle];
+      const Eigen::Vector3f n = (tp[t[1]] - tp[t[0]]).cross(tp[t[2]] - tp[t[0]]);
+      sd.push_back(1000.0 * ((p - q.point).dot(n) >= 0 ? q.distance : -q.distance));
     }
-  }
-  if (const char* e = std::getenv("EXP_PUSH_MM")) {
-    const float d = std::atof(e) * 0.001f;
-    for (holo::Mesh* m : {&full->mesh, &reduced->mesh}) {
-      if (m->normals.size() != m->positions.size()) m->ComputeNormals();
-      for (size_t i = 0; i < m->positions.size(); ++i) m->positions[i] += d * m->normals[i].normalized();
-    }
+    if (sd.empty()) continue;
+    std::sort(sd.begin(), sd.end());
+    c->signed_mm = {sd[sd.size() / 10], sd[sd.size() / 2], sd[sd.size() * 9 / 10]};
   }
   return holo::OkStatus();
 }
@@ -248,8 +241,9 @@ holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::Offs
 
 // Side-by-side pictures for docs/viewer.md, one PNG per view: ground truth
 // | projective texturing as before issue 17 (RenderSettings::Legacy: no
-// masks) | projective texturing now | per-vertex colour; each panel cropped
-// to the true foreground's box (plus a margin) of that view.
+// masks) | projective texturing now, blended per pixel | the same baked into
+// the atlas (the default) | per-vertex colour; each panel cropped to the
+// true foreground's box (plus a margin) of that view.
 holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
                              holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
                              const std::string& prefix) {
@@ -259,10 +253,11 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
     holo::ImageGray8 mask;
     studio->RenderView(frame, cam, &truth, nullptr, &mask);
     std::vector<holo::ImageRgb8> panels = {truth};
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 0; k < 4; ++k) {
       holo::render::RenderSettings settings = base;
       settings.background = {0, 0, 0};
-      settings.mode = k == 2 ? holo::render::ColorMode::kVertexColor : holo::render::ColorMode::kProjective;
+      settings.mode = k == 3 ? holo::render::ColorMode::kVertexColor : holo::render::ColorMode::kProjective;
+      settings.projective.bake = k == 2;
       if (k == 0) settings = holo::render::RenderSettings::Legacy();
       settings.background = {0, 0, 0};
       target->Bind();
@@ -289,9 +284,10 @@ holo::Status WriteSideBySide(holo::render::Renderer* renderer, holo::render::Off
     x1 = std::min(truth.width() - 1, x1 + 8);
     y1 = std::min(truth.height() - 1, y1 + 8);
     const int pw = x1 - x0 + 1, ph = y1 - y0 + 1;
-    holo::ImageRgb8 out(4 * pw + 3 * 4, ph);
+    const int n = static_cast<int>(panels.size());
+    holo::ImageRgb8 out(n * pw + (n - 1) * 4, ph);
     std::fill(out.data(), out.data() + 3 * out.num_pixels(), uint8_t{255});
-    for (int k = 0; k < 4; ++k)
+    for (int k = 0; k < n; ++k)
       for (int y = 0; y < ph; ++y)
         for (int x = 0; x < pw; ++x)
           for (int ch = 0; ch < 3; ++ch) out.at(k * (pw + 4) + x, y, ch) = panels[k].at(x0 + x, y0 + y, ch);
@@ -359,7 +355,8 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     holo::TextureOptions to;
     if (legacy) to.mask_edge_px = 0;
     if (holo::Status s =
-            MakeFusedContent(*workload, studio_frame, reduced_triangles, to, &contents[0], &contents[1]);
+            MakeFusedContent(*workload, studio_frame, reduced_triangles, to, options.behind_band, &contents[0],
+                             &contents[1]);
         !s.ok())
       return Fail(s);
     if (!args.json) spdlog::info("client render: site done in {:.1f} s", sw.ElapsedMs() / 1000);
@@ -453,6 +450,14 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       vis_cpu.push_back(ProcessCpuMs() - cpu0);
     }
     EmitFigure("client", args.workload, "upload_ms", Median(upload_ms), "ms", q);
+    if (c.signed_mm.size() == 3) {
+      static constexpr const char* kStats[3] = {"p10", "p50", "p90"};
+      for (int k = 0; k < 3; ++k) {
+        auto qs = q;
+        qs["stat"] = kStats[k];
+        EmitFigure("client", args.workload, "signed_distance_mm", c.signed_mm[k], "mm", qs);
+      }
+    }
     EmitFigure("client", args.workload, "visibility_ms", Median(vis_ms), "ms", q);
     EmitFigure("client", args.workload, "visibility_cpu_ms", Median(vis_cpu), "ms", q);
     // The atlas bake (per mesh, after visibility and the pod selection).
@@ -591,6 +596,10 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--bake-density", o->bake_density,
                  "atlas texels per pod pixel of a triangle's edge, 0 = always --bake-texels (default: the renderer's)")
       ->check(CLI::Range(0.0, 64.0));
+  app.add_option("--behind-band", o->behind_band,
+                 "fused content: the site's TSDF counts observations behind the surface this many truncation "
+                 "distances deep (default: TsdfOptions')")
+      ->check(CLI::Range(1.0, 4.0));
   app.add_option("--gpu-visibility", o->gpu_visibility,
                  "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
