@@ -12,6 +12,10 @@
 //     depth discontinuity of that map (within `discontinuity_radius_m` at
 //     the texel's depth) are used only when no clean sample exists. With no
 //     sample at all the vertex colour is used.
+//     By default (ProjectiveOptions::bake) the same blending, without the
+//     view-dependent term, runs once per mesh on the CPU into a texture atlas
+//     (atlas.h), and each frame draws the mesh with one texture fetch per
+//     pixel.
 // The remote mesh can be placed in the local room by a similarity transform
 // (the miniature mode), and composited against the local site's mesh: that
 // mesh is drawn first (in colour, or depth only for see-through AR) so it
