@@ -57,6 +57,17 @@ float Smoothstep(float e, float x) {
 
 }  // namespace
 
+Eigen::Matrix<float, 3, 4> PodProjection(const CameraModel& camera) {
+  Eigen::Matrix3f k = Eigen::Matrix3f::Identity();
+  if (!camera.intrinsics.HasDistortion()) {
+    k(0, 0) = static_cast<float>(camera.intrinsics.fx);
+    k(1, 1) = static_cast<float>(camera.intrinsics.fy);
+    k(0, 2) = static_cast<float>(camera.intrinsics.cx);
+    k(1, 2) = static_cast<float>(camera.intrinsics.cy);
+  }
+  return k * camera.world_from_camera.inverse().matrix().topRows<3>();
+}
+
 Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, const AtlasBakeOptions& options,
                  WorkerPool* pool, Atlas* out) {
   HOLO_RETURN_IF_ERROR(options.Check());
@@ -85,14 +96,7 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
     HOLO_RETURN_IF_ERROR(cam.intrinsics.Check().WithContext("atlas bake: pod " + std::to_string(i)));
     PodInfo& p = info[i];
     p.distorted = cam.intrinsics.HasDistortion();
-    Eigen::Matrix3f k = Eigen::Matrix3f::Identity();
-    if (!p.distorted) {
-      k(0, 0) = static_cast<float>(cam.intrinsics.fx);
-      k(1, 1) = static_cast<float>(cam.intrinsics.fy);
-      k(0, 2) = static_cast<float>(cam.intrinsics.cx);
-      k(1, 2) = static_cast<float>(cam.intrinsics.cy);
-    }
-    p.projection = k * cam.world_from_camera.inverse().matrix().topRows<3>();
+    p.projection = PodProjection(cam);
     p.center = cam.Center();
     p.focal = static_cast<float>(cam.intrinsics.fx);
     p.width = cam.intrinsics.width;

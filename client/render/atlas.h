@@ -98,6 +98,12 @@ struct Atlas {
   size_t samples = 0;       // pod samples taken (texel × pod)
 };
 
+// A pod's world-to-image map as one 3×4 matrix: rows u·z, v·z, z for a camera
+// without lens distortion; camera coordinates (then Distort via
+// CameraModel::ProjectCamera) for one with it. Shared by the bake and the
+// renderer's pod selection.
+Eigen::Matrix<float, 3, 4> PodProjection(const CameraModel& camera);
+
 // Bakes `mesh` from `pods`. `pool` (optional) runs the triangles in
 // parallel; the result does not depend on the thread count.
 Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, const AtlasBakeOptions& options,

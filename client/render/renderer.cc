@@ -946,17 +946,8 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     std::vector<Eigen::Matrix<float, 3, 4>> projection(n);
     std::vector<bool> distorted(n);
     for (int i = 0; i < n; ++i) {
-      const CameraModel& cam = pod_cameras_[i];
-      const Eigen::Matrix4f cam_from_world = cam.world_from_camera.inverse().matrix();
-      Eigen::Matrix3f k = Eigen::Matrix3f::Identity();
-      distorted[i] = cam.intrinsics.HasDistortion();
-      if (!distorted[i]) {
-        k(0, 0) = static_cast<float>(cam.intrinsics.fx);
-        k(1, 1) = static_cast<float>(cam.intrinsics.fy);
-        k(0, 2) = static_cast<float>(cam.intrinsics.cx);
-        k(1, 2) = static_cast<float>(cam.intrinsics.cy);
-      }
-      projection[i] = k * cam_from_world.topRows<3>();
+      distorted[i] = pod_cameras_[i].intrinsics.HasDistortion();
+      projection[i] = PodProjection(pod_cameras_[i]);
     }
     // The view-independent weight of every (vertex, pod), as the shaders
     // would give it: facing term, visibility, discontinuity and mask weight.
@@ -1106,37 +1097,41 @@ Status Renderer::FlaggedDepthOnCpu() {
   return OkStatus();
 }
 
+bool Renderer::VisibilityCurrent(const ProjectiveOptions& options) const {
+  return !visibility_dirty_ && options.discontinuity_jump_m == edge_jump_m_ &&
+         options.discontinuity_radius_m == edge_radius_m_ && options.gpu_visibility == vis_gpu_ &&
+         options.cull_back_faces == vis_cull_;
+}
+
+bool Renderer::TexturesCurrent(const ProjectiveOptions& options) const {
+  return !textures_dirty_ && options.use_masks == tex_use_masks_ && options.mask_erode_px == tex_erode_ &&
+         options.mask_feather_px == tex_feather_ && options.edge_floor_weight == tex_floor_;
+}
+
+bool Renderer::SelectionCurrent(const ProjectiveOptions& options) const {
+  return !selection_dirty_ && options.pods_per_vertex == sel_per_vertex_ &&
+         options.max_pods_per_triangle == sel_per_triangle_ && options.alpha == sel_alpha_;
+}
+
+Status Renderer::PreparePods(const ProjectiveOptions& options) {
+  HOLO_RETURN_IF_ERROR(options.Check());
+  if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
+  if (!VisibilityCurrent(options)) HOLO_RETURN_IF_ERROR(UpdateVisibility(options));
+  if (!TexturesCurrent(options)) UploadPodTextures(options);
+  if (!SelectionCurrent(options)) HOLO_RETURN_IF_ERROR(SelectPods(options));
+  return OkStatus();
+}
+
 bool Renderer::AtlasCurrent(const ProjectiveOptions& options) const {
-  const bool visibility = !visibility_dirty_ && options.discontinuity_jump_m == edge_jump_m_ &&
-                          options.discontinuity_radius_m == edge_radius_m_ && options.gpu_visibility == vis_gpu_ &&
-                          options.cull_back_faces == vis_cull_;
-  const bool textures = !textures_dirty_ && options.use_masks == tex_use_masks_ &&
-                        options.mask_erode_px == tex_erode_ && options.mask_feather_px == tex_feather_ &&
-                        options.edge_floor_weight == tex_floor_;
-  const bool selection = !selection_dirty_ && options.pods_per_vertex == sel_per_vertex_ &&
-                         options.max_pods_per_triangle == sel_per_triangle_ && options.alpha == sel_alpha_;
-  return visibility && textures && selection && !atlas_dirty_ && atlas_texels_ == options.bake_texels_per_edge &&
+  return VisibilityCurrent(options) && TexturesCurrent(options) && SelectionCurrent(options) && !atlas_dirty_ &&
+         atlas_texels_ == options.bake_texels_per_edge &&
          atlas_density_ == options.bake_texels_per_pod_pixel &&
          atlas_tol_ == options.visibility_tolerance_m && atlas_edge_ == options.discontinuity_weight &&
          atlas_conf_ == options.min_mask_confidence;
 }
 
 Status Renderer::UpdateAtlas(const ProjectiveOptions& options) {
-  HOLO_RETURN_IF_ERROR(options.Check());
-  if (num_pods_ == 0) return InvalidArgument("no pod images: call SetPodImages before projective texturing");
-  if (visibility_dirty_ || options.discontinuity_jump_m != edge_jump_m_ ||
-      options.discontinuity_radius_m != edge_radius_m_ || options.gpu_visibility != vis_gpu_ ||
-      options.cull_back_faces != vis_cull_) {
-    HOLO_RETURN_IF_ERROR(UpdateVisibility(options));
-  }
-  if (textures_dirty_ || options.use_masks != tex_use_masks_ || options.mask_erode_px != tex_erode_ ||
-      options.mask_feather_px != tex_feather_ || options.edge_floor_weight != tex_floor_) {
-    UploadPodTextures(options);
-  }
-  if (selection_dirty_ || options.pods_per_vertex != sel_per_vertex_ ||
-      options.max_pods_per_triangle != sel_per_triangle_ || options.alpha != sel_alpha_) {
-    HOLO_RETURN_IF_ERROR(SelectPods(options));
-  }
+  HOLO_RETURN_IF_ERROR(PreparePods(options));
   HOLO_RETURN_IF_ERROR(FlaggedDepthOnCpu());
   Stopwatch sw;
   if (!pool_) pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
@@ -1295,30 +1290,10 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
   const bool projective = settings.mode == ColorMode::kProjective;
   bool baked = false;
   if (projective && settings.projective.bake) {
-    if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
-    if (!AtlasCurrent(settings.projective)) {
-      HOLO_RETURN_IF_ERROR(UpdateAtlas(settings.projective));
-    }
+    if (!AtlasCurrent(settings.projective)) HOLO_RETURN_IF_ERROR(UpdateAtlas(settings.projective));
     baked = !atlas_stats_.fallback;
   }
-  if (projective && !baked) {
-    HOLO_RETURN_IF_ERROR(settings.projective.Check());
-    if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
-    if (visibility_dirty_ || settings.projective.discontinuity_jump_m != edge_jump_m_ ||
-        settings.projective.discontinuity_radius_m != edge_radius_m_ ||
-        settings.projective.gpu_visibility != vis_gpu_ || settings.projective.cull_back_faces != vis_cull_) {
-      HOLO_RETURN_IF_ERROR(UpdateVisibility(settings.projective));
-    }
-    const ProjectiveOptions& po = settings.projective;
-    if (textures_dirty_ || po.use_masks != tex_use_masks_ || po.mask_erode_px != tex_erode_ ||
-        po.mask_feather_px != tex_feather_ || po.edge_floor_weight != tex_floor_) {
-      UploadPodTextures(po);
-    }
-    if (selection_dirty_ || po.pods_per_vertex != sel_per_vertex_ || po.max_pods_per_triangle != sel_per_triangle_ ||
-        po.alpha != sel_alpha_) {
-      HOLO_RETURN_IF_ERROR(SelectPods(po));
-    }
-  }
+  if (projective && !baked) HOLO_RETURN_IF_ERROR(PreparePods(settings.projective));
   const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
   if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
     return InvalidArgument("local_from_remote must be a finite, invertible transform");

@@ -270,8 +270,15 @@ class Renderer {
   // Makes sure pod_flagged_z_ holds the flagged depth maps of the last
   // visibility pass (reads the GL maps back once when GL made them).
   Status FlaggedDepthOnCpu();
-  // True when the atlas is current for `options`.
+  // Whether the visibility maps, the uploaded pod textures and the pod
+  // selection (and on top of them the atlas) are current for `options`.
+  bool VisibilityCurrent(const ProjectiveOptions& options) const;
+  bool TexturesCurrent(const ProjectiveOptions& options) const;
+  bool SelectionCurrent(const ProjectiveOptions& options) const;
   bool AtlasCurrent(const ProjectiveOptions& options) const;
+  // Checks `options` and brings the visibility maps, pod textures and pod
+  // selection up to date: what both projective paths need first.
+  Status PreparePods(const ProjectiveOptions& options);
 
   std::array<unsigned, kMaxPods + 1> draw_programs_{};
   unsigned depth_program_ = 0, edge_program_ = 0, empty_vao_ = 0;
