@@ -70,7 +70,7 @@ Status ServerConfig::Check() const {
   if (threads < 1 || threads > 64) return KeyError("threads", "1..64");
   if (tls.enabled && (tls.cert_file.empty() || tls.key_file.empty()))
     return KeyError("tls", "enabled needs cert and key files");
-  return OkStatus();
+  return layers.Check();
 }
 
 StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std::string& source) {
@@ -88,7 +88,7 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
                                         "max_publishers", "max_pending", "max_message_bytes", "handshake_timeout_s",
                                         "idle_timeout_s", "ping_interval_s", "queue_video_frames",
                                         "queue_priority_messages", "socket_send_buffer", "fragment_bytes", "threads",
-                                        "tls"},
+                                        "tls", "layers"},
                                        ""));
     HOLO_RETURN_IF_ERROR(GetYamlString(root, "name", "", &c.name));
     std::string listen;
@@ -115,6 +115,24 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
       HOLO_RETURN_IF_ERROR(GetYamlBool(tls, "enabled", "", &c.tls.enabled).WithContext("tls"));
       HOLO_RETURN_IF_ERROR(GetYamlString(tls, "cert", "", &c.tls.cert_file).WithContext("tls"));
       HOLO_RETURN_IF_ERROR(GetYamlString(tls, "key", "", &c.tls.key_file).WithContext("tls"));
+    }
+    const YAML::Node layers = root["layers"];
+    if (layers.IsDefined()) {
+      if (!layers.IsMap()) return KeyError("layers", "must be a map (adaptive, up_hold_s, ...)");
+      HOLO_RETURN_IF_ERROR(CheckYamlKeys(layers,
+                                         {"adaptive", "down_queue_s", "throughput_window_s", "busy_fraction",
+                                          "down_throughput", "up_hold_s", "max_up_hold_s", "up_headroom", "stable_s"},
+                                         "layers."));
+      LayerPolicy& p = c.layers;
+      HOLO_RETURN_IF_ERROR(GetYamlBool(layers, "adaptive", "", &p.adaptive).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "down_queue_s", &p.down_queue_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "throughput_window_s", &p.throughput_window_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "busy_fraction", &p.busy_fraction).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "down_throughput", &p.down_throughput).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "up_hold_s", &p.up_hold_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "max_up_hold_s", &p.max_up_hold_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "up_headroom", &p.up_headroom).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "stable_s", &p.stable_s).WithContext("layers"));
     }
     return c.Check();
   };

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "common/status.h"
+#include "net/layer_control.h"
 
 namespace holo::net {
 
@@ -45,6 +46,9 @@ struct ServerConfig {
   uint32_t fragment_bytes = 64u << 10;  // video messages go out in fragments of this payload size
   int threads = 2;                       // io threads
   TlsServerConfig tls;
+  // How viewers are moved between the site's quality layers (YAML section
+  // `layers`, keys as the fields; net/layer_control.h).
+  LayerPolicy layers;
 
   Status Check() const;
 };

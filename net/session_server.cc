@@ -7,10 +7,12 @@
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <deque>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <thread>
 
 #include <asio.hpp>
@@ -19,6 +21,7 @@
 #include <openssl/evp.h>
 
 #include "common/log.h"
+#include "net/layer_control.h"
 
 namespace holo::net {
 
@@ -163,8 +166,38 @@ class Server::Impl {
   struct Atomics {
     std::atomic<uint64_t> accepted{0}, welcomed{0}, refused{0}, rejected_pending{0}, violations{0},
         handshake_timeouts{0}, idle_timeouts{0}, priority_overflows{0}, video_frames_published{0},
-        audio_published{0}, audio_relayed{0}, controls_forwarded{0}, keyframe_requests{0};
+        audio_published{0}, audio_relayed{0}, controls_forwarded{0}, keyframe_requests{0}, layer_switches{0};
+    std::array<std::atomic<uint64_t>, kMaxLayers> layer_keyframe_requests{};
   } n;
+
+  // Quality layers: how many the site publishes, and each one's recent
+  // bitrate (decaying sums of bytes and of time between its frames).
+  std::atomic<int> num_layers{1};
+  std::mutex layer_mu;
+  struct LayerRate {
+    double bytes = 0, seconds = 0;
+    int64_t last_us = -1;
+  };
+  std::array<LayerRate, kMaxLayers> layer_rate;
+  // Notes a published frame of `layer`; returns every layer's bytes/s.
+  std::array<double, kMaxLayers> NoteLayerFrame(int layer, size_t bytes, int64_t now_us) {
+    std::lock_guard<std::mutex> l(layer_mu);
+    LayerRate& r = layer_rate[static_cast<size_t>(layer)];
+    if (r.last_us >= 0 && now_us > r.last_us) {
+      const double dt = static_cast<double>(now_us - r.last_us) * 1e-6;
+      const double f = std::exp(-dt / 2.0);  // 2 s memory
+      r.bytes = r.bytes * f + static_cast<double>(bytes);
+      r.seconds = r.seconds * f + dt;
+    }
+    r.last_us = now_us;
+    return LayerRatesLocked();
+  }
+  std::array<double, kMaxLayers> LayerRatesLocked() const {
+    std::array<double, kMaxLayers> out{};
+    for (size_t i = 0; i < out.size(); ++i)
+      out[i] = layer_rate[i].seconds > 0 ? layer_rate[i].bytes / layer_rate[i].seconds : 0.0;
+    return out;
+  }
 };
 
 class Session : public std::enable_shared_from_this<Session> {
@@ -177,7 +210,8 @@ class Session : public std::enable_shared_from_this<Session> {
         ping_timer_(srv->io),
         id_(id),
         parser_(MakeLimits(srv->cfg)),
-        assembler_(MakeLimits(srv->cfg)) {
+        assembler_(MakeLimits(srv->cfg)),
+        layers_(srv->cfg.layers) {
     std::error_code ec;
     const auto ep = sock_.remote_endpoint(ec);
     peer_ = ec ? std::string("?") : ep.address().to_string() + ":" + std::to_string(ep.port());
@@ -222,18 +256,64 @@ class Session : public std::enable_shared_from_this<Session> {
     });
   }
 
-  // Fan-out entry points (any thread).
-  void EnqueueVideo(const VideoFramePtr& f) {
+  // Fan-out entry points (any thread). `rates`: each layer's bytes/s.
+  void EnqueueVideo(const VideoFramePtr& f, std::span<const double> rates) {
     if (!(subscription() & (kContentGeometry | kContentColor))) return;
-    std::lock_guard<std::mutex> l(mu_);
-    if (closing_) return;
-    ++video_queued_;
-    if (video_.size() >= static_cast<size_t>(srv_->cfg.queue_video_frames)) {
-      video_.pop_front();  // never the frame in flight: whole frames only
-      ++video_dropped_;
+    bool switched = false;
+    int old_target = 0, new_target = 0, now_layer = 0;
+    std::string reason, name;
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      name = client_name_;
+      if (closing_ || state_ != State::kActive) return;
+      const int64_t now = SteadyUs();
+      old_target = layers_.target();
+      if (f->layer == layers_.layer()) layers_.Update(now, rates);
+      new_target = layers_.target();
+      const int old_layer = layers_.layer();
+      if (!layers_.Take(f->layer, f->independent, &switched)) {
+        if (new_target != old_target) reason = layers_.reason();
+      } else {
+        now_layer = layers_.layer();
+        if (switched && now_layer > old_layer) {
+          // Down because the viewer fell behind: what waits of the old layer
+          // is the backlog; the new layer's independent frame replaces it.
+          video_dropped_ += video_.size();
+          video_.clear();
+        }
+        ++video_queued_;
+        bool dropped = false;
+        if (video_.size() >= static_cast<size_t>(srv_->cfg.queue_video_frames)) {
+          video_.pop_front();  // never the frame in flight: whole frames only
+          ++video_dropped_;
+          dropped = true;
+        }
+        video_.push_back(f);
+        layers_.OnEnqueue(now, video_.size(), dropped);
+        KickLocked();
+        if (new_target != old_target) reason = layers_.reason();
+      }
     }
-    video_.push_back(f);
-    KickLocked();
+    if (new_target != old_target) {
+      // The target layer must send an independent frame soon (V1: a key frame).
+      srv_->n.layer_keyframe_requests[static_cast<size_t>(new_target)]++;
+      srv_->Log("session " + std::to_string(id_) + " '" + name + "': layer " + std::to_string(old_target) +
+                " -> " + std::to_string(new_target) + " (" + reason + ")");
+    }
+    if (switched) {
+      srv_->n.layer_switches++;
+      protocol::Stats st;
+      st.values = {{std::string(protocol::kLayerKey), static_cast<double>(now_layer)},
+                   {std::string(protocol::kLayersKey), static_cast<double>(layers_num())}};
+      EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
+    }
+  }
+
+  // The layer this viewer receives or is about to (the publisher encodes a
+  // layer only while someone is on it).
+  bool OnLayer(int layer) const {
+    std::lock_guard<std::mutex> l(mu_);
+    return layers_.layer() == layer || layers_.target() == layer;
   }
 
   void EnqueuePriority(const WireMessagePtr& lean_or_other) {
@@ -287,6 +367,12 @@ class Session : public std::enable_shared_from_this<Session> {
     s.queue_priority = prio_.size();
     s.rtt_ms = rtt_ms_;
     s.rtt_min_ms = rtt_min_ms_;
+    s.layer = layers_.layer();
+    s.target_layer = layers_.target();
+    s.layer_switches = layers_.switches();
+    s.layer_switches_down = layers_.switches_down();
+    s.layer_reason = layers_.reason();
+    s.throughput_mbps = layers_.throughput_bytes_per_s() < 0 ? -1 : layers_.throughput_bytes_per_s() * 8e-6;
     return s;
   }
 
@@ -447,6 +533,20 @@ class Session : public std::enable_shared_from_this<Session> {
           return;
         }
         quality_ = static_cast<int>(c.value);
+        {
+          int before = 0, after = 0;
+          {
+            std::lock_guard<std::mutex> l(mu_);
+            before = layers_.target();
+            layers_.SetMinLayer(LayerController::MinLayerForQuality(quality_, layers_.num_layers()), SteadyUs());
+            after = layers_.target();
+          }
+          if (after != before) {  // the viewer's own cap moves it: the new layer's next frame must decode alone
+            srv_->n.layer_keyframe_requests[static_cast<size_t>(after)]++;
+            srv_->Log("session " + std::to_string(id_) + " '" + client_name_ + "': layer " + std::to_string(before) +
+                      " -> " + std::to_string(after) + " (quality " + std::to_string(c.value) + ")");
+          }
+        }
         break;
       case ControlCommand::kSetSpeed:
         if (!(c.speed >= 0.1f && c.speed <= 8.0f)) {
@@ -454,9 +554,18 @@ class Session : public std::enable_shared_from_this<Session> {
           return;
         }
         break;
-      case ControlCommand::kRequestKeyFrame:
+      case ControlCommand::kRequestKeyFrame: {
         srv_->n.keyframe_requests++;
+        int layer = 0, target = 0;
+        {
+          std::lock_guard<std::mutex> l(mu_);
+          layer = layers_.layer();
+          target = layers_.target();
+        }
+        srv_->n.layer_keyframe_requests[static_cast<size_t>(layer)]++;
+        if (target != layer) srv_->n.layer_keyframe_requests[static_cast<size_t>(target)]++;
         break;
+      }
       case ControlCommand::kSeek:
         if (c.value < 0) {
           Violation("control.value: seek time must be >= 0");
@@ -543,7 +652,10 @@ class Session : public std::enable_shared_from_this<Session> {
     registered_ = true;
     lean_audio_ = w.audio_codec == protocol::AudioCodec::kOpusLean;
     srv_->n.welcomed++;
-    if (IsViewerRole(h.role)) srv_->n.keyframe_requests++;  // a new viewer starts at a key frame
+    if (IsViewerRole(h.role)) {  // a new viewer starts at a key frame of the full layer
+      srv_->n.keyframe_requests++;
+      srv_->n.layer_keyframe_requests[0]++;
+    }
     Header hdr;
     EnqueuePriority(MakeWireMessage(hdr, w, srv_->cfg.fragment_bytes));
     if (IsViewerRole(h.role)) {
@@ -555,6 +667,13 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       if (rig) EnqueuePriorityAlways(rig);
       if (announce) EnqueuePriorityAlways(announce);
+      const int layers = srv_->num_layers.load();
+      if (layers > 1) {
+        // The site has quality layers: the viewer starts on the full one.
+        protocol::Stats st;
+        st.values = {{std::string(protocol::kLayerKey), 0.0}, {std::string(protocol::kLayersKey), double(layers)}};
+        EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
+      }
     }
     state_ = State::kActive;
     srv_->Log("welcome " + peer_ + " '" + h.client_name + "' as " + protocol::RoleName(h.role) + " (session " +
@@ -646,6 +765,7 @@ class Session : public std::enable_shared_from_this<Session> {
     holding_.clear();
     audio_in_write_ = 0;
     frame_done_in_write_ = false;
+    size_t video_bytes_in_write = 0;
     for (int i = 0; i < 64 && !prio_.empty(); ++i) {
       const WireMessagePtr& m = prio_.front();
       bufs_.push_back(asio::buffer(m->bytes));
@@ -662,6 +782,7 @@ class Session : public std::enable_shared_from_this<Session> {
         frag_ = 0;
       }
       size_t video_bytes = 0;
+      const auto count_video = [&] { video_bytes_in_write = video_bytes; };
       if (inflight_) writing_frame_ = inflight_;  // keeps the bytes alive during the write
       while (inflight_ && video_bytes < srv_->cfg.fragment_bytes) {
         if (part_ < inflight_->parts.size()) {
@@ -685,9 +806,12 @@ class Session : public std::enable_shared_from_this<Session> {
           frame_done_in_write_ = true;
         }
       }
+      count_video();
     }
     if (bufs_.empty()) return;
     writing_ = true;
+    write_start_us_ = SteadyUs();
+    write_video_bytes_ = video_bytes_in_write;
     l.unlock();
     auto self = shared_from_this();
     auto h = asio::bind_executor(strand_, [this, self](std::error_code ec, size_t n) { OnWrite(ec, n); });
@@ -706,6 +830,10 @@ class Session : public std::enable_shared_from_this<Session> {
       if (!ec) {
         audio_sent_ += audio_in_write_;
         if (frame_done_in_write_) ++video_sent_;
+        if (write_video_bytes_ > 0) {
+          const int64_t now = SteadyUs();
+          layers_.OnWrite(now, n, now - write_start_us_);
+        }
       }
       holding_.clear();
       writing_frame_.reset();
@@ -783,6 +911,21 @@ class Session : public std::enable_shared_from_this<Session> {
   std::atomic<uint32_t> subscription_{0};
   std::atomic<bool> lean_audio_{false};  // negotiated audio codec 3 (lean AudioPose frames)
   std::atomic<int> quality_{10};
+  // Quality layer policy (mu_); recorders always take the full layer.
+  LayerController layers_;
+  int64_t write_start_us_ = 0;
+  size_t write_video_bytes_ = 0;
+  int layers_num() const {
+    std::lock_guard<std::mutex> l(mu_);
+    return layers_.num_layers();
+  }
+
+ public:
+  void SetNumLayers(int n) {
+    std::lock_guard<std::mutex> l(mu_);
+    layers_.SetNumLayers(role_ == Role::kRecorder ? 1 : n);
+    layers_.SetMinLayer(LayerController::MinLayerForQuality(quality_, layers_.num_layers()), SteadyUs());
+  }
 };
 
 void Server::Impl::Accept() {
@@ -836,6 +979,7 @@ bool Server::Impl::Register(const std::shared_ptr<Session>& s, Role role, std::s
       return false;
     }
     viewers[s->id()] = s;
+    s->SetNumLayers(num_layers.load());
     RebuildViewersLocked();
   }
   --pending;
@@ -966,8 +1110,31 @@ void Server::SetRigMessage(WireMessagePtr message) {
 }
 
 void Server::PublishVideo(VideoFramePtr frame) {
+  HOLO_CHECK(frame->layer >= 0 && frame->layer < kMaxLayers);
   impl_->n.video_frames_published++;
-  for (const auto& v : impl_->Viewers()) v->EnqueueVideo(frame);
+  const auto rates = impl_->NoteLayerFrame(frame->layer, frame->bytes(), SteadyUs());
+  for (const auto& v : impl_->Viewers()) v->EnqueueVideo(frame, rates);
+}
+
+void Server::SetLayers(int n) {
+  HOLO_CHECK(n >= 1 && n <= kMaxLayers);
+  impl_->num_layers = n;
+  for (const auto& v : impl_->Viewers()) v->SetNumLayers(n);
+}
+
+int Server::num_layers() const { return impl_->num_layers.load(); }
+
+size_t Server::ViewersOnLayer(int layer) const {
+  size_t n = 0;
+  for (const auto& v : impl_->Viewers())
+    if (v->OnLayer(layer)) ++n;
+  return n;
+}
+
+double Server::LayerMbps(int layer) const {
+  if (layer < 0 || layer >= kMaxLayers) return 0;
+  std::lock_guard<std::mutex> l(impl_->layer_mu);
+  return impl_->LayerRatesLocked()[static_cast<size_t>(layer)] * 8e-6;
 }
 
 void Server::PublishAudio(const protocol::AudioPose& audio, uint32_t stream_id) {
@@ -1031,6 +1198,8 @@ ServerCounters Server::counters() const {
   c.audio_relayed = a.audio_relayed;
   c.controls_forwarded = a.controls_forwarded;
   c.keyframe_requests = a.keyframe_requests;
+  c.layer_switches = a.layer_switches;
+  for (size_t i = 0; i < c.layer_keyframe_requests.size(); ++i) c.layer_keyframe_requests[i] = a.layer_keyframe_requests[i];
   return c;
 }
 

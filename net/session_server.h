@@ -10,6 +10,7 @@
 // per-viewer lock.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -19,6 +20,7 @@
 
 #include "common/rig.h"
 #include "common/status.h"
+#include "net/layer_control.h"
 #include "net/server_config.h"
 #include "net/wire_message.h"
 #include "protocol/messages.h"
@@ -59,6 +61,13 @@ struct SessionStats {
   size_t queue_priority = 0;          // small messages waiting
   double rtt_ms = -1;                 // last ping round trip (-1: none yet)
   double rtt_min_ms = -1;
+  // Quality layers (net/layer_control.h): the layer this viewer receives,
+  // the one it is being moved to, switches so far, why the target last
+  // changed, and the throughput its socket took while busy (-1: not known).
+  int layer = 0, target_layer = 0;
+  uint64_t layer_switches = 0, layer_switches_down = 0;
+  std::string layer_reason;
+  double throughput_mbps = -1;
 };
 
 struct ServerCounters {
@@ -77,6 +86,10 @@ struct ServerCounters {
   // Viewers welcomed plus Control kRequestKeyFrame received: a publisher of
   // inter-frame colour (V1) sends a key frame when this count grows.
   uint64_t keyframe_requests = 0;
+  // The same per quality layer (welcomes count for layer 0; a viewer moved
+  // to a layer counts for it), and layer switches of all viewers.
+  std::array<uint64_t, kMaxLayers> layer_keyframe_requests{};
+  uint64_t layer_switches = 0;
 };
 
 struct ServerHooks {
@@ -125,6 +138,18 @@ class Server {
   void PublishAudio(const protocol::AudioPose& audio, uint32_t stream_id);
   // Any small message to every viewer subscribed to its content (priority queue).
   void PublishPriority(WireMessagePtr message);
+
+  // Quality layers (docs/sessions.md): the site publishes each frame once
+  // per layer (VideoFrame::layer, 0 = full); each viewer gets one layer,
+  // moved by its queue, drops and throughput (config().layers). Default 1.
+  // Viewers hear of their layer through Stats (protocol::kLayerKey).
+  void SetLayers(int num_layers);
+  int num_layers() const;
+  // Viewers receiving `layer` or being moved to it: a publisher encodes a
+  // reduced layer only while this is > 0.
+  size_t ViewersOnLayer(int layer) const;
+  // The layer's published bitrate over the last seconds, Mbit/s.
+  double LayerMbps(int layer) const;
 
   size_t num_viewers() const;      // after Welcome: viewers, render hosts, recorders
   size_t num_publishers() const;

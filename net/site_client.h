@@ -145,6 +145,11 @@ struct ClientStats {
   uint64_t decode_errors = 0;
   uint64_t color_images_waiting = 0;  // V1 pod images skipped while a stream waited for a keyframe
   uint64_t keyframe_requests = 0;     // Control kRequestKeyFrame sent (V1)
+  // Quality layers: the layer the site says this viewer receives (0 = full),
+  // how many it publishes (1: no layers), and the changes it announced.
+  int layer = 0;
+  int num_layers = 1;
+  uint64_t layer_changes = 0;
   uint64_t sends_dropped = 0;     // not connected or send queue full
   int64_t last_frame_index = -1;
   double rtt_ms = -1;

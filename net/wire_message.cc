@@ -68,15 +68,19 @@ size_t VideoFrame::bytes() const {
 
 VideoFramePtr MakeVideoFrame(int64_t frame_index, int64_t capture_time_us, protocol::GeometryCodec codec,
                              std::span<const uint8_t> geometry_blob, const protocol::ColorFrame* color,
-                             size_t fragment_bytes, uint32_t stream_id) {
+                             size_t fragment_bytes, uint32_t stream_id, int layer, bool independent) {
   auto f = std::make_shared<VideoFrame>();
   f->frame_index = frame_index;
+  f->layer = layer;
+  f->independent = independent;
   f->capture_time_us = capture_time_us;
   Header h;
   h.stream_id = stream_id;
   h.sequence = static_cast<uint32_t>(frame_index);
   h.capture_time_us = capture_time_us;
-  h.flags = protocol::kFlagKeyFrame;
+  // KEY_FRAME only where the whole frame decodes alone: recordings and live
+  // segments seek and start there.
+  h.flags = independent ? protocol::kFlagKeyFrame : 0;
   // MeshFrame payload: i64 frame_index · u8 codec · blob32 data, written
   // straight into one buffer (no intermediate copy of the blob).
   {

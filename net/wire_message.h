@@ -60,6 +60,11 @@ WireMessagePtr WithClassicAudio(const WireMessagePtr& lean, WireMessagePtr class
 struct VideoFrame {
   int64_t frame_index = 0;
   int64_t capture_time_us = 0;
+  // The site's quality layer (0 = full; net/layer_control.h), and whether
+  // every part decodes without earlier frames (G1/C1 always; V1 only when
+  // every pod's image is a key frame): a viewer changes layer only there.
+  int layer = 0;
+  bool independent = true;
   std::vector<WireMessagePtr> parts;
   size_t bytes() const;
 };
@@ -67,10 +72,11 @@ using VideoFramePtr = std::shared_ptr<const VideoFrame>;
 
 // Builds a video frame on `stream_id` (sequence = frame index) from a
 // geometry blob (geometry_codec.h) and optional colour images.
-// `color` may be null.
+// `color` may be null. `layer` and `independent` as in VideoFrame.
 VideoFramePtr MakeVideoFrame(int64_t frame_index, int64_t capture_time_us, protocol::GeometryCodec codec,
                              std::span<const uint8_t> geometry_blob, const protocol::ColorFrame* color,
-                             size_t fragment_bytes, uint32_t stream_id = kSiteStreamId);
+                             size_t fragment_bytes, uint32_t stream_id = kSiteStreamId, int layer = 0,
+                             bool independent = true);
 
 // Wall-clock time (system clock), µs since the Unix epoch: capture stamps on
 // the wire and receive stamps, comparable across processes of one machine

@@ -287,6 +287,11 @@ inline constexpr uint32_t kContentBitRegions = 8;
 // when it publishes Regions; a viewer subscribes to kContentBitRegions only
 // after seeing it, so a new viewer never sends bit 8 to an old site.
 inline constexpr const char* kRegionsAnnounceKey = "site.regions";
+// Stats keys a site with quality layers sends a viewer after Welcome and at
+// every change of its layer: the layer it now receives (0 = full) and how
+// many the site publishes (PROTOCOL.md §4, Stats).
+inline constexpr const char* kLayerKey = "session.layer";
+inline constexpr const char* kLayersKey = "session.layers";
 
 struct Control {
   ControlCommand command = ControlCommand::kSubscribe;

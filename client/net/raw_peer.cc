@@ -1,5 +1,7 @@
 #include "client/net/raw_peer.h"
 
+#include <cmath>
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netdb.h>
@@ -189,11 +191,28 @@ void RawViewer::Run() {
   while (!stop_) {
     std::vector<protocol::Frame> frames;
     if (!peer_->ReadFrames(budget_, 0.01, &frames).ok()) return;
-    for (const auto& f : frames)
-      if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments))
+    for (const auto& f : frames) {
+      if (f.header.type == protocol::MessageType::kMeshFrame && !(f.header.flags & protocol::kFlagMoreFragments)) {
         ++meshes_;
+        const int64_t now = std::chrono::duration_cast<std::chrono::microseconds>(
+                                std::chrono::steady_clock::now().time_since_epoch())
+                                .count();
+        std::lock_guard<std::mutex> l(times_mu_);
+        if (mesh_times_us_.size() < 100000) mesh_times_us_.push_back(now);
+      } else if (f.header.type == protocol::MessageType::kStats && !(f.header.flags & protocol::kFlagMoreFragments)) {
+        auto p = protocol::DecodePayload(f.header, f.payload);
+        if (!p.ok()) continue;
+        for (const auto& [key, value] : std::get<protocol::Stats>(*p).values)
+          if (key == protocol::kLayerKey && std::isfinite(value)) layer_ = static_cast<int>(value);
+      }
+    }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
+}
+
+std::vector<int64_t> RawViewer::mesh_times_us() const {
+  std::lock_guard<std::mutex> l(times_mu_);
+  return mesh_times_us_;
 }
 
 }  // namespace holo::net

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <thread>
@@ -75,16 +76,25 @@ class RawViewer {
 
   // Whole MeshFrames read so far (the last fragment of each).
   int64_t meshes() const { return meshes_; }
+  // When each whole MeshFrame was read (steady clock, µs; the first 100 000).
+  std::vector<int64_t> mesh_times_us() const;
+  // Changes the read rate (a viewer started with bytes_per_10ms > 0 only).
+  void SetRate(size_t bytes_per_10ms) { budget_ = bytes_per_10ms; }
+  // The quality layer the site last announced (Stats "session.layer"), -1: none.
+  int layer() const { return layer_; }
 
  private:
   RawViewer(std::unique_ptr<RawPeer> peer, size_t bytes_per_10ms);
   void Run();
 
   std::unique_ptr<RawPeer> peer_;
-  size_t budget_;
+  std::atomic<size_t> budget_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<int64_t> meshes_{0};
+  std::atomic<int> layer_{-1};
+  mutable std::mutex times_mu_;
+  std::vector<int64_t> mesh_times_us_;
 };
 
 }  // namespace holo::net

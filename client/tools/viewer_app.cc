@@ -558,11 +558,18 @@ class Viewer {
       std::lock_guard<std::mutex> l(regions_mu_);
       for (const auto& e : region_events_) regions += "\n  " + e;
     }
-    char buf[768];
+    // The site's quality layer this viewer receives, when the site has layers.
+    char layer[48] = "";
+    if (net_mode_ && client_) {
+      const net::ClientStats cs = client_->stats();
+      if (cs.num_layers > 1)
+        std::snprintf(layer, sizeof layer, "  LAYER %s", cs.layer == 0 ? "FULL" : "REDUCED");
+    }
+    char buf[800];
     std::snprintf(buf, sizeof buf,
                   "HOLOPORT VIEWER  %s\n%s\nFPS %s  RENDER %s MS\nLATENCY %s MS CAPTURE->DISPLAY\n"
-                  "BITRATE %.2f MBIT/S  DROPS %lld\n%zu TRIS  %s%s",
-                  src.c_str(), status.c_str(), fps, rms, lat, recent_mbps_, static_cast<long long>(stats_.drops),
+                  "BITRATE %.2f MBIT/S  DROPS %lld%s\n%zu TRIS  %s%s",
+                  src.c_str(), status.c_str(), fps, rms, lat, recent_mbps_, static_cast<long long>(stats_.drops), layer,
                   renderer_->remote_triangles(),
                   frame_has_images_ && mode_ == ColorMode::kProjective ? "PROJECTIVE" : "VERTEX COLOUR", audio);
     return buf + regions;
@@ -1015,6 +1022,9 @@ class Viewer {
       }
       j["color_images_waiting"] = cs.color_images_waiting;
       j["keyframe_requests"] = cs.keyframe_requests;
+      j["layers"] = cs.num_layers;
+      j["layer"] = cs.layer;
+      j["layer_changes"] = cs.layer_changes;
       j["bad_frames"] = bad_frames_;
       j["stale_renders"] = stale_renders_;
       j["rig_changes"] = rig_changes_;

@@ -3,7 +3,9 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <chrono>
+#include <string>
 
 namespace holo::net {
 namespace {
@@ -12,9 +14,35 @@ double MsSince(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
+Status ReducedLayerOptions::Check() const {
+  if (!(position_step_scale >= 1 && position_step_scale <= 16))
+    return InvalidArgument("reduced layer: position_step_scale must be 1..16, got " + std::to_string(position_step_scale));
+  if (jpeg_quality < 1 || jpeg_quality > 100)
+    return InvalidArgument("reduced layer: jpeg_quality must be 1..100, got " + std::to_string(jpeg_quality));
+  if (crf_offset < 0 || crf_offset > 51)
+    return InvalidArgument("reduced layer: crf_offset must be 0..51, got " + std::to_string(crf_offset));
+  if (frame_divisor < 1 || frame_divisor > 8)
+    return InvalidArgument("reduced layer: frame_divisor must be 1..8, got " + std::to_string(frame_divisor));
+  return OkStatus();
+}
+
 SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
     : server_(server), options_(std::move(options)) {
+  HOLO_CHECK(options_.reduced.Check().ok());
   server_->SetPublishedCodecs(options_.geometry.codec, options_.color_options.codec);
+  layers_[0].geometry = options_.geometry;
+  layers_[0].color = options_.color_options;
+  layers_[0].video = options_.video;
+  layers_[1] = LayerState{};
+  layers_[1].geometry = options_.geometry;
+  layers_[1].geometry.position_step_m =
+      static_cast<float>(options_.geometry.position_step_m * options_.reduced.position_step_scale);
+  layers_[1].color = options_.color_options;
+  layers_[1].color.jpeg_quality = options_.reduced.jpeg_quality;
+  layers_[1].video = options_.video;
+  const int crf = options_.video.crf < 0 ? 24 : options_.video.crf;
+  layers_[1].video.crf = std::min(51, crf + options_.reduced.crf_offset);
+  if (options_.reduced.enabled) server_->SetLayers(2);
 }
 
 Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
@@ -27,13 +55,43 @@ Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, cons
 
 Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
                              const std::vector<PodColor>& pods, EncodedFrame* out) {
+  out->timings = PublishTimings{};
+  HOLO_RETURN_IF_ERROR(EncodeLayer(0, frame_index, capture_wall_us, mesh, pods, out));
+  const int64_t n = frames_seen_++;
+  // The reduced layer only while someone receives it (or is being moved to
+  // it), on every frame_divisor-th frame.
+  const bool wanted = options_.reduced.enabled && server_->ViewersOnLayer(1) > 0;
+  if (!wanted) {
+    out->reduced.clear();
+    // A later start begins each pod's video with a key frame.
+    layers_[1].video_encoders.clear();
+    return OkStatus();
+  }
+  if (n % options_.reduced.frame_divisor != 0) {
+    out->reduced.clear();
+    return OkStatus();
+  }
+  out->reduced.resize(1);
+  EncodedFrame& r = out->reduced[0];
+  r.timings = PublishTimings{};
+  HOLO_RETURN_IF_ERROR(EncodeLayer(1, frame_index, capture_wall_us, mesh, pods, &r));
+  out->timings.reduced = true;
+  out->timings.reduced_ms = r.timings.geometry_ms + r.timings.color_ms;
+  out->timings.reduced_cpu_ms = r.timings.geometry_cpu_ms + r.timings.color_cpu_ms;
+  out->timings.reduced_bytes = r.timings.geometry_bytes + r.timings.color_bytes;
+  return OkStatus();
+}
+
+Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
+                                  const std::vector<PodColor>& pods, EncodedFrame* out) {
+  LayerState& st = layers_[layer];
   PublishTimings* t = &out->timings;
-  *t = PublishTimings{};
+  out->layer = layer;
   out->frame_index = frame_index;
   out->capture_wall_us = capture_wall_us;
   auto t0 = std::chrono::steady_clock::now();
   double cpu0 = holo::ThreadCpuTimeMs();
-  protocol::GeometryEncodeOptions g = options_.geometry;
+  protocol::GeometryEncodeOptions g = st.geometry;
   g.colors = g.colors && !mesh.colors.empty();
   out->codec = g.codec;
   out->geometry.clear();  // the encoder appends
@@ -42,21 +100,23 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
   t->geometry_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   t->geometry_bytes = out->geometry.size();
   protocol::ColorFrame& color = out->color;
-  color.codec = options_.color_options.codec;
+  color.codec = st.color.codec;
+  out->independent = true;
   // Keep the pod images' buffers for reuse; only the count changes.
   size_t used = 0;
   if (options_.color) {
     t0 = std::chrono::steady_clock::now();
     cpu0 = holo::ThreadCpuTimeMs();
-    const bool video = options_.color_options.codec == protocol::ColorCodec::kV1;
+    const bool video = st.color.codec == protocol::ColorCodec::kV1;
     bool force_keyframe = false;
     if (video) {
-      // A viewer joined or lost a frame: key frames on every pod, but not
-      // more often than every 250 ms (a burst of requests costs one).
-      const uint64_t requests = server_->counters().keyframe_requests;
-      if (requests != keyframe_requests_seen_ && t0 - last_forced_keyframe_ >= std::chrono::milliseconds(250)) {
-        keyframe_requests_seen_ = requests;
-        last_forced_keyframe_ = t0;
+      // A viewer joined, lost a frame or is being moved to this layer: key
+      // frames on every pod, but not more often than every 250 ms (a burst
+      // of requests costs one).
+      const uint64_t requests = server_->counters().layer_keyframe_requests[static_cast<size_t>(layer)];
+      if (requests != st.keyframe_requests_seen && t0 - st.last_forced_keyframe >= std::chrono::milliseconds(250)) {
+        st.keyframe_requests_seen = requests;
+        st.last_forced_keyframe = t0;
         force_keyframe = true;
       }
     }
@@ -70,34 +130,40 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
       pi.pod_id = p.pod_id;
       pi.data.clear();
       if (video) {
-        auto& enc = video_encoders_[p.pod_id];
+        auto& enc = st.video_encoders[p.pod_id];
         if (enc == nullptr) {
-          HOLO_ASSIGN_OR_RETURN(enc, protocol::VideoEncoder::Create(options_.video));
+          HOLO_ASSIGN_OR_RETURN(enc, protocol::VideoEncoder::Create(st.video));
         }
         if (force_keyframe) enc->RequestKeyframe();
         const int64_t keys = enc->keyframes();
         HOLO_RETURN_IF_ERROR(enc->Encode(*p.image, *p.mask, &pi.data).WithContext("pod " + std::to_string(p.pod_id)));
         all_keyframes = all_keyframes && enc->keyframes() > keys;
       } else {
-        auto enc = color_encoders_.try_emplace(p.pod_id, options_.color_options).first;
+        auto enc = st.color_encoders.try_emplace(p.pod_id, st.color).first;
         HOLO_RETURN_IF_ERROR(enc->second.Encode(*p.image, *p.mask, &pi.data));
       }
       t->color_bytes += pi.data.size();
     }
     t->color_keyframe = all_keyframes && used > 0;
+    if (video && used > 0) out->independent = t->color_keyframe;
     t->color_ms = MsSince(t0);
     t->color_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
   }
   color.images.resize(used);
+  ++encoded_[layer];
   return OkStatus();
 }
 
 void SitePublisher::PublishEncoded(EncodedFrame* frame) {
   const auto t0 = std::chrono::steady_clock::now();
   frame->timings.viewers = server_->num_viewers();
-  server_->PublishVideo(MakeVideoFrame(frame->frame_index, frame->capture_wall_us, frame->codec, frame->geometry,
-                                       frame->color.images.empty() ? nullptr : &frame->color,
-                                       server_->config().fragment_bytes));
+  auto publish = [&](const EncodedFrame& f) {
+    server_->PublishVideo(MakeVideoFrame(f.frame_index, f.capture_wall_us, f.codec, f.geometry,
+                                         f.color.images.empty() ? nullptr : &f.color,
+                                         server_->config().fragment_bytes, kSiteStreamId, f.layer, f.independent));
+  };
+  publish(*frame);
+  for (const EncodedFrame& r : frame->reduced) publish(r);
   frame->timings.publish_ms = MsSince(t0);
 }
 

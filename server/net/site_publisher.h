@@ -5,9 +5,17 @@
 // With V1 each pod is one inter-frame stream: the publisher sends a key frame
 // on every pod when a viewer joins or asks for one (Server's
 // keyframe_requests), at most one forced key frame per 250 ms.
+//
+// Quality layers: with `reduced` enabled the site publishes two layers, the
+// full one (layer 0) and a reduced one (layer 1: coarser geometry steps,
+// lower colour quality, every n-th frame), each encoded once whatever the
+// number of viewers, and the reduced one only while a viewer receives it or
+// is being moved to it (Server::ViewersOnLayer). The session server moves
+// each viewer between them (net/layer_control.h).
 #pragma once
 
 #include <cstdint>
+#include <atomic>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -23,11 +31,22 @@
 
 namespace holo::net {
 
+// The reduced layer (layer 1) relative to the full one.
+struct ReducedLayerOptions {
+  bool enabled = true;
+  double position_step_scale = 2.0;  // G1 position step × this
+  int jpeg_quality = 35;             // C1 quality, 1..100
+  int crf_offset = 8;                // V1: the full layer's CRF (its default 24 when -1) + this, ≤ 51
+  int frame_divisor = 2;             // every n-th frame (1..8): 30 fps → 15
+  Status Check() const;
+};
+
 struct SitePublisherOptions {
   protocol::GeometryEncodeOptions geometry;  // default G1, 1 mm, normals recomputed, colours
   bool color = true;                         // send C1 images of the pods (when masks exist)
   protocol::ColorEncodeOptions color_options;  // codec kC1 (default), kC0 or kV1
   protocol::VideoEncodeOptions video;          // when color_options.codec is kV1
+  ReducedLayerOptions reduced;
 };
 
 struct PublishTimings {
@@ -39,6 +58,11 @@ struct PublishTimings {
   size_t color_bytes = 0;
   size_t viewers = 0;       // viewers the frame was offered to
   bool color_keyframe = false;  // V1: this frame's colour is a key frame on every pod
+  // The reduced layer, when it was encoded with this frame (its encode
+  // time is not in geometry_ms/color_ms).
+  bool reduced = false;
+  double reduced_ms = 0, reduced_cpu_ms = 0;
+  size_t reduced_bytes = 0;
 };
 
 // One pod's colour image and its foreground mask (same size, 255 = foreground).
@@ -50,12 +74,16 @@ struct PodColor {
 
 // One frame encoded for the wire, before it is handed to the fan-out.
 struct EncodedFrame {
+  int layer = 0;             // 0 full, 1 reduced
+  bool independent = true;   // decodes without earlier frames (VideoFrame::independent)
   int64_t frame_index = 0;
   int64_t capture_wall_us = 0;
   protocol::GeometryCodec codec = protocol::GeometryCodec::kG1;
   std::vector<uint8_t> geometry;
   protocol::ColorFrame color;  // no images: no ColorFrame is sent
   PublishTimings timings;      // encode part filled by Encode
+  // The reduced layer of the same frame, when encoded (0 or 1 entries).
+  std::vector<EncodedFrame> reduced;
 };
 
 class SitePublisher {
@@ -70,20 +98,36 @@ class SitePublisher {
   // encodes (the per-pod colour encoders keep state between frames).
   Status Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const std::vector<PodColor>& pods,
                 EncodedFrame* out);
-  // Hands an encoded frame to every viewer's queue; fills publish_ms and
-  // viewers of `out->timings`. May run on another thread than Encode.
+  // Hands an encoded frame (and its reduced layer) to every viewer's queue;
+  // fills publish_ms and viewers of `out->timings`. May run on another
+  // thread than Encode.
   void PublishEncoded(EncodedFrame* frame);
 
+  // Frames encoded per layer so far (each once, whatever the audience).
+  int64_t frames_encoded(int layer) const { return encoded_[layer == 0 ? 0 : 1].load(); }
+
  private:
+  // One layer's encoders and its key frame bookkeeping.
+  struct LayerState {
+    protocol::GeometryEncodeOptions geometry;
+    protocol::ColorEncodeOptions color;
+    protocol::VideoEncodeOptions video;
+    // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
+    std::map<uint16_t, protocol::ColorEncoder> color_encoders;
+    // V1: one video encoder per pod stream.
+    std::map<uint16_t, std::unique_ptr<protocol::VideoEncoder>> video_encoders;
+    uint64_t keyframe_requests_seen = 0;
+    std::chrono::steady_clock::time_point last_forced_keyframe{};
+  };
+  Status EncodeLayer(int layer, int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
+                     const std::vector<PodColor>& pods, EncodedFrame* out);
+
   Server* server_;
   SitePublisherOptions options_;
   EncodedFrame scratch_;  // Publish's
-  // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
-  std::map<uint16_t, protocol::ColorEncoder> color_encoders_;
-  // V1: one video encoder per pod stream.
-  std::map<uint16_t, std::unique_ptr<protocol::VideoEncoder>> video_encoders_;
-  uint64_t keyframe_requests_seen_ = 0;
-  std::chrono::steady_clock::time_point last_forced_keyframe_{};
+  LayerState layers_[2];
+  std::atomic<int64_t> encoded_[2] = {0, 0};
+  int64_t frames_seen_ = 0;
 };
 
 }  // namespace holo::net

@@ -60,6 +60,7 @@ void OnSignal(int) { g_stop = true; }
 // Per-viewer counters summed for the stats lines and stderr.
 struct NetSummary {
   size_t viewers = 0;
+  size_t on_reduced = 0;  // viewers receiving the reduced quality layer
   uint64_t sent = 0, dropped = 0, bytes = 0;
   size_t max_queue = 0;
   double rtt_ms_max = -1;
@@ -69,6 +70,7 @@ NetSummary Summarize(const holo::net::Server& server) {
   for (const auto& s : server.Sessions()) {
     if (s.role == holo::protocol::Role::kPublisher) continue;
     ++n.viewers;
+    if (s.layer > 0) ++n.on_reduced;
     n.sent += s.video_frames_sent;
     n.dropped += s.video_frames_dropped;
     n.bytes += s.bytes_sent;
@@ -202,6 +204,28 @@ int main(int argc, char** argv) {
   app.add_option("--video-crf", video_crf, "v1: x264 constant-quality factor 0..51 (-1: the codec's default, 24)")
       ->capture_default_str()
       ->check(CLI::Range(-1, 51));
+  int layers = 2;
+  holo::net::ReducedLayerOptions reduced;
+  app.add_option("--layers", layers,
+                 "quality layers: 2 = full + reduced (each encoded once; a viewer that falls behind is moved to the "
+                 "reduced one and back when its link allows; the reduced one is encoded only while someone gets it), "
+                 "1 = the full layer only")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 2));
+  app.add_option("--reduced-step-scale", reduced.position_step_scale,
+                 "reduced layer: G1 position step x this")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 16.0));
+  app.add_option("--reduced-jpeg-quality", reduced.jpeg_quality, "reduced layer: C1 JPEG quality 1..100")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
+  app.add_option("--reduced-crf-offset", reduced.crf_offset, "reduced layer, v1: CRF of the full layer + this")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 51));
+  app.add_option("--reduced-rate-divisor", reduced.frame_divisor,
+                 "reduced layer: every n-th frame (2: 30 fps -> 15)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 8));
   app.add_flag("--mesh-colors", mesh_colors,
                "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
@@ -338,6 +362,8 @@ int main(int argc, char** argv) {
     publish_options.video.crf = video_crf;
     if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
   }
+  publish_options.reduced = reduced;
+  publish_options.reduced.enabled = layers > 1;
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
@@ -589,6 +615,12 @@ int main(int argc, char** argv) {
     j["violations"] = c.violations;
     j["audio_relayed"] = c.audio_relayed;
     j["keyframe_requests"] = c.keyframe_requests;
+    if (server->num_layers() > 1) {
+      j["viewers_reduced"] = n.on_reduced;
+      j["layer_switches"] = c.layer_switches;
+      j["layer0_mbps"] = server->LayerMbps(0);
+      j["layer1_mbps"] = server->LayerMbps(1);
+    }
     if (site_voice) {
       const holo::voice::SiteVoiceStats vs = site_voice->stats();
       j["voice_frames"] = vs.frames;
@@ -689,6 +721,7 @@ int main(int argc, char** argv) {
       j["publish_ms"] = pt.publish_ms;
       j["geometry_bytes"] = pt.geometry_bytes;
       j["color_bytes"] = pt.color_bytes;
+      if (pt.reduced) j["reduced_bytes"] = pt.reduced_bytes;
       j["viewers"] = pt.viewers;
       if (region_tracker) {
         j["regions_ms"] = rt.regions_ms;
@@ -813,6 +846,11 @@ int main(int argc, char** argv) {
       j["geometry_bytes"] = pt.geometry_bytes;
       j["color_bytes"] = pt.color_bytes;
       j["color_keyframe"] = pt.color_keyframe;
+      if (pt.reduced) {
+        j["reduced_bytes"] = pt.reduced_bytes;
+        j["reduced_ms"] = pt.reduced_ms;
+        j["reduced_cpu_ms"] = pt.reduced_cpu_ms;
+      }
       j["viewers"] = pt.viewers;
     }
     std::fprintf(stats_out, "%s\n", j.dump().c_str());
