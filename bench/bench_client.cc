@@ -3,6 +3,8 @@
 //           (llvmpipe here), per-vertex colour and projective texturing,
 //           plus the per-stream-frame costs (upload, pod visibility maps) and
 //           the novel-view PSNR of both modes against the studio's truth.
+//   stream  what the live stream's codecs cost that PSNR, per quality layer
+//           (viewer_psnr_loss_db, stream_mbps).
 // Adding a part: write a function
 //   int RunClientXxxPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options);
 // add its options to ClientBenchOptions and SetupClient, and the part to Parts().
@@ -34,6 +36,8 @@
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
 #include "protocol/color_codec.h"
+#include "protocol/geometry_codec.h"
+#include "server/net/site_publisher.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "server/pipeline/capture_site.h"
 #include "studio/studio.h"
@@ -63,6 +67,8 @@ struct ClientBenchOptions {
   float behind_band = -1;                        // the site's TsdfOptions::behind_band (fused; -1: the default)
   int bake_texels = -1;                          // ProjectiveOptions::bake_texels_per_edge (-1: the renderer's)
   float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
+  double reduced_step_scale = -1;                // stream part: the reduced layer's (-1: SitePublisher's default)
+  int reduced_jpeg_quality = -1;                 // stream part: the reduced layer's (-1: SitePublisher's default)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -85,6 +91,10 @@ struct ViewerContent {
   std::vector<double> signed_mm;
   std::vector<holo::ImageRgb8> images;
   std::vector<holo::ImageGray8> masks;  // empty = none (whole images)
+  // Fused: the pods' images and masks as the site has them, before the
+  // colour codec (the reference of the stream part).
+  std::vector<holo::ImageRgb8> raw_images;
+  std::vector<holo::ImageGray8> raw_masks;
   std::vector<const holo::ImageRgb8*> ImagePtrs() const {
     std::vector<const holo::ImageRgb8*> v;
     for (const auto& i : images) v.push_back(&i);
@@ -152,6 +162,8 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   full->content = "fused";
   full->mesh_name = "fused_full";
   for (const auto& f : kept.frames) {
+    full->raw_images.push_back(f.color);
+    full->raw_masks.push_back(f.mask);
     std::vector<uint8_t> blob;
     HOLO_RETURN_IF_ERROR(holo::protocol::EncodeColor(f.color, f.mask, {}, &blob));
     holo::ImageRgb8 img;
@@ -303,6 +315,29 @@ constexpr std::pair<holo::render::ColorMode, bool> kVariants[] = {{holo::render:
                                                                    {holo::render::ColorMode::kProjective, false},
                                                                    {holo::render::ColorMode::kProjective, true}};
 
+// The content of --content: the truth (one mesh) or the fused stream (the
+// site's full mesh and the reduced stream mesh).
+holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchOptions& options,
+                          const holo::Workload& workload, std::vector<ViewerContent>* contents) {
+  if (options.content == "truth") {
+    holo::StudioOptions tso = workload.studio;
+    tso.threads = 2;
+    tso.color_variation = false;  // a server calibrates its pods
+    HOLO_ASSIGN_OR_RETURN(auto tstudio, holo::SyntheticStudio::Create(workload.rig, tso));
+    contents->emplace_back();
+    return MakeTruthContent(workload, tstudio.get(), options.frame, &contents->back());
+  }
+  if (!args.json) spdlog::info("client: running the capture site to frame {}...", options.frame);
+  contents->resize(2);
+  holo::Stopwatch sw;
+  holo::TextureOptions to;
+  if (options.legacy == "1") to.mask_edge_px = 0;
+  HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, to, options.behind_band,
+                                        &(*contents)[0], &(*contents)[1]));
+  if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
+  return holo::OkStatus();
+}
+
 int Fail(const holo::Status& s) {
   spdlog::error("client: {}", s.ToString());
   return 1;
@@ -322,12 +357,10 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       resolutions.push_back({w, h});
     }
   }
-  const std::string& content_opt = options.content;
   const std::string& png_dir = options.png_dir;
   const bool legacy = options.legacy == "1";
   const int frames = args.frames > 0 ? args.frames : 30;
   const int64_t studio_frame = options.frame;
-  const size_t reduced_triangles = options.reduce;
 
   auto workload = holo::GetWorkload(args.workload);
   if (!workload.ok()) {
@@ -340,27 +373,7 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
   if (!studio.ok()) return Fail(studio.status());
 
   std::vector<ViewerContent> contents;
-  if (content_opt == "truth") {
-    holo::StudioOptions tso = so;
-    tso.color_variation = false;  // a server calibrates its pods
-    auto tstudio = holo::SyntheticStudio::Create(workload->rig, tso);
-    if (!tstudio.ok()) return Fail(tstudio.status());
-    contents.emplace_back();
-    if (holo::Status s = MakeTruthContent(*workload, tstudio->get(), studio_frame, &contents.back()); !s.ok())
-      return Fail(s);
-  } else {
-    if (!args.json) spdlog::info("client render: running the capture site to frame {}...", studio_frame);
-    contents.resize(2);
-    holo::Stopwatch sw;
-    holo::TextureOptions to;
-    if (legacy) to.mask_edge_px = 0;
-    if (holo::Status s =
-            MakeFusedContent(*workload, studio_frame, reduced_triangles, to, options.behind_band, &contents[0],
-                             &contents[1]);
-        !s.ok())
-      return Fail(s);
-    if (!args.json) spdlog::info("client render: site done in {:.1f} s", sw.ElapsedMs() / 1000);
-  }
+  if (holo::Status s = MakeContents(args, options, *workload, &contents); !s.ok()) return Fail(s);
 
   auto ctx = holo::render::CreateHeadlessContext();
   if (!ctx.ok()) return Fail(ctx.status());
@@ -535,13 +548,134 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
   return 0;
 }
 
+// What the stream costs the viewer's picture: the stream mesh and the pods'
+// images through the site's codecs as the live server sends them — each
+// quality layer of SitePublisher (layer 0 full, layer 1 reduced: coarser
+// G1 step, lower C1 quality, every n-th frame) — rendered projectively
+// (baked) from the novel views, against the same render from the
+// uncompressed mesh and images: `viewer_psnr_loss_db` per `codec` and
+// `layer`, with the layer's `stream_mbps` at 30 fps (one frame's bytes ×
+// its frame rate). V1 video is not here: one frame says nothing about an
+// inter-frame codec (holoport-bench codecs measures it over a sequence).
+int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options) {
+  auto workload = holo::GetWorkload(args.workload);
+  if (!workload.ok()) {
+    spdlog::error("client: {}", workload.status().ToString());
+    return 2;
+  }
+  holo::StudioOptions so = workload->studio;
+  so.threads = 2;
+  auto studio = holo::SyntheticStudio::Create(workload->rig, so);
+  if (!studio.ok()) return Fail(studio.status());
+  std::vector<ViewerContent> contents;
+  if (holo::Status s = MakeContents(args, options, *workload, &contents); !s.ok()) return Fail(s);
+  // The mesh a viewer gets: the truth, or the fused stream-size mesh.
+  ViewerContent& c = contents.back();
+  if (c.raw_images.empty()) {  // truth: the pods' whole images are the reference
+    c.raw_images = c.images;
+    c.raw_masks.assign(c.images.size(), holo::ImageGray8());
+  }
+  auto ctx = holo::render::CreateHeadlessContext();
+  if (!ctx.ok()) return Fail(ctx.status());
+  auto renderer = holo::render::Renderer::Create();
+  if (!renderer.ok()) return Fail(renderer.status());
+  auto small = holo::render::OffscreenTarget::Create(640, 480);
+  if (!small.ok()) return Fail(small.status());
+  holo::render::RenderSettings settings;
+  settings.mode = holo::render::ColorMode::kProjective;
+  settings.projective.bake = true;
+
+  holo::net::SitePublisherOptions publisher;  // the live server's defaults
+  if (options.reduced_step_scale > 0) publisher.reduced.position_step_scale = options.reduced_step_scale;
+  if (options.reduced_jpeg_quality > 0) publisher.reduced.jpeg_quality = options.reduced_jpeg_quality;
+  struct Variant {
+    std::string codec;
+    int layer;  // -1: uncompressed
+    holo::protocol::GeometryEncodeOptions geometry;
+    holo::protocol::ColorEncodeOptions color;
+    double fps;
+  };
+  std::vector<Variant> variants;
+  variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0});
+  variants.push_back({"G1+C1", 0, publisher.geometry, publisher.color_options, 30.0});
+  {
+    Variant r{"G1+C1", 1, publisher.geometry, publisher.color_options, 30.0 / publisher.reduced.frame_divisor};
+    r.geometry.position_step_m =
+        static_cast<float>(publisher.geometry.position_step_m * publisher.reduced.position_step_scale);
+    r.color.jpeg_quality = publisher.reduced.jpeg_quality;
+    variants.push_back(r);
+  }
+  double reference_psnr = 0, reference_ssim = 0;
+  for (const Variant& v : variants) {
+    holo::Mesh mesh = c.mesh;
+    std::vector<holo::ImageRgb8> images = c.raw_images;
+    std::vector<holo::ImageGray8> masks = c.raw_masks;
+    size_t geometry_bytes = 0, color_bytes = 0;
+    if (v.layer >= 0) {
+      std::vector<uint8_t> blob;
+      holo::protocol::GeometryEncodeOptions g = v.geometry;
+      g.colors = false;  // projective texturing: the live server sends no vertex colours with images
+      if (holo::Status s = holo::protocol::EncodeGeometry(c.mesh, g, &blob); !s.ok()) return Fail(s);
+      geometry_bytes = blob.size();
+      if (holo::Status s = holo::protocol::DecodeGeometry(blob, &mesh); !s.ok()) return Fail(s);
+      for (size_t i = 0; i < images.size(); ++i) {
+        blob.clear();
+        if (holo::Status s = holo::protocol::EncodeColor(c.raw_images[i], c.raw_masks[i], v.color, &blob); !s.ok())
+          return Fail(s);
+        color_bytes += blob.size();
+        holo::ImageGray8 mask;
+        if (holo::Status s = holo::protocol::DecodeColor(blob, &images[i], &mask); !s.ok()) return Fail(s);
+        if (!masks[i].empty()) masks[i] = std::move(mask);
+      }
+    }
+    if (holo::Status s = (*renderer)->SetRemoteMesh(mesh); !s.ok()) return Fail(s);
+    std::vector<const holo::ImageRgb8*> ip;
+    std::vector<const holo::ImageGray8*> mp;
+    for (size_t i = 0; i < images.size(); ++i) {
+      ip.push_back(&images[i]);
+      mp.push_back(&masks[i]);
+    }
+    if (holo::Status s = (*renderer)->SetPodImages(workload->rig, ip, mp); !s.ok()) return Fail(s);
+    Quality qual;
+    if (holo::Status s = MeasureQuality(renderer->get(), small->get(), studio->get(), options.frame, settings, &qual);
+        !s.ok())
+      return Fail(s);
+    std::map<std::string, std::string> q = {{"stage", "stream"},       {"content", c.content},
+                                            {"mesh", c.mesh_name},     {"triangles", std::to_string(c.mesh.num_triangles())},
+                                            {"codec", v.codec},        {"mode", "projective"},
+                                            {"baked", "true"},         {"resolution", "640x480"},
+                                            {"views", "4"},            {"region", "truth"},
+                                            {"frame", std::to_string(options.frame)}};
+    if (v.layer >= 0) {
+      q["layer"] = v.layer == 0 ? "full" : "reduced";
+      q["position_step_mm"] = fmt::format("{:g}", v.geometry.position_step_m * 1e3);
+      q["jpeg_quality"] = std::to_string(v.color.jpeg_quality);
+      q["fps"] = fmt::format("{:g}", v.fps);
+    }
+    EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr, "dB", q);
+    EmitFigure("client", args.workload, "novel_view_ssim", qual.ssim, "", q);
+    if (v.layer < 0) {
+      reference_psnr = qual.psnr;
+      reference_ssim = qual.ssim;
+      continue;
+    }
+    EmitFigure("client", args.workload, "viewer_psnr_loss_db", reference_psnr - qual.psnr, "dB", q);
+    EmitFigure("client", args.workload, "viewer_ssim_loss", reference_ssim - qual.ssim, "", q);
+    EmitFigure("client", args.workload, "geometry_bytes", static_cast<double>(geometry_bytes), "B", q);
+    EmitFigure("client", args.workload, "color_bytes", static_cast<double>(color_bytes), "B", q);
+    EmitFigure("client", args.workload, "stream_mbps",
+               static_cast<double>(geometry_bytes + color_bytes) * 8.0 * v.fps / 1e6, "Mbit/s", q);
+  }
+  return 0;
+}
+
 struct Part {
   const char* name;
   int (*run)(const holo::bench::BenchArgs&, const ClientBenchOptions&);
 };
 
 const std::vector<Part>& Parts() {
-  static const std::vector<Part> parts = {{"render", RunClientRenderPart}};
+  static const std::vector<Part> parts = {{"render", RunClientRenderPart}, {"stream", RunClientStreamPart}};
   return parts;
 }
 
@@ -568,7 +702,7 @@ int RunClientBench(const holo::bench::BenchArgs& args, const ClientBenchOptions&
 holo::bench::BenchFn SetupClient(CLI::App& app) {
   holo::bench::DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<ClientBenchOptions>();
-  app.add_option("--parts", o->parts, "run only these parts, comma-separated (render); default all");
+  app.add_option("--parts", o->parts, "run only these parts, comma-separated (render, stream); default all");
   app.add_option("--resolutions", o->resolutions, "render sizes WxH[,WxH...], sides 16..8192")->capture_default_str();
   app.add_option("--content", o->content, "fused (the capture site's mesh and images) or truth (the studio's)")
       ->check(CLI::IsMember({"fused", "truth"}))
@@ -603,6 +737,12 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--gpu-visibility", o->gpu_visibility,
                  "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
+  app.add_option("--reduced-step-scale", o->reduced_step_scale,
+                 "stream part: the reduced layer's G1 step x this (default: holoport-server's)")
+      ->check(CLI::Range(1.0, 16.0));
+  app.add_option("--reduced-jpeg-quality", o->reduced_jpeg_quality,
+                 "stream part: the reduced layer's C1 quality (default: holoport-server's)")
+      ->check(CLI::Range(1, 100));
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 

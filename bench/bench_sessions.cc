@@ -4,7 +4,9 @@
 // One-to-many broadcast on loopback: an in-process session server (its own
 // io threads) fans a 30 fps stream out to N normal viewers (SiteClient, no
 // decoding, on a shared client io thread), one slow viewer (reads at 1/10 of
-// the stream's byte rate) and one stalled viewer (never reads).
+// the stream's byte rate), one stalled viewer (never reads) and one "mid" viewer
+// reading at 60 % of the full layer's byte rate: with --layers 2 (default) the
+// site also publishes the reduced layer, and the mid viewer shows a layer switch.
 //
 // Content: N frames (default 30) of the workload pre-encoded once, then looped:
 // the studio's ground-truth foreground mesh per frame (G1, colours) and the 8
@@ -42,6 +44,7 @@
 #include "net/site_client.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
@@ -57,6 +60,7 @@ struct SessionsOptions {
   int server_threads = 2;
   int client_threads = 1;
   std::string content = "truth";
+  int layers = 2;
 };
 
 std::string LoadAverage() {
@@ -71,35 +75,62 @@ struct Content {
   std::vector<protocol::ColorFrame> color;
   size_t vertices = 0;
   double bytes_per_frame = 0;
+  // The same frames as holoport-server's reduced layer (SitePublisher's
+  // defaults: coarser G1 step, lower C1 quality; published every n-th frame).
+  std::vector<std::vector<uint8_t>> reduced_geometry;
+  std::vector<protocol::ColorFrame> reduced_color;
+  double reduced_bytes_per_frame = 0;
 };
+
+// Encodes one frame into both layers of `c`.
+Status AddFrame(const Mesh& mesh, const std::vector<const ImageRgb8*>& images,
+                const std::vector<const ImageGray8*>& masks, Content* c) {
+  const net::SitePublisherOptions site;  // holoport-server's defaults
+  for (int layer = 0; layer < 2; ++layer) {
+    protocol::GeometryEncodeOptions g = site.geometry;
+    protocol::ColorEncodeOptions co = site.color_options;
+    if (layer == 1) {
+      g.position_step_m = static_cast<float>(g.position_step_m * site.reduced.position_step_scale);
+      co.jpeg_quality = site.reduced.jpeg_quality;
+    }
+    g.colors = !mesh.colors.empty();
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(mesh, g, &blob));
+    double bytes = static_cast<double>(blob.size());
+    protocol::ColorFrame cf;
+    cf.codec = protocol::ColorCodec::kC1;
+    for (size_t p = 0; p < images.size(); ++p) {
+      protocol::PodImage pi;
+      pi.pod_id = static_cast<uint16_t>(p);
+      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(*images[p], *masks[p], co, &pi.data));
+      bytes += static_cast<double>(pi.data.size());
+      cf.images.push_back(std::move(pi));
+    }
+    (layer == 0 ? c->bytes_per_frame : c->reduced_bytes_per_frame) += bytes;
+    (layer == 0 ? c->geometry : c->reduced_geometry).push_back(std::move(blob));
+    (layer == 0 ? c->color : c->reduced_color).push_back(std::move(cf));
+  }
+  c->vertices = mesh.num_vertices();
+  return OkStatus();
+}
 
 StatusOr<Content> PrepareContent(const Workload& wl, int frames) {
   Content c;
   SyntheticStudio studio(wl.rig, wl.studio);
   RgbdFrameSet fs;
   StudioGroundTruth gt;
-  double bytes = 0;
   for (int f = 0; f < frames; ++f) {
     studio.RenderFrame(f, &fs, &gt);
-    protocol::GeometryEncodeOptions g;
-    g.colors = !gt.foreground_mesh.colors.empty();
-    std::vector<uint8_t> blob;
-    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(gt.foreground_mesh, g, &blob));
-    c.vertices = gt.foreground_mesh.num_vertices();
-    protocol::ColorFrame cf;
-    cf.codec = protocol::ColorCodec::kC1;
-    for (size_t p = 0; p < fs.frames.size(); ++p) {
-      protocol::PodImage pi;
-      pi.pod_id = static_cast<uint16_t>(p);
-      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(fs.frames[p].color, gt.mask[p], {}, &pi.data));
-      bytes += static_cast<double>(pi.data.size());
-      cf.images.push_back(std::move(pi));
+    std::vector<const ImageRgb8*> images;
+    std::vector<const ImageGray8*> masks;
+    for (size_t p = 0; p < fs.frames.size() && p < gt.mask.size(); ++p) {
+      images.push_back(&fs.frames[p].color);
+      masks.push_back(&gt.mask[p]);
     }
-    bytes += static_cast<double>(blob.size());
-    c.geometry.push_back(std::move(blob));
-    c.color.push_back(std::move(cf));
+    HOLO_RETURN_IF_ERROR(AddFrame(gt.foreground_mesh, images, masks, &c));
   }
-  c.bytes_per_frame = bytes / frames;
+  c.bytes_per_frame /= frames;
+  c.reduced_bytes_per_frame /= frames;
   return c;
 }
 
@@ -113,32 +144,29 @@ StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
   o.color_calibration = false;
   o.tsdf.voxel_size = wl.voxel_size_m;
   o.pipeline.max_frames = frames;
+  // What holoport-server --listen publishes by default: the compact stream
+  // mesh, without vertex colours (the viewer colours it from the images).
+  o.stream_mesh = true;
+  o.texture = false;
+  o.tsdf.integrate_color = false;
   HOLO_ASSIGN_OR_RETURN(auto site, CaptureSite::Create(studio.get(), nullptr, studio.get(), o));
-  double bytes = 0;
   auto sink = [&](const FrameWork& w) -> Status {
-    std::vector<uint8_t> blob;
-    HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(w.mesh, {}, &blob));
-    protocol::ColorFrame cf;
-    cf.codec = protocol::ColorCodec::kC1;
+    std::vector<const ImageRgb8*> images;
+    std::vector<const ImageGray8*> masks;
     for (const auto& f : w.frames.frames) {
       if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) continue;
-      protocol::PodImage pi;
-      pi.pod_id = static_cast<uint16_t>(f.pod_id);
-      HOLO_RETURN_IF_ERROR(protocol::EncodeColor(f.color, f.mask, {}, &pi.data));
-      bytes += static_cast<double>(pi.data.size());
-      cf.images.push_back(std::move(pi));
+      images.push_back(&f.color);
+      masks.push_back(&f.mask);
     }
-    bytes += static_cast<double>(blob.size());
-    c.vertices = w.mesh.num_vertices();
-    c.geometry.push_back(std::move(blob));
-    c.color.push_back(std::move(cf));
-    spdlog::error("  fused frame {}/{}: {} vertices", c.geometry.size(), frames, w.mesh.num_vertices());
+    HOLO_RETURN_IF_ERROR(AddFrame(w.mesh, images, masks, &c));
+    spdlog::info("  fused frame {}/{}: {} vertices", c.geometry.size(), frames, w.mesh.num_vertices());
     return OkStatus();
   };
   HOLO_ASSIGN_OR_RETURN(auto stats, site->Run(sink));
   (void)stats;
   if (c.geometry.empty()) return Internal("the capture site produced no frames");
-  c.bytes_per_frame = bytes / static_cast<double>(c.geometry.size());
+  c.bytes_per_frame /= static_cast<double>(c.geometry.size());
+  c.reduced_bytes_per_frame /= static_cast<double>(c.geometry.size());
   return c;
 }
 
@@ -183,6 +211,9 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
     return 1;
   }
   const uint16_t port = (*server)->port();
+  const net::SitePublisherOptions site;  // holoport-server's defaults
+  const int divisor = site.reduced.frame_divisor;
+  if (o.layers > 1) (*server)->SetLayers(2);
 
   // Normal viewers.
   struct ViewerCount {
@@ -242,14 +273,20 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   ro.name = "stalled";
   ro.bytes_per_10ms = 0;
   auto stalled_viewer = net::RawViewer::Start(ro);
-  if (!slow_viewer.ok() || !stalled_viewer.ok()) {
-    spdlog::error("sessions: slow/stalled viewer: {} {}", slow_viewer.status().ToString(),
-                  stalled_viewer.status().ToString());
+  // A viewer whose link carries 60 % of the full stream: more than the
+  // reduced layer needs, less than the full one.
+  ro.name = "mid";
+  ro.bytes_per_10ms = static_cast<size_t>(content->bytes_per_frame * fps * 0.6 / 100);
+  auto mid_viewer = net::RawViewer::Start(ro);
+  if (!slow_viewer.ok() || !stalled_viewer.ok() || !mid_viewer.ok()) {
+    spdlog::error("sessions: slow/stalled/mid viewer: {} {} {}", slow_viewer.status().ToString(),
+                  stalled_viewer.status().ToString(), mid_viewer.status().ToString());
     return 1;
   }
   const net::RawViewer& slow = **slow_viewer;
   const net::RawViewer& stalled = **stalled_viewer;
-  while ((*server)->num_subscribed(net::kContentGeometry) < static_cast<size_t>(num_viewers + 2))
+  const net::RawViewer& mid = **mid_viewer;
+  while ((*server)->num_subscribed(net::kContentGeometry) < static_cast<size_t>(num_viewers + 3))
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   spdlog::info("sessions: {} normal + 1 slow + 1 stalled viewers connected; streaming {} s at {:.0f} fps", num_viewers,
                seconds, fps);
@@ -257,7 +294,7 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   // Publisher: one encode per frame (MakeVideoFrame copies the pre-encoded
   // blobs into the wire buffer once), shared by every viewer.
   const double warmup_s = 2.0;
-  std::atomic<int64_t> published{0};
+  std::atomic<int64_t> published{0}, published_reduced{0};
   std::atomic<int64_t> published_at_window_start{0};
   double publisher_cpu_ms = 0;
   std::thread publisher([&] {
@@ -266,9 +303,17 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
     const int64_t total = static_cast<int64_t>(seconds * fps);
     for (int64_t i = 0; i < total; ++i) {
       const size_t k = static_cast<size_t>(i % static_cast<int64_t>(content->geometry.size()));
-      (*server)->PublishVideo(net::MakeVideoFrame(i, net::WallUs(), protocol::GeometryCodec::kG1,
-                                                  content->geometry[k], &content->color[k], cfg.fragment_bytes));
+      const int64_t now = net::WallUs();
+      (*server)->PublishVideo(net::MakeVideoFrame(i, now, protocol::GeometryCodec::kG1, content->geometry[k],
+                                                  &content->color[k], cfg.fragment_bytes));
       ++published;
+      // The reduced layer as SitePublisher does it: only while someone gets it, every n-th frame.
+      if (o.layers > 1 && i % divisor == 0 && (*server)->ViewersOnLayer(1) > 0) {
+        (*server)->PublishVideo(net::MakeVideoFrame(i, now, protocol::GeometryCodec::kG1,
+                                                    content->reduced_geometry[k], &content->reduced_color[k],
+                                                    cfg.fragment_bytes, net::kSiteStreamId, 1, true));
+        ++published_reduced;
+      }
       std::this_thread::sleep_until(start + std::chrono::microseconds(static_cast<int64_t>((i + 1) * 1e6 / fps)));
     }
     publisher_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
@@ -280,6 +325,9 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   for (int i = 0; i < num_viewers; ++i) frames0[i] = counts[i].frames;
   const int64_t slow0 = slow.meshes();
   const int64_t stalled0 = stalled.meshes();
+  const int64_t mid0 = mid.meshes();
+  const size_t mid_lat0 = mid.mesh_latencies_ms().size();
+  const int64_t reduced0 = published_reduced.load();
   published_at_window_start = published.load();
   const double server_cpu0 = (*server)->IoCpuMs();
   const double client_cpu0 = ctx.CpuMs();
@@ -320,9 +368,15 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
   const double slow_fraction = static_cast<double>(slow.meshes() - slow0) / static_cast<double>(window_published);
   const double stalled_fraction =
       static_cast<double>(stalled.meshes() - stalled0) / static_cast<double>(window_published);
+  const double mid_fraction = static_cast<double>(mid.meshes() - mid0) / static_cast<double>(window_published);
+  std::vector<double> mid_lat = mid.mesh_latencies_ms();
+  mid_lat.erase(mid_lat.begin(), mid_lat.begin() + static_cast<std::ptrdiff_t>(std::min(mid_lat0, mid_lat.size())));
+  net::SessionStats mid_stats;
   uint64_t dropped_normal = 0, dropped_slow = 0, dropped_stalled = 0, bytes_sent = 0;
   for (const auto& s : (*server)->Sessions()) {
     bytes_sent += s.bytes_sent;
+    if (s.client_name == "mid") mid_stats = s;
+    if (s.client_name == "mid") continue;
     if (s.client_name == "slow") dropped_slow = s.video_frames_dropped;
     else if (s.client_name == "stalled") dropped_stalled = s.video_frames_dropped;
     else dropped_normal += s.video_frames_dropped;
@@ -333,13 +387,14 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
     lat = latencies;
   }
   const double server_total_cpu_ms = server_cpu_ms + publisher_cpu_ms * (window_s / seconds);
-  const double cpu_pct_per_viewer = server_total_cpu_ms / (window_s * 1e3) * 100.0 / (num_viewers + 2);
+  const double cpu_pct_per_viewer = server_total_cpu_ms / (window_s * 1e3) * 100.0 / (num_viewers + 3);
 
   const std::string w = args.workload;
   const std::map<std::string, std::string> q{{"viewers", std::to_string(num_viewers)},
                                              {"fps", "30"},
                                              {"content", content_kind == "truth" ? "studio-ground-truth-G1+C1-looped" : "fused-G1+C1-looped"},
-                                             {"server_threads", std::to_string(server_threads)}};
+                                             {"server_threads", std::to_string(server_threads)},
+                                             {"layers", std::to_string(o.layers)}};
   auto with = [&](std::map<std::string, std::string> extra) {
     extra.insert(q.begin(), q.end());
     return extra;
@@ -350,6 +405,20 @@ int RunSessions(const BenchArgs& args, const SessionsOptions& o) {
              with({{"class", "normal"}, {"stat", "min"}}));
   EmitFigure("sessions", w, "delivered_fraction", slow_fraction, "1", with({{"class", "slow"}}));
   EmitFigure("sessions", w, "delivered_fraction", stalled_fraction, "1", with({{"class", "stalled"}}));
+  // The viewer between the layers: what it gets, how late, on which layer.
+  EmitFigure("sessions", w, "delivered_fraction", mid_fraction, "1", with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "fps_per_viewer", mid_fraction * fps, "1/s", with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "publish_to_received_p50_ms", Quantile(mid_lat, 0.5), "ms", with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "publish_to_received_p99_ms", Quantile(mid_lat, 0.99), "ms", with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "frames_dropped", static_cast<double>(mid_stats.video_frames_dropped), "frames",
+             with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "layer_switches", static_cast<double>(mid_stats.layer_switches), "",
+             with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "layer", static_cast<double>(mid_stats.layer), "", with({{"class", "mid"}}));
+  EmitFigure("sessions", w, "reduced_frames_published",
+             static_cast<double>(published_reduced.load() - reduced0), "frames",
+             with({{"of", std::to_string(window_published)}}));
+  EmitFigure("sessions", w, "frame_bytes", content->reduced_bytes_per_frame, "B", with({{"layer", "reduced"}}));
   EmitFigure("sessions", w, "frames_dropped", static_cast<double>(dropped_normal), "frames",
              with({{"class", "normal"}, {"stat", "sum"}}));
   EmitFigure("sessions", w, "frames_dropped", static_cast<double>(dropped_slow), "frames", with({{"class", "slow"}}));
@@ -379,6 +448,10 @@ BenchFn SetupSessions(CLI::App& app) {
   DropCommonOptions(app, {"--repeats"});  // this benchmark does not read them
   auto o = std::make_shared<SessionsOptions>();
   app.add_option("--viewers", o->viewers, "viewers on loopback")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--layers", o->layers,
+                 "2: the site also publishes the reduced layer (as holoport-server does by default), 1: full only")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 2));
   app.add_option("--seconds", o->seconds, "seconds of broadcast (at least 4)")->capture_default_str();
   app.add_option("--server-threads", o->server_threads, "session server threads")->capture_default_str();
   app.add_option("--client-threads", o->client_threads, "threads of the viewers' client side")->capture_default_str();

@@ -197,8 +197,14 @@ void RawViewer::Run() {
         const int64_t now = std::chrono::duration_cast<std::chrono::microseconds>(
                                 std::chrono::steady_clock::now().time_since_epoch())
                                 .count();
+        const int64_t wall = std::chrono::duration_cast<std::chrono::microseconds>(
+                                 std::chrono::system_clock::now().time_since_epoch())
+                                 .count();
         std::lock_guard<std::mutex> l(times_mu_);
-        if (mesh_times_us_.size() < 100000) mesh_times_us_.push_back(now);
+        if (mesh_times_us_.size() < 100000) {
+          mesh_times_us_.push_back(now);
+          mesh_latencies_ms_.push_back(static_cast<double>(wall - f.header.capture_time_us) * 1e-3);
+        }
       } else if (f.header.type == protocol::MessageType::kStats && !(f.header.flags & protocol::kFlagMoreFragments)) {
         auto p = protocol::DecodePayload(f.header, f.payload);
         if (!p.ok()) continue;
@@ -213,6 +219,11 @@ void RawViewer::Run() {
 std::vector<int64_t> RawViewer::mesh_times_us() const {
   std::lock_guard<std::mutex> l(times_mu_);
   return mesh_times_us_;
+}
+
+std::vector<double> RawViewer::mesh_latencies_ms() const {
+  std::lock_guard<std::mutex> l(times_mu_);
+  return mesh_latencies_ms_;
 }
 
 }  // namespace holo::net

@@ -78,6 +78,9 @@ class RawViewer {
   int64_t meshes() const { return meshes_; }
   // When each whole MeshFrame was read (steady clock, µs; the first 100 000).
   std::vector<int64_t> mesh_times_us() const;
+  // Capture (header time, wall clock) → read, ms, of each whole MeshFrame
+  // read (the first 100 000): a viewer on this machine's clock.
+  std::vector<double> mesh_latencies_ms() const;
   // Changes the read rate (a viewer started with bytes_per_10ms > 0 only).
   void SetRate(size_t bytes_per_10ms) { budget_ = bytes_per_10ms; }
   // The quality layer the site last announced (Stats "session.layer"), -1: none.
@@ -95,6 +98,7 @@ class RawViewer {
   std::atomic<int> layer_{-1};
   mutable std::mutex times_mu_;
   std::vector<int64_t> mesh_times_us_;
+  std::vector<double> mesh_latencies_ms_;
 };
 
 }  // namespace holo::net
