@@ -116,6 +116,7 @@ Status ClientOptions::Check() const {
   if (!(connect_timeout_s > 0 && connect_timeout_s <= 3600)) return InvalidArgument("client: connect_timeout_s 0..3600");
   if (!(ping_interval_s >= 0 && ping_interval_s <= 3600)) return InvalidArgument("client: ping_interval_s 0..3600");
   if (!(color_wait_s >= 0 && color_wait_s <= 10)) return InvalidArgument("client: color_wait_s 0..10");
+  if (quality < 0 || quality > 10) return InvalidArgument("client: quality must be 0..10, got " + std::to_string(quality));
   if (max_pending_frames < 1 || max_pending_audio < 1 || max_send_queue < 1)
     return InvalidArgument("client: queue sizes must be >= 1");
   if (max_message_bytes < 1024 || max_message_bytes > (64u << 20))
@@ -422,6 +423,14 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         c.value = subscription.load() & kSubscribeAll;
         if (c.value != 0) Queue(Encode(Header{}, c), false);
         regions_subscribed = false;
+        // The viewer's quality cap, again on every connection (the site keeps it per session).
+        const int q = quality.load();
+        if (q < 10) {
+          protocol::Control qc;
+          qc.command = protocol::ControlCommand::kSetQuality;
+          qc.value = q;
+          Queue(Encode(Header{}, qc), false);
+        }
       }
       SetState(ClientState::kConnected, OkStatus());
       ArmPing();
@@ -781,6 +790,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
   int backoff_step = 0;
   uint64_t ping_count = 0;
   std::atomic<uint32_t> subscription{0};
+  std::atomic<int> quality{10};  // Control set quality, resent after every Welcome when < 10
   bool regions_subscribed = false;  // Subscribe(regions) sent on this connection (strand)
   std::optional<ReceivedFrame> pending;
   std::map<uint16_t, std::unique_ptr<protocol::VideoDecoder>> video_decoders;  // V1, per pod (strand)
@@ -813,6 +823,7 @@ StatusOr<std::unique_ptr<SiteClient>> SiteClient::Start(ClientOptions options, C
   auto impl = std::make_shared<Impl>(std::move(options), std::move(callbacks), context);
   HOLO_RETURN_IF_ERROR(impl->SetUpTls());
   impl->subscription = impl->opt.subscribe;
+  impl->quality = impl->opt.quality;
   Impl* raw = impl.get();
   if (raw->opt.fed) {
     asio::post(impl->strand, [raw, keep = impl] {
@@ -990,7 +1001,10 @@ protocol::Control MakeControl(protocol::ControlCommand c, int64_t value = 0, flo
 
 void SiteClient::Subscribe(uint32_t bits) { SendControl(MakeControl(protocol::ControlCommand::kSubscribe, bits)); }
 void SiteClient::Unsubscribe(uint32_t bits) { SendControl(MakeControl(protocol::ControlCommand::kUnsubscribe, bits)); }
-void SiteClient::SetQuality(int level) { SendControl(MakeControl(protocol::ControlCommand::kSetQuality, level)); }
+void SiteClient::SetQuality(int level) {
+  impl_->quality = std::clamp(level, 0, 10);
+  SendControl(MakeControl(protocol::ControlCommand::kSetQuality, impl_->quality.load()));
+}
 void SiteClient::Pause() { SendControl(MakeControl(protocol::ControlCommand::kPause)); }
 void SiteClient::Resume() { SendControl(MakeControl(protocol::ControlCommand::kResume)); }
 void SiteClient::SetLoop(bool loop) { SendControl(MakeControl(protocol::ControlCommand::kSetLoop, loop ? 1 : 0)); }

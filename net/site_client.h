@@ -72,6 +72,9 @@ struct ClientOptions {
   double ping_interval_s = 1.0;    // 0: no pings
   // How long a mesh waits for its ColorFrame before it is delivered alone.
   double color_wait_s = 0.05;
+  // Control set quality sent after each Welcome when below 10 (10: the site
+  // chooses; on a site with quality layers 0..4 keep to the reduced layer).
+  int quality = 10;
   size_t max_pending_frames = 4;   // pull queue; the oldest is dropped
   size_t max_pending_audio = 512;  // pull queue; the oldest is dropped
   size_t max_send_queue = 1024;    // messages waiting to be sent; newer ones are dropped beyond
@@ -197,6 +200,9 @@ class SiteClient {
   void SendControl(const protocol::Control& control);
   void Subscribe(uint32_t content_bits);
   void Unsubscribe(uint32_t content_bits);
+  // Control set quality 0..10 (clamped), kept and sent again after every
+  // reconnection; on a site with quality layers it caps the layer
+  // (PROTOCOL.md §4 Stats).
   void SetQuality(int level);
   void Pause();
   void Resume();

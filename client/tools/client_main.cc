@@ -111,6 +111,12 @@ int main(int argc, char** argv) {
                  "play a live broadcast from an HTTP edge: http://EDGE/NAME/live.json[?md5=..&expires=..] "
                  "(docs/broadcast.md); --seconds / --frames as with --connect");
   app.add_option("--token", o.token, "viewer token for --connect (default: env HOLO_VIEWER_TOKEN)");
+  app.add_option("--quality", o.quality,
+                 "--connect/--call: the quality the site may send, 0..10: 10 lets a site with quality layers move "
+                 "this viewer between its full and reduced layers by what the link carries; 0..4 keep to the "
+                 "reduced layer")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10));
   app.add_option("--call", o.call,
                  "one side of a two-site call: call config YAML (docs/sessions.md); watches the remote site, "
                  "publishes the own voice and head pose to the local site, spatializes the remote voices");

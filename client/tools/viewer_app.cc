@@ -224,6 +224,7 @@ class Viewer {
   Status StartNetwork() {
     net::ClientOptions co;
     co.name = o_.name;
+    co.quality = o_.quality;
     co.backoff_initial_s = 0.2;
     co.backoff_max_s = 2.0;
     co.connect_timeout_s = 3.0;

@@ -51,6 +51,9 @@ struct ViewerOptions {
   std::string http;
   std::string call;
   std::string name = "holoport-client";
+  // Network: the quality cap sent to the site (Control set quality): 10 lets
+  // the site choose the layer; 0..4 keep to its reduced layer.
+  int quality = 10;
   // --call: where the participant's head stands in the own room (metres,
   // degrees; x forward at yaw 0), swaying a little; unset: net::SyntheticHead.
   bool head_placed = false;
