@@ -23,6 +23,7 @@ Status LayerPolicy::Check() const {
     return bad("max_up_hold_s", ">= up_hold_s and <= 3600 s", max_up_hold_s);
   if (!(up_headroom >= 1 && up_headroom <= 10)) return bad("up_headroom", "in [1, 10]", up_headroom);
   if (!(stable_s > 0 && stable_s <= 3600)) return bad("stable_s", "in (0, 3600] s", stable_s);
+  if (!(probe_s >= 0 && probe_s <= 60)) return bad("probe_s", "in [0, 60] s", probe_s);
   return OkStatus();
 }
 
@@ -100,8 +101,11 @@ void LayerController::Update(int64_t now_us, std::span<const double> rates) {
   if (l + 1 < num_layers_) {
     const char* why = nullptr;
     const double busy = sum_busy_s_ / p_.throughput_window_s;
+    const bool probing = last_up_us_ >= 0 && (now_us - last_up_us_) * kUs < p_.probe_s;
     if (drop_pending_) {
       why = "drop";
+    } else if (probing && queue_high_since_us_ >= 0) {
+      why = "probe failed";
     } else if (queue_high_since_us_ >= 0 && (now_us - queue_high_since_us_) * kUs >= p_.down_queue_s) {
       why = "queue";
     } else if (busy >= p_.busy_fraction && rate(l) > 0 && throughput_bytes_per_s() < p_.down_throughput * rate(l)) {

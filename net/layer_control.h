@@ -13,7 +13,8 @@
 // for `down_queue_s`, or when the measured throughput of a mostly busy socket
 // stays below `down_throughput` × the current layer's bitrate.
 // Up: after `up_hold_s` on the lower layer with no queue build-up and a
-// measured throughput of at least `up_headroom` × the upper layer's bitrate.
+// measured throughput of at least `up_headroom` × the upper layer's bitrate;
+// within `probe_s` of such a probe any backlog ends it.
 // A return down within `stable_s` of going up doubles the hold (up to
 // `max_up_hold_s`), so a viewer on a link between the two layers probes up
 // ever more rarely instead of oscillating; `stable_s` on a layer resets it.
@@ -52,6 +53,10 @@ struct LayerPolicy {
   double up_headroom = 1.3;
   // A layer kept this long without going down resets the hold to up_hold_s.
   double stable_s = 20.0;
+  // For this long after a probe up, any backlog (≥ 2 frames waiting) sends
+  // the viewer back at once: a failed probe costs a frame or two, not
+  // down_queue_s of growing delay.
+  double probe_s = 1.0;
 
   Status Check() const;
 };

@@ -121,7 +121,8 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
       if (!layers.IsMap()) return KeyError("layers", "must be a map (adaptive, up_hold_s, ...)");
       HOLO_RETURN_IF_ERROR(CheckYamlKeys(layers,
                                          {"adaptive", "down_queue_s", "throughput_window_s", "busy_fraction",
-                                          "down_throughput", "up_hold_s", "max_up_hold_s", "up_headroom", "stable_s"},
+                                          "down_throughput", "up_hold_s", "max_up_hold_s", "up_headroom", "stable_s",
+                                          "probe_s"},
                                          "layers."));
       LayerPolicy& p = c.layers;
       HOLO_RETURN_IF_ERROR(GetYamlBool(layers, "adaptive", "", &p.adaptive).WithContext("layers"));
@@ -133,6 +134,7 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "max_up_hold_s", &p.max_up_hold_s).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "up_headroom", &p.up_headroom).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "stable_s", &p.stable_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "probe_s", &p.probe_s).WithContext("layers"));
     }
     return c.Check();
   };

@@ -188,6 +188,27 @@ TEST(LayerControl, AFailedProbeDoublesTheHoldAndALongStayResetsIt) {
   EXPECT_DOUBLE_EQ(c.up_hold_s(), 1.0);
 }
 
+TEST(LayerControl, ABacklogRightAfterAProbeEndsItAtOnce) {
+  LayerPolicy p;
+  p.up_hold_s = 1;
+  p.probe_s = 1;
+  LayerController c = TwoLayers(p);
+  GoDown(&c, 0);
+  c.Update(1000 * kMs, kRates);
+  ASSERT_EQ(c.target(), 0);
+  ASSERT_TRUE(c.Take(0, true, nullptr));
+  // 100 ms into the probe two frames wait: back down now, not after down_queue_s.
+  c.OnEnqueue(1100 * kMs, 2, false);
+  c.Update(1100 * kMs, kRates);
+  EXPECT_EQ(c.target(), 1);
+  EXPECT_EQ(c.reason(), "probe failed");
+  // Outside the probe window the same backlog has to last down_queue_s.
+  LayerController d = TwoLayers(p);
+  d.OnEnqueue(5000 * kMs, 2, false);
+  d.Update(5000 * kMs, kRates);
+  EXPECT_EQ(d.target(), 0);
+}
+
 TEST(LayerControl, QualityCapKeepsTheViewerOnTheReducedLayer) {
   EXPECT_EQ(LayerController::MinLayerForQuality(10, 2), 0);
   EXPECT_EQ(LayerController::MinLayerForQuality(5, 2), 0);
