@@ -173,6 +173,7 @@ class Server::Impl {
   // Quality layers: how many the site publishes, and each one's recent
   // bitrate (decaying sums of bytes and of time between its frames).
   std::atomic<int> num_layers{1};
+  std::array<std::atomic<int>, kMaxLayers> layer_step{1, 1, 1, 1};
   std::mutex layer_mu;
   struct LayerRate {
     double bytes = 0, seconds = 0;
@@ -304,7 +305,9 @@ class Session : public std::enable_shared_from_this<Session> {
       srv_->n.layer_switches++;
       protocol::Stats st;
       st.values = {{std::string(protocol::kLayerKey), static_cast<double>(now_layer)},
-                   {std::string(protocol::kLayersKey), static_cast<double>(layers_num())}};
+                   {std::string(protocol::kLayersKey), static_cast<double>(layers_num())},
+                   {std::string(protocol::kLayerStepKey),
+                    static_cast<double>(srv_->layer_step[static_cast<size_t>(now_layer)].load())}};
       EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
     }
   }
@@ -671,7 +674,9 @@ class Session : public std::enable_shared_from_this<Session> {
       if (layers > 1) {
         // The site has quality layers: the viewer starts on the full one.
         protocol::Stats st;
-        st.values = {{std::string(protocol::kLayerKey), 0.0}, {std::string(protocol::kLayersKey), double(layers)}};
+        st.values = {{std::string(protocol::kLayerKey), 0.0},
+                     {std::string(protocol::kLayersKey), double(layers)},
+                     {std::string(protocol::kLayerStepKey), double(srv_->layer_step[0].load())}};
         EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
       }
     }
@@ -1123,6 +1128,11 @@ void Server::SetLayers(int n) {
 }
 
 int Server::num_layers() const { return impl_->num_layers.load(); }
+
+void Server::SetLayerFrameStep(int layer, int step) {
+  HOLO_CHECK(layer >= 0 && layer < kMaxLayers && step >= 1);
+  impl_->layer_step[static_cast<size_t>(layer)] = step;
+}
 
 size_t Server::ViewersOnLayer(int layer) const {
   size_t n = 0;

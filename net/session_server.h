@@ -144,6 +144,8 @@ class Server {
   // moved by its queue, drops and throughput (config().layers). Default 1.
   // Viewers hear of their layer through Stats (protocol::kLayerKey).
   void SetLayers(int num_layers);
+  // A layer that carries every `step`-th frame (default 1), told to viewers.
+  void SetLayerFrameStep(int layer, int step);
   int num_layers() const;
   // Viewers receiving `layer` or being moved to it: a publisher encodes a
   // reduced layer only while this is > 0.

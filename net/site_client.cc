@@ -499,12 +499,14 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
         auto p = protocol::DecodePayload(t, raw.payload, limits);
         if (!p.ok()) return BadPayload(t, p.status());
         for (const auto& [key, value] : std::get<protocol::Stats>(*p).values) {
-          if (key == protocol::kLayerKey || key == protocol::kLayersKey) {
+          if (key == protocol::kLayerKey || key == protocol::kLayersKey || key == protocol::kLayerStepKey) {
             // Informational (a site's stats are not trusted for anything else): clamped.
             const int v = std::isfinite(value) ? static_cast<int>(std::clamp(value, 0.0, 16.0)) : 0;
             std::lock_guard<std::mutex> l(mu);
             if (key == protocol::kLayersKey) {
               stats.num_layers = std::max(v, 1);
+            } else if (key == protocol::kLayerStepKey) {
+              stats.layer_step = std::max(v, 1);
             } else if (v != stats.layer) {
               stats.layer = v;
               ++stats.layer_changes;

@@ -152,6 +152,7 @@ struct ClientStats {
   // how many it publishes (1: no layers), and the changes it announced.
   int layer = 0;
   int num_layers = 1;
+  int layer_step = 1;  // the layer carries every layer_step-th frame of the site
   uint64_t layer_changes = 0;
   uint64_t sends_dropped = 0;     // not connected or send queue full
   int64_t last_frame_index = -1;

@@ -292,6 +292,10 @@ inline constexpr const char* kRegionsAnnounceKey = "site.regions";
 // many the site publishes (PROTOCOL.md §4, Stats).
 inline constexpr const char* kLayerKey = "session.layer";
 inline constexpr const char* kLayersKey = "session.layers";
+// ... and how many of the site's frames the layer spans per frame it carries
+// (1: every frame; 2: every other), so that a viewer does not count the
+// frames a reduced layer leaves out as lost.
+inline constexpr const char* kLayerStepKey = "session.layer_step";
 
 struct Control {
   ControlCommand command = ControlCommand::kSubscribe;

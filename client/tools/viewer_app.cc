@@ -640,7 +640,11 @@ class Viewer {
     // already corrected by its clock-offset estimate; add the time since.
     const double lat = f.latency_ms + (net::WallUs() - f.received_us) / 1000.0;
     stats_.latency_ms.push_back(lat);
-    if (last_index_ >= 0 && f.frame_index > last_index_) stats_.drops += f.frame_index - last_index_ - 1;
+    // A reduced quality layer carries every n-th frame only: those gaps are
+    // the layer's rate, not drops.
+    const int64_t step = client_ ? std::max(1, client_->stats().layer_step) : 1;
+    if (last_index_ >= 0 && f.frame_index > last_index_)
+      stats_.drops += std::max<int64_t>(0, f.frame_index - last_index_ - step);
     last_index_ = f.frame_index;
     ++frames_new_;
     // Network mode: the fps shown is new site frames displayed per second
@@ -1009,7 +1013,9 @@ class Viewer {
       j["frames_new"] = frames_new_;
       j["last_frame_index"] = last_index_;
       j["frames_received"] = cs.frames_received;
-      j["drops_definition"] = "frames of the site's sequence this viewer never displayed (gaps in frame indices)";
+      j["drops_definition"] =
+          "frames of the site's sequence this viewer never displayed (gaps in frame indices; on a reduced quality "
+          "layer, beyond the frames the layer leaves out)";
       j["frames_dropped_local"] = cs.frames_dropped_local;
       j["bitrate_mbps"] = net_elapsed_s_ > 0 ? cs.bytes_received * 8.0 / (net_elapsed_s_ * 1e6) : 0.0;
       j["bytes_received"] = cs.bytes_received;

@@ -42,7 +42,10 @@ SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
   layers_[1].video = options_.video;
   const int crf = options_.video.crf < 0 ? 24 : options_.video.crf;
   layers_[1].video.crf = std::min(51, crf + options_.reduced.crf_offset);
-  if (options_.reduced.enabled) server_->SetLayers(2);
+  if (options_.reduced.enabled) {
+    server_->SetLayers(2);
+    server_->SetLayerFrameStep(1, options_.reduced.frame_divisor);
+  }
 }
 
 Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,

@@ -210,6 +210,8 @@ TEST(FanoutLayersTest, EachFrameIsEncodedOncePerLayerAndTheReducedOnlyWhenSomeon
   EXPECT_EQ(pub.frames_encoded(1), 10) << "every other frame, once";
   ASSERT_TRUE(test::Eventually([&] { return viewers[0]->stats().layer == 1; }));
   EXPECT_EQ(viewers[0]->stats().num_layers, 2);
+  EXPECT_EQ(viewers[0]->stats().layer_step, 2) << "the reduced layer carries every other frame";
+  EXPECT_EQ(viewers[1]->stats().layer_step, 1);
   EXPECT_EQ(StatsOf(srv, "v0").layer, 1);
   for (size_t i = 1; i < viewers.size(); ++i) EXPECT_EQ(StatsOf(srv, ViewerName(i)).layer, 0);
   // The capped viewer decodes its frames (coarser, but whole) and the others keep the full rate.
