@@ -14,6 +14,8 @@ Status LayerPolicy::Check() const {
     return InvalidArgument(std::string("layers.") + key + " must be " + range + ", got " + std::to_string(v));
   };
   if (!(down_queue_s > 0 && down_queue_s <= 60)) return bad("down_queue_s", "in (0, 60] s", down_queue_s);
+  if (!(kernel_backlog_s > 0 && kernel_backlog_s <= 60))
+    return bad("kernel_backlog_s", "in (0, 60] s", kernel_backlog_s);
   if (!(throughput_window_s > 0 && throughput_window_s <= 60))
     return bad("throughput_window_s", "in (0, 60] s", throughput_window_s);
   if (!(busy_fraction > 0 && busy_fraction <= 1)) return bad("busy_fraction", "in (0, 1]", busy_fraction);
@@ -58,7 +60,12 @@ void LayerController::Decay(int64_t now_us) {
 
 void LayerController::OnEnqueue(int64_t now_us, size_t queue_depth, bool dropped) {
   if (dropped) drop_pending_ = true;
-  if (queue_depth >= 2) {
+  queue_depth_ = queue_depth;
+  NoteBacklog(now_us, queue_depth >= 2 || kernel_backlog_);
+}
+
+void LayerController::NoteBacklog(int64_t now_us, bool high) {
+  if (high) {
     if (queue_high_since_us_ < 0) queue_high_since_us_ = now_us;
     queue_high_last_us_ = now_us;
   } else {
@@ -66,8 +73,9 @@ void LayerController::OnEnqueue(int64_t now_us, size_t queue_depth, bool dropped
   }
 }
 
-void LayerController::OnWrite(int64_t now_us, size_t bytes, int64_t write_us) {
+void LayerController::OnWrite(int64_t now_us, size_t bytes, int64_t write_us, size_t unsent_bytes) {
   Decay(now_us);
+  unsent_bytes_ = unsent_bytes;
   sum_bytes_ += static_cast<double>(bytes);
   sum_busy_s_ += static_cast<double>(std::max<int64_t>(write_us, 1)) * kUs;
 }
@@ -87,6 +95,10 @@ void LayerController::SetTarget(int t, int64_t now_us, const char* why) {
 void LayerController::Update(int64_t now_us, std::span<const double> rates) {
   Decay(now_us);
   auto rate = [&](int layer) { return layer >= 0 && static_cast<size_t>(layer) < rates.size() ? rates[layer] : 0.0; };
+  // The kernel's unsent bytes as time at this layer's bitrate.
+  const double r = rate(layer_);
+  kernel_backlog_ = r > 0 && static_cast<double>(unsent_bytes_) / r > p_.kernel_backlog_s;
+  NoteBacklog(now_us, queue_depth_ >= 2 || kernel_backlog_);
   if (target_ < min_layer_) SetTarget(min_layer_, now_us, "quality");
   if (!p_.adaptive) {
     if (target_ != min_layer_) SetTarget(min_layer_, now_us, "quality");
@@ -107,7 +119,7 @@ void LayerController::Update(int64_t now_us, std::span<const double> rates) {
     } else if (probing && queue_high_since_us_ >= 0) {
       why = "probe failed";
     } else if (queue_high_since_us_ >= 0 && (now_us - queue_high_since_us_) * kUs >= p_.down_queue_s) {
-      why = "queue";
+      why = kernel_backlog_ && queue_depth_ < 2 ? "socket backlog" : "queue";
     } else if (busy >= p_.busy_fraction && rate(l) > 0 && throughput_bytes_per_s() < p_.down_throughput * rate(l)) {
       why = "throughput";
     }
@@ -141,6 +153,8 @@ bool LayerController::Take(int layer, bool independent, bool* switched) {
     ++switches_;
     // The old layer's queue state says nothing about the new one.
     queue_high_since_us_ = -1;
+    queue_depth_ = 0;
+    unsent_bytes_ = 0;
     if (switched != nullptr) *switched = true;
     return true;
   }

@@ -39,6 +39,10 @@ struct LayerPolicy {
   bool adaptive = true;
   // ≥ 2 frames waiting behind the one in flight for this long → down, s.
   double down_queue_s = 0.25;
+  // Bytes in the kernel's send buffer not yet sent count as a backlog too
+  // when they would take longer than this to send at the current layer's
+  // bitrate, s: a socket buffer hides a slow link from the frame queue.
+  double kernel_backlog_s = 0.15;
   // Throughput is judged over a decaying window of this length, s, and only
   // when the socket was busy (blocked on the viewer) for at least
   // `busy_fraction` of it: an idle socket says nothing about its limit.
@@ -80,7 +84,9 @@ class LayerController {
   void OnEnqueue(int64_t now_us, size_t queue_depth, bool dropped);
   // A finished write of `bytes` that took `write_us` (async_write start to
   // completion): how fast the viewer's socket takes data when it is busy.
-  void OnWrite(int64_t now_us, size_t bytes, int64_t write_us);
+  // `unsent_bytes`: what the kernel still holds for the viewer after it
+  // (SIOCOUTQ; 0 when unknown).
+  void OnWrite(int64_t now_us, size_t bytes, int64_t write_us, size_t unsent_bytes = 0);
 
   // Re-decides the target layer. `layer_bytes_per_s[i]`: layer i's recent
   // published bitrate (0 = unknown: up to an unknown layer needs only the
@@ -120,6 +126,10 @@ class LayerController {
   // Queue: since when ≥ 2 frames wait (-1: not now); last time it did.
   int64_t queue_high_since_us_ = -1, queue_high_last_us_ = -1;
   bool drop_pending_ = false;
+  size_t unsent_bytes_ = 0;  // the kernel's, after the last write
+  size_t queue_depth_ = 0;   // frames waiting, after the last enqueue
+  bool kernel_backlog_ = false;  // the unsent bytes exceed kernel_backlog_s (last Update)
+  void NoteBacklog(int64_t now_us, bool high);
   int64_t target_since_us_ = 0;   // when the target last changed
   int64_t last_up_us_ = -1;       // when the target last went up (a probe)
   double hold_s_ = 0;

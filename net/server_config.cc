@@ -120,13 +120,14 @@ StatusOr<ServerConfig> ParseServerConfig(const std::string& yaml_text, const std
     if (layers.IsDefined()) {
       if (!layers.IsMap()) return KeyError("layers", "must be a map (adaptive, up_hold_s, ...)");
       HOLO_RETURN_IF_ERROR(CheckYamlKeys(layers,
-                                         {"adaptive", "down_queue_s", "throughput_window_s", "busy_fraction",
+                                         {"adaptive", "down_queue_s", "kernel_backlog_s", "throughput_window_s", "busy_fraction",
                                           "down_throughput", "up_hold_s", "max_up_hold_s", "up_headroom", "stable_s",
                                           "probe_s"},
                                          "layers."));
       LayerPolicy& p = c.layers;
       HOLO_RETURN_IF_ERROR(GetYamlBool(layers, "adaptive", "", &p.adaptive).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "down_queue_s", &p.down_queue_s).WithContext("layers"));
+      HOLO_RETURN_IF_ERROR(GetNumber(layers, "kernel_backlog_s", &p.kernel_backlog_s).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "throughput_window_s", &p.throughput_window_s).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "busy_fraction", &p.busy_fraction).WithContext("layers"));
       HOLO_RETURN_IF_ERROR(GetNumber(layers, "down_throughput", &p.down_throughput).WithContext("layers"));

@@ -1,7 +1,9 @@
 #include "net/session_server.h"
 
 #include <fcntl.h>
+#include <linux/sockios.h>
 #include <pthread.h>
+#include <sys/ioctl.h>
 #include <time.h>
 
 #include <array>
@@ -828,6 +830,10 @@ class Session : public std::enable_shared_from_this<Session> {
 
   void OnWrite(std::error_code ec, size_t n) {
     bool refusing_done = false;
+    // What the kernel still holds for this viewer (a slow link fills the send buffer first).
+    int unsent_i = 0;
+    const size_t unsent =
+        !ec && ::ioctl(Lowest().native_handle(), SIOCOUTQ, &unsent_i) == 0 && unsent_i > 0 ? static_cast<size_t>(unsent_i) : 0;
     {
       std::lock_guard<std::mutex> l(mu_);
       writing_ = false;
@@ -837,7 +843,7 @@ class Session : public std::enable_shared_from_this<Session> {
         if (frame_done_in_write_) ++video_sent_;
         if (write_video_bytes_ > 0) {
           const int64_t now = SteadyUs();
-          layers_.OnWrite(now, n, now - write_start_us_);
+          layers_.OnWrite(now, n, now - write_start_us_, unsent);
         }
       }
       holding_.clear();

@@ -209,6 +209,27 @@ TEST(LayerControl, ABacklogRightAfterAProbeEndsItAtOnce) {
   EXPECT_EQ(d.target(), 0);
 }
 
+TEST(LayerControl, UnsentBytesInTheKernelCountAsABacklog) {
+  LayerController c = TwoLayers();
+  // 0.3 MB unsent at 1.2 MB/s: 250 ms of delay the frame queue does not show.
+  c.OnEnqueue(0, 0, false);
+  c.OnWrite(0, 40'000, 100, 300'000);
+  c.Update(0, kRates);
+  EXPECT_EQ(c.target(), 0) << "not at once";
+  c.OnWrite(200 * kMs, 40'000, 100, 300'000);
+  c.Update(260 * kMs, kRates);
+  EXPECT_EQ(c.target(), 1);
+  EXPECT_EQ(c.reason(), "socket backlog");
+  // 100 KB unsent (83 ms) is not a backlog.
+  LayerController d = TwoLayers();
+  for (int64_t t = 0; t < 2000 * kMs; t += 33 * kMs) {
+    d.OnEnqueue(t, 0, false);
+    d.OnWrite(t, 40'000, 100, 100'000);
+    d.Update(t, kRates);
+  }
+  EXPECT_EQ(d.target(), 0);
+}
+
 TEST(LayerControl, QualityCapKeepsTheViewerOnTheReducedLayer) {
   EXPECT_EQ(LayerController::MinLayerForQuality(10, 2), 0);
   EXPECT_EQ(LayerController::MinLayerForQuality(5, 2), 0);
