@@ -338,6 +338,21 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
   return holo::OkStatus();
 }
 
+// What every part starts from: the workload, its studio (the truth's
+// renders) and the content of --content.
+struct PartInput {
+  holo::Workload workload;
+  std::unique_ptr<holo::SyntheticStudio> studio;
+  std::vector<ViewerContent> contents;
+};
+holo::Status PreparePart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options, PartInput* in) {
+  HOLO_ASSIGN_OR_RETURN(in->workload, holo::GetWorkload(args.workload));
+  holo::StudioOptions so = in->workload.studio;
+  so.threads = 2;
+  HOLO_ASSIGN_OR_RETURN(in->studio, holo::SyntheticStudio::Create(in->workload.rig, so));
+  return MakeContents(args, options, in->workload, &in->contents);
+}
+
 int Fail(const holo::Status& s) {
   spdlog::error("client: {}", s.ToString());
   return 1;
@@ -362,18 +377,11 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
   const int frames = args.frames > 0 ? args.frames : 30;
   const int64_t studio_frame = options.frame;
 
-  auto workload = holo::GetWorkload(args.workload);
-  if (!workload.ok()) {
-    spdlog::error("client: {}", workload.status().ToString());
-    return 2;
-  }
-  holo::StudioOptions so = workload->studio;
-  so.threads = 2;
-  auto studio = holo::SyntheticStudio::Create(workload->rig, so);
-  if (!studio.ok()) return Fail(studio.status());
-
-  std::vector<ViewerContent> contents;
-  if (holo::Status s = MakeContents(args, options, *workload, &contents); !s.ok()) return Fail(s);
+  PartInput input;
+  if (holo::Status s = PreparePart(args, options, &input); !s.ok()) return Fail(s);
+  const holo::Workload* workload = &input.workload;
+  const std::unique_ptr<holo::SyntheticStudio>* studio = &input.studio;
+  std::vector<ViewerContent>& contents = input.contents;
 
   auto ctx = holo::render::CreateHeadlessContext();
   if (!ctx.ok()) return Fail(ctx.status());
@@ -558,17 +566,11 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
 // its frame rate). V1 video is not here: one frame says nothing about an
 // inter-frame codec (holoport-bench codecs measures it over a sequence).
 int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options) {
-  auto workload = holo::GetWorkload(args.workload);
-  if (!workload.ok()) {
-    spdlog::error("client: {}", workload.status().ToString());
-    return 2;
-  }
-  holo::StudioOptions so = workload->studio;
-  so.threads = 2;
-  auto studio = holo::SyntheticStudio::Create(workload->rig, so);
-  if (!studio.ok()) return Fail(studio.status());
-  std::vector<ViewerContent> contents;
-  if (holo::Status s = MakeContents(args, options, *workload, &contents); !s.ok()) return Fail(s);
+  PartInput input;
+  if (holo::Status s = PreparePart(args, options, &input); !s.ok()) return Fail(s);
+  const holo::Workload* workload = &input.workload;
+  const std::unique_ptr<holo::SyntheticStudio>* studio = &input.studio;
+  std::vector<ViewerContent>& contents = input.contents;
   // The mesh a viewer gets: the truth, or the fused stream-size mesh.
   ViewerContent& c = contents.back();
   if (c.raw_images.empty()) {  // truth: the pods' whole images are the reference
@@ -633,7 +635,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     std::vector<const holo::ImageGray8*> mp;
     for (size_t i = 0; i < images.size(); ++i) {
       ip.push_back(&images[i]);
-      mp.push_back(&masks[i]);
+      if (!masks[i].empty()) mp.push_back(&masks[i]);  // truth: whole images, no masks
     }
     if (holo::Status s = (*renderer)->SetPodImages(workload->rig, ip, mp); !s.ok()) return Fail(s);
     Quality qual;
@@ -646,6 +648,8 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
                                             {"baked", "true"},         {"resolution", "640x480"},
                                             {"views", "4"},            {"region", "truth"},
                                             {"frame", std::to_string(options.frame)}};
+    // Truth content has the pods' whole images (no masks): its bytes are not the live stream's.
+    q["pod_images"] = c.raw_masks.empty() || c.raw_masks[0].empty() ? "whole" : "masked";
     if (v.layer >= 0) {
       q["layer"] = v.layer == 0 ? "full" : "reduced";
       q["position_step_mm"] = fmt::format("{:g}", v.geometry.position_step_m * 1e3);
