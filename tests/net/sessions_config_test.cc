@@ -29,8 +29,21 @@ queue_priority_messages: 256
 fragment_bytes: 32768
 threads: 3
 tls: {enabled: true, cert: a.pem, key: a.key}
+layers: {adaptive: false, down_queue_s: 0.5, kernel_backlog_s: 0.2, throughput_window_s: 2, busy_fraction: 0.6,
+         down_throughput: 0.8, up_hold_s: 3, max_up_hold_s: 60, up_headroom: 1.5, stable_s: 30, probe_s: 0.5}
 )");
   ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_FALSE(c->layers.adaptive);
+  EXPECT_DOUBLE_EQ(c->layers.down_queue_s, 0.5);
+  EXPECT_DOUBLE_EQ(c->layers.kernel_backlog_s, 0.2);
+  EXPECT_DOUBLE_EQ(c->layers.throughput_window_s, 2);
+  EXPECT_DOUBLE_EQ(c->layers.busy_fraction, 0.6);
+  EXPECT_DOUBLE_EQ(c->layers.down_throughput, 0.8);
+  EXPECT_DOUBLE_EQ(c->layers.up_hold_s, 3);
+  EXPECT_DOUBLE_EQ(c->layers.max_up_hold_s, 60);
+  EXPECT_DOUBLE_EQ(c->layers.up_headroom, 1.5);
+  EXPECT_DOUBLE_EQ(c->layers.stable_s, 30);
+  EXPECT_DOUBLE_EQ(c->layers.probe_s, 0.5);
   EXPECT_EQ(c->name, "site-a");
   EXPECT_EQ(c->host, "0.0.0.0");
   EXPECT_EQ(c->port, 7000);
@@ -61,6 +74,10 @@ TEST(NetConfig, ServerConfigErrorsNameTheKey) {
   expect_error("publisher_token: p\nviewer_token: v\nlisten: 1.2.3.4:99999\n", "port");
   expect_error("publisher_token: p\nviewer_token: v\ntls: {enabled: true}\n", "tls");
   expect_error("publisher_token: p\nviewer_token: v\ntls: {enabled: true, crt: x}\n", "tls.crt: unknown key");
+  expect_error("publisher_token: p\nviewer_token: v\nlayers: {up_hedroom: 2}\n", "layers.up_hedroom: unknown key");
+  expect_error("publisher_token: p\nviewer_token: v\nlayers: {up_headroom: 0.5}\n", "layers.up_headroom");
+  expect_error("publisher_token: p\nviewer_token: v\nlayers: {up_hold_s: fast}\n", "up_hold_s: must be a number");
+  expect_error("publisher_token: p\nviewer_token: v\nlayers: 3\n", "layers");
   expect_error("publisher_token: [p\n", "not valid YAML");
   expect_error("- a\n- b\n", "map");
   expect_error("publisher_token: p\nviewer_token: v\n[a]: 1\n", "keys must be names");
