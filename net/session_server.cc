@@ -268,7 +268,7 @@ class Session : public std::enable_shared_from_this<Session> {
     {
       std::lock_guard<std::mutex> l(mu_);
       name = client_name_;
-      if (closing_ || state_ != State::kActive) return;
+      if (closing_) return;  // (state_ is the strand's: a frame queued before Active waits for it in StartWrite)
       const int64_t now = SteadyUs();
       old_target = layers_.target();
       if (f->layer == layers_.layer()) layers_.Update(now, rates);
