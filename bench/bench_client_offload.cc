@@ -42,6 +42,14 @@
 
 namespace {
 
+// One quality layer: the render host measured here takes every frame of the
+// full layer; the layer policy (docs/sessions.md) is not what this measures.
+holo::net::SitePublisherOptions FullLayerOnly() {
+  holo::net::SitePublisherOptions o;
+  o.reduced.enabled = false;
+  return o;
+}
+
 using namespace holo;
 
 struct ConfigResult {
@@ -125,7 +133,7 @@ int RunClientOffloadBench(const bench::BenchArgs& args, const OffloadArgs& o) {
   }
   std::atomic<bool> stop{false};
   std::thread publisher([&] {
-    net::SitePublisher pub(server->get(), {});
+    net::SitePublisher pub(server->get(), FullLayerOnly());
     for (int64_t idx = 0; !stop; ++idx) {
       net::PublishTimings t;
       (void)pub.Publish(idx, net::WallUs(), content, {}, &t);

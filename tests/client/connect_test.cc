@@ -44,6 +44,15 @@
 namespace holo {
 namespace {
 
+// One quality layer: what is checked here is every frame on the full layer,
+// not the layer policy (tests/net/fanout_layers_test.cc), which could move a
+// viewer slowed by a loaded machine to the reduced layer.
+net::SitePublisherOptions FullLayerOnly() {
+  net::SitePublisherOptions o;
+  o.reduced.enabled = false;
+  return o;
+}
+
 // Stated threshold: projective texturing of the received (G1 + C1 decoded)
 // S8-QVGA frame vs the studio's ground-truth render from the same pose, mean
 // over 4 novel views at 640x480, inside the true foreground. The same
@@ -115,7 +124,7 @@ TEST(ConnectTest, ReceivedSyntheticSiteRendersLikeGroundTruth) {
   auto server = net::Server::Start(Loopback());
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   (*server)->SetRig(c.rig);
-  net::SitePublisher pub(server->get(), {});
+  net::SitePublisher pub(server->get(), FullLayerOnly());
   net::ClientOptions o;
   o.port = (*server)->port();
   o.token = "view";
@@ -225,7 +234,7 @@ Mesh SmallMesh() { return test::NoisySphere(20, 30); }
 
 // Publishes `count` frames of a small mesh from index `first`, ~30 fps.
 void PublishSpheres(net::Server* server, int64_t first, int count) {
-  net::SitePublisher pub(server, {});
+  net::SitePublisher pub(server, FullLayerOnly());
   const Mesh m = SmallMesh();
   for (int i = 0; i < count; ++i) {
     net::PublishTimings t;
@@ -389,7 +398,7 @@ TEST(ConnectTest, RigChangeMidStreamIsReportedAndRenderingContinues) {
   auto server = test::StartServerRetrying(Loopback(port));
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   (*server)->SetRig(a.rig);
-  net::SitePublisher pub(server->get(), {});
+  net::SitePublisher pub(server->get(), FullLayerOnly());
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   for (int i = 0; i < 30; ++i) {
     ASSERT_TRUE(PublishStudio(pub, a, i).ok());

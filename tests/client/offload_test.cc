@@ -28,6 +28,15 @@
 namespace holo::offload {
 namespace {
 
+// One quality layer: what is checked here is every frame on the full layer,
+// not the layer policy (tests/net/fanout_layers_test.cc), which could move a
+// viewer slowed by a loaded machine to the reduced layer.
+net::SitePublisherOptions FullLayerOnly() {
+  net::SitePublisherOptions o;
+  o.reduced.enabled = false;
+  return o;
+}
+
 // test::Eventually with this file's longer default wait.
 bool Eventually(const std::function<bool()>& pred, double timeout_s = 10.0) {
   return test::Eventually(pred, timeout_s);
@@ -64,7 +73,7 @@ class Site {
     HOLO_CHECK_MSG(s.ok(), s.status().ToString());
     server_ = std::move(*s);
     thread_ = std::thread([this] {
-      net::SitePublisher pub(server_.get(), {});
+      net::SitePublisher pub(server_.get(), FullLayerOnly());
       for (int64_t i = 0; !stop_; ++i) {
         net::PublishTimings t;
         (void)pub.Publish(i, net::WallUs(), StudioMesh(), {}, &t);

@@ -64,6 +64,7 @@ double ForegroundPsnr(const ImageRgb8& a, const ImageRgb8& b, const ImageGray8& 
 net::SitePublisherOptions VideoOptions() {
   net::SitePublisherOptions o;
   o.color_options.codec = protocol::ColorCodec::kV1;
+  o.reduced.enabled = false;  // the full layer's key frames (layers: fanout_layers_test)
   return o;
 }
 

@@ -24,6 +24,15 @@
 namespace holo {
 namespace {
 
+// One quality layer: what is checked here is every frame on the full layer,
+// not the layer policy (tests/net/fanout_layers_test.cc), which could move a
+// viewer slowed by a loaded machine to the reduced layer.
+net::SitePublisherOptions FullLayerOnly() {
+  net::SitePublisherOptions o;
+  o.reduced.enabled = false;
+  return o;
+}
+
 struct SiteFrame {
   int64_t capture_us = 0;
   double chamfer_mm = 0;
@@ -46,7 +55,7 @@ TEST(LiveFused, ViewerDecodesEveryReconstructedFrameAsCloseToTruthAsTheSite) {
   auto server = test::StartServerRetrying(test::LoopbackConfig());
   ASSERT_TRUE(server.ok()) << server.status().ToString();
   (*server)->SetRig(workload->rig);
-  net::SitePublisher publisher(server->get(), {});
+  net::SitePublisher publisher(server->get(), FullLayerOnly());
 
   std::mutex mu;
   std::vector<net::ReceivedFrame> received;
