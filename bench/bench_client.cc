@@ -599,13 +599,9 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
   };
   std::vector<Variant> variants;
   variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0});
-  variants.push_back({"G1+C1", 0, publisher.geometry, publisher.color_options, 30.0});
-  {
-    Variant r{"G1+C1", 1, publisher.geometry, publisher.color_options, 30.0 / publisher.reduced.frame_divisor};
-    r.geometry.position_step_m =
-        static_cast<float>(publisher.geometry.position_step_m * publisher.reduced.position_step_scale);
-    r.color.jpeg_quality = publisher.reduced.jpeg_quality;
-    variants.push_back(r);
+  for (int layer = 0; layer < 2; ++layer) {
+    const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(publisher, layer);
+    variants.push_back({"G1+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / publisher.reduced.frame_divisor});
   }
   double reference_psnr = 0, reference_ssim = 0;
   for (const Variant& v : variants) {

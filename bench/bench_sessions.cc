@@ -87,12 +87,9 @@ Status AddFrame(const Mesh& mesh, const std::vector<const ImageRgb8*>& images,
                 const std::vector<const ImageGray8*>& masks, Content* c) {
   const net::SitePublisherOptions site;  // holoport-server's defaults
   for (int layer = 0; layer < 2; ++layer) {
-    protocol::GeometryEncodeOptions g = site.geometry;
-    protocol::ColorEncodeOptions co = site.color_options;
-    if (layer == 1) {
-      g.position_step_m = static_cast<float>(g.position_step_m * site.reduced.position_step_scale);
-      co.jpeg_quality = site.reduced.jpeg_quality;
-    }
+    const net::LayerEncodeOptions lo = net::EncodeOptionsOfLayer(site, layer);
+    protocol::GeometryEncodeOptions g = lo.geometry;
+    const protocol::ColorEncodeOptions& co = lo.color;
     g.colors = !mesh.colors.empty();
     std::vector<uint8_t> blob;
     HOLO_RETURN_IF_ERROR(protocol::EncodeGeometry(mesh, g, &blob));

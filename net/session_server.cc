@@ -263,11 +263,12 @@ class Session : public std::enable_shared_from_this<Session> {
   void EnqueueVideo(const VideoFramePtr& f, std::span<const double> rates) {
     if (!(subscription() & (kContentGeometry | kContentColor))) return;
     bool switched = false;
-    int old_target = 0, new_target = 0, now_layer = 0;
+    int old_target = 0, new_target = 0, now_layer = 0, num_layers = 1;
     std::string reason, name;
     {
       std::lock_guard<std::mutex> l(mu_);
       name = client_name_;
+      num_layers = layers_.num_layers();
       if (closing_) return;  // (state_ is the strand's: a frame queued before Active waits for it in StartWrite)
       const int64_t now = SteadyUs();
       old_target = layers_.target();
@@ -300,18 +301,26 @@ class Session : public std::enable_shared_from_this<Session> {
     if (new_target != old_target) {
       // The target layer must send an independent frame soon (V1: a key frame).
       srv_->n.layer_keyframe_requests[static_cast<size_t>(new_target)]++;
-      srv_->Log("session " + std::to_string(id_) + " '" + name + "': layer " + std::to_string(old_target) +
-                " -> " + std::to_string(new_target) + " (" + reason + ")");
+      LogLayerMove(name, old_target, new_target, reason);
     }
     if (switched) {
       srv_->n.layer_switches++;
-      protocol::Stats st;
-      st.values = {{std::string(protocol::kLayerKey), static_cast<double>(now_layer)},
-                   {std::string(protocol::kLayersKey), static_cast<double>(layers_num())},
-                   {std::string(protocol::kLayerStepKey),
-                    static_cast<double>(srv_->layer_step[static_cast<size_t>(now_layer)].load())}};
-      EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
+      EnqueuePriorityAlways(LayerStats(now_layer, num_layers));
     }
+  }
+
+  // Stats telling the viewer its layer (PROTOCOL.md §4 Stats).
+  WireMessagePtr LayerStats(int layer, int num_layers) const {
+    protocol::Stats st;
+    st.values = {{std::string(protocol::kLayerKey), static_cast<double>(layer)},
+                 {std::string(protocol::kLayersKey), static_cast<double>(num_layers)},
+                 {std::string(protocol::kLayerStepKey),
+                  static_cast<double>(srv_->layer_step[static_cast<size_t>(layer)].load())}};
+    return MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes);
+  }
+  void LogLayerMove(const std::string& name, int from, int to, const std::string& why) {
+    srv_->Log("session " + std::to_string(id_) + " '" + name + "': layer " + std::to_string(from) + " -> " +
+              std::to_string(to) + " (" + why + ")");
   }
 
   // The layer this viewer receives or is about to (the publisher encodes a
@@ -548,8 +557,7 @@ class Session : public std::enable_shared_from_this<Session> {
           }
           if (after != before) {  // the viewer's own cap moves it: the new layer's next frame must decode alone
             srv_->n.layer_keyframe_requests[static_cast<size_t>(after)]++;
-            srv_->Log("session " + std::to_string(id_) + " '" + client_name_ + "': layer " + std::to_string(before) +
-                      " -> " + std::to_string(after) + " (quality " + std::to_string(c.value) + ")");
+            LogLayerMove(client_name_, before, after, "quality " + std::to_string(c.value));
           }
         }
         break;
@@ -674,12 +682,7 @@ class Session : public std::enable_shared_from_this<Session> {
       if (announce) EnqueuePriorityAlways(announce);
       const int layers = srv_->num_layers.load();
       if (layers > 1) {
-        // The site has quality layers: the viewer starts on the full one.
-        protocol::Stats st;
-        st.values = {{std::string(protocol::kLayerKey), 0.0},
-                     {std::string(protocol::kLayersKey), double(layers)},
-                     {std::string(protocol::kLayerStepKey), double(srv_->layer_step[0].load())}};
-        EnqueuePriorityAlways(MakeWireMessage(Header{}, st, srv_->cfg.fragment_bytes));
+        EnqueuePriorityAlways(LayerStats(0, layers));  // the site has layers: the viewer starts on the full one
       }
     }
     state_ = State::kActive;
@@ -926,10 +929,6 @@ class Session : public std::enable_shared_from_this<Session> {
   LayerController layers_;
   int64_t write_start_us_ = 0;
   size_t write_video_bytes_ = 0;
-  int layers_num() const {
-    std::lock_guard<std::mutex> l(mu_);
-    return layers_.num_layers();
-  }
 
  public:
   void SetNumLayers(int n) {

@@ -26,22 +26,22 @@ Status ReducedLayerOptions::Check() const {
   return OkStatus();
 }
 
+LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int layer) {
+  LayerEncodeOptions o{options.geometry, options.color_options, options.video};
+  if (layer == 0) return o;
+  o.geometry.position_step_m = static_cast<float>(options.geometry.position_step_m * options.reduced.position_step_scale);
+  o.color.jpeg_quality = options.reduced.jpeg_quality;
+  const int crf = options.video.crf < 0 ? 24 : options.video.crf;
+  o.video.crf = std::min(51, crf + options.reduced.crf_offset);
+  return o;
+}
+
 SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
     : server_(server), options_(std::move(options)) {
   HOLO_CHECK(options_.reduced.Check().ok());
   server_->SetPublishedCodecs(options_.geometry.codec, options_.color_options.codec);
-  layers_[0].geometry = options_.geometry;
-  layers_[0].color = options_.color_options;
-  layers_[0].video = options_.video;
-  layers_[1] = LayerState{};
-  layers_[1].geometry = options_.geometry;
-  layers_[1].geometry.position_step_m =
-      static_cast<float>(options_.geometry.position_step_m * options_.reduced.position_step_scale);
-  layers_[1].color = options_.color_options;
-  layers_[1].color.jpeg_quality = options_.reduced.jpeg_quality;
-  layers_[1].video = options_.video;
-  const int crf = options_.video.crf < 0 ? 24 : options_.video.crf;
-  layers_[1].video.crf = std::min(51, crf + options_.reduced.crf_offset);
+  for (int layer = 0; layer < 2; ++layer)
+    static_cast<LayerEncodeOptions&>(layers_[layer]) = EncodeOptionsOfLayer(options_, layer);
   if (options_.reduced.enabled) {
     server_->SetLayers(2);
     server_->SetLayerFrameStep(1, options_.reduced.frame_divisor);

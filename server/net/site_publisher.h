@@ -49,6 +49,16 @@ struct SitePublisherOptions {
   ReducedLayerOptions reduced;
 };
 
+// The encoder options of one layer (0 full, 1 reduced) of a site publishing
+// with `options`: what SitePublisher encodes each layer with, for tools
+// that measure the layers without a server.
+struct LayerEncodeOptions {
+  protocol::GeometryEncodeOptions geometry;
+  protocol::ColorEncodeOptions color;
+  protocol::VideoEncodeOptions video;
+};
+LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int layer);
+
 struct PublishTimings {
   double geometry_ms = 0;   // geometry encode
   double color_ms = 0;      // colour encode, all pods
@@ -108,10 +118,7 @@ class SitePublisher {
 
  private:
   // One layer's encoders and its key frame bookkeeping.
-  struct LayerState {
-    protocol::GeometryEncodeOptions geometry;
-    protocol::ColorEncodeOptions color;
-    protocol::VideoEncodeOptions video;
+  struct LayerState : LayerEncodeOptions {
     // One colour encoder per pod: C1 reuses each pod's Huffman tables between frames.
     std::map<uint16_t, protocol::ColorEncoder> color_encoders;
     // V1: one video encoder per pod stream.
