@@ -27,7 +27,7 @@ THREE.ColorManagement.enabled = false;
 
 const params = new URLSearchParams(location.search);
 const state = {
-  status: 'starting', problem: '', framesShown: 0, frameIndex: -1, frozen: false,
+  status: 'starting', problem: '', framesShown: 0, frameIndex: -1, frozen: false, passEnds: [],
   latencyMs: null, bufferMs: 0, fps: 0, geometryMs: [], colorMs: [], triangles: 0,
   bytes: 0, parts: 0, errors: 0, bufferGrowths: 0, problems: [], audioChunks: 0, mode: '',
 };
@@ -178,19 +178,31 @@ function onMessages(messages, info) {
   availStartUs = info.availabilityStartUs;
   state.bytes += info.bytes;
   state.parts++;
-  if (info.discontinuity) person.reset();
   const first = messages.length ? messages[0].timeUs : 0;
-  if (!messages.length) return;
+  if (!messages.length) {
+    if (info.discontinuity) person.reset();
+    return;
+  }
   const broadcastNow = nowUnixUs() - availStartUs;
+  // A restart of the stream (discontinuity) takes effect when the playhead
+  // reaches it: the frames before it that are still waiting play first (the
+  // broadcast's time runs on across a restart). Only a jump in time — ahead
+  // of the playhead by more than a second, or back behind what is waiting —
+  // drops what is waiting and re-anchors.
+  const lastPendingUs = pending.length ? pending[pending.length - 1].timeUs : -Infinity;
+  const jump = first > broadcastNow - delayUs + 1e6 || first < lastPendingUs;
   // Join, a jump (catch-up, a skipped segment) or a restart: re-anchor the
   // playhead one part plus 250 ms behind the live edge. A join starts at a
   // segment's first part (its key frame), so the parts up to the edge come
   // due at once: their frames are shown in a burst and their voice, already
   // late, is skipped — the viewer starts at the live edge, not a segment ago.
-  if (delayUs === null || first > broadcastNow - delayUs + 1e6 || info.discontinuity) {
+  if (delayUs === null || jump) {
     const edge = Math.max(first, info.liveEdgeUs || first);
     delayUs = broadcastNow - edge + (info.targetPartUs || 250000) + 250000;
     pending.length = 0;
+    if (info.discontinuity) person.reset();
+  } else if (info.discontinuity) {
+    pending.push({ reset: true, timeUs: first });
   }
   // Parts arriving later than the playhead (a slow network or a busy
   // machine): the buffer grows by the lateness plus 100 ms, so that voice
@@ -280,6 +292,11 @@ function pump() {
   }
   while (pending.length && pending[0].timeUs <= nowUnixUs() - availStartUs - delayUs) {
     const m = pending.shift();
+    if (m.reset) {
+      state.passEnds.push(state.frameIndex);  // the last frame shown before the restart
+      person.reset();
+      continue;
+    }
     handle(m).catch((e) => {
       state.errors++;
       showStatus('warn', `A ${m.type === MSG.COLOR ? 'colour' : 'message'} frame could not be decoded (${e.message}); continuing.`);

@@ -120,6 +120,10 @@ try {
     check(s1.framesShown - s0.framesShown >= 10, `played 5 s: ${s1.framesShown - s0.framesShown} frames shown (frame ${s0.frameIndex} → ${s1.frameIndex}; buffer grown ${s1.bufferGrowths}×, now ${(s1.bufferMs / 1000).toFixed(2)} s)`);
     check(s1.mediaUs - s0.mediaUs >= 3e6, `broadcast time advanced ${((s1.mediaUs - s0.mediaUs) / 1e6).toFixed(2)} s in 5 s`);
     check(s1.problems.length === 0, `no problem shown while playing (${s1.problems.map((p) => p.text).join('; ') || 'none'})`);
+    // The recording loops (a discontinuity every pass): the frames before a
+    // restart play out, none is dropped when the restart arrives.
+    check(s1.passEnds.length >= 1 && s1.passEnds.every((f) => f === lastFrame),
+      `every pass plays to its last frame before the restart (${lastFrame}): last frames shown [${s1.passEnds.join(', ')}]`);
     check(s1.audioChunks >= 100, `voice: ${s1.audioChunks} AudioPose messages played`);
     const v = await page.evaluate(() => {
       const vo = window.holoport.voice, p = window.holoport.state.lastPose;
