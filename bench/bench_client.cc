@@ -37,8 +37,8 @@
 #include "common/pose.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/video_codec.h"
 #include "server/net/site_publisher.h"
-#include "server/fusion/mesh_cleanup.h"
 #include "server/pipeline/capture_site.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
@@ -58,7 +58,7 @@ struct ClientBenchOptions {
   std::string png_dir;                           // write the novel views as PNGs here
   std::string legacy = "0";                      // 1: RenderSettings::Legacy(), no mask-edge texturing
   int64_t frame = 40;                            // studio frame of the content
-  size_t reduce = 20000;                         // triangle budget of the reduced fused mesh
+  size_t reduce = 20000;                         // triangle budget of the site's stream mesh (fused)
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
@@ -69,6 +69,8 @@ struct ClientBenchOptions {
   float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
   double reduced_step_scale = -1;                // stream part: the reduced layer's (-1: SitePublisher's default)
   int reduced_jpeg_quality = -1;                 // stream part: the reduced layer's (-1: SitePublisher's default)
+  int video_frames = 30;                         // stream part, fused: frames of V1 video before the measured one (0: no V1)
+  std::string video_crfs = "24,30";              // stream part: the full layer's V1 CRFs to measure
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -84,7 +86,7 @@ holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float ra
 // colours, and the pods' colour images with their masks.
 struct ViewerContent {
   std::string content;  // "truth" | "fused"
-  std::string mesh_name;  // "truth", "fused_full", "fused_reduced"
+  std::string mesh_name;  // "truth", "fused_full", "fused_stream"
   holo::Mesh mesh;
   // Fused: p10, p50, p90 of the vertices' signed distance to the true
   // surface (mm, positive outside; within 5 cm of it). Empty for the truth.
@@ -95,6 +97,11 @@ struct ViewerContent {
   // colour codec (the reference of the stream part).
   std::vector<holo::ImageRgb8> raw_images;
   std::vector<holo::ImageGray8> raw_masks;
+  // Fused, stream part: the same for the frames before it, oldest first
+  // (sequence[k][pod]; the last is the measured frame), for the V1 video
+  // codec, which needs the frames a live encoder would have seen.
+  std::vector<std::vector<holo::ImageRgb8>> sequence_images;
+  std::vector<std::vector<holo::ImageGray8>> sequence_masks;
   std::vector<const holo::ImageRgb8*> ImagePtrs() const {
     std::vector<const holo::ImageRgb8*> v;
     for (const auto& i : images) v.push_back(&i);
@@ -128,14 +135,15 @@ holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStu
 
 // The live fused stream: the real capture site (segmentation with a learned
 // background, TSDF fusion, marching cubes + clean-up, texturer) run
-// in-process on the studio's frames 0..`frame`; the frame's mesh and its
-// pods' colour images through the C1 colour codec with the site's masks,
-// exactly as a viewer decodes them (background pixels 0). Also, in `reduced`,
-// the mesh decimated to `reduced_triangles` (quadric decimation of
-// CleanupMesh) and re-textured by the site's texturer: the stream mesh size.
+// in-process on the studio's frames 0..`frame`; the frame's full-resolution
+// mesh and its pods' colour images through the C1 colour codec with the
+// site's masks, exactly as a viewer decodes them (background pixels 0).
+// Also, in `reduced`, the site's stream mesh of that frame (StreamMesher,
+// budget `reduced_triangles`: what holoport-server --listen publishes),
+// both re-textured by the site's texturer.
 holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles,
-                              const holo::TextureOptions& texture_options, float behind_band, ViewerContent* full,
-                              ViewerContent* reduced) {
+                              const holo::TextureOptions& texture_options, float behind_band, int sequence_frames,
+                              ViewerContent* full, ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
   HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
   so.empty_room = true;
@@ -146,12 +154,27 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   if (behind_band > 0) o.tsdf.behind_band = behind_band;
   o.pipeline.serial = true;
   o.pipeline.max_frames = frame + 1;
+  // What holoport-server --listen publishes: the compact stream mesh; the
+  // full-resolution mesh beside it.
+  o.stream_mesh = true;
+  o.stream.max_triangles = reduced_triangles;
+  o.full_mesh = true;
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
   holo::RgbdFrameSet kept;
+  holo::Mesh stream_mesh;
   bool got = false;
   auto stats = site->Run([&](const holo::FrameWork& w) {
+    if (w.frames.frame_index > frame - sequence_frames && w.frames.frame_index <= frame) {
+      full->sequence_images.emplace_back();
+      full->sequence_masks.emplace_back();
+      for (const auto& f : w.frames.frames) {
+        full->sequence_images.back().push_back(f.color);
+        full->sequence_masks.back().push_back(f.mask);
+      }
+    }
     if (w.frames.frame_index == frame) {
-      full->mesh = w.mesh;
+      full->mesh = w.full_mesh;
+      stream_mesh = w.mesh;
       kept = w.frames;
       got = true;
     }
@@ -172,12 +195,16 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
     full->images.push_back(std::move(img));
     full->masks.push_back(std::move(mask));
   }
+  // The sequence stays with the stream-size mesh only (the stream part's).
+  std::vector<std::vector<holo::ImageRgb8>> seq_images = std::move(full->sequence_images);
+  std::vector<std::vector<holo::ImageGray8>> seq_masks = std::move(full->sequence_masks);
+  full->sequence_images.clear();
+  full->sequence_masks.clear();
   *reduced = *full;
-  reduced->mesh_name = "fused_reduced";
-  holo::MeshCleanupOptions co;
-  co.min_component_triangles = 0;
-  co.target_triangles = reduced_triangles;
-  HOLO_RETURN_IF_ERROR(holo::CleanupMesh(co, &reduced->mesh));
+  reduced->sequence_images = std::move(seq_images);
+  reduced->sequence_masks = std::move(seq_masks);
+  reduced->mesh_name = "fused_stream";
+  reduced->mesh = std::move(stream_mesh);
   // Both meshes coloured by the texturer with `texture_options` (the site's
   // defaults unless a before/after comparison asks otherwise).
   holo::TextureOptions to = texture_options;
@@ -332,8 +359,10 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
   holo::Stopwatch sw;
   holo::TextureOptions to;
   if (options.legacy == "1") to.mask_edge_px = 0;
+  const int sequence_frames =
+      options.parts.find("stream") != std::string::npos || options.parts.empty() ? options.video_frames : 0;
   HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, to, options.behind_band,
-                                        &(*contents)[0], &(*contents)[1]));
+                                        sequence_frames, &(*contents)[0], &(*contents)[1]));
   if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
   return holo::OkStatus();
 }
@@ -563,8 +592,11 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
 // (baked) from the novel views, against the same render from the
 // uncompressed mesh and images: `viewer_psnr_loss_db` per `codec` and
 // `layer`, with the layer's `stream_mbps` at 30 fps (one frame's bytes ×
-// its frame rate). V1 video is not here: one frame says nothing about an
-// inter-frame codec (holoport-bench codecs measures it over a sequence).
+// its frame rate). V1 video (fused content) codes the `video_frames`
+// frames up to the measured one, as a live encoder sees them (the reduced
+// layer every frame_divisor-th), and the measured frame's decoded images
+// are rendered; its bytes per frame are those of one keyframe interval:
+// (keyframe + (interval − 1) × mean delta frame) / interval.
 int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOptions& options) {
   PartInput input;
   if (holo::Status s = PreparePart(args, options, &input); !s.ok()) return Fail(s);
@@ -596,19 +628,45 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     holo::protocol::GeometryEncodeOptions geometry;
     holo::protocol::ColorEncodeOptions color;
     double fps;
+    bool video = false;  // V1 instead of `color`
+    holo::protocol::VideoEncodeOptions video_options;
   };
   std::vector<Variant> variants;
-  variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0});
+  variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0, false, publisher.video});
+  const int divisor = publisher.reduced.frame_divisor;
   for (int layer = 0; layer < 2; ++layer) {
     const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(publisher, layer);
-    variants.push_back({"G1+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / publisher.reduced.frame_divisor});
+    variants.push_back({"G1+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, false, lo.video});
+  }
+  const int sequence = static_cast<int>(c.sequence_images.size());
+  if (sequence > 0) {
+    std::stringstream ss(options.video_crfs);
+    std::string item;
+    while (std::getline(ss, item, ',')) {
+      holo::net::SitePublisherOptions vp = publisher;
+      vp.color_options.codec = holo::protocol::ColorCodec::kV1;
+      try {
+        vp.video.crf = std::stoi(item);
+      } catch (const std::exception&) {
+        spdlog::error("client: --video-crfs wants numbers 0..51, got '{}'", item);
+        return 2;
+      }
+      if (holo::Status s = vp.video.Check(); !s.ok()) return Fail(s);
+      for (int layer = 0; layer < 2; ++layer) {
+        const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(vp, layer);
+        Variant v{"G1+V1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, true, lo.video};
+        variants.push_back(v);
+      }
+    }
+  } else if (c.content == "fused" && options.video_frames > 0) {
+    spdlog::warn("client: no frame sequence for V1 (stream part)");
   }
   double reference_psnr = 0, reference_ssim = 0;
   for (const Variant& v : variants) {
     holo::Mesh mesh = c.mesh;
     std::vector<holo::ImageRgb8> images = c.raw_images;
     std::vector<holo::ImageGray8> masks = c.raw_masks;
-    size_t geometry_bytes = 0, color_bytes = 0;
+    size_t geometry_bytes = 0, color_bytes = 0, connectivity_bytes = 0;
     if (v.layer >= 0) {
       std::vector<uint8_t> blob;
       holo::protocol::GeometryEncodeOptions g = v.geometry;
@@ -616,7 +674,14 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       if (holo::Status s = holo::protocol::EncodeGeometry(c.mesh, g, &blob); !s.ok()) return Fail(s);
       geometry_bytes = blob.size();
       if (holo::Status s = holo::protocol::DecodeGeometry(blob, &mesh); !s.ok()) return Fail(s);
-      for (size_t i = 0; i < images.size(); ++i) {
+      // G1 (PROTOCOL.md §7): 12-byte prefix, origin, step, chroma shift,
+      // then the connectivity stream's blob32 (read after the decode checked the blob).
+      constexpr size_t kConnectivityAt = 12 + 4 * 4 + 1;
+      if (blob[0] == 2 && blob.size() >= kConnectivityAt + 4)
+        connectivity_bytes = static_cast<size_t>(blob[kConnectivityAt]) | static_cast<size_t>(blob[kConnectivityAt + 1]) << 8 |
+                             static_cast<size_t>(blob[kConnectivityAt + 2]) << 16 |
+                             static_cast<size_t>(blob[kConnectivityAt + 3]) << 24;
+      for (size_t i = 0; i < images.size() && !v.video; ++i) {
         blob.clear();
         if (holo::Status s = holo::protocol::EncodeColor(c.raw_images[i], c.raw_masks[i], v.color, &blob); !s.ok())
           return Fail(s);
@@ -624,6 +689,35 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         holo::ImageGray8 mask;
         if (holo::Status s = holo::protocol::DecodeColor(blob, &images[i], &mask); !s.ok()) return Fail(s);
         if (!masks[i].empty()) masks[i] = std::move(mask);
+      }
+      if (v.video) {
+        // Each pod's stream over the sequence, ending at the measured frame.
+        const int step = v.layer == 0 ? 1 : divisor;
+        const int first = (sequence - 1) % step;
+        double key_bytes = 0, delta_bytes = 0;
+        int deltas = 0;
+        for (size_t i = 0; i < images.size(); ++i) {
+          auto enc = holo::protocol::VideoEncoder::Create(v.video_options);
+          if (!enc.ok()) return Fail(enc.status());
+          holo::protocol::VideoDecoder dec;
+          for (int k = first; k < sequence; k += step) {
+            blob.clear();
+            if (holo::Status s = (*enc)->Encode(c.sequence_images[k][i], c.sequence_masks[k][i], &blob); !s.ok())
+              return Fail(s);
+            if (k == first) {
+              key_bytes += static_cast<double>(blob.size());
+            } else {
+              delta_bytes += static_cast<double>(blob.size());
+              if (i == 0) ++deltas;  // frames, not pod frames
+            }
+            if (holo::Status s = dec.Decode(blob); !s.ok()) return Fail(s);
+          }
+          images[i] = dec.image();
+          masks[i] = dec.mask();
+        }
+        const double interval = v.video_options.keyframe_interval;
+        const double mean_delta = deltas > 0 ? delta_bytes / deltas : key_bytes;  // all pods' bytes per frame
+        color_bytes = static_cast<size_t>(std::lround((key_bytes + (interval - 1) * mean_delta) / interval));
       }
     }
     if (holo::Status s = (*renderer)->SetRemoteMesh(mesh); !s.ok()) return Fail(s);
@@ -649,7 +743,15 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     if (v.layer >= 0) {
       q["layer"] = v.layer == 0 ? "full" : "reduced";
       q["position_step_mm"] = fmt::format("{:g}", v.geometry.position_step_m * 1e3);
-      q["jpeg_quality"] = std::to_string(v.color.jpeg_quality);
+      if (v.video) {
+        q["video_crf"] = std::to_string(v.video_options.crf);
+        q["video_library"] = holo::protocol::VideoLibraryName(v.video_options.library);
+        q["chroma"] = v.video_options.chroma_444 ? "444" : "420";
+        q["video_frames"] = std::to_string(sequence);
+        q["keyframe_interval"] = std::to_string(v.video_options.keyframe_interval);
+      } else {
+        q["jpeg_quality"] = std::to_string(v.color.jpeg_quality);
+      }
       q["fps"] = fmt::format("{:g}", v.fps);
     }
     EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr, "dB", q);
@@ -662,6 +764,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     EmitFigure("client", args.workload, "viewer_psnr_loss_db", reference_psnr - qual.psnr, "dB", q);
     EmitFigure("client", args.workload, "viewer_ssim_loss", reference_ssim - qual.ssim, "", q);
     EmitFigure("client", args.workload, "geometry_bytes", static_cast<double>(geometry_bytes), "B", q);
+    EmitFigure("client", args.workload, "geometry_connectivity_bytes", static_cast<double>(connectivity_bytes), "B", q);
     EmitFigure("client", args.workload, "color_bytes", static_cast<double>(color_bytes), "B", q);
     EmitFigure("client", args.workload, "stream_mbps",
                static_cast<double>(geometry_bytes + color_bytes) * 8.0 * v.fps / 1e6, "Mbit/s", q);
@@ -714,7 +817,7 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--frame", o->frame, "studio frame of the content")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
-  app.add_option("--reduce", o->reduce, "triangle budget of the reduced fused mesh")->capture_default_str();
+  app.add_option("--reduce", o->reduce, "fused: triangle budget of the site's stream mesh (StreamMeshOptions)")->capture_default_str();
   app.add_option("--cull", o->cull, "0: no back-face culling")->check(CLI::IsMember({"0", "1"}))->capture_default_str();
   app.add_option("--prepass", o->prepass, "1 / 0: depth pre-pass on / off (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
@@ -743,6 +846,12 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--reduced-jpeg-quality", o->reduced_jpeg_quality,
                  "stream part: the reduced layer's C1 quality (default: holoport-server's)")
       ->check(CLI::Range(1, 100));
+  app.add_option("--video-frames", o->video_frames,
+                 "stream part, fused: frames of V1 video coded up to the measured frame (0: no V1)")
+      ->check(CLI::Range(0, 300))
+      ->capture_default_str();
+  app.add_option("--video-crfs", o->video_crfs, "stream part: the full layer's V1 CRFs to measure, comma-separated")
+      ->capture_default_str();
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 
