@@ -20,8 +20,9 @@
 #    (the spatialized stereo audio each participant hears); then a summary:
 #    fps, latency capture->display, bitrate, drops, audio delay.
 # Options: --out DIR, --seconds N (20), --headless, --size WxH (960x540),
-#   --color vertex|projective (default vertex: no pod images are sent; projective
-#   texturing from the 8 VGA pod images runs at ~1 fps on llvmpipe here),
+#   --color projective|vertex (default projective: the viewer colours the mesh
+#   from the pods' images, baked once per mesh; vertex: the sites texture the
+#   mesh per vertex and send the colours in it, --mesh-colors),
 #   --truth (stream ground truth, not the reconstruction), --pace A,B (sites' fps),
 #   --no-setup (skip scripts/setup.sh and scripts/build.sh),
 #   --capture-only (the previous demo instead: dataset + reconstruction of
@@ -37,7 +38,7 @@ CAPTURE_ONLY=0
 WORKLOAD=S8-QVGA
 FRAMES=30
 OUT_SET=0
-COLOR=vertex
+COLOR=projective
 TRUTH=0
 PACE=10,2
 while (($#)); do
@@ -140,6 +141,13 @@ remote: {name: alice-room, address: 127.0.0.1:$PORT_A, viewer_token: alice-view}
 room:   {yaw_deg: 180, translation_m: [2.5, 0, 0]}
 EOF
 
+case "$COLOR" in
+  projective) SITE_COLOR=() ;;
+  # The live sites send no vertex colours unless asked (the viewer colours
+  # from the pods' images): a vertex-colour viewer would show a grey person.
+  vertex) SITE_COLOR=(--mesh-colors) ;;
+  *) echo "demo.sh: --color must be projective or vertex, got '$COLOR'" >&2; exit 2 ;;
+esac
 if ((TRUTH)); then
   CONTENT=truth
   SITE_A=(--truth-mesh --truth-loop 30 --pace 30)
@@ -152,11 +160,11 @@ else
   SITE_B=(--prerender 30 --pace "$PACE_B")
 fi
 echo "demo: starting Alice's site (S8-QVGA) on :$PORT_A and Bob's site (S8-VGA) on :$PORT_B, streaming $CONTENT content"
-$BIN/holoport-server --source synthetic -w S8-QVGA "${SITE_A[@]}" -n -1 -q \
+$BIN/holoport-server --source synthetic -w S8-QVGA "${SITE_A[@]}" "${SITE_COLOR[@]}" -n -1 -q \
   --listen "127.0.0.1:$PORT_A" --publisher-token alice-pub --viewer-token alice-view \
   --stats "$OUT/logs/alice_site.jsonl" > "$OUT/logs/alice_site.log" 2>&1 &
 PIDS+=($!)
-$BIN/holoport-server --source synthetic -w S8-VGA "${SITE_B[@]}" -n -1 -q \
+$BIN/holoport-server --source synthetic -w S8-VGA "${SITE_B[@]}" "${SITE_COLOR[@]}" -n -1 -q \
   --listen "127.0.0.1:$PORT_B" --publisher-token bob-pub --viewer-token bob-view \
   --stats "$OUT/logs/bob_site.jsonl" > "$OUT/logs/bob_site.log" 2>&1 &
 PIDS+=($!)
