@@ -408,6 +408,12 @@ class Viewer {
       HOLO_RETURN_IF_ERROR(renderer_->SetLocalMesh(local_frame_.mesh));
     }
     Stopwatch sw;
+    if (mode_ == ColorMode::kVertexColor && frame.mesh.colors.empty() && !frame.mesh.empty() && !warned_no_colors_) {
+      warned_no_colors_ = true;
+      spdlog::warn("holoport-client: {} sends no vertex colours (the site colours nothing unless run with "
+                   "--mesh-colors): the person is shown uncoloured; --color projective colours it from the pods' images",
+                   SourceName());
+    }
     HOLO_RETURN_IF_ERROR(renderer_->SetRemoteMesh(frame.mesh));
     std::vector<const ImageRgb8*> images;
     for (const auto& im : frame.pod_images) images.push_back(&im);
@@ -1179,6 +1185,7 @@ class Viewer {
   int64_t last_png_us_ = 0;
   bool showing_stale_ = false;
   bool frame_has_images_ = true;
+  bool warned_no_colors_ = false;
   bool image_error_reported_ = false;
   std::map<uint16_t, net::DecodedImage> last_images_;  // per pod: the last picture received
   std::vector<ImageRgb8> sheet_tiles_;
