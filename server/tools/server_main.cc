@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
   bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
-  int prerender = 0, stream_step = 2, max_in_flight = 3;
+  int prerender = 0, stream_step = 2, max_in_flight = 2;
   bool keep_late = false;
   size_t stream_triangles = 20000;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
