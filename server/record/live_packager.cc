@@ -274,6 +274,15 @@ Status LivePackager::Tick(int64_t now_unix_us) {
   return PublishPart(now_unix_us);
 }
 
+bool LivePackager::WantsKeyFrame(int64_t now_unix_us) {
+  if (last_keyframe_request_ != INT64_MIN && now_unix_us - last_keyframe_request_ < options_.part_us) return false;
+  const bool due = !open_ || now_unix_us - availability_start_ - window_.back().start_us >= options_.segment_us;
+  if (!due) return false;
+  last_keyframe_request_ = now_unix_us;
+  stats_.keyframe_requests += 1;
+  return true;
+}
+
 Status LivePackager::PublishPart(int64_t now_unix_us) {
   if (!open_ || part_messages_ == 0) return OkStatus();
   LiveSegmentInfo& seg = window_.back();

@@ -80,6 +80,7 @@ struct LivePackagerStats {
   uint64_t parts = 0;
   uint64_t segments = 0;        // segments closed
   uint64_t pruned_segments = 0; // segments whose files were deleted
+  uint64_t keyframe_requests = 0;   // times WantsKeyFrame said yes
 };
 
 // Segment and part names: seg_00042.hrec, seg_00042.p3.
@@ -112,6 +113,14 @@ class LivePackager {
   Status Discontinuity(int64_t now_unix_us);
   // Closes the open segment and writes live.json with ended = true.
   Status Finish(int64_t now_unix_us);
+  // True when the site should be asked for a key frame now (Control
+  // kRequestKeyFrame): the open segment has reached its target length, or
+  // no segment is open (a join or a restart waits for one). With
+  // inter-frame colour (V1) a site sends a whole-frame key frame only every
+  // keyframe interval unless asked, so a packager that does not ask gets
+  // segments of up to segment + interval. At most once per part length;
+  // counted in stats().keyframe_requests.
+  bool WantsKeyFrame(int64_t now_unix_us);
 
   int64_t availability_start_unix_us() const { return availability_start_; }
   const std::deque<LiveSegmentInfo>& window() const { return window_; }
@@ -141,6 +150,7 @@ class LivePackager {
   uint64_t part_messages_ = 0;
   int64_t part_start_ = 0, part_end_ = 0;
   std::vector<uint8_t> rig_;               // the Rig in effect (whole frame)
+  int64_t last_keyframe_request_ = INT64_MIN;
   LivePackagerStats stats_;
 };
 

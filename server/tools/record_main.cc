@@ -326,16 +326,20 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     auto options = RecorderClientOptions(connect, token, "holoport-record --live-dir", tls, ca_file, connect_timeout_s);
     if (!options.ok()) return Fail(options.status());
     holo::net::ClientOptions co = *options;
-    // Segments must start with colour every player can decode alone: the
-    // intra-only codecs. A site publishing V1 video refuses the packager
-    // with "no common codec" (V1 packaging would need colour key frames at
-    // every segment start).
-    co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0};
+    // Segments start at a whole-frame key frame (MeshFrame KEY_FRAME: the
+    // geometry and every pod's colour decode alone). Intra-only colour
+    // (C0/C1) makes every frame one; with V1 video the packager asks the
+    // site for one when a segment is due (LivePackager::WantsKeyFrame).
+    co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0,
+                             holo::protocol::ColorCodec::kV1};
     co.subscribe = holo::net::kSubscribeAll;  // live segments carry no Regions (docs/regions.md)
     holo::Status check = co.Check();
     if (!check.ok()) return Fail(check);
     holo::net::ClientCallbacks cb;
     cb.on_raw = [&](const holo::net::RawMessage& m) {
+      // The connection's own clock pings are not part of the broadcast.
+      if (m.header.type == holo::protocol::MessageType::kPong || m.header.type == holo::protocol::MessageType::kPing)
+        return;
       std::lock_guard<std::mutex> l(mu);
       add(m.header, m.payload, m.received_us);
     };
@@ -393,6 +397,11 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     std::lock_guard<std::mutex> l(mu);
     holo::Status s = (*packager)->Tick(wall_us());
     if (!s.ok() && failed.ok()) failed = s;
+    if (client && client->state() == holo::net::ClientState::kConnected && (*packager)->WantsKeyFrame(wall_us())) {
+      holo::protocol::Control c;
+      c.command = holo::protocol::ControlCommand::kRequestKeyFrame;
+      client->SendControl(c);
+    }
     if (!failed.ok()) break;
     if (client && client->state() == holo::net::ClientState::kRefused) {
       refused = true;
@@ -408,9 +417,9 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
   if (!quiet)
     spdlog::info(
         "holoport-record: {} messages in {} parts, {} segments closed ({} pruned), {} dropped "
-        "before a key frame, {} rejected; next segment {}",
+        "before a key frame, {} rejected, {} key frames asked for; next segment {}",
         st.messages, st.parts, st.segments, st.pruned_segments, st.dropped_before_key, st.rejected,
-        (*packager)->next_segment());
+        st.keyframe_requests, (*packager)->next_segment());
   if (refused) {
     spdlog::error("holoport-record: the site refused the packager: {}", client->status().message());
     return 1;

@@ -265,6 +265,66 @@ TEST(LivePackager, OldSegmentsLeaveTheListThenTheDisk) {
   CheckSegments(dir);
 }
 
+// A site with inter-frame colour (V1): a whole-frame key frame only every
+// `interval` frames, or on the frame after a request (Control
+// kRequestKeyFrame). Returns the segments' start times.
+std::vector<int64_t> PackageInterFrameSite(const std::string& dir, bool ask, int interval, uint64_t* requests) {
+  auto msgs = test::MakeTestStream(300);  // 10 s at 30 fps
+  auto p = LivePackager::Open(Options(dir), kBase);
+  HOLO_CHECK_MSG(p.ok(), p.status().ToString());
+  bool requested = false;
+  int frame = 0;
+  int64_t tick = kBase;
+  for (auto& m : msgs) {
+    while (tick + 10000 <= kBase + m.time_us) {
+      tick += 10000;
+      HOLO_CHECK((*p)->Tick(tick).ok());
+      if ((*p)->WantsKeyFrame(tick) && ask) requested = true;
+    }
+    if (m.type == protocol::MessageType::kMeshFrame) {
+      auto h = protocol::DecodeHeader(m.frame.data(), m.frame.size());
+      HOLO_CHECK(h.ok());
+      const bool key = frame % interval == 0 || requested;
+      requested = requested && !key;
+      h->flags = key ? protocol::kFlagKeyFrame : 0;
+      protocol::EncodeHeader(*h, m.frame.data());
+      ++frame;
+    }
+    HOLO_CHECK((*p)->AddMessage(m.frame, kBase + m.time_us).ok());
+  }
+  HOLO_CHECK((*p)->Finish(kBase + msgs.back().time_us + 1000).ok());
+  *requests = (*p)->stats().keyframe_requests;
+  std::vector<int64_t> starts;
+  const auto manifest = Manifest(dir);
+  for (const auto& seg : manifest["segments"]) starts.push_back(seg["start_us"].get<int64_t>());
+  return starts;
+}
+
+TEST(LivePackager, AsksAnInterFrameSiteForKeyFramesSoSegmentsKeepTheirLength) {
+  // Without asking, segments can only cut at the site's own key frames
+  // (every 2 s here): twice the 1 s target.
+  uint64_t requests = 0;
+  const std::string quiet = test::MakeTempDir("live_v1_quiet");
+  const auto plain = PackageInterFrameSite(quiet, /*ask=*/false, 60, &requests);
+  ASSERT_EQ(plain.size(), 5u);
+  for (size_t i = 1; i < plain.size(); ++i) EXPECT_EQ(plain[i] - plain[i - 1], 2000000);
+  CheckSegments(quiet);
+  // Asking when a segment is due: every segment within two frames of its
+  // target, each starting at a key frame.
+  const std::string asked = test::MakeTempDir("live_v1_asked");
+  const auto starts = PackageInterFrameSite(asked, /*ask=*/true, 60, &requests);
+  ASSERT_GE(starts.size(), 9u);
+  for (size_t i = 1; i < starts.size(); ++i) {
+    EXPECT_GE(starts[i] - starts[i - 1], 1000000) << "segment " << i;
+    EXPECT_LE(starts[i] - starts[i - 1], 1000000 + 2 * 33334) << "segment " << i;
+  }
+  CheckSegments(asked);
+  // One request per segment boundary, not one per tick (at most one per
+  // part length while a key frame is awaited).
+  EXPECT_GE(requests, starts.size() - 1);
+  EXPECT_LE(requests, 2 * starts.size() + 2);
+}
+
 TEST(LivePackager, RefusesBadOptionsAndABadManifest) {
   const std::string dir = test::MakeTempDir("live_bad");
   LivePackagerOptions o = Options(dir);

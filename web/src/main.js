@@ -258,6 +258,15 @@ async function handle(m) {
       if (cf0.frameIndex !== state.frozenFrame) return;
     }
     const cf = parseColorFrame(m.payload);
+    // V1 video colour (codec 4) is not decoded here yet: say so once and
+    // keep showing the shape, instead of an error for every frame.
+    if (cf.images.length && cf.images[0].data.length && cf.images[0].data[0] === 4) {
+      if (!state.videoColorNoted) {
+        state.videoColorNoted = true;
+        showStatus('warn', 'This broadcast sends its colour as V1 video, which this page cannot decode yet: the person is shown uncoloured. The native viewer (holoport-client --http) shows it in colour.');
+      }
+      return;
+    }
     // Falling behind: drop colour, never geometry (the still's colour is never dropped).
     if (!rig || (colorBusy.n > 1 && cf.frameIndex !== state.frozenFrame)) return;
     colorBusy.n++;
