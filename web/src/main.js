@@ -302,8 +302,10 @@ function pump() {
   while (pending.length && pending[0].timeUs <= nowUnixUs() - availStartUs - delayUs) {
     const m = pending.shift();
     if (m.reset) {
-      state.passEnds.push(state.frameIndex);  // the last frame shown before the restart
-      person.reset();
+      if (!state.frozen) {  // a still keeps what it shows
+        state.passEnds.push(state.frameIndex);  // the last frame shown before the restart
+        person.reset();
+      }
       continue;
     }
     handle(m).catch((e) => {

@@ -121,9 +121,12 @@ try {
     check(s1.mediaUs - s0.mediaUs >= 3e6, `broadcast time advanced ${((s1.mediaUs - s0.mediaUs) / 1e6).toFixed(2)} s in 5 s`);
     check(s1.problems.length === 0, `no problem shown while playing (${s1.problems.map((p) => p.text).join('; ') || 'none'})`);
     // The recording loops (a discontinuity every pass): the frames before a
-    // restart play out, none is dropped when the restart arrives.
-    check(s1.passEnds.length >= 1 && s1.passEnds.every((f) => f === lastFrame),
-      `every pass plays to its last frame before the restart (${lastFrame}): last frames shown [${s1.passEnds.join(', ')}]`);
+    // restart play out, none is dropped when the restart arrives. (A join or
+    // a grown buffer can leave the 5 s without a restart: wait for one.)
+    await waitFor(page, () => window.holoport.state.passEnds.length >= 1, 15000, 'a restart of the looping recording');
+    const ends = await page.evaluate(() => [...window.holoport.state.passEnds]);
+    check(ends.length >= 1 && ends.every((f) => f === lastFrame),
+      `every pass plays to its last frame before the restart (${lastFrame}): last frames shown [${ends.join(', ')}]`);
     check(s1.audioChunks >= 100, `voice: ${s1.audioChunks} AudioPose messages played`);
     const v = await page.evaluate(() => {
       const vo = window.holoport.voice, p = window.holoport.state.lastPose;
@@ -153,7 +156,8 @@ try {
       `every scheduled voice position is its AudioPose's head, room (x, y, z) → Web Audio (x, z, −y) (${v && v.mapped.length} checked)`);
     // Freeze a few frames ahead; near the end of the recording's pass (the
     // broadcast loops it), at the first frame of the next pass instead.
-    const k = s1.frameIndex + 6 <= lastFrame ? s1.frameIndex + 6 : 0;
+    const cur = await page.evaluate(() => window.holoport.state.frameIndex);
+    const k = cur + 6 <= lastFrame ? cur + 6 : 0;
     await page.evaluate((kk) => window.holoport.freezeAt(kk), k);
     check(await waitFor(page, () => window.holoport.state.frozen, 20000, 'the frozen frame'), `froze at frame ≥ ${k}`);
     if (color === 'projective') {
