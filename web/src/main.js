@@ -231,6 +231,9 @@ function onMessages(messages, info) {
 async function handle(m) {
   const t = m.type;
   if (t === MSG.RIG) {
+    // A still keeps its rig: each segment starts with the Rig again, and
+    // setting it drops the pods' images until the next colour frame.
+    if (state.frozen) return;
     rig = parseRig(m.payload);
     person.setRig(rig);
   } else if (t === MSG.MESH) {
