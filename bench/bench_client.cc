@@ -35,6 +35,7 @@
 #include "common/metrics/triangle_index.h"
 #include "common/metrics/image_metrics.h"
 #include "common/pose.h"
+#include "protocol/byte_io.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/video_codec.h"
@@ -162,14 +163,16 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
   holo::RgbdFrameSet kept;
   holo::Mesh stream_mesh;
+  std::vector<std::vector<holo::ImageRgb8>> sequence_images;
+  std::vector<std::vector<holo::ImageGray8>> sequence_masks;
   bool got = false;
   auto stats = site->Run([&](const holo::FrameWork& w) {
     if (w.frames.frame_index > frame - sequence_frames && w.frames.frame_index <= frame) {
-      full->sequence_images.emplace_back();
-      full->sequence_masks.emplace_back();
+      sequence_images.emplace_back();
+      sequence_masks.emplace_back();
       for (const auto& f : w.frames.frames) {
-        full->sequence_images.back().push_back(f.color);
-        full->sequence_masks.back().push_back(f.mask);
+        sequence_images.back().push_back(f.color);
+        sequence_masks.back().push_back(f.mask);
       }
     }
     if (w.frames.frame_index == frame) {
@@ -195,14 +198,10 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
     full->images.push_back(std::move(img));
     full->masks.push_back(std::move(mask));
   }
-  // The sequence stays with the stream-size mesh only (the stream part's).
-  std::vector<std::vector<holo::ImageRgb8>> seq_images = std::move(full->sequence_images);
-  std::vector<std::vector<holo::ImageGray8>> seq_masks = std::move(full->sequence_masks);
-  full->sequence_images.clear();
-  full->sequence_masks.clear();
   *reduced = *full;
-  reduced->sequence_images = std::move(seq_images);
-  reduced->sequence_masks = std::move(seq_masks);
+  // The sequence goes with the stream mesh only (the stream part's).
+  reduced->sequence_images = std::move(sequence_images);
+  reduced->sequence_masks = std::move(sequence_masks);
   reduced->mesh_name = "fused_stream";
   reduced->mesh = std::move(stream_mesh);
   // Both meshes coloured by the texturer with `texture_options` (the site's
@@ -677,20 +676,23 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       // G1 (PROTOCOL.md §7): 12-byte prefix, origin, step, chroma shift,
       // then the connectivity stream's blob32 (read after the decode checked the blob).
       constexpr size_t kConnectivityAt = 12 + 4 * 4 + 1;
-      if (blob[0] == 2 && blob.size() >= kConnectivityAt + 4)
-        connectivity_bytes = static_cast<size_t>(blob[kConnectivityAt]) | static_cast<size_t>(blob[kConnectivityAt + 1]) << 8 |
-                             static_cast<size_t>(blob[kConnectivityAt + 2]) << 16 |
-                             static_cast<size_t>(blob[kConnectivityAt + 3]) << 24;
-      for (size_t i = 0; i < images.size() && !v.video; ++i) {
-        blob.clear();
-        if (holo::Status s = holo::protocol::EncodeColor(c.raw_images[i], c.raw_masks[i], v.color, &blob); !s.ok())
-          return Fail(s);
-        color_bytes += blob.size();
-        holo::ImageGray8 mask;
-        if (holo::Status s = holo::protocol::DecodeColor(blob, &images[i], &mask); !s.ok()) return Fail(s);
-        if (!masks[i].empty()) masks[i] = std::move(mask);
-      }
-      if (v.video) {
+      uint32_t connectivity = 0;
+      if (blob[0] == 2 && blob.size() >= kConnectivityAt &&
+          holo::protocol::ByteReader(std::span<const uint8_t>(blob).subspan(kConnectivityAt))
+              .U32("g1.connectivity", &connectivity)
+              .ok())
+        connectivity_bytes = connectivity;
+      if (!v.video) {
+        for (size_t i = 0; i < images.size(); ++i) {
+          blob.clear();
+          if (holo::Status s = holo::protocol::EncodeColor(c.raw_images[i], c.raw_masks[i], v.color, &blob); !s.ok())
+            return Fail(s);
+          color_bytes += blob.size();
+          holo::ImageGray8 mask;
+          if (holo::Status s = holo::protocol::DecodeColor(blob, &images[i], &mask); !s.ok()) return Fail(s);
+          if (!masks[i].empty()) masks[i] = std::move(mask);
+        }
+      } else {
         // Each pod's stream over the sequence, ending at the measured frame.
         const int step = v.layer == 0 ? 1 : divisor;
         const int first = (sequence - 1) % step;

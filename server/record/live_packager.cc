@@ -207,8 +207,10 @@ Status LivePackager::AddMessage(std::span<const uint8_t> frame, int64_t receive_
   if (!header.ok()) return reject("message header: " + header.status().message());
   if (header->payload_length != frame.size() - protocol::kHeaderSize) return reject("payload length mismatch");
   if (header->flags & protocol::kFlagMoreFragments) return reject("a fragment (reassemble first)");
-  if (!Packaged(header->type))
-    return reject(std::string("message type ") + protocol::MessageTypeName(header->type) + " is not broadcast");
+  if (!Packaged(header->type)) {  // session messages (Ping, Pong, Control, ...): not part of a broadcast
+    stats_.ignored_types += 1;
+    return OkStatus();
+  }
   auto payload = protocol::DecodePayload(*header, frame.subspan(protocol::kHeaderSize), limits);
   if (!payload.ok()) return reject("message payload: " + payload.status().message());
 

@@ -77,6 +77,7 @@ struct LivePackagerStats {
   uint64_t messages = 0;        // messages packaged
   uint64_t dropped_before_key = 0;  // content before the first key frame after a (re)start
   uint64_t rejected = 0;        // invalid messages (not packaged; the broadcast goes on)
+  uint64_t ignored_types = 0;   // valid messages of types a broadcast does not carry (Ping, Pong, ...)
   uint64_t parts = 0;
   uint64_t segments = 0;        // segments closed
   uint64_t pruned_segments = 0; // segments whose files were deleted
@@ -103,8 +104,10 @@ class LivePackager {
   // One whole protocol message (32-byte header + payload, not a fragment) as
   // received at `receive_unix_us`. Rig messages are remembered (each segment
   // starts with the one in effect); content before the first key frame after
-  // a (re)start is dropped. An invalid message returns InvalidArgument and is
-  // not packaged (the broadcast goes on); Unavailable: writing failed.
+  // a (re)start is dropped. Types a broadcast does not carry (session
+  // messages such as Pong) are ignored and counted. An invalid message
+  // returns InvalidArgument and is not packaged (the broadcast goes on);
+  // Unavailable: writing failed.
   Status AddMessage(std::span<const uint8_t> frame, int64_t receive_unix_us);
   // Publishes the open part if it is due at `now_unix_us`.
   Status Tick(int64_t now_unix_us);

@@ -337,9 +337,6 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     if (!check.ok()) return Fail(check);
     holo::net::ClientCallbacks cb;
     cb.on_raw = [&](const holo::net::RawMessage& m) {
-      // The connection's own clock pings are not part of the broadcast.
-      if (m.header.type == holo::protocol::MessageType::kPong || m.header.type == holo::protocol::MessageType::kPing)
-        return;
       std::lock_guard<std::mutex> l(mu);
       add(m.header, m.payload, m.received_us);
     };
@@ -417,9 +414,9 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
   if (!quiet)
     spdlog::info(
         "holoport-record: {} messages in {} parts, {} segments closed ({} pruned), {} dropped "
-        "before a key frame, {} rejected, {} key frames asked for; next segment {}",
+        "before a key frame, {} rejected, {} not broadcast (session messages), {} key frames asked for; next segment {}",
         st.messages, st.parts, st.segments, st.pruned_segments, st.dropped_before_key, st.rejected,
-        st.keyframe_requests, (*packager)->next_segment());
+        st.ignored_types, st.keyframe_requests, (*packager)->next_segment());
   if (refused) {
     spdlog::error("holoport-record: the site refused the packager: {}", client->status().message());
     return 1;
