@@ -710,19 +710,9 @@ Status Renderer::UpdateVisibilityCpu(const ProjectiveOptions& options) {
       }
     }
   });
-  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_raw_tex_);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-  for (int i = 0; i < n; ++i) {
-    const Intrinsics& in = pod_cameras_[i].intrinsics;
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RED, GL_FLOAT, pod_raw_z_[i].data());
-  }
-  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_depth_tex_);
-  for (int i = 0; i < n; ++i) {
-    const Intrinsics& in = pod_cameras_[i].intrinsics;
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RED, GL_FLOAT,
-                    pod_flagged_z_[i].data());
-  }
-  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  // The GL copies are made only when the per-fragment path draws with them
+  // (SyncPodTexturesToGpu): the baked atlas reads these CPU maps.
+  depth_tex_stale_ = true;
   edge_jump_m_ = jump;
   edge_radius_m_ = radius;
   vis_gpu_ = false;
@@ -824,14 +814,13 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   visibility_dirty_ = false;
   selection_dirty_ = true;
   flagged_on_cpu_ = false;
+  depth_tex_stale_ = false;
   return CheckGlError("pod visibility pass");
 }
 
 void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
   const bool use_masks = options.use_masks && !pod_masks_.empty();
   pod_alpha_.assign(use_masks ? num_pods_ : 0, {});
-  glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
-  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
   for (int i = 0; i < num_pods_; ++i) {
     const ImageRgb8& img = pod_images_[i];
     const int w = img.width(), h = img.height();
@@ -903,15 +892,42 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
       alpha.resize(npx);
       for (size_t k = 0; k < npx; ++k) alpha[k] = lut[d[k]];
     }
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, w, h, 1, GL_RGBA, GL_UNSIGNED_BYTE, out);
   }
-  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  // Uploaded when the per-fragment path needs them (SyncPodTexturesToGpu).
+  color_tex_stale_ = true;
   tex_use_masks_ = options.use_masks;
   tex_erode_ = options.mask_erode_px;
   tex_feather_ = options.mask_feather_px;
   tex_floor_ = options.edge_floor_weight;
   textures_dirty_ = false;
   selection_dirty_ = true;
+}
+
+Status Renderer::SyncPodTexturesToGpu() {
+  if (color_tex_stale_) {
+    glBindTexture(GL_TEXTURE_2D_ARRAY, pod_color_tex_);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    for (int i = 0; i < num_pods_ && i < static_cast<int>(pod_rgba_.size()); ++i) {
+      const Intrinsics& in = pod_cameras_[i].intrinsics;
+      glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RGBA, GL_UNSIGNED_BYTE,
+                      pod_rgba_[i].data());
+    }
+    color_tex_stale_ = false;
+  }
+  if (depth_tex_stale_) {
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    for (const auto& [tex, maps] : {std::pair{pod_raw_tex_, &pod_raw_z_}, std::pair{pod_depth_tex_, &pod_flagged_z_}}) {
+      glBindTexture(GL_TEXTURE_2D_ARRAY, tex);
+      for (int i = 0; i < num_pods_ && i < static_cast<int>(maps->size()); ++i) {
+        const Intrinsics& in = pod_cameras_[i].intrinsics;
+        glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, i, in.width, in.height, 1, GL_RED, GL_FLOAT,
+                        (*maps)[i].data());
+      }
+    }
+    depth_tex_stale_ = false;
+  }
+  glBindTexture(GL_TEXTURE_2D_ARRAY, 0);
+  return CheckGlError("pod textures upload");
 }
 
 Status Renderer::SelectPods(const ProjectiveOptions& options) {
@@ -1293,7 +1309,10 @@ Status Renderer::Render(const CameraModel& camera, const RenderSettings& setting
     if (!AtlasCurrent(settings.projective)) HOLO_RETURN_IF_ERROR(UpdateAtlas(settings.projective));
     baked = !atlas_stats_.fallback;
   }
-  if (projective && !baked) HOLO_RETURN_IF_ERROR(PreparePods(settings.projective));
+  if (projective && !baked) {
+    HOLO_RETURN_IF_ERROR(PreparePods(settings.projective));
+    HOLO_RETURN_IF_ERROR(SyncPodTexturesToGpu());
+  }
   const Eigen::Matrix4f& local_from_remote = settings.local_from_remote;
   if (!local_from_remote.allFinite() || std::abs(local_from_remote.block<3, 3>(0, 0).determinant()) < 1e-12f) {
     return InvalidArgument("local_from_remote must be a finite, invertible transform");

@@ -339,6 +339,12 @@ class Renderer {
   // pod_raw_tex_: camera z per texel; pod_depth_tex_: the same, negated
   // near discontinuities.
   unsigned pod_color_tex_ = 0, pod_depth_tex_ = 0, pod_raw_tex_ = 0, pod_depth_rb_ = 0, pod_fbo_ = 0;
+  // The CPU maps (pod_rgba_; pod_raw_z_ / pod_flagged_z_ of a CPU visibility
+  // pass) changed since they were last copied into the texture arrays. Only
+  // the per-fragment path reads the arrays: the baked path never pays the
+  // copies (about 7 MB per mesh at S8-QVGA through llvmpipe).
+  bool color_tex_stale_ = false, depth_tex_stale_ = false;
+  Status SyncPodTexturesToGpu();
   float edge_jump_m_ = -1, edge_radius_m_ = -1;
   int num_pods_ = 0, array_width_ = 0, array_height_ = 0;
   std::vector<CameraModel> pod_cameras_;

@@ -247,6 +247,45 @@ TEST_F(RenderTest, ProjectiveTexturingMatchesGroundTruthRender) {
   EXPECT_GT(mean_b, mean_v + 1.5);
 }
 
+// The baked path leaves the pods' texture arrays stale (it reads the CPU
+// copies); per-fragment blending after a bake of new images and a new mesh
+// must draw exactly what it draws without the bake.
+TEST_F(RenderTest, PerFragmentAfterBakedUsesCurrentPodTextures) {
+  StudioFrame a = MakeStudioFrame(40), b = MakeStudioFrame(60);
+  const CameraModel cam = NovelCamera(320, 240, 45.0f);
+  RenderSettings settings;
+  settings.background = {0, 0, 0};
+  settings.mode = ColorMode::kProjective;
+  auto set_frame = [&](const StudioFrame& f) {
+    std::vector<const ImageRgb8*> images;
+    for (const auto& fr : f.frames.frames) images.push_back(&fr.color);
+    ASSERT_TRUE(renderer_->SetRemoteMesh(f.gt.foreground_mesh).ok());
+    ASSERT_TRUE(renderer_->SetPodImages(f.rig, images).ok());
+  };
+  set_frame(b);
+  settings.projective.bake = false;
+  const ImageRgb8 alone = RenderTo(cam, settings);
+  set_frame(a);
+  const ImageRgb8 frame_a = RenderTo(cam, settings);  // the arrays now hold frame a
+  set_frame(b);
+  settings.projective.bake = true;
+  (void)RenderTo(cam, settings);
+  settings.projective.bake = false;
+  const ImageRgb8 after = RenderTo(cam, settings);
+  ASSERT_EQ(alone.num_pixels(), after.num_pixels());
+  // Frame b's colours, not stale or empty arrays: close to the studio's view.
+  ImageRgb8 truth;
+  ImageGray8 mask;
+  b.studio->RenderView(60, cam, &truth, nullptr, &mask);
+  auto psnr = metrics::ComputePsnr(alone, truth, &mask);
+  ASSERT_TRUE(psnr.ok());
+  EXPECT_GT(*psnr, kProjectivePsnrThresholdDb - 2.0);
+  size_t differ_from_a = 0;
+  for (size_t i = 0; i < 3 * alone.num_pixels(); ++i) differ_from_a += alone.data()[i] != frame_a.data()[i];
+  EXPECT_GT(differ_from_a, 1000u);
+  EXPECT_TRUE(std::equal(alone.data(), alone.data() + 3 * alone.num_pixels(), after.data()));
+}
+
 // --views K: K tiles, each a different perspective (all pairs differ), laid
 // out in a grid; the convergence plane lands on the same pixel in every view.
 TEST_F(RenderTest, MosaicHasKDistinctViews) {
