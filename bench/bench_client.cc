@@ -567,6 +567,31 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         qm["resolution"] = std::to_string(width) + "x" + std::to_string(height);
         EmitFigure("client", args.workload, "render_ms", Median(ms), "ms", qm);
         EmitFigure("client", args.workload, "render_cpu_ms", Median(cpu), "ms", qm);
+        if (mode != holo::render::ColorMode::kProjective || !bake) continue;
+        // What a live viewer pays per new frame: the mesh and the pods'
+        // images set (normals, mask weights), visibility, pod selection,
+        // bake, uploads and one draw; all of the process's threads (pool,
+        // llvmpipe) in the CPU figure.
+        ms.clear();
+        cpu.clear();
+        for (int i = -2; i < 10; ++i) {
+          const holo::CameraModel cam = OrbitCamera(width, height, 3.0f * static_cast<float>(i), 2.5f);
+          const double cpu0 = ProcessCpuMs();
+          holo::Stopwatch sw;
+          if (holo::Status s = (*renderer)->SetRemoteMesh(c.mesh); !s.ok()) return Fail(s);
+          if (holo::Status s = (*renderer)->SetPodImages(workload->rig, c.ImagePtrs(), c.MaskPtrs()); !s.ok())
+            return Fail(s);
+          if (holo::Status s = (*renderer)->Render(cam, settings, {0, 0, width, height}); !s.ok()) return Fail(s);
+          holo::render::FinishGl();
+          if (i >= 0) {
+            ms.push_back(sw.ElapsedMs());
+            cpu.push_back(ProcessCpuMs() - cpu0);
+          }
+        }
+        qm["per"] = "new mesh";
+        qm["frames"] = "10";
+        EmitFigure("client", args.workload, "mesh_render_ms", Median(ms), "ms", qm);
+        EmitFigure("client", args.workload, "mesh_render_cpu_ms", Median(cpu), "ms", qm);
       }
     }
     // The per-mesh pod selection behind the projective frames above.

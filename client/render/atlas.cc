@@ -5,8 +5,9 @@
 #include <cstring>
 #include <string>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define HOLO_ATLAS_AVX2 1
 #endif
 
 #include "common/worker_pool.h"
@@ -54,6 +55,162 @@ float Smoothstep(float e, float x) {
   const float t = std::clamp(x / e, 0.0f, 1.0f);
   return t * t * (3.0f - 2.0f * t);
 }
+
+// The texels of a cell with l texels per edge, one array per field, padded
+// to a multiple of 8 with texels of zero weight (c = 0).
+struct CellTable {
+  int count = 0, padded = 0;
+  std::vector<int> i, j;
+  std::vector<float> b0, b1, b2, c0, c1, c2;
+};
+
+// One pod's samples of one triangle's cell: what the bake loop needs.
+struct PodPass {
+  Eigen::Vector3f q0, q1, q2;  // corners through the pod's projection (pixel·z, z)
+  float cw0, cw1, cw2;         // the corners' facing weights
+  const float* zmap;
+  const uint8_t* rgba;
+  int w, h;
+  float tol, edge_w;
+};
+
+// Accumulators of a cell's texels, one array per field (`stride` floats
+// each): premultiplied R, G, B, alpha, weight.
+struct CellAccum {
+  float* f[5];
+};
+
+// Adds the pod's samples to the texels of the cell (undistorted pod).
+// Returns the samples taken (texels inside the image with weight).
+size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccum& acc) {
+  size_t samples = 0;
+  const float xmax = static_cast<float>(pp.w) - 0.5f, ymax = static_cast<float>(pp.h) - 0.5f;
+  for (int k = 0; k < ct.count; ++k) {
+    const float wt = ct.c0[k] * pp.cw0 + ct.c1[k] * pp.cw1 + ct.c2[k] * pp.cw2;
+    if (wt <= 1e-6f) continue;
+    const float qz = ct.b0[k] * pp.q0.z() + ct.b1[k] * pp.q1.z() + ct.b2[k] * pp.q2.z();
+    if (qz < 0.05f) continue;
+    const float inv = 1.0f / qz;
+    const float x = (ct.b0[k] * pp.q0.x() + ct.b1[k] * pp.q1.x() + ct.b2[k] * pp.q2.x()) * inv;
+    const float y = (ct.b0[k] * pp.q0.y() + ct.b1[k] * pp.q1.y() + ct.b2[k] * pp.q2.y()) * inv;
+    if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
+    ++samples;
+    // Nearest texel of the depth map (x, y ≥ −0.5: truncation rounds).
+    const int ix = static_cast<int>(x + 0.5f), iy = static_cast<int>(y + 0.5f);
+    const float zf = pp.zmap[static_cast<size_t>(iy) * pp.w + ix];
+    const float zabs = std::abs(zf);
+    if (zabs <= 0.0f || qz > zabs + pp.tol) continue;
+    // Bilinear fetch (texel centres on integers), clamped at the border.
+    const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;  // floor, x ≥ −1
+    const float ax = x - static_cast<float>(fx), ay = y - static_cast<float>(fy);
+    const int x0 = std::clamp(fx, 0, pp.w - 1), x1 = std::clamp(fx + 1, 0, pp.w - 1);
+    const int y0 = std::clamp(fy, 0, pp.h - 1), y1 = std::clamp(fy + 1, 0, pp.h - 1);
+    const uint8_t* p00 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x0);
+    const uint8_t* p10 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x1);
+    const uint8_t* p01 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x0);
+    const uint8_t* p11 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x1);
+    const float kw = zf < 0.0f ? pp.edge_w * wt : wt;
+    const float w00 = kw * (1 - ax) * (1 - ay), w10 = kw * ax * (1 - ay), w01 = kw * (1 - ax) * ay,
+                w11 = kw * ax * ay;
+    for (int ch = 0; ch < 4; ++ch) {
+      const float sum = w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
+      acc.f[ch][k] += sum;
+    }
+    acc.f[4][k] += kw;
+  }
+  return samples;
+}
+
+#if defined(HOLO_ATLAS_AVX2)
+bool CpuHasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+// SampleCellPortable eight texels at a time: the same operations in the
+// same order (no FMA), so the sums are bit-identical; lanes that the
+// portable loop skips add zero.
+__attribute__((target("avx2"))) size_t SampleCellAvx2(const CellTable& ct, const PodPass& pp,
+                                                      const CellAccum& acc) {
+  size_t samples = 0;
+  const __m256 cw0 = _mm256_set1_ps(pp.cw0), cw1 = _mm256_set1_ps(pp.cw1), cw2 = _mm256_set1_ps(pp.cw2);
+  const __m256 q0x = _mm256_set1_ps(pp.q0.x()), q0y = _mm256_set1_ps(pp.q0.y()), q0z = _mm256_set1_ps(pp.q0.z());
+  const __m256 q1x = _mm256_set1_ps(pp.q1.x()), q1y = _mm256_set1_ps(pp.q1.y()), q1z = _mm256_set1_ps(pp.q1.z());
+  const __m256 q2x = _mm256_set1_ps(pp.q2.x()), q2y = _mm256_set1_ps(pp.q2.y()), q2z = _mm256_set1_ps(pp.q2.z());
+  const __m256 xmax = _mm256_set1_ps(static_cast<float>(pp.w) - 0.5f);
+  const __m256 ymax = _mm256_set1_ps(static_cast<float>(pp.h) - 0.5f);
+  const __m256 half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f), minus_half = _mm256_set1_ps(-0.5f);
+  const __m256 tol = _mm256_set1_ps(pp.tol), edge_w = _mm256_set1_ps(pp.edge_w), zero = _mm256_setzero_ps();
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  const __m256i width = _mm256_set1_epi32(pp.w), wmax = _mm256_set1_epi32(pp.w - 1),
+                hmax = _mm256_set1_epi32(pp.h - 1), izero = _mm256_setzero_si256(), ione = _mm256_set1_epi32(1),
+                byte = _mm256_set1_epi32(0xFF);
+  const int* rgba = reinterpret_cast<const int*>(pp.rgba);
+  for (int k = 0; k < ct.count; k += 8) {
+    const __m256 c0 = _mm256_loadu_ps(&ct.c0[k]), c1 = _mm256_loadu_ps(&ct.c1[k]), c2 = _mm256_loadu_ps(&ct.c2[k]);
+    const __m256 b0 = _mm256_loadu_ps(&ct.b0[k]), b1 = _mm256_loadu_ps(&ct.b1[k]), b2 = _mm256_loadu_ps(&ct.b2[k]);
+    const __m256 wt = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(c0, cw0), _mm256_mul_ps(c1, cw1)), _mm256_mul_ps(c2, cw2));
+    const __m256 qz = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(b0, q0z), _mm256_mul_ps(b1, q1z)), _mm256_mul_ps(b2, q2z));
+    __m256 live = _mm256_and_ps(_mm256_cmp_ps(wt, _mm256_set1_ps(1e-6f), _CMP_GT_OQ),
+                                _mm256_cmp_ps(qz, _mm256_set1_ps(0.05f), _CMP_GE_OQ));
+    if (_mm256_testz_ps(live, live)) continue;
+    const __m256 inv = _mm256_div_ps(one, qz);
+    const __m256 x = _mm256_mul_ps(
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(b0, q0x), _mm256_mul_ps(b1, q1x)), _mm256_mul_ps(b2, q2x)), inv);
+    const __m256 y = _mm256_mul_ps(
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(b0, q0y), _mm256_mul_ps(b1, q1y)), _mm256_mul_ps(b2, q2y)), inv);
+    live = _mm256_and_ps(live, _mm256_and_ps(_mm256_cmp_ps(x, minus_half, _CMP_GE_OQ),
+                                             _mm256_cmp_ps(y, minus_half, _CMP_GE_OQ)));
+    live = _mm256_and_ps(live, _mm256_and_ps(_mm256_cmp_ps(x, xmax, _CMP_LT_OQ), _mm256_cmp_ps(y, ymax, _CMP_LT_OQ)));
+    const int in_image = _mm256_movemask_ps(live);
+    if (in_image == 0) continue;
+    samples += static_cast<size_t>(__builtin_popcount(static_cast<unsigned>(in_image)));
+    // Lanes out of the image index texel 0 (masked gather) and add zero.
+    const __m256i ix = _mm256_cvttps_epi32(_mm256_add_ps(x, half));
+    const __m256i iy = _mm256_cvttps_epi32(_mm256_add_ps(y, half));
+    const __m256i zi = _mm256_and_si256(_mm256_add_epi32(_mm256_mullo_epi32(iy, width), ix), _mm256_castps_si256(live));
+    const __m256 zf = _mm256_mask_i32gather_ps(zero, pp.zmap, zi, live, 4);
+    const __m256 zabs = _mm256_and_ps(zf, abs_mask);
+    live = _mm256_and_ps(live, _mm256_and_ps(_mm256_cmp_ps(zabs, zero, _CMP_GT_OQ),
+                                             _mm256_cmp_ps(qz, _mm256_add_ps(zabs, tol), _CMP_LE_OQ)));
+    if (_mm256_testz_ps(live, live)) continue;
+    const __m256i fx = _mm256_sub_epi32(_mm256_cvttps_epi32(_mm256_add_ps(x, one)), ione);
+    const __m256i fy = _mm256_sub_epi32(_mm256_cvttps_epi32(_mm256_add_ps(y, one)), ione);
+    const __m256 ax = _mm256_sub_ps(x, _mm256_cvtepi32_ps(fx)), ay = _mm256_sub_ps(y, _mm256_cvtepi32_ps(fy));
+    const __m256i x0 = _mm256_min_epi32(_mm256_max_epi32(fx, izero), wmax);
+    const __m256i x1 = _mm256_min_epi32(_mm256_max_epi32(_mm256_add_epi32(fx, ione), izero), wmax);
+    const __m256i y0 = _mm256_mullo_epi32(_mm256_min_epi32(_mm256_max_epi32(fy, izero), hmax), width);
+    const __m256i y1 =
+        _mm256_mullo_epi32(_mm256_min_epi32(_mm256_max_epi32(_mm256_add_epi32(fy, ione), izero), hmax), width);
+    const __m256i live_i = _mm256_castps_si256(live);
+    const __m256i t00 = _mm256_mask_i32gather_epi32(izero, rgba, _mm256_add_epi32(y0, x0), live_i, 4);
+    const __m256i t10 = _mm256_mask_i32gather_epi32(izero, rgba, _mm256_add_epi32(y0, x1), live_i, 4);
+    const __m256i t01 = _mm256_mask_i32gather_epi32(izero, rgba, _mm256_add_epi32(y1, x0), live_i, 4);
+    const __m256i t11 = _mm256_mask_i32gather_epi32(izero, rgba, _mm256_add_epi32(y1, x1), live_i, 4);
+    const __m256 kw = _mm256_and_ps(live, _mm256_blendv_ps(wt, _mm256_mul_ps(edge_w, wt),
+                                                           _mm256_cmp_ps(zf, zero, _CMP_LT_OQ)));
+    const __m256 ax1 = _mm256_sub_ps(one, ax), ay1 = _mm256_sub_ps(one, ay);
+    // Dead lanes: kw = 0, but ax may be NaN there; mask the products.
+    const __m256 w00 = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(kw, ax1), ay1));
+    const __m256 w10 = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(kw, ax), ay1));
+    const __m256 w01 = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(kw, ax1), ay));
+    const __m256 w11 = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(kw, ax), ay));
+    for (int ch = 0; ch < 4; ++ch) {
+      const __m256 p00 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(t00, 8 * ch), byte));
+      const __m256 p10 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(t10, 8 * ch), byte));
+      const __m256 p01 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(t01, 8 * ch), byte));
+      const __m256 p11 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(t11, 8 * ch), byte));
+      __m256 sum = _mm256_mul_ps(w00, p00);
+      sum = _mm256_add_ps(sum, _mm256_mul_ps(w10, p10));
+      sum = _mm256_add_ps(sum, _mm256_mul_ps(w01, p01));
+      sum = _mm256_add_ps(sum, _mm256_mul_ps(w11, p11));
+      _mm256_storeu_ps(acc.f[ch] + k, _mm256_add_ps(_mm256_loadu_ps(acc.f[ch] + k), sum));
+    }
+    _mm256_storeu_ps(acc.f[4] + k, _mm256_add_ps(_mm256_loadu_ps(acc.f[4] + k), kw));
+  }
+  return samples;
+}
+#endif
 
 }  // namespace
 
@@ -148,40 +305,47 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
   const float min_conf = options.min_mask_confidence;
   // The cell's texels: offset, barycentrics (exact, for the position) and
   // clamped ones (for the weights and the vertex colour: the extrapolated
-  // row lies just outside the triangle).
-  struct CellTexel {
-    int i, j;
-    float b[3], c[3];
-  };
-  // One table per texel count l = 1..L (a triangle small in its pods'
-  // images uses fewer texels of its cell: see texels_per_pod_pixel).
-  std::vector<std::vector<CellTexel>> tables(L + 1);
+  // row lies just outside the triangle). One table per texel count
+  // l = 1..L (a triangle small in its pods' images uses fewer texels of its
+  // cell: see texels_per_pod_pixel).
+  std::vector<CellTable> tables(L + 1);
   for (int l = 1; l <= L; ++l) {
+    CellTable& ct = tables[l];
     for (int j = 0; j <= l; ++j) {
       for (int i = 0; i + j <= l + 1 && i <= l; ++i) {
-        CellTexel ct;
-        ct.i = i;
-        ct.j = j;
-        ct.b[1] = static_cast<float>(i) / static_cast<float>(l);
-        ct.b[2] = static_cast<float>(j) / static_cast<float>(l);
-        ct.b[0] = 1.0f - ct.b[1] - ct.b[2];
-        const float c0 = std::max(ct.b[0], 0.0f), cs = c0 + ct.b[1] + ct.b[2];
-        ct.c[0] = c0 / cs;
-        ct.c[1] = ct.b[1] / cs;
-        ct.c[2] = ct.b[2] / cs;
-        tables[l].push_back(ct);
+        const float b1 = static_cast<float>(i) / static_cast<float>(l);
+        const float b2 = static_cast<float>(j) / static_cast<float>(l);
+        const float b0 = 1.0f - b1 - b2;
+        const float c0 = std::max(b0, 0.0f), cs = c0 + b1 + b2;
+        ct.i.push_back(i);
+        ct.j.push_back(j);
+        ct.b0.push_back(b0);
+        ct.b1.push_back(b1);
+        ct.b2.push_back(b2);
+        ct.c0.push_back(c0 / cs);
+        ct.c1.push_back(b1 / cs);
+        ct.c2.push_back(b2 / cs);
       }
     }
+    ct.count = static_cast<int>(ct.i.size());
+    ct.padded = (ct.count + 7) / 8 * 8;
+    for (auto* v : {&ct.b0, &ct.b1, &ct.b2, &ct.c0, &ct.c1, &ct.c2}) v->resize(ct.padded, 0.0f);
   }
+  bool vectorized = false;
+#if defined(HOLO_ATLAS_AVX2)
+  vectorized = options.vectorized && CpuHasAvx2();
+#endif
   const int nthreads = pool ? pool->num_threads() : 1;
   std::vector<size_t> samples(nthreads, 0), texels(nthreads, 0);
   // Per thread: the texels' accumulators (premultiplied colour, alpha,
-  // weight), one cell at a time.
-  std::vector<std::vector<float>> scratch(nthreads, std::vector<float>(5 * tables[L].size()));
+  // weight), one cell at a time, one array per field.
+  const int stride = tables[L].padded;
+  std::vector<std::vector<float>> scratch(nthreads, std::vector<float>(5 * static_cast<size_t>(stride)));
   const float density = options.texels_per_pod_pixel;
   auto bake_block = [&](size_t begin, size_t end, int thread) {
     size_t my_samples = 0, my_texels = 0;
-    float* accum = scratch[thread].data();
+    CellAccum acc;
+    for (int f = 0; f < 5; ++f) acc.f[f] = scratch[thread].data() + static_cast<size_t>(f) * stride;
     for (size_t t = begin; t < end; ++t) {
       const auto& tri = tris[t];
       const int cx = static_cast<int>(t % cells_per_row) * cell, cy = static_cast<int>(t / cells_per_row) * cell;
@@ -218,14 +382,14 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
           l = 1;
         }
       }
-      const std::vector<CellTexel>& cell_texels = tables[l];
-      const int texels_per_cell = static_cast<int>(cell_texels.size());
+      const CellTable& ct = tables[l];
+      const int texels_per_cell = ct.count;
       out->uv[3 * t] = {(cx + 0.5f) * inv_w, (cy + 0.5f) * inv_h};
       out->uv[3 * t + 1] = {(cx + l + 0.5f) * inv_w, (cy + 0.5f) * inv_h};
       out->uv[3 * t + 2] = {(cx + 0.5f) * inv_w, (cy + l + 0.5f) * inv_h};
       if (!valid) continue;
       my_texels += static_cast<size_t>(texels_per_cell);
-      std::fill(accum, accum + 5 * texels_per_cell, 0.0f);
+      for (int f = 0; f < 5; ++f) std::fill(acc.f[f], acc.f[f] + ct.padded, 0.0f);
       // Pod by pod (its maps stay in cache), every texel of the cell.
       // Pods far weaker than the triangle's strongest add little but cost
       // as much (min_pod_weight).
@@ -242,78 +406,60 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
         if (!(cw0 > 0 || cw1 > 0 || cw2 > 0)) continue;
         if (cw0 + cw1 + cw2 < min_sum) continue;
         const PodInfo& p = info[pi];
-        const Eigen::Vector3f q0 = p.projection * pos[tri[0]].homogeneous();
-        const Eigen::Vector3f q1 = p.projection * pos[tri[1]].homogeneous();
-        const Eigen::Vector3f q2 = p.projection * pos[tri[2]].homogeneous();
-        const float* zmap_data = pods[pi].flagged_z;
-        const uint8_t* rgba = pods[pi].rgba;
-        const int w = p.width, h = p.height;
-        const float xmax = static_cast<float>(w) - 0.5f, ymax = static_cast<float>(h) - 0.5f;
-        for (int k = 0; k < texels_per_cell; ++k) {
-          const CellTexel& ct = cell_texels[k];
-          const float wt = ct.c[0] * cw0 + ct.c[1] * cw1 + ct.c[2] * cw2;
-          if (wt <= 1e-6f) continue;
-          const float qz = ct.b[0] * q0.z() + ct.b[1] * q1.z() + ct.b[2] * q2.z();
-          if (qz < 0.05f) continue;
-          float x, y;
-          if (!p.distorted) {
-            const float inv = 1.0f / qz;
-            x = (ct.b[0] * q0.x() + ct.b[1] * q1.x() + ct.b[2] * q2.x()) * inv;
-            y = (ct.b[0] * q0.y() + ct.b[1] * q1.y() + ct.b[2] * q2.y()) * inv;
-          } else {
-            Eigen::Vector2f px;
-            if (!pods[pi].camera->ProjectCamera(ct.b[0] * q0 + ct.b[1] * q1 + ct.b[2] * q2, &px)) continue;
-            x = px.x();
-            y = px.y();
+        PodPass pp;
+        pp.q0 = p.projection * pos[tri[0]].homogeneous();
+        pp.q1 = p.projection * pos[tri[1]].homogeneous();
+        pp.q2 = p.projection * pos[tri[2]].homogeneous();
+        pp.cw0 = cw0;
+        pp.cw1 = cw1;
+        pp.cw2 = cw2;
+        pp.zmap = pods[pi].flagged_z;
+        pp.rgba = pods[pi].rgba;
+        pp.w = p.width;
+        pp.h = p.height;
+        pp.tol = tol;
+        pp.edge_w = edge_w;
+        if (!p.distorted) {
+#if defined(HOLO_ATLAS_AVX2)
+          if (vectorized) {
+            my_samples += SampleCellAvx2(ct, pp, acc);
+            continue;
           }
+#endif
+          my_samples += SampleCellPortable(ct, pp, acc);
+          continue;
+        }
+        // A distorted pod: each texel through the camera's distortion model.
+        const float xmax = static_cast<float>(p.width) - 0.5f, ymax = static_cast<float>(p.height) - 0.5f;
+        for (int k = 0; k < texels_per_cell; ++k) {
+          const float wt = ct.c0[k] * cw0 + ct.c1[k] * cw1 + ct.c2[k] * cw2;
+          if (wt <= 1e-6f) continue;
+          const float qz = ct.b0[k] * pp.q0.z() + ct.b1[k] * pp.q1.z() + ct.b2[k] * pp.q2.z();
+          if (qz < 0.05f) continue;
+          Eigen::Vector2f px;
+          if (!pods[pi].camera->ProjectCamera(ct.b0[k] * pp.q0 + ct.b1[k] * pp.q1 + ct.b2[k] * pp.q2, &px)) continue;
+          const float x = px.x(), y = px.y();
           if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
           ++my_samples;
-          // Nearest texel of the depth map (x, y ≥ −0.5: truncation rounds).
           const int ix = static_cast<int>(x + 0.5f), iy = static_cast<int>(y + 0.5f);
-          const float zf = zmap_data[static_cast<size_t>(iy) * w + ix];
+          const float zf = pp.zmap[static_cast<size_t>(iy) * pp.w + ix];
           const float zabs = std::abs(zf);
           if (zabs <= 0.0f || qz > zabs + tol) continue;
-          // Bilinear fetch (texel centres on integers), clamped at the border.
-          const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;  // floor, x ≥ −1
+          const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;
           const float ax = x - static_cast<float>(fx), ay = y - static_cast<float>(fy);
-          const uint8_t *p00, *p10, *p01, *p11;
-          if (fx >= 0 && fy >= 0 && fx + 1 < w && fy + 1 < h) {
-            p00 = rgba + 4 * (static_cast<size_t>(fy) * w + fx);
-            p10 = p00 + 4;
-            p01 = p00 + 4 * static_cast<size_t>(w);
-            p11 = p01 + 4;
-          } else {
-            const int x0 = std::clamp(fx, 0, w - 1), x1 = std::clamp(fx + 1, 0, w - 1);
-            const int y0 = std::clamp(fy, 0, h - 1), y1 = std::clamp(fy + 1, 0, h - 1);
-            p00 = rgba + 4 * (static_cast<size_t>(y0) * w + x0);
-            p10 = rgba + 4 * (static_cast<size_t>(y0) * w + x1);
-            p01 = rgba + 4 * (static_cast<size_t>(y1) * w + x0);
-            p11 = rgba + 4 * (static_cast<size_t>(y1) * w + x1);
-          }
+          const int x0 = std::clamp(fx, 0, pp.w - 1), x1 = std::clamp(fx + 1, 0, pp.w - 1);
+          const int y0 = std::clamp(fy, 0, pp.h - 1), y1 = std::clamp(fy + 1, 0, pp.h - 1);
+          const uint8_t* p00 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x0);
+          const uint8_t* p10 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x1);
+          const uint8_t* p01 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x0);
+          const uint8_t* p11 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x1);
           const float kw = zf < 0.0f ? edge_w * wt : wt;
           const float w00 = kw * (1 - ax) * (1 - ay), w10 = kw * ax * (1 - ay), w01 = kw * (1 - ax) * ay,
                       w11 = kw * ax * ay;
-          float* a = accum + 5 * k;
-#if defined(__SSE2__)
-          // The four RGBA texels widened to floats four channels at a time.
-          const __m128i zero = _mm_setzero_si128();
-          auto texel = [&zero](const uint8_t* q) {
-            int32_t v;
-            std::memcpy(&v, q, 4);
-            const __m128i b = _mm_unpacklo_epi8(_mm_cvtsi32_si128(v), zero);
-            return _mm_cvtepi32_ps(_mm_unpacklo_epi16(b, zero));
-          };
-          __m128 sum = _mm_mul_ps(_mm_set1_ps(w00), texel(p00));
-          sum = _mm_add_ps(sum, _mm_mul_ps(_mm_set1_ps(w10), texel(p10)));
-          sum = _mm_add_ps(sum, _mm_mul_ps(_mm_set1_ps(w01), texel(p01)));
-          sum = _mm_add_ps(sum, _mm_mul_ps(_mm_set1_ps(w11), texel(p11)));
-          _mm_storeu_ps(a, _mm_add_ps(_mm_loadu_ps(a), sum));
-#else
           for (int ch = 0; ch < 4; ++ch) {
-            a[ch] += w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
+            acc.f[ch][k] += w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
           }
-#endif
-          a[4] += kw;
+          acc.f[4][k] += kw;
         }
       }
       std::array<float, 3> vcol[3];
@@ -321,15 +467,15 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
         for (int c = 0; c < 3; ++c) vcol[k][c] = has_colors ? (*mesh.colors)[tri[k]][c] : 180.0f;
       }
       for (int k = 0; k < texels_per_cell; ++k) {
-        const CellTexel& ct = cell_texels[k];
-        const float* a = accum + 5 * k;
-        uint8_t* dst = &out->rgba[4 * (static_cast<size_t>(cy + ct.j) * out->width + cx + ct.i)];
+        const float a[5] = {acc.f[0][k], acc.f[1][k], acc.f[2][k], acc.f[3][k], acc.f[4][k]};
+        const float c[3] = {ct.c0[k], ct.c1[k], ct.c2[k]};
+        uint8_t* dst = &out->rgba[4 * (static_cast<size_t>(cy + ct.j[k]) * out->width + cx + ct.i[k])];
         // a[0..2] / a[3] is the unpremultiplied colour; a[3] / (255 a[4])
         // the mean mask weight of the samples.
         const float f = a[3] > 0 ? Smoothstep(min_conf, a[3] / (255.0f * a[4])) : 0.0f;
         const float inv_a = a[3] > 0 ? 255.0f / a[3] : 0.0f;
         for (int ch = 0; ch < 3; ++ch) {
-          const float vc = ct.c[0] * vcol[0][ch] + ct.c[1] * vcol[1][ch] + ct.c[2] * vcol[2][ch];
+          const float vc = c[0] * vcol[0][ch] + c[1] * vcol[1][ch] + c[2] * vcol[2][ch];
           const float v = vc + (a[ch] * inv_a - vc) * f;
           dst[ch] = static_cast<uint8_t>(std::clamp(v + 0.5f, 0.0f, 255.0f));
         }
