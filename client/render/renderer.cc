@@ -838,17 +838,29 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
       }
     } else {
       // Chessboard distance of every mask pixel to the nearest background
-      // pixel (or the image border), two passes, capped at 255.
+      // pixel (or the image border), two passes, capped at 255. Only the
+      // mask's bounding box can be nonzero: the passes run over it, and
+      // everything outside (background) is zero.
       const uint8_t* m = pod_masks_[i].data();
-      dist_scratch_.resize(npx);
-      uint8_t* d = dist_scratch_.data();
+      int bx0 = w, by0 = h, bx1 = -1, by1 = -1;
       for (int y = 0; y < h; ++y) {
-        for (int x = 0; x < w; ++x) {
+        const uint8_t* row = m + static_cast<size_t>(y) * w;
+        int first = 0;
+        while (first < w && row[first] == 0) ++first;
+        if (first == w) continue;
+        int last = w - 1;
+        while (row[last] == 0) --last;
+        bx0 = std::min(bx0, first);
+        bx1 = std::max(bx1, last);
+        by0 = std::min(by0, y);
+        by1 = y;
+      }
+      dist_scratch_.assign(npx, 0);
+      uint8_t* d = dist_scratch_.data();
+      for (int y = by0; y <= by1; ++y) {
+        for (int x = bx0; x <= bx1; ++x) {
           const size_t k = static_cast<size_t>(y) * w + x;
-          if (m[k] == 0) {
-            d[k] = 0;
-            continue;
-          }
+          if (m[k] == 0) continue;
           int v = 1;  // the image border counts as background
           if (x > 0 && y > 0) {
             v = std::min({d[k - 1], d[k - w], d[k - w - 1], x + 1 < w ? d[k - w + 1] : uint8_t{0}}) + 1;
@@ -856,8 +868,8 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
           d[k] = static_cast<uint8_t>(std::min(v, 255));
         }
       }
-      for (int y = h - 1; y >= 0; --y) {
-        for (int x = w - 1; x >= 0; --x) {
+      for (int y = by1; y >= by0; --y) {
+        for (int x = bx1; x >= bx0; --x) {
           const size_t k = static_cast<size_t>(y) * w + x;
           if (d[k] == 0) continue;
           int v = 1;
@@ -881,12 +893,16 @@ void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
         lut[k] = static_cast<uint8_t>(std::lround(wgt * 255.0f));
         if (k > 0 && lut[k] == 0) lut[k] = 1;
       }
-      for (size_t k = 0; k < npx; ++k) {
-        const unsigned a = lut[d[k]];
-        out[4 * k + 0] = static_cast<uint8_t>((in[3 * k + 0] * a + 127) / 255);
-        out[4 * k + 1] = static_cast<uint8_t>((in[3 * k + 1] * a + 127) / 255);
-        out[4 * k + 2] = static_cast<uint8_t>((in[3 * k + 2] * a + 127) / 255);
-        out[4 * k + 3] = static_cast<uint8_t>(a);
+      std::fill(out, out + 4 * npx, uint8_t{0});  // lut[0] = 0: background is zero
+      for (int y = by0; y <= by1; ++y) {
+        for (int x = bx0; x <= bx1; ++x) {
+          const size_t k = static_cast<size_t>(y) * w + x;
+          const unsigned a = lut[d[k]];
+          out[4 * k + 0] = static_cast<uint8_t>((in[3 * k + 0] * a + 127) / 255);
+          out[4 * k + 1] = static_cast<uint8_t>((in[3 * k + 1] * a + 127) / 255);
+          out[4 * k + 2] = static_cast<uint8_t>((in[3 * k + 2] * a + 127) / 255);
+          out[4 * k + 3] = static_cast<uint8_t>(a);
+        }
       }
       std::vector<uint8_t>& alpha = pod_alpha_[i];
       alpha.resize(npx);
@@ -1053,7 +1069,18 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
       triangle_pods_[t] = bits;
       keyed[t] = {bits, static_cast<uint32_t>(t)};
     }
-    std::sort(keyed.begin(), keyed.end());
+    // Sorted by pod set, then triangle (the order std::sort of the pairs
+    // gives): a stable radix sort over the 16-bit set, low byte then high.
+    {
+      std::vector<std::pair<uint16_t, uint32_t>> tmp(nt);
+      for (int shift : {0, 8}) {
+        std::array<size_t, 257> start{};
+        for (const auto& k : keyed) ++start[((k.first >> shift) & 0xFF) + 1];
+        for (int b = 0; b < 256; ++b) start[b + 1] += start[b];
+        for (const auto& k : keyed) tmp[start[(k.first >> shift) & 0xFF]++] = k;
+        keyed.swap(tmp);
+      }
+    }
     ordered.resize(nt);
     for (size_t t = 0; t < nt; ++t) {
       ordered[t] = remote_triangles_[keyed[t].second];
