@@ -8,12 +8,16 @@
 #include <string>
 
 #include "common/clock.h"
+#include "server/fusion/edge_collapse.h"
 #include "server/fusion/mesh_cleanup.h"
 
 namespace holo {
 
 Status StreamMeshOptions::Check() const {
   if (step < 1 || step > 4) return InvalidArgument("stream mesh step must be in [1, 4], got " + std::to_string(step));
+  if (!(collapse_max_edge_voxels >= 0 && collapse_max_edge_voxels <= 1))
+    return InvalidArgument("stream mesh collapse_max_edge_voxels must be in [0, 1], got " +
+                           std::to_string(collapse_max_edge_voxels));
   if (max_triangles != 0 && max_triangles < 100)
     return InvalidArgument("stream mesh triangle budget must be 0 (none) or >= 100, got " + std::to_string(max_triangles));
   return OkStatus();
@@ -26,6 +30,7 @@ StatusOr<std::unique_ptr<StreamMesher>> StreamMesher::Create(const TsdfOptions& 
   HOLO_RETURN_IF_ERROR(fine.Check().WithContext("fusion options"));
   std::unique_ptr<StreamMesher> m(new StreamMesher());
   m->options_ = options;
+  m->coarse_voxel_m_ = fine.voxel_size * static_cast<float>(options.step);
   if (options.step > 1) {
     TsdfOptions coarse = fine;
     coarse.voxel_size = fine.voxel_size * static_cast<float>(options.step);
@@ -75,6 +80,20 @@ Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* 
     return OkStatus();
   }
   sw.Restart();
+  if (options_.collapse_max_edge_voxels > 0) {
+    EdgeCollapseOptions eo;
+    eo.target_triangles = options_.max_triangles;
+    eo.max_edge_m = options_.collapse_max_edge_voxels * coarse_voxel_m_;
+    EdgeCollapseStats es;
+    CollapseShortEdges(eo, out, &es);
+    st.collapses = es.collapses;
+    if (out->num_triangles() <= options_.max_triangles) {
+      st.simplify_ms = sw.ElapsedMs();
+      st.triangles = out->num_triangles();
+      return OkStatus();
+    }
+  }
+  st.quadric = true;
   // Quadric simplification of the indexed mesh (topology kept; no error
   // bound: the budget decides).
   const size_t nt = out->num_triangles();

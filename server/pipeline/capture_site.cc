@@ -1,5 +1,7 @@
 #include "server/pipeline/capture_site.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <vector>
 
@@ -191,6 +193,9 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
       // simplification to the budget as simplify.
       StreamMeshStats ss;
       HOLO_RETURN_IF_ERROR(stream_->Make(*volume_, &w.mesh, &ss));
+      spdlog::trace("stream mesh: {} triangles from marching cubes, {} sent ({} short edges collapsed{}; {:.1f} ms)",
+                    ss.coarse_triangles, ss.triangles, ss.collapses, ss.quadric ? ", then quadric" : "",
+                    ss.simplify_ms);
       w.timings.mesh_ms = std::max(1e-6, ss.downsample_ms + ss.extract_ms);
       w.timings.simplify_ms = std::max(1e-6, ss.simplify_ms);
       if (cpu) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 #include <utility>
 #include <vector>
 
@@ -13,6 +14,7 @@
 #include "analytic_scenes.h"
 #include "common/metrics/mesh_distance.h"
 #include "server/capture/prerendered.h"
+#include "server/fusion/edge_collapse.h"
 #include "server/fusion/tsdf.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
@@ -161,6 +163,24 @@ TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
   EXPECT_LT(MeanDistanceMm(stream, full), 1.5);
   EXPECT_LT(MeanDistanceMm(full, stream), 1.5);
   for (const auto& p : stream.positions) EXPECT_NEAR((p - Eigen::Vector3f(0, 0, 1)).norm(), r, 0.006f);
+  EXPECT_GT(st.collapses, 0u) << "short edges go first";
+
+  // The quadric simplifier alone (no short-edge collapse) holds the same.
+  {
+    StreamMeshOptions qo = so;
+    qo.collapse_max_edge_voxels = 0;
+    auto quadric = StreamMesher::Create(o, qo);
+    ASSERT_TRUE(quadric.ok());
+    Mesh q;
+    StreamMeshStats qs;
+    ASSERT_TRUE((*quadric)->Make(volume, &q, &qs).ok());
+    ExpectNoDegenerateTriangles(q);
+    EXPECT_TRUE(qs.quadric);
+    EXPECT_EQ(qs.collapses, 0u);
+    EXPECT_LE(q.num_triangles(), so.max_triangles);
+    EXPECT_TRUE(IsClosed(q));
+    EXPECT_LT(MeanDistanceMm(q, full), 1.5);
+  }
 
   // Without a budget the coarse mesh is published as extracted.
   so.max_triangles = 0;
@@ -177,6 +197,123 @@ TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
   EXPECT_LE(irregular * 1000, edges) << irregular << " of " << edges << " edges are boundary or non-manifold";
 }
 
+
+// Every directed edge once: a closed surface whose triangles all face the
+// same way (outward if one does).
+bool ConsistentlyOriented(const Mesh& m) {
+  std::map<std::pair<uint32_t, uint32_t>, int> directed;
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) ++directed[{t[k], t[(k + 1) % 3]}];
+  for (const auto& [e, n] : directed)
+    if (n != 1 || directed.count({e.second, e.first}) != 1) return false;
+  return true;
+}
+
+// Short-edge collapse on the closed full marching-cubes mesh of a sphere:
+// closed, consistently oriented, no degenerate triangle, the budget met by
+// collapsing only edges below the limit, every vertex on the sphere and
+// within half the limit of where a vertex was.
+TEST(EdgeCollapse, ClosedMeshStaysClosedOrientedAndNear) {
+  Rig rig = RingRig(8, {0, 0, 1}, 1.5f, 240, 180);
+  for (float dz : {1.4f, -1.4f}) {
+    PodCalibration pod = rig.pods[0];
+    pod.id = static_cast<int>(rig.pods.size());
+    pod.name = "cam" + std::to_string(pod.id);
+    pod.world_from_depth = LookAt(Eigen::Vector3f(0.3f, 0.2f, 1.0f + dz), Eigen::Vector3f(0, 0, 1));
+    rig.pods.push_back(pod);
+  }
+  const float r = 0.3f;
+  TsdfVolume volume(Options(0.008f));
+  ASSERT_TRUE(volume.Integrate(rig, RenderAnalytic(rig, Sphere({0, 0, 1}, r))).ok());
+  Mesh full;
+  volume.ExtractMesh(&full);
+  ASSERT_TRUE(IsClosed(full));
+  ASSERT_TRUE(ConsistentlyOriented(full));
+  Mesh m = full;
+  EdgeCollapseOptions eo;
+  eo.target_triangles = full.num_triangles() * 85 / 100;
+  eo.max_edge_m = 0.35f * 0.008f;
+  EdgeCollapseStats st;
+  CollapseShortEdges(eo, &m, &st);
+  ExpectNoDegenerateTriangles(m);
+  EXPECT_GT(st.collapses, 0u);
+  EXPECT_LE(m.num_triangles(), eo.target_triangles);
+  EXPECT_EQ(m.num_triangles(), full.num_triangles() - 2 * st.collapses);
+  EXPECT_LE(st.longest_collapsed_m, eo.max_edge_m);
+  EXPECT_TRUE(IsClosed(m));
+  EXPECT_TRUE(ConsistentlyOriented(m));
+  EXPECT_EQ(m.normals.size(), m.positions.size());
+  // Midpoints of chords shorter than the limit stay as near the sphere as
+  // the fused surface was (within 0.2 mm).
+  float full_dev = 0;
+  for (const auto& p : full.positions) full_dev = std::max(full_dev, std::abs((p - Eigen::Vector3f(0, 0, 1)).norm() - r));
+  for (const auto& p : m.positions) {
+    EXPECT_NEAR((p - Eigen::Vector3f(0, 0, 1)).norm(), r, full_dev + 0.0002f);
+    float nearest = 1e9f;
+    for (const auto& q : full.positions) nearest = std::min(nearest, (p - q).norm());
+    EXPECT_LE(nearest, 0.5f * eo.max_edge_m + 1e-6f);
+  }
+  EXPECT_LT(MeanDistanceMm(m, full), 0.5);
+  EXPECT_LT(MeanDistanceMm(full, m), 0.5);
+}
+
+// A tetrahedron has no edge that can go (each collapse would leave two
+// copies of a triangle); a plane's border stays where it is.
+TEST(EdgeCollapse, KeepsTetrahedraAndBorders) {
+  Mesh tet;
+  tet.positions = {{0, 0, 0}, {0.001f, 0, 0}, {0, 0.001f, 0}, {0, 0, 0.001f}};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  EdgeCollapseOptions eo;
+  eo.target_triangles = 0;
+  eo.max_edge_m = 0.01f;
+  Mesh t = tet;
+  EdgeCollapseStats st;
+  CollapseShortEdges(eo, &t, &st);
+  EXPECT_EQ(st.collapses, 0u);
+  EXPECT_EQ(t.triangles, tet.triangles);
+
+  // A 20×20 grid of 1 cm squares whose interior vertices wander by up to
+  // 3 mm: many short interior edges, and the border.
+  Mesh grid;
+  const int n = 20;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> jitter(-0.003f, 0.003f);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const bool border = i == 0 || j == 0 || i == n || j == n;
+      grid.positions.push_back({0.01f * i + (border ? 0 : jitter(rng)), 0.01f * j + (border ? 0 : jitter(rng)), 0});
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const uint32_t a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      grid.triangles.push_back({a, b, d});
+      grid.triangles.push_back({a, d, c});
+    }
+  auto facing_up = [](const Mesh& m) {
+    size_t up = 0;
+    for (const auto& t : m.triangles)
+      up += (m.positions[t[1]] - m.positions[t[0]]).cross(m.positions[t[2]] - m.positions[t[0]]).z() > 0.0f;
+    return up;
+  };
+  ASSERT_EQ(facing_up(grid), grid.num_triangles());
+  const size_t border_edges = IrregularEdges(grid);
+  Mesh g = grid;
+  eo.max_edge_m = 0.0065f;
+  CollapseShortEdges(eo, &g, &st);
+  ExpectNoDegenerateTriangles(g);
+  EXPECT_GT(st.collapses, 5u);
+  EXPECT_EQ(IrregularEdges(g), border_edges) << "the border keeps its edges and nothing else opens";
+  size_t border_kept = 0;
+  for (const auto& p : g.positions) {
+    const float x = p.x() / 0.01f, y = p.y() / 0.01f;
+    const bool on_border = std::abs(x) < 1e-4f || std::abs(y) < 1e-4f || std::abs(x - n) < 1e-4f ||
+                           std::abs(y - n) < 1e-4f;
+    border_kept += on_border && std::abs(x - std::round(x)) < 1e-4f && std::abs(y - std::round(y)) < 1e-4f;
+  }
+  EXPECT_EQ(border_kept, static_cast<size_t>(4 * n)) << "every border vertex in place";
+  EXPECT_EQ(facing_up(g), g.num_triangles()) << "no triangle flipped";
+}
+
 TEST(StreamMesh, RefusesBadOptions) {
   StreamMeshOptions so;
   so.step = 0;
@@ -185,6 +322,9 @@ TEST(StreamMesh, RefusesBadOptions) {
   so.max_triangles = 10;
   EXPECT_FALSE(StreamMesher::Create(Options(0.008f), so).ok());
   so.max_triangles = 20000;
+  so.collapse_max_edge_voxels = 1.5f;
+  EXPECT_FALSE(StreamMesher::Create(Options(0.008f), so).ok());
+  so.collapse_max_edge_voxels = 0.35f;
   so.step = 4;
   TsdfOptions thin = Options(0.008f);
   thin.truncation_voxels = 3;  // 3/4 of a coarse voxel: cannot be represented
