@@ -686,12 +686,17 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
       f.latency_ms = static_cast<double>(f.received_us + stats.clock_offset_us - f.capture_time_us) * 1e-3;
       ++stats.frames_received;
       stats.last_frame_index = f.frame_index;
-      if (cb.on_frame == nullptr || keep_frames) {
+      // Without a callback the queue holds the only copy (a frame is a
+      // mesh and eight images: copying it cost the live viewers ~2 % of
+      // the machine).
+      if (cb.on_frame == nullptr) {
+        frames.push_back(std::move(f));
+      } else if (keep_frames) {
         frames.push_back(f);
-        while (frames.size() > opt.max_pending_frames) {
-          frames.pop_front();
-          ++stats.frames_dropped_local;
-        }
+      }
+      while (frames.size() > opt.max_pending_frames) {
+        frames.pop_front();
+        ++stats.frames_dropped_local;
       }
     }
     cv.notify_all();
