@@ -167,8 +167,8 @@ int main(int argc, char** argv) {
   app.add_option("--replay-seconds", replay.max_wall_s, "--replay: stop after this many seconds (0: at the end)");
   std::string listen_spec, net_config_path, publisher_token, viewer_token;
   bool truth_mesh = false, no_color_stream = false, mesh_colors = false;
-  double position_step_mm = 2.0;
-  int jpeg_quality = 55;
+  double position_step_mm = holo::net::kSitePositionStepMm;
+  int jpeg_quality = holo::net::kSiteJpegQuality;
   std::string color_codec = "c1";
   int video_crf = -1;
   int truth_loop = 0;
