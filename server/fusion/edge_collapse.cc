@@ -21,9 +21,16 @@ struct Candidate {
   uint32_t a, b;
 };
 
-// The triangles around every vertex (compressed rows).
-struct VertexTriangles {
+// The triangles around every vertex (compressed rows, built once per pass)
+// and, as the pass collapses edges, what changed since: triangles that died
+// and the vertices merged into each survivor (its fan is theirs together).
+struct Fans {
   std::vector<uint32_t> start, tris;
+  std::vector<uint8_t> dead;          // per triangle
+  std::vector<uint32_t> parent;       // merged vertex → survivor (itself if alive)
+  std::vector<uint32_t> next_merged;  // chain of the vertices merged into a survivor
+  static constexpr uint32_t kEnd = 0xFFFFFFFFu;
+
   void Build(const std::vector<std::array<uint32_t, 3>>& t, size_t nv) {
     start.assign(nv + 1, 0);
     for (const auto& tri : t) {
@@ -35,25 +42,49 @@ struct VertexTriangles {
     for (size_t i = 0; i < t.size(); ++i) {
       for (uint32_t v : t[i]) tris[cursor[v]++] = static_cast<uint32_t>(i);
     }
+    dead.assign(t.size(), 0);
+    parent.resize(nv);
+    std::iota(parent.begin(), parent.end(), 0u);
+    next_merged.assign(nv, kEnd);
+  }
+  uint32_t Find(uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  }
+  // Calls fn(t) for every live triangle around survivor v.
+  template <typename F>
+  void ForEachTriangle(uint32_t v, F&& fn) const {
+    for (uint32_t u = v; u != kEnd; u = next_merged[u]) {
+      for (uint32_t i = start[u]; i < start[u + 1]; ++i) {
+        if (!dead[tris[i]]) fn(tris[i]);
+      }
+    }
   }
 };
 
-// The one-ring of `v` if its triangles form a single closed fan: `ring`
-// gets the neighbours (each once), `fan` the triangles. False otherwise
-// (boundary, non-manifold or pinched vertex, or more than kMaxFan triangles).
-bool ClosedFan(uint32_t v, const std::vector<std::array<uint32_t, 3>>& t, const VertexTriangles& vt,
+// The one-ring of survivor `v` if its live triangles form a single closed
+// fan: `ring` gets the neighbours (each once), `fan` the triangles. False
+// otherwise (boundary, non-manifold or pinched vertex, or more than kMaxFan
+// triangles).
+bool ClosedFan(uint32_t v, const std::vector<std::array<uint32_t, 3>>& t, const Fans& fans,
                std::array<uint32_t, kMaxFan>* ring, std::array<uint32_t, kMaxFan>* fan, int* size) {
-  const uint32_t b = vt.start[v], e = vt.start[v + 1];
-  const int n = static_cast<int>(e - b);
-  if (n < 3 || n > kMaxFan) return false;
+  int n = 0;
+  bool overflow = false;
+  fans.ForEachTriangle(v, [&](uint32_t tri) {
+    if (n < kMaxFan) {
+      (*fan)[n++] = tri;
+    } else {
+      overflow = true;
+    }
+  });
+  if (overflow || n < 3) return false;
   // Each triangle seen from v: (next, after) counter-clockwise.
   std::array<uint32_t, kMaxFan> next{}, after{};
   for (int i = 0; i < n; ++i) {
-    const auto& tri = t[vt.tris[b + i]];
+    const auto& tri = t[(*fan)[i]];
     const int k = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
     next[i] = tri[(k + 1) % 3];
     after[i] = tri[(k + 2) % 3];
-    (*fan)[i] = vt.tris[b + i];
   }
   // Walk around: from triangle i the next one starts where i ends. A single
   // closed fan visits every triangle once and comes back to the first.
@@ -95,10 +126,8 @@ void CollapseShortEdges(const EdgeCollapseOptions& options, Mesh* mesh, EdgeColl
   const size_t nv = pos.size();
   const bool has_normals = mesh->normals.size() == nv, has_colors = mesh->colors.size() == nv;
   const float max2 = options.max_edge_m * options.max_edge_m;
-  VertexTriangles vt;
+  Fans fans;
   std::vector<Candidate> cands;
-  std::vector<uint32_t> parent;
-  std::vector<uint8_t> locked;
   for (int pass = 0; pass < options.max_passes && tris.size() > options.target_triangles; ++pass) {
     const size_t nt = tris.size();
     const size_t need = (nt - options.target_triangles + 1) / 2;  // an interior collapse removes 2
@@ -116,23 +145,25 @@ void CollapseShortEdges(const EdgeCollapseOptions& options, Mesh* mesh, EdgeColl
     auto shorter = [](const Candidate& x, const Candidate& y) {
       return x.len2 < y.len2 || (x.len2 == y.len2 && (x.a < y.a || (x.a == y.a && x.b < y.b)));
     };
-    const size_t keep = std::min(cands.size(), 4 * need + 64);
+    const size_t keep = std::min(cands.size(), 2 * need + 64);
     if (keep < cands.size()) {
       std::nth_element(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(keep), cands.end(), shorter);
       cands.resize(keep);
     }
     std::sort(cands.begin(), cands.end(), shorter);
-    vt.Build(tris, nv);
-    locked.assign(nv, 0);
-    parent.resize(nv);
-    std::iota(parent.begin(), parent.end(), 0u);
+    // One pass over the candidates, the mesh updated after each collapse
+    // (triangles renamed, two marked dead, the fans merged), so the tests
+    // always see the current mesh.
+    fans.Build(tris, nv);
     size_t done = 0;
     std::array<uint32_t, kMaxFan> ring_a{}, ring_b{}, fan_a{}, fan_b{};
     for (const Candidate& c : cands) {
-      const uint32_t a = c.a, b = c.b;
-      if (locked[a] || locked[b]) continue;
+      const uint32_t a = fans.Find(c.a), b = fans.Find(c.b);
+      if (a == b) continue;
+      const float len2 = (pos[a] - pos[b]).squaredNorm();  // ends may have moved
+      if (!(len2 < max2)) continue;
       int na = 0, nb = 0;
-      if (!ClosedFan(a, tris, vt, &ring_a, &fan_a, &na) || !ClosedFan(b, tris, vt, &ring_b, &fan_b, &nb)) continue;
+      if (!ClosedFan(a, tris, fans, &ring_a, &fan_a, &na) || !ClosedFan(b, tris, fans, &ring_b, &fan_b, &nb)) continue;
       // Link condition: in closed fans the edge has two triangles, whose
       // opposite corners are common neighbours; there must be no other.
       int common = 0;
@@ -178,19 +209,27 @@ void CollapseShortEdges(const EdgeCollapseOptions& options, Mesh* mesh, EdgeColl
           mesh->colors[a][ch] = static_cast<uint8_t>((mesh->colors[a][ch] + mesh->colors[b][ch] + 1) / 2);
         }
       }
-      parent[b] = a;
-      locked[a] = locked[b] = 1;
-      for (int i = 0; i < na; ++i) locked[ring_a[i]] = 1;
-      for (int i = 0; i < nb; ++i) locked[ring_b[i]] = 1;
-      st.longest_collapsed_m = std::max(st.longest_collapsed_m, std::sqrt(c.len2));
+      // The edge's two triangles die; b's others now use a.
+      for (int i = 0; i < nb; ++i) {
+        auto& tri = tris[fan_b[i]];
+        const bool has_a = tri[0] == a || tri[1] == a || tri[2] == a;
+        if (has_a) {
+          fans.dead[fan_b[i]] = 1;
+          continue;
+        }
+        for (uint32_t& v : tri) v = v == b ? a : v;
+      }
+      fans.parent[b] = a;
+      uint32_t tail = a;
+      while (fans.next_merged[tail] != Fans::kEnd) tail = fans.next_merged[tail];
+      fans.next_merged[tail] = b;
+      st.longest_collapsed_m = std::max(st.longest_collapsed_m, std::sqrt(len2));
       if (++done >= need) break;
     }
     if (done == 0) break;
     size_t out = 0;
     for (size_t t = 0; t < nt; ++t) {
-      const std::array<uint32_t, 3> r = {parent[tris[t][0]], parent[tris[t][1]], parent[tris[t][2]]};
-      if (r[0] == r[1] || r[1] == r[2] || r[0] == r[2]) continue;
-      tris[out++] = r;
+      if (!fans.dead[t]) tris[out++] = tris[t];
     }
     tris.resize(out);
     st.collapses += done;
