@@ -992,13 +992,16 @@ Status Renderer::SelectPods(const ProjectiveOptions& options) {
     if (!pool_) pool_ = std::make_unique<WorkerPool>(ResolveThreadCount(0));
     pool_->ParallelFor(n, [&](int i) {
       const CameraModel& cam = pod_cameras_[i];
+      const Eigen::Vector3f center = cam.Center();
       for (size_t v = 0; v < nv; ++v) {
         const Eigen::Vector3f& p = remote_positions_[v];
         const Eigen::Vector3f& nrm = remote_normals_[v];
-        const Eigen::Vector3f to_pod = cam.Center() - p;
+        const Eigen::Vector3f to_pod = center - p;
+        const float dot = nrm.dot(to_pod);
+        if (!(dot > 0)) continue;  // facing away (about half): no square roots
         const float len = to_pod.norm();
         if (!(len > 0)) continue;
-        const float ndv = nrm.dot(to_pod) / (len * std::max(nrm.norm(), 1e-12f));
+        const float ndv = dot / (len * std::max(nrm.norm(), 1e-12f));
         if (!(ndv > 0)) continue;
         const Eigen::Vector3f pc = projection[i] * p.homogeneous();  // camera point, or pixel·z
         if (pc.z() < 0.05f) continue;
