@@ -24,6 +24,7 @@
 #include "common/image.h"
 #include "common/mesh.h"
 #include "common/status.h"
+#include "common/worker_pool.h"
 #include "net/session_server.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
@@ -156,6 +157,7 @@ class SitePublisher {
   SitePublisherOptions options_;
   EncodedFrame scratch_;  // Publish's
   LayerState layers_[2];
+  WorkerPool pool_{2};  // geometry and colour of a layer at once
   std::atomic<int64_t> encoded_[2] = {0, 0};
   int64_t frames_seen_ = 0;
 };
