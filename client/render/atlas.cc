@@ -80,6 +80,30 @@ struct CellAccum {
   float* f[5];
 };
 
+// One sample of a pod at image point (x, y) (inside the image) for texel k
+// at camera depth qz with facing weight wt: the depth test against the
+// pod's flagged map, then the bilinear colour fetch added to the texel.
+inline void AddSample(const PodPass& pp, float x, float y, float qz, float wt, int k, const CellAccum& acc) {
+  // Nearest texel of the depth map (x, y ≥ −0.5: truncation rounds).
+  const int ix = static_cast<int>(x + 0.5f), iy = static_cast<int>(y + 0.5f);
+  const float zf = pp.zmap[static_cast<size_t>(iy) * pp.w + ix];
+  const float zabs = std::abs(zf);
+  if (zabs <= 0.0f || qz > zabs + pp.tol) return;
+  // Bilinear fetch (texel centres on integers), clamped at the border.
+  const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;  // floor, x ≥ −1
+  const float ax = x - static_cast<float>(fx), ay = y - static_cast<float>(fy);
+  const int x0 = std::clamp(fx, 0, pp.w - 1), x1 = std::clamp(fx + 1, 0, pp.w - 1);
+  const int y0 = std::clamp(fy, 0, pp.h - 1), y1 = std::clamp(fy + 1, 0, pp.h - 1);
+  const uint8_t* p00 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x0);
+  const uint8_t* p10 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x1);
+  const uint8_t* p01 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x0);
+  const uint8_t* p11 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x1);
+  const float kw = zf < 0.0f ? pp.edge_w * wt : wt;
+  const float w00 = kw * (1 - ax) * (1 - ay), w10 = kw * ax * (1 - ay), w01 = kw * (1 - ax) * ay, w11 = kw * ax * ay;
+  for (int ch = 0; ch < 4; ++ch) acc.f[ch][k] += w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
+  acc.f[4][k] += kw;
+}
+
 // Adds the pod's samples to the texels of the cell (undistorted pod).
 // Returns the samples taken (texels inside the image with weight).
 size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccum& acc) {
@@ -95,28 +119,7 @@ size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccu
     const float y = (ct.b0[k] * pp.q0.y() + ct.b1[k] * pp.q1.y() + ct.b2[k] * pp.q2.y()) * inv;
     if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
     ++samples;
-    // Nearest texel of the depth map (x, y ≥ −0.5: truncation rounds).
-    const int ix = static_cast<int>(x + 0.5f), iy = static_cast<int>(y + 0.5f);
-    const float zf = pp.zmap[static_cast<size_t>(iy) * pp.w + ix];
-    const float zabs = std::abs(zf);
-    if (zabs <= 0.0f || qz > zabs + pp.tol) continue;
-    // Bilinear fetch (texel centres on integers), clamped at the border.
-    const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;  // floor, x ≥ −1
-    const float ax = x - static_cast<float>(fx), ay = y - static_cast<float>(fy);
-    const int x0 = std::clamp(fx, 0, pp.w - 1), x1 = std::clamp(fx + 1, 0, pp.w - 1);
-    const int y0 = std::clamp(fy, 0, pp.h - 1), y1 = std::clamp(fy + 1, 0, pp.h - 1);
-    const uint8_t* p00 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x0);
-    const uint8_t* p10 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x1);
-    const uint8_t* p01 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x0);
-    const uint8_t* p11 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x1);
-    const float kw = zf < 0.0f ? pp.edge_w * wt : wt;
-    const float w00 = kw * (1 - ax) * (1 - ay), w10 = kw * ax * (1 - ay), w01 = kw * (1 - ax) * ay,
-                w11 = kw * ax * ay;
-    for (int ch = 0; ch < 4; ++ch) {
-      const float sum = w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
-      acc.f[ch][k] += sum;
-    }
-    acc.f[4][k] += kw;
+    AddSample(pp, x, y, qz, wt, k, acc);
   }
   return samples;
 }
@@ -441,25 +444,7 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
           const float x = px.x(), y = px.y();
           if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
           ++my_samples;
-          const int ix = static_cast<int>(x + 0.5f), iy = static_cast<int>(y + 0.5f);
-          const float zf = pp.zmap[static_cast<size_t>(iy) * pp.w + ix];
-          const float zabs = std::abs(zf);
-          if (zabs <= 0.0f || qz > zabs + tol) continue;
-          const int fx = static_cast<int>(x + 1.0f) - 1, fy = static_cast<int>(y + 1.0f) - 1;
-          const float ax = x - static_cast<float>(fx), ay = y - static_cast<float>(fy);
-          const int x0 = std::clamp(fx, 0, pp.w - 1), x1 = std::clamp(fx + 1, 0, pp.w - 1);
-          const int y0 = std::clamp(fy, 0, pp.h - 1), y1 = std::clamp(fy + 1, 0, pp.h - 1);
-          const uint8_t* p00 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x0);
-          const uint8_t* p10 = pp.rgba + 4 * (static_cast<size_t>(y0) * pp.w + x1);
-          const uint8_t* p01 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x0);
-          const uint8_t* p11 = pp.rgba + 4 * (static_cast<size_t>(y1) * pp.w + x1);
-          const float kw = zf < 0.0f ? edge_w * wt : wt;
-          const float w00 = kw * (1 - ax) * (1 - ay), w10 = kw * ax * (1 - ay), w01 = kw * (1 - ax) * ay,
-                      w11 = kw * ax * ay;
-          for (int ch = 0; ch < 4; ++ch) {
-            acc.f[ch][k] += w00 * p00[ch] + w10 * p10[ch] + w01 * p01[ch] + w11 * p11[ch];
-          }
-          acc.f[4][k] += kw;
+          AddSample(pp, x, y, qz, wt, k, acc);
         }
       }
       std::array<float, 3> vcol[3];

@@ -127,9 +127,10 @@ TEST(TsdfDownsample, CopiesEveryStepthVoxelAndRefusesMismatchedVolumes) {
   EXPECT_FLOAT_EQ(fine.DownsampleOffset(2), 0.005f);
 }
 
-TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
+// A ring of 8 pods around (0, 0, 1) and two more above and below, so that
+// the whole of a sphere there is seen (a closed full mesh).
+Rig SphereRig() {
   Rig rig = RingRig(8, {0, 0, 1}, 1.5f, 240, 180);
-  // Two more pods above and below so that the whole sphere is seen (a closed full mesh).
   for (float dz : {1.4f, -1.4f}) {
     PodCalibration pod = rig.pods[0];
     pod.id = static_cast<int>(rig.pods.size());
@@ -137,6 +138,11 @@ TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
     pod.world_from_depth = LookAt(Eigen::Vector3f(0.3f, 0.2f, 1.0f + dz), Eigen::Vector3f(0, 0, 1));
     rig.pods.push_back(pod);
   }
+  return rig;
+}
+
+TEST(StreamMesh, SphereStaysClosedWithinTheBudgetAndNearTheFullMesh) {
+  const Rig rig = SphereRig();
   const float r = 0.35f;
   const TsdfOptions o = Options(0.008f);
   TsdfVolume volume(o);
@@ -214,14 +220,7 @@ bool ConsistentlyOriented(const Mesh& m) {
 // collapsing only edges below the limit, every vertex on the sphere and
 // within half the limit of where a vertex was.
 TEST(EdgeCollapse, ClosedMeshStaysClosedOrientedAndNear) {
-  Rig rig = RingRig(8, {0, 0, 1}, 1.5f, 240, 180);
-  for (float dz : {1.4f, -1.4f}) {
-    PodCalibration pod = rig.pods[0];
-    pod.id = static_cast<int>(rig.pods.size());
-    pod.name = "cam" + std::to_string(pod.id);
-    pod.world_from_depth = LookAt(Eigen::Vector3f(0.3f, 0.2f, 1.0f + dz), Eigen::Vector3f(0, 0, 1));
-    rig.pods.push_back(pod);
-  }
+  const Rig rig = SphereRig();
   const float r = 0.3f;
   TsdfVolume volume(Options(0.008f));
   ASSERT_TRUE(volume.Integrate(rig, RenderAnalytic(rig, Sphere({0, 0, 1}, r))).ok());
