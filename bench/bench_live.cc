@@ -16,7 +16,9 @@
 // gives the CPU-ms of each stage. After it, frames kept by the rendering
 // viewer are scored against the studio's ground truth: Chamfer distance of
 // the decoded mesh, and PSNR/SSIM of the viewer's render from cameras no pod
-// has.
+// has. The kept frames show the same studio frames in every run (those
+// nearest to --quality-frames points spread over the looped content), so
+// runs compare picture for picture.
 //
 // Figures (JSON lines, every one with "content"): site_fps, site_cpu_ms per
 // stage (serial run) and total (live run: the site process's CPU per
@@ -37,6 +39,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <limits>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -373,6 +376,20 @@ int Run(const BenchArgs& args, LiveOptions o) {
   ViewerLog render_log;
   std::unique_ptr<net::SiteClient> render_client;
   std::vector<KeptFrame> kept;
+  // The studio frame a frame index shows (the site loops its pre-rendered
+  // frames forward and back; the truth stream loops forward).
+  auto content_frame = [&](int64_t k) {
+    return content == "truth" ? k % o.prerender : LoopContent(k, o.prerender);
+  };
+  struct QualitySlot {
+    int64_t target = 0;
+    int64_t distance = std::numeric_limits<int64_t>::max();
+    KeptFrame frame;
+  };
+  std::vector<QualitySlot> slots(static_cast<size_t>(std::max(0, o.quality_frames)));
+  for (size_t i = 0; i < slots.size(); ++i) {
+    slots[i].target = static_cast<int64_t>((2 * i + 1) * static_cast<size_t>(o.prerender) / (2 * slots.size()));
+  }
   std::vector<double> render_ms, render_cpu_ms;
   double render_thread_cpu_ms = 0;
   Status render_status;
@@ -411,7 +428,6 @@ int Run(const BenchArgs& args, LiveOptions o) {
       settings.mode = render::ColorMode::kProjective;
       settings.projective.bake = o.color == "projective";
       const auto t0 = std::chrono::steady_clock::now();
-      int64_t kept_every = 0;
       net::ReceivedFrame rf;
       while (!stop) {
         // The newest picture due now (held while its voice is later).
@@ -453,9 +469,17 @@ int Run(const BenchArgs& args, LiveOptions o) {
           std::lock_guard<std::mutex> l(render_log.mu);
           render_log.frames.push_back(r);
         }
-        if (++kept_every % 20 == 0 && static_cast<int>(kept.size()) < o.quality_frames && rf.has_color) {
-          std::lock_guard<std::mutex> l(kept_mu);
-          kept.push_back({rf.frame_index, rf.mesh, rf.images});
+        if (rf.has_color) {
+          // Each slot keeps the rendered frame whose studio frame is nearest
+          // its target (the first one at the target stays).
+          const int64_t c = content_frame(rf.frame_index);
+          for (QualitySlot& slot : slots) {
+            const int64_t d = std::abs(c - slot.target);
+            if (d >= slot.distance) continue;
+            std::lock_guard<std::mutex> l(kept_mu);
+            slot.distance = d;
+            slot.frame = {rf.frame_index, rf.mesh, rf.images};
+          }
         }
       }
       render_thread_cpu_ms = holo::ThreadCpuTimeMs();
@@ -679,6 +703,9 @@ int Run(const BenchArgs& args, LiveOptions o) {
   guard.c->Stop(10);
 
   // 3. Quality at the viewer against the studio's ground truth.
+  for (QualitySlot& slot : slots) {
+    if (slot.distance != std::numeric_limits<int64_t>::max()) kept.push_back(std::move(slot.frame));
+  }
   if (!kept.empty()) {
     progress("scoring " + std::to_string(kept.size()) + " decoded frames against the ground truth");
     auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
@@ -686,9 +713,6 @@ int Run(const BenchArgs& args, LiveOptions o) {
       spdlog::error("live: {}", studio.status().ToString());
       return 1;
     }
-    auto content_frame = [&](int64_t k) {
-      return content == "truth" ? k % o.prerender : LoopContent(k, o.prerender);
-    };
     std::vector<double> chamfer, psnr, ssim;
     NovelViewOptions nv;
     nv.intrinsics = Intrinsics::FromFov(o.width, o.height, 50.0);
