@@ -48,8 +48,9 @@ struct ReducedLayerOptions {
 // the viewer's picture (holoport-bench client, stream part).
 // The pods' images carry the fine appearance. C1 quality 45 (holoport-server
 // --jpeg-quality) keeps a 30 fps S8-QVGA call under 12 Mbit/s (11.7; 12.6 at
-// quality 55); the viewer's picture loses 0.02 dB PSNR and 0.003 SSIM
-// against 55 (holoport-bench client, stream part, fused frame 40).
+// quality 55); the viewer's picture loses 0.014–0.03 dB PSNR and
+// 0.003–0.004 SSIM against 55 (holoport-bench client, stream part, fused
+// frames 20, 40, 70, 110).
 constexpr double kSitePositionStepMm = 2.0;
 constexpr int kSiteJpegQuality = 45;
 inline protocol::GeometryEncodeOptions SiteGeometryOptions() {
