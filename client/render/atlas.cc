@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <string>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
@@ -10,6 +9,7 @@
 #define HOLO_ATLAS_AVX2 1
 #endif
 
+#include "common/cpu_features.h"
 #include "common/worker_pool.h"
 
 namespace holo::render {
@@ -104,9 +104,11 @@ inline void AddSample(const PodPass& pp, float x, float y, float qz, float wt, i
   acc.f[4][k] += kw;
 }
 
-// Adds the pod's samples to the texels of the cell (undistorted pod).
-// Returns the samples taken (texels inside the image with weight).
-size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccum& acc) {
+// Adds the pod's samples to the texels of the cell. `distorted`: the pod's
+// camera, whose distortion model maps each texel (q rows are then camera
+// coordinates); null for a pinhole pod (q rows are pixel·z, z). Returns the
+// samples taken (texels inside the image with weight).
+size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CameraModel* distorted, const CellAccum& acc) {
   size_t samples = 0;
   const float xmax = static_cast<float>(pp.w) - 0.5f, ymax = static_cast<float>(pp.h) - 0.5f;
   for (int k = 0; k < ct.count; ++k) {
@@ -114,9 +116,17 @@ size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccu
     if (wt <= 1e-6f) continue;
     const float qz = ct.b0[k] * pp.q0.z() + ct.b1[k] * pp.q1.z() + ct.b2[k] * pp.q2.z();
     if (qz < 0.05f) continue;
-    const float inv = 1.0f / qz;
-    const float x = (ct.b0[k] * pp.q0.x() + ct.b1[k] * pp.q1.x() + ct.b2[k] * pp.q2.x()) * inv;
-    const float y = (ct.b0[k] * pp.q0.y() + ct.b1[k] * pp.q1.y() + ct.b2[k] * pp.q2.y()) * inv;
+    float x, y;
+    if (distorted == nullptr) {
+      const float inv = 1.0f / qz;
+      x = (ct.b0[k] * pp.q0.x() + ct.b1[k] * pp.q1.x() + ct.b2[k] * pp.q2.x()) * inv;
+      y = (ct.b0[k] * pp.q0.y() + ct.b1[k] * pp.q1.y() + ct.b2[k] * pp.q2.y()) * inv;
+    } else {
+      Eigen::Vector2f px;
+      if (!distorted->ProjectCamera(ct.b0[k] * pp.q0 + ct.b1[k] * pp.q1 + ct.b2[k] * pp.q2, &px)) continue;
+      x = px.x();
+      y = px.y();
+    }
     if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
     ++samples;
     AddSample(pp, x, y, qz, wt, k, acc);
@@ -125,12 +135,8 @@ size_t SampleCellPortable(const CellTable& ct, const PodPass& pp, const CellAccu
 }
 
 #if defined(HOLO_ATLAS_AVX2)
-bool CpuHasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
 
-// SampleCellPortable eight texels at a time: the same operations in the
+// SampleCellPortable for a pinhole pod, eight texels at a time: the same operations in the
 // same order (no FMA), so the sums are bit-identical; lanes that the
 // portable loop skips add zero.
 __attribute__((target("avx2"))) size_t SampleCellAvx2(const CellTable& ct, const PodPass& pp,
@@ -386,12 +392,11 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
         }
       }
       const CellTable& ct = tables[l];
-      const int texels_per_cell = ct.count;
       out->uv[3 * t] = {(cx + 0.5f) * inv_w, (cy + 0.5f) * inv_h};
       out->uv[3 * t + 1] = {(cx + l + 0.5f) * inv_w, (cy + 0.5f) * inv_h};
       out->uv[3 * t + 2] = {(cx + 0.5f) * inv_w, (cy + l + 0.5f) * inv_h};
       if (!valid) continue;
-      my_texels += static_cast<size_t>(texels_per_cell);
+      my_texels += static_cast<size_t>(ct.count);
       for (int f = 0; f < 5; ++f) std::fill(acc.f[f], acc.f[f] + ct.padded, 0.0f);
       // Pod by pod (its maps stay in cache), every texel of the cell.
       // Pods far weaker than the triangle's strongest add little but cost
@@ -422,36 +427,19 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
         pp.h = p.height;
         pp.tol = tol;
         pp.edge_w = edge_w;
-        if (!p.distorted) {
 #if defined(HOLO_ATLAS_AVX2)
-          if (vectorized) {
-            my_samples += SampleCellAvx2(ct, pp, acc);
-            continue;
-          }
-#endif
-          my_samples += SampleCellPortable(ct, pp, acc);
+        if (vectorized && !p.distorted) {
+          my_samples += SampleCellAvx2(ct, pp, acc);
           continue;
         }
-        // A distorted pod: each texel through the camera's distortion model.
-        const float xmax = static_cast<float>(p.width) - 0.5f, ymax = static_cast<float>(p.height) - 0.5f;
-        for (int k = 0; k < texels_per_cell; ++k) {
-          const float wt = ct.c0[k] * cw0 + ct.c1[k] * cw1 + ct.c2[k] * cw2;
-          if (wt <= 1e-6f) continue;
-          const float qz = ct.b0[k] * pp.q0.z() + ct.b1[k] * pp.q1.z() + ct.b2[k] * pp.q2.z();
-          if (qz < 0.05f) continue;
-          Eigen::Vector2f px;
-          if (!pods[pi].camera->ProjectCamera(ct.b0[k] * pp.q0 + ct.b1[k] * pp.q1 + ct.b2[k] * pp.q2, &px)) continue;
-          const float x = px.x(), y = px.y();
-          if (!(x >= -0.5f && y >= -0.5f && x < xmax && y < ymax)) continue;
-          ++my_samples;
-          AddSample(pp, x, y, qz, wt, k, acc);
-        }
+#endif
+        my_samples += SampleCellPortable(ct, pp, p.distorted ? pods[pi].camera : nullptr, acc);
       }
       std::array<float, 3> vcol[3];
       for (int k = 0; k < 3; ++k) {
         for (int c = 0; c < 3; ++c) vcol[k][c] = has_colors ? (*mesh.colors)[tri[k]][c] : 180.0f;
       }
-      for (int k = 0; k < texels_per_cell; ++k) {
+      for (int k = 0; k < ct.count; ++k) {
         const float a[5] = {acc.f[0][k], acc.f[1][k], acc.f[2][k], acc.f[3][k], acc.f[4][k]};
         const float c[3] = {ct.c0[k], ct.c1[k], ct.c2[k]};
         uint8_t* dst = &out->rgba[4 * (static_cast<size_t>(cy + ct.j[k]) * out->width + cx + ct.i[k])];

@@ -818,7 +818,7 @@ Status Renderer::UpdateVisibility(const ProjectiveOptions& options) {
   return CheckGlError("pod visibility pass");
 }
 
-void Renderer::UploadPodTextures(const ProjectiveOptions& options) {
+void Renderer::MakePodRgba(const ProjectiveOptions& options) {
   const bool use_masks = options.use_masks && !pod_masks_.empty();
   pod_alpha_.assign(use_masks ? num_pods_ : 0, {});
   for (int i = 0; i < num_pods_; ++i) {
@@ -1163,7 +1163,7 @@ Status Renderer::PreparePods(const ProjectiveOptions& options) {
   HOLO_RETURN_IF_ERROR(options.Check());
   if (num_pods_ == 0) return InvalidArgument("projective texturing needs the pods' images (SetPodImages)");
   if (!VisibilityCurrent(options)) HOLO_RETURN_IF_ERROR(UpdateVisibility(options));
-  if (!TexturesCurrent(options)) UploadPodTextures(options);
+  if (!TexturesCurrent(options)) MakePodRgba(options);
   if (!SelectionCurrent(options)) HOLO_RETURN_IF_ERROR(SelectPods(options));
   return OkStatus();
 }

@@ -264,9 +264,10 @@ class Renderer {
   // Chooses the pods of every vertex and triangle and orders the remote
   // mesh's triangles into one range per pod set (see ProjectiveOptions).
   Status SelectPods(const ProjectiveOptions& options);
-  // Uploads the pods' images as premultiplied RGBA (alpha = the texel's mask
-  // weight, see ProjectiveOptions) for `options`.
-  void UploadPodTextures(const ProjectiveOptions& options);
+  // Makes the pods' images premultiplied RGBA (alpha = the texel's mask
+  // weight, see ProjectiveOptions) for `options` in pod_rgba_ (copied to GL
+  // by SyncPodTexturesToGpu when per-fragment blending needs them).
+  void MakePodRgba(const ProjectiveOptions& options);
   // Makes sure pod_flagged_z_ holds the flagged depth maps of the last
   // visibility pass (reads the GL maps back once when GL made them).
   Status FlaggedDepthOnCpu();

@@ -19,9 +19,11 @@
 //    edge gets more than two triangles and no triangle is duplicated (a
 //    closed mesh stays closed);
 //  * no surviving triangle around it flips or degenerates.
-// Each pass locks the one-rings of what it collapsed, so the tests above see
-// the current mesh; passes repeat until the budget is met, no candidate is
-// left, or `max_passes`.
+// A pass takes the shortest candidates in order and updates the mesh after
+// every collapse (triangles renamed, the edge's two removed, the fans
+// merged), so the tests above always see the current mesh; another pass
+// runs only if the first ran out of candidates before the budget, up to
+// `max_passes`.
 #pragma once
 
 #include <cstddef>

@@ -33,7 +33,7 @@ StatusOr<std::unique_ptr<StreamMesher>> StreamMesher::Create(const TsdfOptions& 
   m->coarse_voxel_m_ = fine.voxel_size * static_cast<float>(options.step);
   if (options.step > 1) {
     TsdfOptions coarse = fine;
-    coarse.voxel_size = fine.voxel_size * static_cast<float>(options.step);
+    coarse.voxel_size = m->coarse_voxel_m_;
     coarse.truncation_voxels = fine.truncation_voxels / static_cast<float>(options.step);
     // The coarse volume is only meshed; the truncation in voxels may drop
     // below 1 at large steps, which Check() refuses though meshing does not care.
@@ -87,30 +87,27 @@ Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* 
     EdgeCollapseStats es;
     CollapseShortEdges(eo, out, &es);
     st.collapses = es.collapses;
-    if (out->num_triangles() <= options_.max_triangles) {
-      st.simplify_ms = sw.ElapsedMs();
-      st.triangles = out->num_triangles();
-      return OkStatus();
-    }
   }
-  st.quadric = true;
-  // Quadric simplification of the indexed mesh (topology kept; no error
-  // bound: the budget decides).
-  const size_t nt = out->num_triangles();
-  indices_.resize(3 * nt);
-  for (size_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) indices_[3 * t + k] = out->triangles[t][k];
-  simplified_.resize(indices_.size());
-  static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "positions must be packed float triples");
-  const size_t n = meshopt_simplify(simplified_.data(), indices_.data(), indices_.size(), out->positions[0].data(),
-                                    out->positions.size(), sizeof(Eigen::Vector3f), 3 * options_.max_triangles,
-                                    /*target_error=*/1.0f, /*options=*/0, &st.simplify_error);
-  // The surviving triangles (meshoptimizer keeps original vertices), then
-  // only the vertices they use.
-  out->triangles.resize(n / 3);
-  for (size_t t = 0; t < n / 3; ++t)
-    out->triangles[t] = {simplified_[3 * t], simplified_[3 * t + 1], simplified_[3 * t + 2]};
-  RemoveUnreferencedVertices(out);
+  if (out->num_triangles() > options_.max_triangles) {
+    st.quadric = true;
+    // Quadric simplification of the indexed mesh (topology kept; no error
+    // bound: the budget decides).
+    const size_t nt = out->num_triangles();
+    indices_.resize(3 * nt);
+    for (size_t t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) indices_[3 * t + k] = out->triangles[t][k];
+    simplified_.resize(indices_.size());
+    static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "positions must be packed float triples");
+    const size_t n = meshopt_simplify(simplified_.data(), indices_.data(), indices_.size(), out->positions[0].data(),
+                                      out->positions.size(), sizeof(Eigen::Vector3f), 3 * options_.max_triangles,
+                                      /*target_error=*/1.0f, /*options=*/0, &st.simplify_error);
+    // The surviving triangles (meshoptimizer keeps original vertices), then
+    // only the vertices they use.
+    out->triangles.resize(n / 3);
+    for (size_t t = 0; t < n / 3; ++t)
+      out->triangles[t] = {simplified_[3 * t], simplified_[3 * t + 1], simplified_[3 * t + 2]};
+    RemoveUnreferencedVertices(out);
+  }
   st.simplify_ms = sw.ElapsedMs();
   st.triangles = out->num_triangles();
   return OkStatus();

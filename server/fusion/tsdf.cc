@@ -16,6 +16,7 @@
 #endif
 
 #include "common/camera.h"
+#include "common/cpu_features.h"
 #include "server/fusion/tsdf_internal.h"
 
 namespace holo {
@@ -120,77 +121,70 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
   int32_t last_index = VoxelBlockMap::kNotFound;
   const size_t nb = blocks_.size();
   // Without colour (a live site streaming the pods' images) only tsdf and
-  // weight are summed: 2 instead of 5 multiply-adds per fine voxel.
+  // weight are summed (the test does not change within the loop).
   const bool color = options_.integrate_color;
-  auto sum_blocks = [&]<bool kColor>() {
-    for (size_t bi = 0; bi < nb; ++bi) {
-      const int32_t b = static_cast<int32_t>(bi);
-      const BlockCoord bc = blocks_.coord(b);
-      const VoxelBlock& fine = blocks_.block(b);
-      // Per axis and fine index within the block: the coarse block coordinate
-      // and the index within it (the divisions once per block, not per voxel).
-      const int64_t base[3] = {int64_t{kBlockSide} * bc.x, int64_t{kBlockSide} * bc.y, int64_t{kBlockSide} * bc.z};
-      int32_t cblock[3][kBlockSide];
-      int cvox[3][kBlockSide];
-      for (int a = 0; a < 3; ++a)
-        for (int t = 0; t < kBlockSide; ++t) {
-          const int64_t c = floor_div(base[a] + t, step);
-          const int64_t cbk = floor_div(c, kBlockSide);
-          cblock[a][t] = static_cast<int32_t>(cbk);
-          cvox[a][t] = static_cast<int>(c - int64_t{kBlockSide} * cbk);
-        }
-      // Along a row of the block, fine voxels that fall into the same coarse
-      // voxel (a run of `step`) are summed in registers and added once.
-      for (int k = 0; k < kBlockSide; ++k) {
-        for (int j = 0; j < kBlockSide; ++j) {
-          const int row = kBlockSide * (j + kBlockSide * k);
-          int i = 0;
-          while (i < kBlockSide) {
-            const int32_t cbx = cblock[0][i];
-            const int cvx = cvox[0][i];
-            float tw = 0, ws = 0, rs = 0, gs = 0, bs = 0;
-            int cnt = 0;
-            for (; i < kBlockSide && cvox[0][i] == cvx && cblock[0][i] == cbx; ++i) {
-              const int fv = row + i;
-              const float w = fine.weight[fv];
-              if (!(w > 0)) continue;
-              tw += fine.tsdf[fv] * w;
-              ws += w;
-              if constexpr (kColor) {
-                rs += fine.r[fv] * w;
-                gs += fine.g[fv] * w;
-                bs += fine.b[fv] * w;
-              }
-              ++cnt;
+  for (size_t bi = 0; bi < nb; ++bi) {
+    const int32_t b = static_cast<int32_t>(bi);
+    const BlockCoord bc = blocks_.coord(b);
+    const VoxelBlock& fine = blocks_.block(b);
+    // Per axis and fine index within the block: the coarse block coordinate
+    // and the index within it (the divisions once per block, not per voxel).
+    const int64_t base[3] = {int64_t{kBlockSide} * bc.x, int64_t{kBlockSide} * bc.y, int64_t{kBlockSide} * bc.z};
+    int32_t cblock[3][kBlockSide];
+    int cvox[3][kBlockSide];
+    for (int a = 0; a < 3; ++a)
+      for (int t = 0; t < kBlockSide; ++t) {
+        const int64_t c = floor_div(base[a] + t, step);
+        const int64_t cbk = floor_div(c, kBlockSide);
+        cblock[a][t] = static_cast<int32_t>(cbk);
+        cvox[a][t] = static_cast<int>(c - int64_t{kBlockSide} * cbk);
+      }
+    // Along a row of the block, fine voxels that fall into the same coarse
+    // voxel (a run of `step`) are summed in registers and added once.
+    for (int k = 0; k < kBlockSide; ++k) {
+      for (int j = 0; j < kBlockSide; ++j) {
+        const int row = kBlockSide * (j + kBlockSide * k);
+        int i = 0;
+        while (i < kBlockSide) {
+          const int32_t cbx = cblock[0][i];
+          const int cvx = cvox[0][i];
+          float tw = 0, ws = 0, rs = 0, gs = 0, bs = 0;
+          int cnt = 0;
+          for (; i < kBlockSide && cvox[0][i] == cvx && cblock[0][i] == cbx; ++i) {
+            const int fv = row + i;
+            const float w = fine.weight[fv];
+            if (!(w > 0)) continue;
+            tw += fine.tsdf[fv] * w;
+            ws += w;
+            if (color) {
+              rs += fine.r[fv] * w;
+              gs += fine.g[fv] * w;
+              bs += fine.b[fv] * w;
             }
-            if (cnt == 0) continue;
-            const BlockCoord cb{cbx, cblock[1][j], cblock[2][k]};
-            if (last_index == VoxelBlockMap::kNotFound || !(cb == last)) {
-              bool created = false;
-              last_index = out.FindOrAllocate(cb, &created);
-              last = cb;
-              if (sums.size() <= static_cast<size_t>(last_index)) sums.resize(static_cast<size_t>(last_index) + 1);
-              if (created) std::memset(&sums[static_cast<size_t>(last_index)], 0, sizeof(Sums));
-            }
-            Sums& sm = sums[static_cast<size_t>(last_index)];
-            const int cv = cvx + kBlockSide * (cvox[1][j] + kBlockSide * cvox[2][k]);
-            sm.tw[cv] += tw;
-            sm.w[cv] += ws;
-            if constexpr (kColor) {
-              sm.r[cv] += rs;
-              sm.g[cv] += gs;
-              sm.b[cv] += bs;
-            }
-            sm.n[cv] = static_cast<uint16_t>(sm.n[cv] + cnt);
+            ++cnt;
           }
+          if (cnt == 0) continue;
+          const BlockCoord cb{cbx, cblock[1][j], cblock[2][k]};
+          if (last_index == VoxelBlockMap::kNotFound || !(cb == last)) {
+            bool created = false;
+            last_index = out.FindOrAllocate(cb, &created);
+            last = cb;
+            if (sums.size() <= static_cast<size_t>(last_index)) sums.resize(static_cast<size_t>(last_index) + 1);
+            if (created) std::memset(&sums[static_cast<size_t>(last_index)], 0, sizeof(Sums));
+          }
+          Sums& sm = sums[static_cast<size_t>(last_index)];
+          const int cv = cvx + kBlockSide * (cvox[1][j] + kBlockSide * cvox[2][k]);
+          sm.tw[cv] += tw;
+          sm.w[cv] += ws;
+          if (color) {
+            sm.r[cv] += rs;
+            sm.g[cv] += gs;
+            sm.b[cv] += bs;
+          }
+          sm.n[cv] = static_cast<uint16_t>(sm.n[cv] + cnt);
         }
       }
     }
-  };
-  if (color) {
-    sum_blocks.template operator()<true>();
-  } else {
-    sum_blocks.template operator()<false>();
   }
   for (size_t ci = 0; ci < out.size(); ++ci) {
     const int32_t c = static_cast<int32_t>(ci);
@@ -593,10 +587,6 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
   }
 }
 
-bool CpuHasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
 #endif
 
 enum class BlockView { kSkip, kFreeSpace, kProject };

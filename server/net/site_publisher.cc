@@ -94,19 +94,19 @@ Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t captur
   out->capture_wall_us = capture_wall_us;
   // Geometry and colour are independent: encoded on two threads at once
   // (the frame's encode wall time is the longer of the two, not the sum).
-  Status geometry_status, color_status;
-  auto encode_geometry = [&] {
+  auto encode_geometry = [&]() -> Status {
     const auto t0 = std::chrono::steady_clock::now();
     const double cpu0 = holo::ThreadCpuTimeMs();
     protocol::GeometryEncodeOptions g = st.geometry;
     g.colors = g.colors && !mesh.colors.empty();
     out->codec = g.codec;
     out->geometry.clear();  // the encoder appends
-    geometry_status =
-        protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index));
+    HOLO_RETURN_IF_ERROR(
+        protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
     t->geometry_ms = MsSince(t0);
     t->geometry_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
     t->geometry_bytes = out->geometry.size();
+    return OkStatus();
   };
   protocol::ColorFrame& color = out->color;
   color.codec = st.color.codec;
@@ -160,15 +160,10 @@ Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t captur
     t->color_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
     return OkStatus();
   };
-  pool_.Run(2, [&](int task, int) {
-    if (task == 0) {
-      encode_geometry();
-    } else {
-      color_status = encode_color();
-    }
-  });
-  HOLO_RETURN_IF_ERROR(geometry_status);
-  HOLO_RETURN_IF_ERROR(color_status);
+  Status status[2];
+  pool_.Run(2, [&](int task, int) { status[task] = task == 0 ? encode_geometry() : encode_color(); });
+  HOLO_RETURN_IF_ERROR(status[0]);
+  HOLO_RETURN_IF_ERROR(status[1]);
   color.images.resize(used);
   ++encoded_[layer];
   return OkStatus();

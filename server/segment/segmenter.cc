@@ -13,6 +13,7 @@
 #define HOLO_SEGMENT_AVX2 1
 #endif
 
+#include "common/cpu_features.h"
 #include "common/worker_pool.h"
 
 namespace holo {
@@ -493,10 +494,6 @@ inline void UnaryAt(const UnaryParams& p, const BgModel& m, const uint8_t* rgb, 
 }
 
 #if defined(HOLO_SEGMENT_AVX2)
-bool CpuHasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
 
 // UnaryAt eight pixels at a time: the same operations in the same order (no
 // FMA; the division is the table's), so the result is bit-identical. Pixels
