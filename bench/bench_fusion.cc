@@ -254,6 +254,13 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
   app.add_option("--eval-every", p.eval_every, "evaluate every N frames")->check(CLI::PositiveNumber);
   app.add_option("--pipeline-source", p.source, "pipeline source");
   app.add_option("--cpu-frames", p.cpu_frames, "frames timed for CPU figures")->check(CLI::NonNegativeNumber);
+  app.add_option("--depth-filter", p.depth_filter,
+                 "pipeline: depth filter radius (default: the capture site's, 0: off)")
+      ->check(CLI::Range(0, 4));
+  app.add_flag("--raw-full-mesh", p.raw_full_mesh, "pipeline: full meshes from the fused volume as it is (not smoothed)");
+  app.add_option("--stream-frames", p.stream_frames,
+                 "frames of the run that scores the stream mesh against the full mesh (0: skip)")
+      ->check(CLI::NonNegativeNumber);
 }
 
 // Every fusion figure is measured on the site's own reconstruction.

@@ -44,6 +44,8 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   site_options.masks = MaskSource::kSegment;
   site_options.tsdf.voxel_size = workload->voxel_size_m;
   if (options.behind_band >= 0) site_options.tsdf.behind_band = static_cast<float>(options.behind_band);
+  if (options.depth_filter >= 0) site_options.depth_filter.radius = options.depth_filter;
+  site_options.smooth_full_mesh = !options.raw_full_mesh;
   site_options.pipeline.max_frames = options.frames;
   if (options.texture_cluster_mm >= 0)
     site_options.texture_options.cluster_size_m = static_cast<float>(options.texture_cluster_mm * 1e-3);
@@ -211,7 +213,67 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     }
   }
 
-  // 4. Quality of the kept frames against ground truth.
+  // 4. The stream mesh a live site publishes (server/fusion/stream_mesh.h)
+  // against the full-resolution mesh it exports, on the same frames.
+  if (options.stream_frames > 0) {
+    Progress(args, "stream mesh against the full mesh");
+    Site ss;
+    site_options.pipeline.pace_fps = 0;
+    site_options.pipeline.max_frames = std::min(options.frames, options.stream_frames);
+    site_options.stream_mesh = true;
+    site_options.full_mesh = true;
+    site_options.texture = false;  // geometry only; the live site colours from the pods' images
+    std::vector<double> to_full, from_full, stream_chamfer, full_chamfer, stream_tris, full_tris;
+    Status made_ss = make_site(&ss);
+    if (made_ss.ok()) {
+      RgbdFrameSet unused;
+      StudioGroundTruth sgt;
+      auto st = ss.site->Run([&](const FrameWork& w) -> Status {
+        if (w.sequence % options.eval_every != options.eval_every / 2) return OkStatus();
+        auto a = metrics::ComputeMeshDistance(w.mesh, w.full_mesh);
+        ss.studio->RenderFrame(w.frames.frame_index, &unused, &sgt);
+        auto ts = metrics::ComputeMeshDistance(w.mesh, sgt.foreground_mesh);
+        auto tf = metrics::ComputeMeshDistance(w.full_mesh, sgt.foreground_mesh);
+        if (a.ok() && ts.ok() && tf.ok()) {
+          to_full.push_back(a->accuracy_mm);
+          from_full.push_back(a->completeness_distance_mm);
+          stream_chamfer.push_back(ts->chamfer_mm);
+          full_chamfer.push_back(tf->chamfer_mm);
+          stream_tris.push_back(static_cast<double>(w.mesh.num_triangles()));
+          full_tris.push_back(static_cast<double>(w.full_mesh.num_triangles()));
+        }
+        return OkStatus();
+      });
+      if (!st.ok()) made_ss = st.status();
+    }
+    if (!made_ss.ok()) {
+      spdlog::warn("fusion: stream mesh run: {}", made_ss.message());
+    } else if (!to_full.empty()) {
+      auto sq = [&](const char* direction, const char* mesh) {
+        std::map<std::string, std::string> m = {{"mode", "stream_mesh"}, {"content", "fused"},
+                                                {"frames_scored", std::to_string(to_full.size())}};
+        if (*direction) m["direction"] = direction;
+        if (*mesh) m["mesh"] = mesh;
+        return m;
+      };
+      EmitFigure("fusion", wl, "mean_distance_mm", Mean(to_full), "mm", sq("stream_to_full", ""));
+      EmitFigure("fusion", wl, "mean_distance_mm", Mean(from_full), "mm", sq("full_to_stream", ""));
+      EmitFigure("fusion", wl, "chamfer_mm", Mean(stream_chamfer), "mm", sq("", "stream"));
+      EmitFigure("fusion", wl, "chamfer_mm", Mean(full_chamfer), "mm", sq("", "full"));
+      EmitFigure("fusion", wl, "triangles", Mean(stream_tris), "count", sq("", "stream"));
+      EmitFigure("fusion", wl, "triangles", Mean(full_tris), "count", sq("", "full"));
+      if (!args.json)
+        spdlog::info("fusion pipeline: stream mesh {:.0f} triangles, mean distance to the full mesh ({:.0f} "
+                     "triangles) {:.2f} mm, back {:.2f} mm; Chamfer to the truth {:.2f} mm (full mesh {:.2f})",
+                     Mean(stream_tris), Mean(full_tris), Mean(to_full), Mean(from_full), Mean(stream_chamfer),
+                     Mean(full_chamfer));
+    }
+    site_options.stream_mesh = false;
+    site_options.full_mesh = false;
+    site_options.texture = true;
+  }
+
+  // 5. Quality of the kept frames against ground truth.
   if (!options.png_dir.empty()) {
     if (Status s = MakeDirs(options.png_dir); !s.ok()) {
       spdlog::error("fusion: {}", s.message());

@@ -29,12 +29,20 @@ struct PipelineBenchOptions {
   double behind_band = -1;
   // Frames of the serial run that measures CPU-ms per stage (0: skip it).
   int cpu_frames = 20;
+  // Frames of the run that scores the stream mesh against the full mesh
+  // (every eval_every-th is scored; 0: skip it).
+  int stream_frames = 60;
+  // Depth filter radius override (< 0: the capture site's default, 0: off)
+  // and full meshes from the volume as fused, not smoothed.
+  int depth_filter = -1;
+  bool raw_full_mesh = false;
 };
 
 // Prints JSON lines: ms per stage (segment, fuse, mesh, texture, total),
 // fps, cpu_ms per frame of the concurrent run and the fps two cores could
 // sustain at that cost, cpu_ms per stage (serial run), latency_ms (paced
-// run), mask_iou, chamfer_mm, completeness and
+// run), mask_iou, chamfer_mm, completeness, the stream mesh's
+// mean_distance_mm to the full mesh and back ("mode":"stream_mesh"), and
 // novel_view_psnr_db / novel_view_ssim (4 viewpoints no pod has), all with
 // "mode":"pipeline". Returns a process exit code.
 int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& options);

@@ -211,6 +211,103 @@ Status TsdfVolume::DownsampleInto(int step, TsdfVolume* coarse) const {
   return OkStatus();
 }
 
+Status TsdfVolume::SmoothInto(TsdfVolume* out) const {
+  if (out == nullptr || out == this) return InvalidArgument("SmoothInto needs a second volume");
+  if (std::abs(out->options_.voxel_size - options_.voxel_size) > 1e-6f * options_.voxel_size ||
+      std::abs(out->options_.truncation_voxels - options_.truncation_voxels) > 1e-6f * options_.truncation_voxels)
+    return InvalidArgument("SmoothInto: the output volume must have voxel_size " + std::to_string(options_.voxel_size) +
+                           " m and truncation_voxels " + std::to_string(options_.truncation_voxels));
+  out->Reset();
+  VoxelBlockMap& dst = out->blocks_;
+  constexpr int kP = kBlockSide + 2;  // the block and one voxel of each neighbour
+  // weight·tsdf and weight over the padded block, then the three passes.
+  float tw[kP][kP][kP], ws[kP][kP][kP];
+  float tw_x[kP][kP][kBlockSide], ws_x[kP][kP][kBlockSide];
+  float tw_y[kP][kBlockSide][kBlockSide], ws_y[kP][kBlockSide][kBlockSide];
+  const bool color = options_.integrate_color;
+  for (size_t bi = 0; bi < blocks_.size(); ++bi) {
+    const int32_t b = static_cast<int32_t>(bi);
+    const BlockCoord bc = blocks_.coord(b);
+    const VoxelBlock* nb[3][3][3];
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) {
+          const int64_t x = int64_t{bc.x} + i - 1, y = int64_t{bc.y} + j - 1, z = int64_t{bc.z} + k - 1;
+          int32_t n = VoxelBlockMap::kNotFound;
+          if (BlockCoordInRange(x, y, z))
+            n = blocks_.Find({static_cast<int32_t>(x), static_cast<int32_t>(y), static_cast<int32_t>(z)});
+          nb[k][j][i] = n == VoxelBlockMap::kNotFound ? nullptr : &blocks_.block(n);
+        }
+    // Padded coordinate p ∈ [0, kP) is voxel p − 1 of the block: block
+    // (p == 0 ? −1 : p == kP − 1 ? +1 : 0), voxel (p − 1) mod kBlockSide.
+    auto split = [](int p, int* block, int* voxel) {
+      *block = p == 0 ? 0 : p == kP - 1 ? 2 : 1;
+      *voxel = p == 0 ? kBlockSide - 1 : p == kP - 1 ? 0 : p - 1;
+    };
+    for (int z = 0; z < kP; ++z) {
+      int bz, vz;
+      split(z, &bz, &vz);
+      for (int y = 0; y < kP; ++y) {
+        int by, vy;
+        split(y, &by, &vy);
+        for (int x = 0; x < kP; ++x) {
+          int bx, vx;
+          split(x, &bx, &vx);
+          const VoxelBlock* src = nb[bz][by][bx];
+          const int v = vx + kBlockSide * (vy + kBlockSide * vz);
+          const float w = src ? src->weight[v] : 0.0f;
+          ws[z][y][x] = w;
+          tw[z][y][x] = w > 0 ? w * src->tsdf[v] : 0.0f;
+        }
+      }
+    }
+    for (int z = 0; z < kP; ++z)
+      for (int y = 0; y < kP; ++y)
+        for (int x = 0; x < kBlockSide; ++x) {
+          tw_x[z][y][x] = tw[z][y][x] + 2 * tw[z][y][x + 1] + tw[z][y][x + 2];
+          ws_x[z][y][x] = ws[z][y][x] + 2 * ws[z][y][x + 1] + ws[z][y][x + 2];
+        }
+    for (int z = 0; z < kP; ++z)
+      for (int y = 0; y < kBlockSide; ++y)
+        for (int x = 0; x < kBlockSide; ++x) {
+          tw_y[z][y][x] = tw_x[z][y][x] + 2 * tw_x[z][y + 1][x] + tw_x[z][y + 2][x];
+          ws_y[z][y][x] = ws_x[z][y][x] + 2 * ws_x[z][y + 1][x] + ws_x[z][y + 2][x];
+        }
+    const VoxelBlock& in = blocks_.block(b);
+    const int32_t oi = dst.FindOrAllocate(bc, nullptr, false);
+    VoxelBlock& o = dst.block(oi);
+    std::memcpy(o.weight, in.weight, sizeof(o.weight));
+    if (color) {
+      std::memcpy(o.r, in.r, sizeof(o.r));
+      std::memcpy(o.g, in.g, sizeof(o.g));
+      std::memcpy(o.b, in.b, sizeof(o.b));
+    } else {
+      std::memset(o.r, 0, sizeof(o.r));
+      std::memset(o.g, 0, sizeof(o.g));
+      std::memset(o.b, 0, sizeof(o.b));
+    }
+    bool has_neg = false, has_pos = false, has_band = false;
+    for (int z = 0; z < kBlockSide; ++z)
+      for (int y = 0; y < kBlockSide; ++y)
+        for (int x = 0; x < kBlockSide; ++x) {
+          const int v = x + kBlockSide * (y + kBlockSide * z);
+          if (!(in.weight[v] > 0)) {
+            o.tsdf[v] = in.tsdf[v];
+            continue;
+          }
+          const float den = ws_y[z][y][x] + 2 * ws_y[z + 1][y][x] + ws_y[z + 2][y][x];
+          const float num = tw_y[z][y][x] + 2 * tw_y[z + 1][y][x] + tw_y[z + 2][y][x];
+          const float t = std::clamp(num / den, -1.0f, 1.0f);  // den ≥ 8 · the voxel's own weight
+          o.tsdf[v] = t;
+          has_neg |= t < 0;
+          has_pos |= t >= 0;
+          has_band |= t >= 0 && t < kTsdfBandLimit;
+        }
+    dst.set_flags(oi, BlockFlagsOf(has_neg, has_pos, has_band));
+  }
+  return OkStatus();
+}
+
 void TsdfVolume::VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* weight) const {
   *tsdf = 0;
   *weight = 0;

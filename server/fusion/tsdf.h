@@ -139,6 +139,21 @@ class TsdfVolume {
   // step); InvalidArgument otherwise. Used for the capture site's stream
   // mesh (server/fusion/stream_mesh.h).
   Status DownsampleInto(int step, TsdfVolume* coarse) const;
+  // The same field smoothed on the same grid: every observed voxel of `out`
+  // (reset first; same voxel size and truncation, InvalidArgument
+  // otherwise) holds the weighted mean TSDF of its observed 3×3×3
+  // neighbours, with the binomial kernel [1 2 1] on each axis; weights,
+  // colours and unobserved voxels are copied as they are. What is left of
+  // the depth noise after the depth filter (server/fusion/depth_filter.h)
+  // folds the full-resolution mesh at the scale of one voxel. Voxels at +1
+  // (free space beyond the truncation) are smoothed too: next to the
+  // surface they drop below +1, so cubes that marching cubes skipped for
+  // one noisy +1 corner (skip_truncated_cubes) are meshed again. Measured on
+  // the S8-QVGA pipeline (docs/fusion.md, "Depth filter and smoothing"):
+  // full mesh 110 k → 84 k triangles, Chamfer to the truth 5.42 → 5.36 mm;
+  // keeping the +1 voxels as they were gave 5.46 mm. The capture site's
+  // full-resolution meshes (export, recording) are extracted from it.
+  Status SmoothInto(TsdfVolume* out) const;
   // World offset (metres, the same on every axis) of DownsampleInto's coarse grid.
   float DownsampleOffset(int step) const { return 0.5f * static_cast<float>(step - 1) * options_.voxel_size; }
 

@@ -31,6 +31,7 @@ Status CaptureSiteOptions::Check() const {
   if (background_frames < 1 || background_frames > 1000)
     return InvalidArgument("background_frames must be in [1, 1000], got " + std::to_string(background_frames));
   HOLO_RETURN_IF_ERROR(segment.Check().WithContext("segment"));
+  HOLO_RETURN_IF_ERROR(depth_filter.Check().WithContext("depth filter"));
   HOLO_RETURN_IF_ERROR(tsdf.Check().WithContext("tsdf"));
   HOLO_RETURN_IF_ERROR(cleanup.Check().WithContext("cleanup"));
   HOLO_RETURN_IF_ERROR(texture_options.Check().WithContext("texture"));
@@ -105,9 +106,15 @@ StatusOr<std::unique_ptr<CaptureSite>> CaptureSite::Create(FrameSource* source, 
     // computed only to be thrown away (−4 CPU-ms per S8-QVGA frame).
     if (options.texture) tsdf.integrate_color = false;
     HOLO_ASSIGN_OR_RETURN(site->volume_, TsdfVolume::Create(tsdf));
+    if (options.smooth_full_mesh && !options.hull) {
+      HOLO_ASSIGN_OR_RETURN(site->smoothed_, TsdfVolume::Create(tsdf));
+    }
     if (options.hull) {
       HOLO_ASSIGN_OR_RETURN(site->hull_, VisualHull::Create(options.hull_options));
     }
+  }
+  if (options.depth_filter.radius > 0 && !options.hull) {
+    HOLO_ASSIGN_OR_RETURN(site->depth_filter_, DepthFilter::Create(options.depth_filter));
   }
   if (options.stream_mesh) {
     TsdfOptions tsdf = options.temporal ? options.TemporalOptions().tsdf : options.tsdf;
@@ -148,7 +155,13 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
     if (calibration_) calibration_->Apply(&w.frames);
     return OkStatus();
   };
-  if (segmenter_) st.segment = [this](FrameWork& w) { return segmenter_->Segment(&w.frames); };
+  // Depth is filtered within the masks, so after segmentation.
+  if (segmenter_ || depth_filter_)
+    st.segment = [this](FrameWork& w) {
+      if (segmenter_) HOLO_RETURN_IF_ERROR(segmenter_->Segment(&w.frames));
+      if (depth_filter_) HOLO_RETURN_IF_ERROR(depth_filter_->Apply(&w.frames));
+      return OkStatus();
+    };
   st.fuse_mesh = [this](FrameWork& w) -> Status {
     // Process CPU splits into fuse and mesh only when the stages run one at a time.
     const bool cpu = options_.pipeline.serial;
@@ -206,11 +219,11 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
         w.timings.simplify_cpu_ms = std::max(1e-6, all * share);
       }
       if (options_.full_mesh) {
-        volume_->ExtractMesh(&w.full_mesh);
+        HOLO_RETURN_IF_ERROR(ExtractFullMesh(&w.full_mesh));
         HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.full_mesh));
       }
     } else {
-      volume_->ExtractMesh(&w.mesh);
+      HOLO_RETURN_IF_ERROR(ExtractFullMesh(&w.mesh));
       HOLO_RETURN_IF_ERROR(CleanupMesh(options_.cleanup, &w.mesh));
       w.timings.mesh_ms = std::max(1e-6, sw.ElapsedMs());
       if (cpu) w.timings.mesh_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
@@ -227,6 +240,16 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
   st.encode = std::move(encode);
   st.sink = std::move(sink);
   return st;
+}
+
+Status CaptureSite::ExtractFullMesh(Mesh* out) {
+  if (smoothed_) {
+    HOLO_RETURN_IF_ERROR(volume_->SmoothInto(smoothed_.get()));
+    smoothed_->ExtractMesh(out);
+  } else {
+    volume_->ExtractMesh(out);
+  }
+  return OkStatus();
 }
 
 StatusOr<PipelineStats> CaptureSite::Run(std::function<Status(const FrameWork&)> sink,

@@ -22,6 +22,7 @@
 #include "common/rig.h"
 #include "common/status.h"
 #include "server/fusion/mesh_cleanup.h"
+#include "server/fusion/depth_filter.h"
 #include "server/fusion/stream_mesh.h"
 #include "server/fusion/visual_hull.h"
 #include "server/fusion/tsdf.h"
@@ -59,7 +60,16 @@ struct CaptureSiteOptions {
     o.crf_iterations = 1;
     return o;
   }();
+  // Edge-preserving smoothing of each pod's depth within its mask before
+  // fusion (server/fusion/depth_filter.h; radius 0 = off). Not used by the
+  // visual hull, which reads no depth.
+  DepthFilterOptions depth_filter;
   TsdfOptions tsdf;
+  // Full-resolution meshes (the published mesh without `stream_mesh`, and
+  // `full_mesh`) are extracted from the fused volume smoothed on its own
+  // grid (TsdfVolume::SmoothInto). Not for temporal fusion, whose volume
+  // carries its own history.
+  bool smooth_full_mesh = true;
   MeshCleanupOptions cleanup;
   // Fuse + mesh by TemporalFusion (docs/temporal.md) instead of a fresh
   // volume per frame. Its `tsdf` and `cleanup` are replaced by the ones
@@ -109,6 +119,8 @@ class CaptureSite {
  private:
   CaptureSite() = default;
   PipelineStages MakeStages(std::function<Status(const FrameWork&)> sink, std::function<Status(FrameWork&)> encode);
+  // The full-resolution mesh of volume_ (smoothed with smooth_full_mesh).
+  Status ExtractFullMesh(Mesh* out);
 
   Rig rig_;
   CaptureSiteOptions options_;
@@ -116,7 +128,9 @@ class CaptureSite {
   SyntheticStudio* studio_ = nullptr;
   std::unique_ptr<ColorCalibration> calibration_;
   std::unique_ptr<Segmenter> segmenter_;
+  std::unique_ptr<DepthFilter> depth_filter_;
   std::unique_ptr<TsdfVolume> volume_;
+  std::unique_ptr<TsdfVolume> smoothed_;  // smooth_full_mesh
   std::unique_ptr<TemporalFusion> temporal_;
   std::unique_ptr<StreamMesher> stream_;
   std::unique_ptr<VisualHull> hull_;

@@ -137,6 +137,16 @@ int main(int argc, char** argv) {
                  "forever (-n counts on), so acquisition costs a copy as with cameras, not the studio's rendering "
                  "(0: render while running)")
       ->check(CLI::Range(0, 3000));
+  int depth_filter_radius = holo::DepthFilterOptions{}.radius;
+  app.add_option("--depth-filter", depth_filter_radius,
+                 "smooth each pod's depth within its mask over a (2R+1)² window before fusion, keeping depth "
+                 "edges (0: off; server/fusion/depth_filter.h)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 4));
+  bool raw_full_mesh = false;
+  app.add_flag("--raw-full-mesh", raw_full_mesh,
+               "extract full-resolution meshes (--export, --stream-step 1) from the fused volume as it is, not "
+               "smoothed on its grid");
   app.add_option("--stream-step", stream_step,
                  "the published mesh: marching cubes over every N-th voxel of the fused volume (1: full resolution)")
       ->capture_default_str()
@@ -401,6 +411,8 @@ int main(int argc, char** argv) {
   options.stream.step = stream_step;
   options.stream.max_triangles = stream_triangles;
   options.full_mesh = !export_dir.empty();
+  options.depth_filter.radius = depth_filter_radius;
+  options.smooth_full_mesh = !raw_full_mesh;
 
   // Sources. The studio is both the frame source and (empty room) the background.
   std::unique_ptr<holo::SyntheticStudio> studio, empty_room;
