@@ -17,7 +17,7 @@
 // silhouette) from blending; the mask keeps the background out. A box window
 // with a hard range test rather than Gaussian weights: on the studio frame
 // 12 (exact masks) r = 2 with 3 σ gave the lowest Chamfer of the variants
-// tried (r 1–4, 2–6 σ; docs/fusion.md, "Depth filter"), and the integer
+// tried (r 1–4, 2–6 σ; docs/fusion.md, "Depth filter and smoothing"), and the integer
 // window sums vectorise.
 //
 // Only foreground pixels are written; the others keep their depth. Written
