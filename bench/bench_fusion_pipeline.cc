@@ -226,14 +226,12 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     std::vector<double> to_full, from_full, stream_chamfer, full_chamfer, stream_tris, full_tris;
     Status made_ss = make_site(&ss);
     if (made_ss.ok()) {
-      RgbdFrameSet unused;
-      StudioGroundTruth sgt;
       auto st = ss.site->Run([&](const FrameWork& w) -> Status {
         if (w.sequence % options.eval_every != options.eval_every / 2) return OkStatus();
         auto a = metrics::ComputeMeshDistance(w.mesh, w.full_mesh);
-        ss.studio->RenderFrame(w.frames.frame_index, &unused, &sgt);
-        auto ts = metrics::ComputeMeshDistance(w.mesh, sgt.foreground_mesh);
-        auto tf = metrics::ComputeMeshDistance(w.full_mesh, sgt.foreground_mesh);
+        const Mesh truth = ss.studio->ForegroundMesh(w.frames.frame_index);
+        auto ts = metrics::ComputeMeshDistance(w.mesh, truth);
+        auto tf = metrics::ComputeMeshDistance(w.full_mesh, truth);
         if (a.ok() && ts.ok() && tf.ok()) {
           to_full.push_back(a->accuracy_mm);
           from_full.push_back(a->completeness_distance_mm);

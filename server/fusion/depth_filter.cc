@@ -53,18 +53,18 @@ Status DepthFilter::Apply(RgbdFrameSet* frames) {
   if (options_.radius == 0) return OkStatus();
   pool_->Run(frames->frames.size(), [&](int i, int thread) {
     RgbdFrame& f = frames->frames[static_cast<size_t>(i)];
-    (void)FilterOne(&f.depth, f.mask, scratch_[static_cast<size_t>(thread)].get());  // mask checked above
+    FilterOne(&f.depth, f.mask, scratch_[static_cast<size_t>(thread)].get());
   });
   return OkStatus();
 }
 
 Status DepthFilter::Apply(ImageDepth16* depth, const ImageGray8& mask) {
   HOLO_RETURN_IF_ERROR(CheckMask(*depth, mask, "depth filter"));
-  if (options_.radius == 0) return OkStatus();
-  return FilterOne(depth, mask, scratch_[0].get());
+  if (options_.radius > 0) FilterOne(depth, mask, scratch_[0].get());
+  return OkStatus();
 }
 
-Status DepthFilter::FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scratch* s) const {
+void DepthFilter::FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scratch* s) const {
   const int w = depth->width(), h = depth->height(), r = options_.radius;
   const bool masked = !mask.empty();
   auto usable = [&](int x, int y) { return depth->at(x, y) != 0 && (!masked || mask.at(x, y) != 0); };
@@ -79,7 +79,7 @@ Status DepthFilter::FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scrat
         y0 = std::min(y0, y);
         y1 = std::max(y1, y);
       }
-  if (x1 < 0) return OkStatus();
+  if (x1 < 0) return;
   const int bw = x1 - x0 + 1, bh = y1 - y0 + 1;
   const int pw = bw + 2 * r;
   s->padded.assign(static_cast<size_t>(pw) * (bh + 2 * r), 0);
@@ -126,7 +126,6 @@ Status DepthFilter::FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scrat
     for (int x = 0; x < bw; ++x)
       if (center[x] != 0) out[x] = static_cast<uint16_t>((sum[x] + cnt[x] / 2) / cnt[x]);
   }
-  return OkStatus();
 }
 
 }  // namespace holo

@@ -67,7 +67,8 @@ class DepthFilter {
  private:
   struct Scratch;
   DepthFilter() = default;
-  Status FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scratch* s) const;
+  // One image whose mask was checked.
+  void FilterOne(ImageDepth16* depth, const ImageGray8& mask, Scratch* s) const;
   DepthFilterOptions options_;
   std::unique_ptr<WorkerPool> pool_;
   std::vector<std::unique_ptr<Scratch>> scratch_;  // one per pool thread

@@ -220,11 +220,9 @@ Status TsdfVolume::SmoothInto(TsdfVolume* out) const {
   out->Reset();
   VoxelBlockMap& dst = out->blocks_;
   constexpr int kP = kBlockSide + 2;  // the block and one voxel of each neighbour
-  // weight·tsdf and weight over the padded block, then the three passes.
-  float tw[kP][kP][kP], ws[kP][kP][kP];
-  float tw_x[kP][kP][kBlockSide], ws_x[kP][kP][kBlockSide];
-  float tw_y[kP][kBlockSide][kBlockSide], ws_y[kP][kBlockSide][kBlockSide];
-  const bool color = options_.integrate_color;
+  // [0] weight·tsdf, [1] weight: over the padded block, then after the
+  // pass along x, then along y (the pass along z gives the result).
+  float f[2][kP][kP][kP], fx[2][kP][kP][kBlockSide], fy[2][kP][kBlockSide][kBlockSide];
   for (size_t bi = 0; bi < blocks_.size(); ++bi) {
     const int32_t b = static_cast<int32_t>(bi);
     const BlockCoord bc = blocks_.coord(b);
@@ -256,36 +254,29 @@ Status TsdfVolume::SmoothInto(TsdfVolume* out) const {
           const VoxelBlock* src = nb[bz][by][bx];
           const int v = vx + kBlockSide * (vy + kBlockSide * vz);
           const float w = src ? src->weight[v] : 0.0f;
-          ws[z][y][x] = w;
-          tw[z][y][x] = w > 0 ? w * src->tsdf[v] : 0.0f;
+          f[0][z][y][x] = w > 0 ? w * src->tsdf[v] : 0.0f;
+          f[1][z][y][x] = w;
         }
       }
     }
-    for (int z = 0; z < kP; ++z)
-      for (int y = 0; y < kP; ++y)
-        for (int x = 0; x < kBlockSide; ++x) {
-          tw_x[z][y][x] = tw[z][y][x] + 2 * tw[z][y][x + 1] + tw[z][y][x + 2];
-          ws_x[z][y][x] = ws[z][y][x] + 2 * ws[z][y][x + 1] + ws[z][y][x + 2];
-        }
-    for (int z = 0; z < kP; ++z)
-      for (int y = 0; y < kBlockSide; ++y)
-        for (int x = 0; x < kBlockSide; ++x) {
-          tw_y[z][y][x] = tw_x[z][y][x] + 2 * tw_x[z][y + 1][x] + tw_x[z][y + 2][x];
-          ws_y[z][y][x] = ws_x[z][y][x] + 2 * ws_x[z][y + 1][x] + ws_x[z][y + 2][x];
-        }
+    for (int c = 0; c < 2; ++c) {
+      for (int z = 0; z < kP; ++z)
+        for (int y = 0; y < kP; ++y)
+          for (int x = 0; x < kBlockSide; ++x)
+            fx[c][z][y][x] = f[c][z][y][x] + 2 * f[c][z][y][x + 1] + f[c][z][y][x + 2];
+      for (int z = 0; z < kP; ++z)
+        for (int y = 0; y < kBlockSide; ++y)
+          for (int x = 0; x < kBlockSide; ++x)
+            fy[c][z][y][x] = fx[c][z][y][x] + 2 * fx[c][z][y + 1][x] + fx[c][z][y + 2][x];
+    }
     const VoxelBlock& in = blocks_.block(b);
     const int32_t oi = dst.FindOrAllocate(bc, nullptr, false);
     VoxelBlock& o = dst.block(oi);
+    // Colours are copied as they are (ExtractMesh reads them only when the volume fuses colour).
     std::memcpy(o.weight, in.weight, sizeof(o.weight));
-    if (color) {
-      std::memcpy(o.r, in.r, sizeof(o.r));
-      std::memcpy(o.g, in.g, sizeof(o.g));
-      std::memcpy(o.b, in.b, sizeof(o.b));
-    } else {
-      std::memset(o.r, 0, sizeof(o.r));
-      std::memset(o.g, 0, sizeof(o.g));
-      std::memset(o.b, 0, sizeof(o.b));
-    }
+    std::memcpy(o.r, in.r, sizeof(o.r));
+    std::memcpy(o.g, in.g, sizeof(o.g));
+    std::memcpy(o.b, in.b, sizeof(o.b));
     bool has_neg = false, has_pos = false, has_band = false;
     for (int z = 0; z < kBlockSide; ++z)
       for (int y = 0; y < kBlockSide; ++y)
@@ -295,8 +286,8 @@ Status TsdfVolume::SmoothInto(TsdfVolume* out) const {
             o.tsdf[v] = in.tsdf[v];
             continue;
           }
-          const float den = ws_y[z][y][x] + 2 * ws_y[z + 1][y][x] + ws_y[z + 2][y][x];
-          const float num = tw_y[z][y][x] + 2 * tw_y[z + 1][y][x] + tw_y[z + 2][y][x];
+          const float num = fy[0][z][y][x] + 2 * fy[0][z + 1][y][x] + fy[0][z + 2][y][x];
+          const float den = fy[1][z][y][x] + 2 * fy[1][z + 1][y][x] + fy[1][z + 2][y][x];
           const float t = std::clamp(num / den, -1.0f, 1.0f);  // den ≥ 8 · the voxel's own weight
           o.tsdf[v] = t;
           has_neg |= t < 0;
