@@ -38,6 +38,7 @@
 #include "protocol/byte_io.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/surface_codec.h"
 #include "protocol/video_codec.h"
 #include "server/net/site_publisher.h"
 #include "server/pipeline/capture_site.h"
@@ -69,6 +70,7 @@ struct ClientBenchOptions {
   int bake_texels = -1;                          // ProjectiveOptions::bake_texels_per_edge (-1: the renderer's)
   float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
   double reduced_step_scale = -1;                // stream part: the reduced layer's (-1: SitePublisher's default)
+  double g3_step_mm = -1;                        // stream part: G3's position step (-1: SitePublisher's default)
   int reduced_jpeg_quality = -1;                 // stream part: the reduced layer's (-1: SitePublisher's default)
   int video_frames = 30;                         // stream part, fused: frames of V1 video before the measured one (0: no V1)
   std::string video_crfs = "24,30";              // stream part: the full layer's V1 CRFs to measure
@@ -103,6 +105,8 @@ struct ViewerContent {
   // codec, which needs the frames a live encoder would have seen.
   std::vector<std::vector<holo::ImageRgb8>> sequence_images;
   std::vector<std::vector<holo::ImageGray8>> sequence_masks;
+  // Fused stream mesh: the grid it was extracted from (the G3 codec's input).
+  holo::SdfGrid field;
   std::vector<const holo::ImageRgb8*> ImagePtrs() const {
     std::vector<const holo::ImageRgb8*> v;
     for (const auto& i : images) v.push_back(&i);
@@ -159,10 +163,12 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   // full-resolution mesh beside it.
   o.stream_mesh = true;
   o.stream.max_triangles = reduced_triangles;
+  o.stream_field = true;
   o.full_mesh = true;
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
   holo::RgbdFrameSet kept;
   holo::Mesh stream_mesh;
+  holo::SdfGrid stream_field;
   std::vector<std::vector<holo::ImageRgb8>> sequence_images;
   std::vector<std::vector<holo::ImageGray8>> sequence_masks;
   bool got = false;
@@ -178,6 +184,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
     if (w.frames.frame_index == frame) {
       full->mesh = w.full_mesh;
       stream_mesh = w.mesh;
+      stream_field = w.stream_field;
       kept = w.frames;
       got = true;
     }
@@ -204,6 +211,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   reduced->sequence_masks = std::move(sequence_masks);
   reduced->mesh_name = "fused_stream";
   reduced->mesh = std::move(stream_mesh);
+  reduced->field = std::move(stream_field);
   // Both meshes coloured by the texturer with `texture_options` (the site's
   // defaults unless a before/after comparison asks otherwise).
   holo::TextureOptions to = texture_options;
@@ -645,6 +653,8 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
 
   holo::net::SitePublisherOptions publisher;  // the live server's defaults
   if (options.reduced_step_scale > 0) publisher.reduced.position_step_scale = options.reduced_step_scale;
+  if (options.g3_step_mm > 0) publisher.surface.position_step_m = static_cast<float>(options.g3_step_mm * 1e-3);
+  if (holo::Status s = publisher.surface.Check(); !s.ok()) return Fail(s.WithContext("--g3-step-mm"));
   if (options.reduced_jpeg_quality > 0) publisher.reduced.jpeg_quality = options.reduced_jpeg_quality;
   struct Variant {
     std::string codec;
@@ -654,13 +664,24 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     double fps;
     bool video = false;  // V1 instead of `color`
     holo::protocol::VideoEncodeOptions video_options;
+    bool g3 = false;  // G3 (the stream mesh's grid) instead of `geometry`
+    holo::protocol::SurfaceEncodeOptions surface;
   };
   std::vector<Variant> variants;
-  variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0, false, publisher.video});
+  variants.push_back({"none", -1, publisher.geometry, publisher.color_options, 30.0, false, publisher.video, false, {}});
   const int divisor = publisher.reduced.frame_divisor;
   for (int layer = 0; layer < 2; ++layer) {
     const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(publisher, layer);
-    variants.push_back({"G1+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, false, lo.video});
+    variants.push_back({"G1+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, false, lo.video, false, {}});
+  }
+  // G3 where the content has the stream mesh's grid (fused).
+  const bool g3 = c.field.size() > 0;
+  if (g3) {
+    for (int layer = 0; layer < 2; ++layer) {
+      const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(publisher, layer);
+      variants.push_back({"G3+C1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, false, lo.video,
+                          true, lo.surface});
+    }
   }
   const int sequence = static_cast<int>(c.sequence_images.size());
   if (sequence > 0) {
@@ -678,8 +699,14 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       if (holo::Status s = vp.video.Check(); !s.ok()) return Fail(s);
       for (int layer = 0; layer < 2; ++layer) {
         const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(vp, layer);
-        Variant v{"G1+V1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, true, lo.video};
+        Variant v{"G1+V1", layer, lo.geometry, lo.color, layer == 0 ? 30.0 : 30.0 / divisor, true, lo.video, false, {}};
         variants.push_back(v);
+        if (g3) {
+          v.codec = "G3+V1";
+          v.g3 = true;
+          v.surface = lo.surface;
+          variants.push_back(v);
+        }
       }
     }
   } else if (c.content == "fused" && options.video_frames > 0) {
@@ -695,7 +722,10 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       std::vector<uint8_t> blob;
       holo::protocol::GeometryEncodeOptions g = v.geometry;
       g.colors = false;  // projective texturing: the live server sends no vertex colours with images
-      if (holo::Status s = holo::protocol::EncodeGeometry(c.mesh, g, &blob); !s.ok()) return Fail(s);
+      if (holo::Status s = v.g3 ? holo::protocol::EncodeSurface(c.field, v.surface, &blob)
+                                : holo::protocol::EncodeGeometry(c.mesh, g, &blob);
+          !s.ok())
+        return Fail(s);
       geometry_bytes = blob.size();
       if (holo::Status s = holo::protocol::DecodeGeometry(blob, &mesh); !s.ok()) return Fail(s);
       // G1 (PROTOCOL.md §7): 12-byte prefix, origin, step, chroma shift,
@@ -769,7 +799,12 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
     q["pod_images"] = c.raw_masks.empty() || c.raw_masks[0].empty() ? "whole" : "masked";
     if (v.layer >= 0) {
       q["layer"] = v.layer == 0 ? "full" : "reduced";
-      q["position_step_mm"] = fmt::format("{:g}", v.geometry.position_step_m * 1e3);
+      if (v.g3) {
+        q["g3_step_mm"] = fmt::format("{:g}", v.surface.position_step_m * 1e3);
+        q["decoded_triangles"] = std::to_string(mesh.num_triangles());
+      } else {
+        q["position_step_mm"] = fmt::format("{:g}", v.geometry.position_step_m * 1e3);
+      }
       if (v.video) {
         q["video_crf"] = std::to_string(v.video_options.crf);
         q["video_library"] = holo::protocol::VideoLibraryName(v.video_options.library);
@@ -867,6 +902,7 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--gpu-visibility", o->gpu_visibility,
                  "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
+  app.add_option("--g3-step-mm", o->g3_step_mm, "stream part: G3's position step along a grid edge, mm");
   app.add_option("--reduced-step-scale", o->reduced_step_scale,
                  "stream part: the reduced layer's G1 step x this (default: holoport-server's)")
       ->check(CLI::Range(1.0, 16.0));

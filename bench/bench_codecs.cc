@@ -7,6 +7,7 @@
 //                       [--video-crf=N] [--video-preset=P] [--keyframe-interval=N]
 //                       [--g2-step-mm=S] [--g2-max-rms-mm=R] [--g2-keyframe-step-mm=S] [--g2-dead-zone=Z] [--g2-group=N]
 //                       [--g2-smooth=N] [--g2-max-disp-mm=D] [--g2-far-fraction=F] [--g2-no-backoff]
+//                       [--g3-step-mm=S]
 // Unknown options are refused (exit 2); --name value and --name=value both work.
 //
 // --content truth (the default): the studio's ground-truth foreground mesh and
@@ -24,6 +25,11 @@
 // `library` and `chroma` qualifier, one encoder and one decoder per pod over
 // the frame sequence (fresh ones per repeat); its bytes are the mean over the
 // sequence (keyframes included), its times the median per frame of all pods.
+// G3 (protocol/surface_codec.h) codes the grid the stream mesh is extracted
+// from (fused and temporal content with the stream mesh only); its error is
+// the two-sided surface distance to the site's stream mesh of the same frame
+// (`geom_surface_rms_mm`, as for G2), and `triangles` is what the viewer gets.
+//
 // (--hash prints a hash of every geometry blob of the first repeat to stderr;
 // --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
 //
@@ -88,6 +94,7 @@
 #include "common/metrics/triangle_index.h"
 #include "protocol/geometry2_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/surface_codec.h"
 #include "protocol/video_codec.h"
 
 #if __has_include("studio/workloads.h") && __has_include("studio/studio.cc")
@@ -131,6 +138,7 @@ struct CodecsOptions {
   std::optional<int> g2_group, g2_smooth;
   bool g2_no_backoff = false;
   std::optional<float> g2_max_disp_mm, g2_far_fraction;
+  std::optional<float> g3_step_mm;  // G3 value step (unset: SurfaceEncodeOptions' default)
 };
 
 struct PodImageInput {
@@ -141,6 +149,7 @@ struct PodImageInput {
 
 struct FrameInput {
   Mesh mesh;
+  SdfGrid field;  // fused stream mesh: the grid it was extracted from (G3)
   std::vector<PodImageInput> pods;
 };
 
@@ -365,6 +374,7 @@ int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal,
   o.pipeline.max_frames = frames;
   // The live server's default (holoport-server --stream-step 2 --stream-triangles 20000).
   o.stream_mesh = stream_mesh;
+  o.stream_field = stream_mesh;
   // --content temporal: the site's temporal fusion (docs/temporal.md: the
   // previous volume tracked non-rigidly and fused into), not a fresh volume per frame.
   o.temporal = temporal;
@@ -378,6 +388,7 @@ int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal,
     if (n >= frames) return OkStatus();
     FrameInput& in = (*inputs)[n++];
     in.mesh = w.mesh;
+    in.field = w.stream_field;
     in.pods.clear();
     for (const RgbdFrame& f : w.frames.frames) {
       if (f.mask.width() != f.color.width() || f.mask.height() != f.color.height()) {
@@ -759,6 +770,69 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("G2", "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
     emit("G2", "geom_surface_rms_mm", Mean(fig.a), "mm", extra);
     if (bytes_of.count("G1")) emit("G2", "bytes_ratio_vs_G1", bytes / bytes_of["G1"], "1", {{"peer", "G1"}});
+  }
+  // ---- G3: the stream mesh's grid (fused and temporal content, stream mesh).
+  if (wanted("G3") && !inputs.empty() && inputs[0].field.size() > 0) {
+    protocol::SurfaceEncodeOptions o;
+    if (co.g3_step_mm) o.position_step_m = *co.g3_step_mm / 1000.0f;
+    if (const Status st = o.Check(); !st.ok()) {
+      spdlog::error("codecs: G3 options: {}", st.ToString());
+      return 2;
+    }
+    Figures fig;
+    std::vector<double> tris, label_b, value_b, brick_b, samples;
+    std::vector<uint8_t> blob;
+    Mesh out;
+    for (int rep = 0; rep < args.repeats; ++rep) {
+      for (const FrameInput& in : inputs) {
+        blob.clear();
+        protocol::SurfaceEncodeStats st;
+        const double c0 = holo::ThreadCpuTimeMs();
+        const double t0 = NowMs();
+        const Status es = protocol::EncodeSurface(in.field, o, &blob, nullptr, &st);
+        const double t1 = NowMs();
+        const double c1 = holo::ThreadCpuTimeMs();
+        const Status ds = es.ok() ? protocol::DecodeGeometry(blob, &out) : es;
+        const double t2 = NowMs();
+        const double c2 = holo::ThreadCpuTimeMs();
+        if (!es.ok() || !ds.ok()) {
+          spdlog::error("codecs: G3 failed: {} {}", es.ToString(), ds.ToString());
+          return 1;
+        }
+        fig.bytes.push_back(static_cast<double>(blob.size()));
+        fig.enc.push_back(t1 - t0);
+        fig.dec.push_back(t2 - t1);
+        fig.enc_cpu.push_back(c1 - c0);
+        fig.dec_cpu.push_back(c2 - c1);
+        if (rep == 0) {
+          const SurfaceError se = TwoSidedSurfaceError(out, in.mesh);
+          fig.a.push_back(se.rms_mm);
+          fig.b.push_back(se.max_mm);
+          tris.push_back(static_cast<double>(out.num_triangles()));
+          brick_b.push_back(static_cast<double>(st.brick_bytes));
+          label_b.push_back(static_cast<double>(st.label_bytes));
+          value_b.push_back(static_cast<double>(st.crossing_bytes));
+          samples.push_back(static_cast<double>(st.grid_samples));
+        }
+      }
+    }
+    std::map<std::string, std::string> extra{{"error", "two-sided-surface"},
+                                             {"g3_step_mm", Fixed(o.position_step_m * 1000.0f, 2)}};
+    const double bytes = Median(fig.bytes);
+    bytes_of["G3"] = bytes;
+    emit("G3", "bytes_per_frame", bytes, "B", extra);
+    emit("G3", "mbps", bytes * 8 * 30 / 1e6, "Mbit/s", extra);
+    emit("G3", "brick_bytes", Median(brick_b), "B", extra);
+    emit("G3", "label_bytes", Median(label_b), "B", extra);
+    emit("G3", "crossing_bytes", Median(value_b), "B", extra);
+    emit_times("G3", fig, extra);
+    geom_cpu_of["G3"] = Median(fig.enc_cpu) + Median(fig.dec_cpu);
+    emit("G3", "geom_surface_rms_mm", Mean(fig.a), "mm", extra);
+    emit("G3", "geom_rms_mm", Mean(fig.a), "mm", extra);
+    emit("G3", "geom_max_mm", *std::max_element(fig.b.begin(), fig.b.end()), "mm", extra);
+    emit("G3", "triangles", Median(tris), "1", extra);
+    emit("G3", "grid_samples", Median(samples), "1", extra);
+    if (bytes_of.count("G1")) emit("G3", "bytes_ratio_vs_G1", bytes / bytes_of["G1"], "1", {{"peer", "G1"}});
   }
   for (const GeomRun& run : runs) {
     // Where G1's bytes go: its u32-length streams after the 29 bytes of prefix and G1 header
@@ -1142,6 +1216,8 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("G0+C0", "stream_mbps", (bytes_of["G0"] + bytes_of["C0"]) * 8 * 30 / 1e6, "Mbit/s");
   if (bytes_of.count("G1") && bytes_of.count("C1"))
     emit("G1+C1", "stream_mbps", (bytes_of["G1"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
+  if (bytes_of.count("G3") && bytes_of.count("C1"))
+    emit("G3+C1", "stream_mbps", (bytes_of["G3"] + bytes_of["C1"]) * 8 * 30 / 1e6, "Mbit/s");
   if (codec_cpu_of.count("C1") && geom_cpu_of.count("G1"))
     emit("G1+C1", "codec_cpu_ms", geom_cpu_of["G1"] + codec_cpu_of["C1"], "ms");
   for (const VideoRun& run : video_runs) {
@@ -1203,6 +1279,7 @@ BenchFn SetupCodecs(CLI::App& app) {
   app.add_flag("--g2-no-backoff", co->g2_no_backoff, "G2 tries a predicted frame every frame (no back-off)");
   app.add_option("--g2-smooth", co->g2_smooth, "G2 one-ring smoothing passes of the target displacements");
   app.add_option("--g2-max-disp-mm", co->g2_max_disp_mm, "G2 farthest surface search along a normal, mm");
+  app.add_option("--g3-step-mm", co->g3_step_mm, "G3 quantization of a vertex along its grid edge, mm (default 2)");
   return [co](const BenchArgs& args) { return RunCodecs(args, *co); };
 }
 

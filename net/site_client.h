@@ -79,7 +79,7 @@ struct ClientOptions {
   size_t max_pending_audio = 512;  // pull queue; the oldest is dropped
   size_t max_send_queue = 1024;    // messages waiting to be sent; newer ones are dropped beyond
   uint32_t max_message_bytes = 64u << 20;
-  protocol::Capabilities capabilities{{protocol::GeometryCodec::kG1, protocol::GeometryCodec::kG0},
+  protocol::Capabilities capabilities{{protocol::GeometryCodec::kG1, protocol::GeometryCodec::kG3, protocol::GeometryCodec::kG0},
                                       {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0, protocol::ColorCodec::kV1},
                                       {protocol::AudioCodec::kOpusLean, protocol::AudioCodec::kOpus,
                                        protocol::AudioCodec::kPcm16}};

@@ -10,6 +10,7 @@
 
 #include "protocol/byte_io.h"
 #include "protocol/rans_coder.h"
+#include "protocol/surface_codec.h"
 
 namespace holo::protocol {
 namespace {
@@ -936,7 +937,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
 }  // namespace
 
 Status GeometryEncodeOptions::Check() const {
-  if (codec != GeometryCodec::kG0 && codec != GeometryCodec::kG1) return InvalidArgument("codec must be G0 or G1");
+  if (codec != GeometryCodec::kG0 && codec != GeometryCodec::kG1) return InvalidArgument("codec must be G0 or G1 (G3 codes a distance grid: EncodeSurface)");
   if (chroma_shift < 0 || chroma_shift > 3) {
     return InvalidArgument("chroma_shift must be in [0, 3], got " + std::to_string(chroma_shift));
   }
@@ -1010,7 +1011,7 @@ Status EncodeGeometry(const Mesh& mesh, const GeometryEncodeOptions& options, st
 
 StatusOr<GeometryCodec> PeekGeometryCodec(std::span<const uint8_t> blob) {
   if (blob.empty()) return DataLoss("geometry.codec: empty blob");
-  if (blob[0] != 1 && blob[0] != 2) return DataLoss("geometry.codec: unknown geometry codec " + Str(blob[0]));
+  if (blob[0] != 1 && blob[0] != 2 && blob[0] != 4) return DataLoss("geometry.codec: unknown geometry codec " + Str(blob[0]));
   return static_cast<GeometryCodec>(blob[0]);
 }
 
@@ -1043,6 +1044,8 @@ Status DecodeGeometry(std::span<const uint8_t> blob, Mesh* mesh, const Limits& l
     s = DecodeG0(r, flags, nv, nt, mesh);
   } else if (codec == static_cast<uint8_t>(GeometryCodec::kG1)) {
     s = DecodeG1(r, flags, nv, nt, mesh);
+  } else if (codec == static_cast<uint8_t>(GeometryCodec::kG3)) {
+    s = flags != 0 ? DataLoss("geometry.flags: must be 0 for G3") : internal::DecodeSurfaceBody(r, nv, nt, mesh);
   } else {
     s = DataLoss("geometry.codec: unknown geometry codec " + Str(codec));
   }

@@ -138,7 +138,7 @@ Status Read(ByteReader& r, const Limits& l, Hello* m) {
   HOLO_RETURN_IF_ERROR(r.U16("hello.min_version", &m->min_version));
   HOLO_RETURN_IF_ERROR(r.U16("hello.max_version", &m->max_version));
   if (m->min_version > m->max_version) return DataLoss("hello.min_version: greater than max_version");
-  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.geometry_codecs", 2, &m->capabilities.geometry));
+  HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.geometry_codecs", 4, &m->capabilities.geometry));
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.color_codecs", 4, &m->capabilities.color));
   HOLO_RETURN_IF_ERROR(ReadCodecList(r, "hello.audio_codecs", kMaxAudioCodec, &m->capabilities.audio));
   HOLO_RETURN_IF_ERROR(r.String16("hello.access_token", l.max_token, &m->access_token));
@@ -162,7 +162,7 @@ Status Read(ByteReader& r, const Limits& l, Welcome* m) {
   HOLO_RETURN_IF_ERROR(r.U8("welcome.geometry_codec", &g));
   HOLO_RETURN_IF_ERROR(r.U8("welcome.color_codec", &c));
   HOLO_RETURN_IF_ERROR(r.U8("welcome.audio_codec", &a));
-  if (g < 1 || g > 2) return DataLoss("welcome.geometry_codec: unknown codec " + Str(g));
+  if (g < 1 || g > 4 || g == 3) return DataLoss("welcome.geometry_codec: unknown codec " + Str(g));
   if (c < 1 || c > 4) return DataLoss("welcome.color_codec: unknown codec " + Str(c));
   if (a < 1 || a > kMaxAudioCodec) return DataLoss("welcome.audio_codec: unknown codec " + Str(a));
   m->geometry_codec = static_cast<GeometryCodec>(g);
@@ -233,7 +233,7 @@ Status Read(ByteReader& r, const Limits& l, MeshFrame* m) {
   HOLO_RETURN_IF_ERROR(r.I64("mesh_frame.frame_index", &m->frame_index));
   uint8_t c = 0;
   HOLO_RETURN_IF_ERROR(r.U8("mesh_frame.codec", &c));
-  if (c < 1 || c > 2) return DataLoss("mesh_frame.codec: unknown geometry codec " + Str(c));
+  if (c < 1 || c > 4 || c == 3) return DataLoss("mesh_frame.codec: unknown geometry codec " + Str(c));
   m->codec = static_cast<GeometryCodec>(c);
   return ReadBytes32(r, "mesh_frame.data", l.max_message_bytes, &m->data);
 }

@@ -53,7 +53,9 @@ inline constexpr uint16_t kFlagKeyFrame = 1u << 1;       // decodable without ea
 inline constexpr uint16_t kKnownFlags = kFlagMoreFragments | kFlagKeyFrame;
 
 // Codec identifiers (one byte on the wire; 0 is never valid).
-enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2 };
+// kG3: the surface as the signed-distance samples marching cubes reads
+// (protocol/surface_codec.h). Id 3 is G2, which is not a MeshFrame codec.
+enum class GeometryCodec : uint8_t { kG0 = 1, kG1 = 2, kG3 = 4 };
 // kV1: per-pod inter-frame video (protocol/video_codec.h); its blobs need a
 // VideoDecoder per pod stream, not DecodeColor.
 enum class ColorCodec : uint8_t { kC0 = 1, kC1 = 2, kH264 = 3 /* reserved: specified, not implemented */, kV1 = 4 };

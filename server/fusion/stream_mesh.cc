@@ -55,7 +55,7 @@ StatusOr<std::unique_ptr<StreamMesher>> StreamMesher::Create(const TsdfOptions& 
   return m;
 }
 
-Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* stats) {
+Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* stats, SdfGrid* field) {
   StreamMeshStats local;
   StreamMeshStats& st = stats ? *stats : local;
   st = StreamMeshStats{};
@@ -67,8 +67,13 @@ Status StreamMesher::Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* 
     coarse_->ExtractMesh(out);
     const Eigen::Vector3f shift = Eigen::Vector3f::Constant(volume.DownsampleOffset(options_.step));
     for (auto& p : out->positions) p += shift;
+    if (field) {
+      coarse_->ExportGrid(field);
+      field->origin += shift;
+    }
   } else {
     volume.ExtractMesh(out);
+    if (field) volume.ExportGrid(field);
   }
   MeshCleanupOptions cleanup;
   cleanup.min_component_triangles = options_.min_component_triangles;

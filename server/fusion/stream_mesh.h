@@ -65,8 +65,11 @@ class StreamMesher {
 
   // The stream mesh of `volume` (fused with the TsdfOptions given to Create)
   // into `out` (buffers reused): positions, MC normals, voxel colours if the
-  // volume has them. Not thread-safe.
-  Status Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* stats = nullptr);
+  // volume has them. Not thread-safe. `field` (optional) receives the grid
+  // the mesh is extracted from (before fragment removal and simplification),
+  // in world coordinates: what the G3 geometry codec sends
+  // (protocol/surface_codec.h).
+  Status Make(const TsdfVolume& volume, Mesh* out, StreamMeshStats* stats = nullptr, SdfGrid* field = nullptr);
 
   const StreamMeshOptions& options() const { return options_; }
 

@@ -4,6 +4,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <cstdlib>
 #include <cstring>
 #include <string>
@@ -311,6 +312,61 @@ void TsdfVolume::VoxelAt(int64_t x, int64_t y, int64_t z, float* tsdf, float* we
                                  kBlockSide * kBlockSide * (z - bz * kBlockSide));
   *tsdf = blocks_.block(b).tsdf[i];
   *weight = blocks_.block(b).weight[i];
+}
+
+void TsdfVolume::ExportGrid(SdfGrid* out) const {
+  const size_t nb = blocks_.size();
+  out->voxel_m = options_.voxel_size;
+  // Every surface cube has a corner behind the surface: the box of the
+  // blocks holding such voxels, one voxel wider on every side, holds every
+  // cube marching cubes could use.
+  int32_t lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+  for (size_t b = 0; b < nb; ++b) {
+    if (!(blocks_.flags(static_cast<int32_t>(b)) & kBlockHasNegative)) continue;
+    const BlockCoord& c = blocks_.coord(static_cast<int32_t>(b));
+    const int32_t v[3] = {c.x, c.y, c.z};
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], v[a]);
+      hi[a] = std::max(hi[a], v[a]);
+    }
+  }
+  if (lo[0] > hi[0]) {
+    out->origin = Eigen::Vector3f::Zero();
+    out->nx = out->ny = out->nz = 1;
+    out->sdf.assign(1, std::numeric_limits<float>::quiet_NaN());
+    return;
+  }
+  int64_t v0[3];
+  for (int a = 0; a < 3; ++a) v0[a] = int64_t{lo[a]} * kBlockSide - 1;
+  out->nx = (hi[0] - lo[0] + 1) * kBlockSide + 2;
+  out->ny = (hi[1] - lo[1] + 1) * kBlockSide + 2;
+  out->nz = (hi[2] - lo[2] + 1) * kBlockSide + 2;
+  out->origin = Eigen::Vector3f(static_cast<float>(v0[0]), static_cast<float>(v0[1]), static_cast<float>(v0[2])) *
+                options_.voxel_size;
+  out->sdf.assign(out->size(), std::numeric_limits<float>::quiet_NaN());
+  const float trunc_m = options_.truncation_voxels * options_.voxel_size;
+  for (size_t b = 0; b < nb; ++b) {
+    const BlockCoord& c = blocks_.coord(static_cast<int32_t>(b));
+    const int64_t b0[3] = {int64_t{c.x} * kBlockSide - v0[0], int64_t{c.y} * kBlockSide - v0[1], int64_t{c.z} * kBlockSide - v0[2]};
+    // The part of the block inside the box.
+    int i0[3], i1[3];
+    bool empty = false;
+    const int n[3] = {out->nx, out->ny, out->nz};
+    for (int a = 0; a < 3; ++a) {
+      i0[a] = static_cast<int>(std::clamp<int64_t>(-b0[a], 0, kBlockSide));
+      i1[a] = static_cast<int>(std::clamp<int64_t>(n[a] - b0[a], 0, kBlockSide));
+      empty |= i0[a] >= i1[a];
+    }
+    if (empty) continue;
+    const VoxelBlock& vb = blocks_.block(static_cast<int32_t>(b));
+    for (int k = i0[2]; k < i1[2]; ++k)
+      for (int j = i0[1]; j < i1[1]; ++j) {
+        float* row = &out->sdf[out->Index(0, static_cast<int>(b0[1]) + j, static_cast<int>(b0[2]) + k)];
+        const int r0 = kBlockSide * (j + kBlockSide * k);
+        for (int i = i0[0]; i < i1[0]; ++i)
+          if (vb.weight[r0 + i] >= options_.min_weight) row[b0[0] + i] = vb.tsdf[r0 + i] * trunc_m;
+      }
+  }
 }
 
 namespace {

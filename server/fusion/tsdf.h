@@ -22,6 +22,7 @@
 #include "common/mesh.h"
 #include "common/rgbd.h"
 #include "common/rig.h"
+#include "common/sdf_grid.h"
 #include "common/status.h"
 #include "server/fusion/voxel_blocks.h"
 
@@ -154,6 +155,14 @@ class TsdfVolume {
   // keeping the +1 voxels as they were gave 5.46 mm. The capture site's
   // full-resolution meshes (export, recording) are extracted from it.
   Status SmoothInto(TsdfVolume* out) const;
+  // The field as a dense box of samples (common/sdf_grid.h) for the G3
+  // geometry codec: the box of the blocks holding a voxel behind the
+  // surface (tsdf < 0), one voxel wider on every side (every cube marching
+  // cubes could mesh lies in it), signed
+  // distances in metres (tsdf · truncation), NaN where the weight is below
+  // min_weight — exactly the voxels marching cubes would use. With no
+  // blocks, one unobserved sample. `out`'s buffer is reused.
+  void ExportGrid(SdfGrid* out) const;
   // World offset (metres, the same on every axis) of DownsampleInto's coarse grid.
   float DownsampleOffset(int step) const { return 0.5f * static_cast<float>(step - 1) * options_.voxel_size; }
 

@@ -27,9 +27,10 @@ Status ReducedLayerOptions::Check() const {
 }
 
 LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int layer) {
-  LayerEncodeOptions o{options.geometry, options.color_options, options.video};
+  LayerEncodeOptions o{options.geometry, options.surface, options.color_options, options.video};
   if (layer == 0) return o;
   o.geometry.position_step_m = static_cast<float>(options.geometry.position_step_m * options.reduced.position_step_scale);
+  o.surface.position_step_m = static_cast<float>(std::min<double>(options.surface.position_step_m * options.reduced.position_step_scale, 0.1));
   o.color.jpeg_quality = options.reduced.jpeg_quality;
   const int crf = options.video.crf < 0 ? 24 : options.video.crf;
   o.video.crf = std::min(51, crf + options.reduced.crf_offset);
@@ -39,6 +40,7 @@ LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int
 SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
     : server_(server), options_(std::move(options)) {
   HOLO_CHECK(options_.reduced.Check().ok());
+  HOLO_CHECK(options_.geometry.codec != protocol::GeometryCodec::kG3 || options_.surface.Check().ok());
   server_->SetPublishedCodecs(options_.geometry.codec, options_.color_options.codec);
   for (int layer = 0; layer < 2; ++layer)
     static_cast<LayerEncodeOptions&>(layers_[layer]) = EncodeOptionsOfLayer(options_, layer);
@@ -49,17 +51,19 @@ SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
 }
 
 Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
-                              const std::vector<PodColor>& pods, PublishTimings* t) {
-  HOLO_RETURN_IF_ERROR(Encode(frame_index, capture_wall_us, mesh, pods, &scratch_));
+                              const std::vector<PodColor>& pods, PublishTimings* t, const SdfGrid* field) {
+  HOLO_RETURN_IF_ERROR(Encode(frame_index, capture_wall_us, mesh, pods, &scratch_, field));
   PublishEncoded(&scratch_);
   *t = scratch_.timings;
   return OkStatus();
 }
 
 Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
-                             const std::vector<PodColor>& pods, EncodedFrame* out) {
+                             const std::vector<PodColor>& pods, EncodedFrame* out, const SdfGrid* field) {
   out->timings = PublishTimings{};
-  HOLO_RETURN_IF_ERROR(EncodeLayer(0, frame_index, capture_wall_us, mesh, pods, out));
+  if (options_.geometry.codec == protocol::GeometryCodec::kG3 && field == nullptr)
+    return InvalidArgument("frame " + std::to_string(frame_index) + ": G3 geometry needs the stream mesh's grid");
+  HOLO_RETURN_IF_ERROR(EncodeLayer(0, frame_index, capture_wall_us, mesh, field, pods, out));
   const int64_t n = frames_seen_++;
   // The reduced layer only while someone receives it (or is being moved to
   // it), on every frame_divisor-th frame.
@@ -77,7 +81,7 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
   out->reduced.resize(1);
   EncodedFrame& r = out->reduced[0];
   r.timings = PublishTimings{};
-  HOLO_RETURN_IF_ERROR(EncodeLayer(1, frame_index, capture_wall_us, mesh, pods, &r));
+  HOLO_RETURN_IF_ERROR(EncodeLayer(1, frame_index, capture_wall_us, mesh, field, pods, &r));
   out->timings.reduced = true;
   out->timings.reduced_ms = r.timings.geometry_ms + r.timings.color_ms;
   out->timings.reduced_cpu_ms = r.timings.geometry_cpu_ms + r.timings.color_cpu_ms;
@@ -86,7 +90,7 @@ Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const
 }
 
 Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
-                                  const std::vector<PodColor>& pods, EncodedFrame* out) {
+                                  const SdfGrid* field, const std::vector<PodColor>& pods, EncodedFrame* out) {
   LayerState& st = layers_[layer];
   PublishTimings* t = &out->timings;
   out->layer = layer;
@@ -101,8 +105,13 @@ Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t captur
     g.colors = g.colors && !mesh.colors.empty();
     out->codec = g.codec;
     out->geometry.clear();  // the encoder appends
-    HOLO_RETURN_IF_ERROR(
-        protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
+    if (g.codec == protocol::GeometryCodec::kG3) {
+      HOLO_RETURN_IF_ERROR(protocol::EncodeSurface(*field, st.surface, &out->geometry)
+                               .WithContext("frame " + std::to_string(frame_index)));
+    } else {
+      HOLO_RETURN_IF_ERROR(
+          protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
+    }
     t->geometry_ms = MsSince(t0);
     t->geometry_cpu_ms = holo::ThreadCpuTimeMs() - cpu0;
     t->geometry_bytes = out->geometry.size();

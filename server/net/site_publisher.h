@@ -23,11 +23,13 @@
 
 #include "common/image.h"
 #include "common/mesh.h"
+#include "common/sdf_grid.h"
 #include "common/status.h"
 #include "common/worker_pool.h"
 #include "net/session_server.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
+#include "protocol/surface_codec.h"
 #include "protocol/video_codec.h"
 
 namespace holo::net {
@@ -66,7 +68,12 @@ inline protocol::ColorEncodeOptions SiteColorOptions() {
 
 struct SitePublisherOptions {
   // Default G1, 2 mm (kSitePositionStepMm), normals recomputed, colours.
+  // Codec kG3 codes the stream mesh's distance grid instead of the mesh
+  // (protocol/surface_codec.h): every frame must then come with its grid.
   protocol::GeometryEncodeOptions geometry = SiteGeometryOptions();
+  // G3's options (when geometry.codec is kG3); the reduced layer scales
+  // the value step by reduced.position_step_scale.
+  protocol::SurfaceEncodeOptions surface;
   bool color = true;                         // send C1 images of the pods (when masks exist)
   // Codec kC1 (default, quality kSiteJpegQuality), kC0 or kV1.
   protocol::ColorEncodeOptions color_options = SiteColorOptions();
@@ -79,6 +86,7 @@ struct SitePublisherOptions {
 // that measure the layers without a server.
 struct LayerEncodeOptions {
   protocol::GeometryEncodeOptions geometry;
+  protocol::SurfaceEncodeOptions surface;
   protocol::ColorEncodeOptions color;
   protocol::VideoEncodeOptions video;
 };
@@ -126,13 +134,14 @@ class SitePublisher {
   SitePublisher(Server* server, SitePublisherOptions options);
   // `capture_wall_us`: when the frame was captured, on the wall clock (WallUs).
   // Pods whose mask is missing or of another size are left out of the ColorFrame.
-  // Publish = Encode + PublishEncoded.
+  // Publish = Encode + PublishEncoded. `field`: the grid `mesh` was
+  // extracted from (FrameWork::stream_field), required with G3, unused otherwise.
   Status Publish(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const std::vector<PodColor>& pods,
-                 PublishTimings* timings);
+                 PublishTimings* timings, const SdfGrid* field = nullptr);
   // Encodes into `out` (its buffers reused). Not thread-safe: one thread
   // encodes (the per-pod colour encoders keep state between frames).
   Status Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const std::vector<PodColor>& pods,
-                EncodedFrame* out);
+                EncodedFrame* out, const SdfGrid* field = nullptr);
   // Hands an encoded frame (and its reduced layer) to every viewer's queue;
   // fills publish_ms and viewers of `out->timings`. May run on another
   // thread than Encode.
@@ -151,7 +160,7 @@ class SitePublisher {
     uint64_t keyframe_requests_seen = 0;
     std::chrono::steady_clock::time_point last_forced_keyframe{};
   };
-  Status EncodeLayer(int layer, int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
+  Status EncodeLayer(int layer, int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh, const SdfGrid* field,
                      const std::vector<PodColor>& pods, EncodedFrame* out);
 
   Server* server_;

@@ -37,6 +37,7 @@ Status CaptureSiteOptions::Check() const {
   HOLO_RETURN_IF_ERROR(texture_options.Check().WithContext("texture"));
   HOLO_RETURN_IF_ERROR(pipeline.Check().WithContext("pipeline"));
   if (stream_mesh) HOLO_RETURN_IF_ERROR(stream.Check().WithContext("stream mesh"));
+  if (stream_field && !stream_mesh) return InvalidArgument("stream_field needs stream_mesh (the grid is the stream mesh's)");
   if (temporal) HOLO_RETURN_IF_ERROR(TemporalOptions().Check().WithContext("temporal"));
   if (hull) {
     if (temporal) return InvalidArgument("the visual hull is per frame: it cannot be combined with temporal fusion");
@@ -185,7 +186,8 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
       if (stream_) {
         const double cpu1 = cpu ? ProcessCpuTimeMs() : 0;
         sw.Restart();
-        HOLO_RETURN_IF_ERROR(stream_->Make(temporal_->reference_volume(), &w.mesh));
+        HOLO_RETURN_IF_ERROR(stream_->Make(temporal_->reference_volume(), &w.mesh, nullptr,
+                                           options_.stream_field ? &w.stream_field : nullptr));
         w.timings.simplify_ms = std::max(1e-6, sw.ElapsedMs());
         if (cpu) w.timings.simplify_cpu_ms = std::max(1e-6, ProcessCpuTimeMs() - cpu1);
         if (!options_.full_mesh) w.full_mesh.Clear();
@@ -205,7 +207,7 @@ PipelineStages CaptureSite::MakeStages(std::function<Status(const FrameWork&)> s
       // The stream mesh (coarse marching cubes + clean-up) counts as mesh, its
       // simplification to the budget as simplify.
       StreamMeshStats ss;
-      HOLO_RETURN_IF_ERROR(stream_->Make(*volume_, &w.mesh, &ss));
+      HOLO_RETURN_IF_ERROR(stream_->Make(*volume_, &w.mesh, &ss, options_.stream_field ? &w.stream_field : nullptr));
       spdlog::trace("stream mesh: {} triangles from marching cubes, {} sent ({} short edges collapsed{}; {:.1f} ms)",
                     ss.coarse_triangles, ss.triangles, ss.collapses, ss.quadric ? ", then quadric" : "",
                     ss.simplify_ms);

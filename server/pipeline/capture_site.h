@@ -87,6 +87,9 @@ struct CaptureSiteOptions {
   // (FrameWork::full_mesh, textured too: export, recording of full quality).
   bool stream_mesh = false;
   StreamMeshOptions stream;
+  // With `stream_mesh`: also keep the grid the stream mesh is extracted from
+  // (FrameWork::stream_field), for the G3 geometry codec.
+  bool stream_field = false;
   bool full_mesh = false;
   bool texture = true;
   TextureOptions texture_options;

@@ -21,6 +21,7 @@
 #include "common/clock.h"
 #include "common/mesh.h"
 #include "common/rgbd.h"
+#include "common/sdf_grid.h"
 #include "common/status.h"
 
 namespace holo {
@@ -67,6 +68,7 @@ struct FrameWork {
   RgbdFrameSet frames;   // pods' colour, depth, and (after segment) masks
   Mesh mesh;             // after fuse+mesh: geometry; after texture: colours
   Mesh full_mesh;        // optional: the full-resolution mesh when `mesh` is a reduced stream mesh
+  SdfGrid stream_field;  // optional: the distance grid `mesh` was extracted from (G3 geometry)
   // What the encode stage made for the sink (owned by the stage that set it;
   // kept with the item, so its buffers are reused frame after frame).
   std::shared_ptr<void> encoded;

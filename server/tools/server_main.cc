@@ -179,7 +179,8 @@ int main(int argc, char** argv) {
   bool truth_mesh = false, no_color_stream = false, mesh_colors = false;
   double position_step_mm = holo::net::kSitePositionStepMm;
   int jpeg_quality = holo::net::kSiteJpegQuality;
-  std::string color_codec = "c1";
+  std::string color_codec = "c1", geometry_codec = "g1";
+  double g3_step_mm = 2.0;
   int video_crf = -1;
   int truth_loop = 0;
   app.add_option("--listen", listen_spec,
@@ -203,6 +204,15 @@ int main(int argc, char** argv) {
                  "G1 position quantisation of the streamed mesh, mm (error <= step * 0.87)")
       ->capture_default_str()
       ->check(CLI::Range(0.01, 100.0));
+  app.add_option("--geometry-codec", geometry_codec,
+                 "codec of the streamed mesh: g1 (the mesh: connectivity and quantized positions) or g3 (the "
+                 "distance samples the stream mesh is extracted from; the viewer runs marching cubes: about a "
+                 "third of G1's bytes, no vertex colours; needs the stream mesh, native viewers only)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"g1", "g3"}));
+  app.add_option("--g3-step-mm", g3_step_mm, "g3: quantization of a vertex along its grid edge, mm (error <= step / 2)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 16.0));
   app.add_option("--jpeg-quality", jpeg_quality, "C1 JPEG quality of the streamed pod images, 1..100")
       ->capture_default_str()
       ->check(CLI::Range(1, 100));
@@ -367,6 +377,13 @@ int main(int argc, char** argv) {
   publish_options.color = !no_color_stream;
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
   publish_options.color_options.jpeg_quality = jpeg_quality;
+  if (geometry_codec == "g3") {
+    if (truth_mesh || stream_step < 2)
+      return Fail(holo::InvalidArgument("--geometry-codec g3 needs the stream mesh (--stream-step 2..4, not --truth-mesh)"));
+    publish_options.geometry.codec = holo::protocol::GeometryCodec::kG3;
+    publish_options.surface.position_step_m = static_cast<float>(g3_step_mm * 1e-3);
+    if (holo::Status st = publish_options.surface.Check(); !st.ok()) return Fail(st.WithContext("--g3-step-mm"));
+  }
   if (color_codec == "v1") {
     publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
     publish_options.video.crf = video_crf;
@@ -410,6 +427,7 @@ int main(int argc, char** argv) {
   options.stream_mesh = stream_step > 1 || stream_triangles > 0;
   options.stream.step = stream_step;
   options.stream.max_triangles = stream_triangles;
+  options.stream_field = options.stream_mesh && geometry_codec == "g3";
   options.full_mesh = !export_dir.empty();
   options.depth_filter.radius = depth_filter_radius;
   options.smooth_full_mesh = !raw_full_mesh;
@@ -796,7 +814,8 @@ int main(int argc, char** argv) {
       std::vector<holo::net::PodColor> pods;
       for (const auto& f : w.frames.frames)
         pods.push_back({static_cast<uint16_t>(f.pod_id), &f.color, &f.mask});
-      return publisher->Encode(w.frames.frame_index, capture_us, w.mesh, pods, e);
+      return publisher->Encode(w.frames.frame_index, capture_us, w.mesh, pods, e,
+                               options.stream_field ? &w.stream_field : nullptr);
     };
   }
   double cpu_window = holo::ProcessCpuTimeMs();

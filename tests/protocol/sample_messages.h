@@ -2,6 +2,8 @@
 // the protocol tests.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <utility>
 #include <vector>
@@ -12,6 +14,7 @@
 #include "protocol/fuzz_decoders.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
+#include "protocol/surface_codec.h"
 #include "protocol/test_meshes.h"
 
 namespace holo::test {
@@ -138,7 +141,8 @@ inline std::vector<protocol::Payload> SamplePayloads() {
 }
 
 // Codec blobs as inputs of the fuzz entry point, named as the corpus seeds:
-// geometry (G0, G1, G1 with normals sent) of NoisySphere(rows, cols) and
+// geometry (G0, G1, G1 with normals sent) of NoisySphere(rows, cols), G3 of
+// a ball's distance field, and
 // colour (C0, C1) of MaskedImage(width, height).
 inline std::vector<std::pair<std::string, std::vector<uint8_t>>> SampleCodecInputs(int rows, int cols, int width,
                                                                                    int height) {
@@ -159,6 +163,27 @@ inline std::vector<std::pair<std::string, std::vector<uint8_t>>> SampleCodecInpu
     std::vector<uint8_t> b;
     HOLO_CHECK(EncodeGeometry(mesh, o, &b).ok());
     out.emplace_back("seed-geometry-g1-normals", FuzzInput(FuzzTarget::kGeometry, b));
+  }
+  {
+    // G3: a ball's truncated distance field on a 16 mm grid of rows × cols × rows.
+    SdfGrid g;
+    g.voxel_m = 0.016f;
+    g.nx = g.nz = rows + 4;
+    g.ny = cols + 4;
+    g.sdf.resize(g.size());
+    const Eigen::Vector3f c = 0.5f * g.voxel_m * Eigen::Vector3f(g.nx - 1, g.ny - 1, g.nz - 1);
+    const float r = 0.4f * g.voxel_m * static_cast<float>(std::min(g.nx, g.ny));
+    for (int z = 0; z < g.nz; ++z)
+      for (int y = 0; y < g.ny; ++y)
+        for (int x = 0; x < g.nx; ++x) {
+          const float d = (g.voxel_m * Eigen::Vector3f(x, y, z) - c).norm() - r;
+          g.sdf[g.Index(x, y, z)] = d < -0.02f ? std::nanf("") : std::clamp(d, -0.032f, 0.032f);
+        }
+    SurfaceEncodeOptions o;
+    o.min_component_triangles = 0;
+    std::vector<uint8_t> b;
+    HOLO_CHECK(EncodeSurface(g, o, &b).ok());
+    out.emplace_back("seed-geometry-g3", FuzzInput(FuzzTarget::kGeometry, b));
   }
   ImageRgb8 im;
   ImageGray8 mask;

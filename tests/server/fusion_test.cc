@@ -15,7 +15,7 @@
 #include "analytic_scenes.h"
 #include "common/metrics/mesh_distance.h"
 #include "common/metrics/mesh_shapes.h"
-#include "server/fusion/marching_cubes.h"
+#include "common/marching_cubes_table.h"
 #include "server/fusion/mesh_cleanup.h"
 #include "studio/studio.h"
 

@@ -13,6 +13,8 @@
 
 #include "analytic_scenes.h"
 #include "common/metrics/mesh_distance.h"
+#include "protocol/geometry_codec.h"
+#include "protocol/surface_codec.h"
 #include "server/capture/prerendered.h"
 #include "server/fusion/depth_filter.h"
 #include "server/fusion/edge_collapse.h"
@@ -415,6 +417,15 @@ TEST(StreamMesh, RefusesBadOptions) {
   EXPECT_FALSE(StreamMesher::Create(thin, so).ok());
 }
 
+// A studio frame set with the studio's exact masks.
+RgbdFrameSet FramesWithTruthMasks(SyntheticStudio* studio, int64_t frame) {
+  RgbdFrameSet frames;
+  StudioGroundTruth gt;
+  studio->RenderFrame(frame, &frames, &gt);
+  for (size_t p = 0; p < frames.frames.size(); ++p) frames.frames[p].mask = gt.mask[p];
+  return frames;
+}
+
 // The studio's person fused from its 8 QVGA pods (exact masks): the stream
 // mesh keeps the budget and stays within 1.5 mm (mean) of the full mesh.
 TEST(StreamMesh, FusedStudioFrameMeetsBudgetAndErrorBound) {
@@ -422,10 +433,7 @@ TEST(StreamMesh, FusedStudioFrameMeetsBudgetAndErrorBound) {
   ASSERT_TRUE(workload.ok());
   auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
   ASSERT_TRUE(studio.ok());
-  RgbdFrameSet frames;
-  StudioGroundTruth gt;
-  (*studio)->RenderFrame(12, &frames, &gt);
-  for (size_t p = 0; p < frames.frames.size(); ++p) frames.frames[p].mask = gt.mask[p];
+  RgbdFrameSet frames = FramesWithTruthMasks(studio->get(), 12);
   // As the capture site does: depth filtered within the masks, and the full
   // mesh extracted from the volume smoothed on its own grid.
   auto filter = DepthFilter::Create(DepthFilterOptions{});
@@ -466,6 +474,67 @@ TEST(StreamMesh, FusedStudioFrameMeetsBudgetAndErrorBound) {
   Mesh again;
   ASSERT_TRUE((*mesher)->Make(volume, &again).ok());
   EXPECT_EQ(again.triangles, stream.triangles);
+}
+
+// G3 (protocol/surface_codec.h) codes the grid the stream mesh comes from:
+// with a fine value step and no fragment removal the viewer's marching cubes
+// gives the site's own coarse mesh back; with the defaults it stays within
+// a millimetre of the published stream mesh at well under G1's bytes.
+TEST(StreamMesh, G3GridGivesTheSitesMeshBack) {
+  auto workload = GetWorkload("S8-QVGA");
+  ASSERT_TRUE(workload.ok());
+  auto studio = SyntheticStudio::Create(workload->rig, workload->studio);
+  ASSERT_TRUE(studio.ok());
+  const RgbdFrameSet frames = FramesWithTruthMasks(studio->get(), 30);
+  TsdfOptions o;
+  o.voxel_size = workload->voxel_size_m;
+  TsdfVolume volume(o);
+  ASSERT_TRUE(volume.Integrate(workload->rig, frames).ok());
+  StreamMeshOptions raw_options;
+  raw_options.max_triangles = 0;
+  raw_options.min_component_triangles = 0;
+  auto raw_mesher = StreamMesher::Create(o, raw_options);
+  ASSERT_TRUE(raw_mesher.ok());
+  Mesh coarse;
+  SdfGrid grid;
+  ASSERT_TRUE((*raw_mesher)->Make(volume, &coarse, nullptr, &grid).ok());
+  ASSERT_GT(coarse.num_triangles(), 5000u);
+  EXPECT_NEAR(grid.voxel_m, 2 * workload->voxel_size_m, 1e-7);
+
+  protocol::SurfaceEncodeOptions exact;
+  exact.position_step_m = grid.voxel_m / 255;
+  exact.min_component_triangles = 0;
+  std::vector<uint8_t> blob;
+  ASSERT_TRUE(protocol::EncodeSurface(grid, exact, &blob).ok());
+  Mesh decoded;
+  ASSERT_TRUE(protocol::DecodeGeometry(blob, &decoded).ok());
+  EXPECT_EQ(decoded.num_triangles(), coarse.num_triangles());
+  EXPECT_EQ(decoded.num_vertices(), coarse.num_vertices());
+  // (Edges the labels take for grazing get fewer levels: 0.1 mm.)
+  EXPECT_LT(MeanDistanceMm(decoded, coarse), 0.2);
+  EXPECT_LT(MeanDistanceMm(coarse, decoded), 0.2);
+
+  // Defaults: 2 mm steps, small fragments dropped, against what the site
+  // publishes (simplified to 20 000 triangles) and its G1 bytes.
+  auto mesher = StreamMesher::Create(o, StreamMeshOptions{});
+  ASSERT_TRUE(mesher.ok());
+  Mesh stream;
+  ASSERT_TRUE((*mesher)->Make(volume, &stream, nullptr, &grid).ok());
+  blob.clear();
+  protocol::SurfaceEncodeStats st;
+  ASSERT_TRUE(protocol::EncodeSurface(grid, {}, &blob, nullptr, &st).ok());
+  ASSERT_TRUE(protocol::DecodeGeometry(blob, &decoded).ok());
+  EXPECT_LT(MeanDistanceMm(decoded, stream), 1.0);
+  EXPECT_LT(MeanDistanceMm(stream, decoded), 1.0);
+  protocol::GeometryEncodeOptions g1;
+  g1.position_step_m = 0.002f;
+  g1.colors = false;  // as the site sends it (the viewer colours from the pods' images)
+  std::vector<uint8_t> g1_blob;
+  ASSERT_TRUE(protocol::EncodeGeometry(stream, g1, &g1_blob).ok());
+  EXPECT_LT(blob.size(), g1_blob.size() / 2) << "G3 " << blob.size() << " B, G1 " << g1_blob.size() << " B";
+  std::printf("G3 %zu B (bricks %zu, labels %zu, crossings %zu; %zu triangles), G1 2 mm %zu B (%zu triangles)\n",
+              blob.size(), st.brick_bytes, st.label_bytes, st.crossing_bytes, decoded.num_triangles(), g1_blob.size(),
+              stream.num_triangles());
 }
 
 TEST(PrerenderedSource, LoopsForwardAndBackWithRunningFrameIndices) {
