@@ -428,6 +428,10 @@ int main(int argc, char** argv) {
   options.stream.step = stream_step;
   options.stream.max_triangles = stream_triangles;
   options.stream_field = options.stream_mesh && geometry_codec == "g3";
+  // With G3 the viewers mesh the grid themselves (every marching-cubes
+  // triangle, ~22 k at S8-QVGA): simplifying the site's own copy of the
+  // stream mesh (regions, stats) to the budget would be work no one sees.
+  if (options.stream_field) options.stream.max_triangles = 0;
   options.full_mesh = !export_dir.empty();
   options.depth_filter.radius = depth_filter_radius;
   options.smooth_full_mesh = !raw_full_mesh;
