@@ -61,6 +61,7 @@ struct ClientBenchOptions {
   std::string legacy = "0";                      // 1: RenderSettings::Legacy(), no mask-edge texturing
   int64_t frame = 40;                            // studio frame of the content
   size_t reduce = 20000;                         // triangle budget of the site's stream mesh (fused)
+  int stream_step = 2;                           // the stream mesh's grid step (fused; holoport-server --stream-step)
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
@@ -146,7 +147,7 @@ holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStu
 // Also, in `reduced`, the site's stream mesh of that frame (StreamMesher,
 // budget `reduced_triangles`: what holoport-server --listen publishes),
 // both re-textured by the site's texturer.
-holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles,
+holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles, int stream_step,
                               const holo::TextureOptions& texture_options, float behind_band, int sequence_frames,
                               ViewerContent* full, ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
@@ -163,6 +164,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   // full-resolution mesh beside it.
   o.stream_mesh = true;
   o.stream.max_triangles = reduced_triangles;
+  o.stream.step = stream_step;
   o.stream_field = true;
   o.full_mesh = true;
   HOLO_ASSIGN_OR_RETURN(auto site, holo::CaptureSite::Create(studio.get(), empty.get(), nullptr, o));
@@ -368,7 +370,7 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
   if (options.legacy == "1") to.mask_edge_px = 0;
   const int sequence_frames =
       options.parts.find("stream") != std::string::npos || options.parts.empty() ? options.video_frames : 0;
-  HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, to, options.behind_band,
+  HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, options.stream_step, to, options.behind_band,
                                         sequence_frames, &(*contents)[0], &(*contents)[1]));
   if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
   return holo::OkStatus();
@@ -880,6 +882,9 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
   app.add_option("--reduce", o->reduce, "fused: triangle budget of the site's stream mesh (StreamMeshOptions)")->capture_default_str();
+  app.add_option("--stream-step", o->stream_step, "fused: the stream mesh's grid step in voxels (holoport-server --stream-step)")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 4));
   app.add_option("--cull", o->cull, "0: no back-face culling")->check(CLI::IsMember({"0", "1"}))->capture_default_str();
   app.add_option("--prepass", o->prepass, "1 / 0: depth pre-pass on / off (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
