@@ -18,7 +18,7 @@ namespace {
 using rans::TokenReader;
 using rans::TokenWriter;
 
-constexpr int kBrick = 4;  // samples per brick side
+constexpr int kBrick = 4;  // samples per brick side (Field::At's shifts and masks assume 4)
 constexpr int kBrickSamples = kBrick * kBrick * kBrick;
 constexpr uint32_t kBrickContexts = 8;
 constexpr uint32_t kLabelContexts = 81;
@@ -76,11 +76,12 @@ struct Field {
   // grid or an empty brick.
   int64_t At(int x, int y, int z) const {
     if (x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) return -1;
-    const size_t b = static_cast<size_t>(x / kBrick) +
-                     static_cast<size_t>(bx) * (static_cast<size_t>(y / kBrick) + static_cast<size_t>(by) * static_cast<size_t>(z / kBrick));
+    // Non-negative from here: shifts and masks instead of signed division.
+    const auto ux = static_cast<uint32_t>(x), uy = static_cast<uint32_t>(y), uz = static_cast<uint32_t>(z);
+    const size_t b = (ux >> 2) + static_cast<size_t>(bx) * ((uy >> 2) + static_cast<size_t>(by) * (uz >> 2));
     const int32_t s = brick_slot[b];
     if (s < 0) return -1;
-    return int64_t{s} * kBrickSamples + (x % kBrick) + kBrick * ((y % kBrick) + kBrick * (z % kBrick));
+    return int64_t{s} * kBrickSamples + (ux & 3) + 4 * ((uy & 3) + 4 * (uz & 3));
   }
   // Position of (x, y, z) in `lab`; x, y, z within [−2, n + 1].
   size_t P(int x, int y, int z) const {
