@@ -289,8 +289,9 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     return InvalidArgument("g3: grid of " + Str(static_cast<uint64_t>(std::max(g.nx, 0))) + "×" +
                            Str(static_cast<uint64_t>(std::max(g.ny, 0))) + "×" + Str(static_cast<uint64_t>(std::max(g.nz, 0))) +
                            " samples: each axis must be in [1, " + Str(kSurfaceMaxAxis) + "]");
-  if (g.size() > kSurfaceMaxSamples)
-    return InvalidArgument("g3: grid of " + Str(g.size()) + " samples exceeds " + Str(kSurfaceMaxSamples));
+  if (SurfacePaddedSamples(g.nx, g.ny, g.nz) > kSurfaceMaxSamples)
+    return InvalidArgument("g3: grid of " + Str(g.size()) + " samples is too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
+                           Str(kSurfaceMaxSamples) + ")");
   if (g.sdf.size() != g.size())
     return InvalidArgument("g3: grid has " + Str(g.sdf.size()) + " values for " + Str(g.size()) + " samples");
   if (!(g.voxel_m >= 1e-4f && g.voxel_m <= 1.0f)) return InvalidArgument("g3: voxel must be in [1e-4, 1] m");
@@ -422,6 +423,11 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     }
   }
   st.occupied_bricks = f.slot_brick.size();
+  if (st.occupied_bricks > kSurfaceMaxOccupiedBricks) {
+    for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
+    return InvalidArgument("g3: the surface occupies " + Str(st.occupied_bricks) + " bricks of 4³ samples, more than " +
+                           Str(kSurfaceMaxOccupiedBricks));
+  }
   for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
 
   // Streams.
@@ -518,8 +524,8 @@ Status DecodeSurfaceBody(ByteReader& r, uint32_t nv, uint32_t nt, Mesh* mesh) {
   const int nx = dims[0] + 1, ny = dims[1] + 1, nz = dims[2] + 1;
   if (nx > kSurfaceMaxAxis || ny > kSurfaceMaxAxis || nz > kSurfaceMaxAxis)
     return DataLoss("g3.nx/ny/nz: an axis exceeds " + Str(kSurfaceMaxAxis) + " samples");
-  const uint64_t samples = uint64_t{static_cast<uint32_t>(nx)} * static_cast<uint32_t>(ny) * static_cast<uint32_t>(nz);
-  if (samples > kSurfaceMaxSamples) return DataLoss("g3: grid of " + Str(samples) + " samples exceeds " + Str(kSurfaceMaxSamples));
+  if (SurfacePaddedSamples(nx, ny, nz) > kSurfaceMaxSamples)
+    return DataLoss("g3.nx/ny/nz: the grid is too large ((nx+4)(ny+4)(nz+4) must be ≤ " + Str(kSurfaceMaxSamples) + ")");
   std::span<const uint8_t> bricks_b, labels_b, crossings_b;
   HOLO_RETURN_IF_ERROR(r.Blob32("g3.bricks", r.remaining(), &bricks_b));
   HOLO_RETURN_IF_ERROR(r.Blob32("g3.labels", r.remaining(), &labels_b));
@@ -529,12 +535,14 @@ Status DecodeSurfaceBody(ByteReader& r, uint32_t nv, uint32_t nt, Mesh* mesh) {
     return DataLoss("g3.num_vertices: " + Str(nv) + " vertices cannot all be referenced by " + Str(nt) + " triangles");
   }
 
-  thread_local Field f;
-  f.Reset(nx, ny, nz);
   TokenReader br;
   HOLO_RETURN_IF_ERROR(br.Init(bricks_b, kBrickContexts, "g3.bricks"));
-  if (f.brick_slot.size() > br.MaxSymbols())
-    return DataLoss("g3.bricks: " + Str(f.brick_slot.size()) + " bricks cannot fit in " + Str(bricks_b.size()) + " bytes");
+  // Every brick costs a symbol: checked before anything is allocated.
+  const uint64_t bricks = uint64_t(CeilDiv(nx, kBrick)) * uint64_t(CeilDiv(ny, kBrick)) * uint64_t(CeilDiv(nz, kBrick));
+  if (bricks > br.MaxSymbols())
+    return DataLoss("g3.bricks: " + Str(bricks) + " bricks cannot fit in " + Str(bricks_b.size()) + " bytes");
+  thread_local Field f;
+  f.Reset(nx, ny, nz);
   std::vector<size_t> occupied;
   for (int z = 0; z < f.bz; ++z)
     for (int y = 0; y < f.by; ++y)
@@ -549,6 +557,8 @@ Status DecodeSurfaceBody(ByteReader& r, uint32_t nv, uint32_t nt, Mesh* mesh) {
         if (bit > 1) return DataLoss("g3.bricks: brick flag " + Str(bit) + " is not 0 or 1");
         const size_t b = static_cast<size_t>(x) + static_cast<size_t>(f.bx) * (static_cast<size_t>(y) + static_cast<size_t>(f.by) * static_cast<size_t>(z));
         if (bit) {
+          if (occupied.size() >= kSurfaceMaxOccupiedBricks)
+            return DataLoss("g3.bricks: more than " + Str(kSurfaceMaxOccupiedBricks) + " occupied bricks");
           f.brick_slot[b] = -2;  // occupied; slot given below (after the count is checked)
           occupied.push_back(b);
         }

@@ -49,10 +49,15 @@ namespace holo::protocol {
 
 class ByteReader;
 
-// Largest grid G3 accepts: samples per axis and in total (the decoder's
-// memory is bounded by the occupied part).
+// Largest grid G3 accepts: samples per axis, (nx + 4)·(ny + 4)·(nz + 4)
+// (the decoder keeps one byte per sample with a margin of two), and
+// occupied 4³ bricks (about 1.3 KB of decoder state each).
 inline constexpr int kSurfaceMaxAxis = 4096;
 inline constexpr uint64_t kSurfaceMaxSamples = uint64_t{1} << 24;
+inline constexpr size_t kSurfaceMaxOccupiedBricks = 65536;
+inline uint64_t SurfacePaddedSamples(int nx, int ny, int nz) {
+  return (uint64_t(nx) + 4) * (uint64_t(ny) + 4) * (uint64_t(nz) + 4);
+}
 
 struct SurfaceEncodeOptions {
   // Quantization of a vertex's position along its grid edge, metres: the

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <random>
 #include <utility>
@@ -291,11 +292,19 @@ TEST(SurfaceCodec, HeaderFieldsAreChecked) {
   std::memcpy(&b[12 + 12], &big, 4);
   expect_refused(b, "g3.voxel");
   b = blob;
-  b[12 + 20] = 0xFF;  // nx
-  b[12 + 21] = 0xFF;
-  b[12 + 22] = 0xFF;  // ny
-  b[12 + 23] = 0xFF;
-  expect_refused(b, "g3");
+  // Axes: origin (12 bytes), voxel (4), levels (1), then nx−1, ny−1, nz−1.
+  auto set_axes = [&](uint16_t nx1, uint16_t ny1, uint16_t nz1) {
+    std::vector<uint8_t> c = blob;
+    std::memcpy(&c[12 + 17], &nx1, 2);
+    std::memcpy(&c[12 + 19], &ny1, 2);
+    std::memcpy(&c[12 + 21], &nz1, 2);
+    return c;
+  };
+  expect_refused(set_axes(0xFFFF, 23, 23), "exceeds 4096");
+  // A thin grid of few samples per brick row still needs its margin: too large.
+  expect_refused(set_axes(4095, 4095, 0), "too large");
+  // More bricks than the brick stream can hold symbols for.
+  expect_refused(set_axes(999, 999, 1), "bricks cannot fit");
 }
 
 }  // namespace
