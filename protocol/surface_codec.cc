@@ -76,30 +76,27 @@ struct Field {
   // grid or an empty brick.
   int64_t At(int x, int y, int z) const {
     if (x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) return -1;
-    // Non-negative from here: shifts and masks instead of signed division.
-    const auto ux = static_cast<uint32_t>(x), uy = static_cast<uint32_t>(y), uz = static_cast<uint32_t>(z);
-    const size_t b = (ux >> 2) + static_cast<size_t>(bx) * ((uy >> 2) + static_cast<size_t>(by) * (uz >> 2));
-    const int32_t s = brick_slot[b];
+    const int32_t s = brick_slot[BrickOf(x, y, z)];
     if (s < 0) return -1;
-    return int64_t{s} * kBrickSamples + (ux & 3) + 4 * ((uy & 3) + 4 * (uz & 3));
+    return int64_t{s} * kBrickSamples + (x & 3) + 4 * ((y & 3) + 4 * (z & 3));
+  }
+  // The brick of a sample inside the grid (shifts: coordinates are ≥ 0).
+  size_t BrickOf(int x, int y, int z) const { return Brick(x >> 2, y >> 2, z >> 2); }
+  size_t Brick(int ix, int iy, int iz) const {
+    return static_cast<size_t>(ix) + static_cast<size_t>(bx) * (static_cast<size_t>(iy) + static_cast<size_t>(by) * static_cast<size_t>(iz));
+  }
+  // The brick coding's context: which of the −x, −y, −z neighbour bricks
+  // are occupied (any slot value but −1: the decoder marks them −2 first).
+  uint32_t BrickContext(int ix, int iy, int iz) const {
+    auto occ = [&](int X, int Y, int Z) { return X >= 0 && Y >= 0 && Z >= 0 && brick_slot[Brick(X, Y, Z)] != -1; };
+    return static_cast<uint32_t>(occ(ix - 1, iy, iz) + 2 * occ(ix, iy - 1, iz) + 4 * occ(ix, iy, iz - 1));
   }
   // Position of (x, y, z) in `lab`; x, y, z within [−2, n + 1].
   size_t P(int x, int y, int z) const {
     return static_cast<size_t>(x + 2) + px * static_cast<size_t>(y + 2) + pxy * static_cast<size_t>(z + 2);
   }
   uint8_t LabelAt(int x, int y, int z) const { return lab[P(x, y, z)]; }
-  bool Occupied(int x, int y, int z) const {
-    return brick_slot[static_cast<size_t>(x / kBrick) +
-                      static_cast<size_t>(bx) * (static_cast<size_t>(y / kBrick) + static_cast<size_t>(by) * static_cast<size_t>(z / kBrick))] >= 0;
-  }
-  // Sample coordinates of slot s, local index l.
-  void Coords(int32_t s, int l, int* x, int* y, int* z) const {
-    const int32_t b = slot_brick[static_cast<size_t>(s)];
-    const int bxi = b % bx, byi = (b / bx) % by, bzi = b / (bx * by);
-    *x = bxi * kBrick + (l % kBrick);
-    *y = byi * kBrick + ((l / kBrick) % kBrick);
-    *z = bzi * kBrick + l / (kBrick * kBrick);
-  }
+  bool Occupied(int x, int y, int z) const { return brick_slot[BrickOf(x, y, z)] >= 0; }
 };
 
 int LabelContext(const Field& f, int x, int y, int z) {
@@ -253,7 +250,7 @@ struct EncoderScratch {
   std::vector<uint8_t> codes;     // its marching-cubes case
   Field field;
   std::vector<uint16_t> syms;
-  std::vector<uint8_t> bricks_b, labels_b, values_b;
+  std::vector<uint8_t> bricks_b, labels_b, crossings_b;
 };
 EncoderScratch& Scratch() {
   thread_local EncoderScratch s;
@@ -268,11 +265,6 @@ int32_t Find(std::vector<int32_t>& parent, int32_t i) {
   return i;
 }
 
-void AppendBlob32(std::vector<uint8_t>* out, const std::vector<uint8_t>& b) {
-  ByteWriter w(out);
-  w.U32(static_cast<uint32_t>(b.size()));
-  out->insert(out->end(), b.begin(), b.end());
-}
 
 }  // namespace
 
@@ -404,24 +396,12 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     const int x = static_cast<int>(i % sy), y = static_cast<int>((i / sy) % static_cast<size_t>(ny)), z = static_cast<int>(i / sz);
     for (int k = 0; k < 8; ++k) {
       const int X = x + (k & 1), Y = y + ((k >> 1) & 1), Z = z + ((k >> 2) & 1);
-      const size_t b = static_cast<size_t>(X / kBrick) +
-                       static_cast<size_t>(f.bx) * (static_cast<size_t>(Y / kBrick) + static_cast<size_t>(f.by) * static_cast<size_t>(Z / kBrick));
-      if (f.brick_slot[b] < 0) f.brick_slot[b] = 0;  // marked; slots assigned in raster order below
+      f.lab[f.P(X, Y, Z)] = (sc.bits[g.Index(X, Y, Z)] & 2) ? kInside : kOutside;
+      f.brick_slot[f.BrickOf(X, Y, Z)] = -2;  // occupied; slots are given in raster order below
     }
   }
-  for (size_t b = 0; b < f.brick_slot.size(); ++b)
-    if (f.brick_slot[b] == 0) f.brick_slot[b] = -2;
   for (size_t b = 0; b < f.brick_slot.size(); ++b)
     if (f.brick_slot[b] == -2) f.AddSlot(b);
-  for (size_t c = 0; c < nc; ++c) {
-    if (static_cast<size_t>(sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))]) < o.min_component_triangles) continue;
-    const size_t i = sc.cubes[c];
-    const int x = static_cast<int>(i % sy), y = static_cast<int>((i / sy) % static_cast<size_t>(ny)), z = static_cast<int>(i / sz);
-    for (int k = 0; k < 8; ++k) {
-      const int X = x + (k & 1), Y = y + ((k >> 1) & 1), Z = z + ((k >> 2) & 1);
-      f.lab[f.P(X, Y, Z)] = (sc.bits[g.Index(X, Y, Z)] & 2) ? kInside : kOutside;
-    }
-  }
   st.occupied_bricks = f.slot_brick.size();
   if (st.occupied_bricks > kSurfaceMaxOccupiedBricks) {
     for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
@@ -435,14 +415,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   TokenWriter bricks(kBrickContexts);
   for (int z = 0; z < f.bz; ++z)
     for (int y = 0; y < f.by; ++y)
-      for (int x = 0; x < f.bx; ++x) {
-        auto occ = [&](int X, int Y, int Z) {
-          return X >= 0 && Y >= 0 && Z >= 0 &&
-                 f.brick_slot[static_cast<size_t>(X) + static_cast<size_t>(f.bx) * (static_cast<size_t>(Y) + static_cast<size_t>(f.by) * static_cast<size_t>(Z))] >= 0;
-        };
-        const uint32_t ctx = static_cast<uint32_t>(occ(x - 1, y, z) + 2 * occ(x, y - 1, z) + 4 * occ(x, y, z - 1));
-        bricks.Put(ctx, occ(x, y, z) ? 1 : 0);
-      }
+      for (int x = 0; x < f.bx; ++x) bricks.Put(f.BrickContext(x, y, z), f.brick_slot[f.Brick(x, y, z)] >= 0 ? 1 : 0);
   TokenWriter labels(kLabelContexts, f.slot_brick.size() * kBrickSamples, &sc.syms);
   ForEachSample(f, [&](int x, int y, int z) {
     const uint8_t lab = f.LabelAt(x, y, z);
@@ -467,13 +440,13 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   });
   sc.bricks_b.clear();
   sc.labels_b.clear();
-  sc.values_b.clear();
+  sc.crossings_b.clear();
   bricks.Finish(&sc.bricks_b);
   labels.Finish(&sc.labels_b);
-  crossings.Finish(&sc.values_b);
+  crossings.Finish(&sc.crossings_b);
   st.brick_bytes = sc.bricks_b.size();
   st.label_bytes = sc.labels_b.size();
-  st.crossing_bytes = sc.values_b.size();
+  st.crossing_bytes = sc.crossings_b.size();
 
   const Limits limits;
   size_t counts[2] = {0, 0};
@@ -497,9 +470,9 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   w.U16(static_cast<uint16_t>(nx - 1));
   w.U16(static_cast<uint16_t>(ny - 1));
   w.U16(static_cast<uint16_t>(nz - 1));
-  AppendBlob32(out, sc.bricks_b);
-  AppendBlob32(out, sc.labels_b);
-  AppendBlob32(out, sc.values_b);
+  w.Blob32(sc.bricks_b);
+  w.Blob32(sc.labels_b);
+  w.Blob32(sc.crossings_b);
   return OkStatus();
 }
 
@@ -547,15 +520,10 @@ Status DecodeSurfaceBody(ByteReader& r, uint32_t nv, uint32_t nt, Mesh* mesh) {
   for (int z = 0; z < f.bz; ++z)
     for (int y = 0; y < f.by; ++y)
       for (int x = 0; x < f.bx; ++x) {
-        auto occ = [&](int X, int Y, int Z) {
-          return X >= 0 && Y >= 0 && Z >= 0 &&
-                 f.brick_slot[static_cast<size_t>(X) + static_cast<size_t>(f.bx) * (static_cast<size_t>(Y) + static_cast<size_t>(f.by) * static_cast<size_t>(Z))] != -1;
-        };
-        const uint32_t ctx = static_cast<uint32_t>(occ(x - 1, y, z) + 2 * occ(x, y - 1, z) + 4 * occ(x, y, z - 1));
-        const uint32_t bit = br.Get(ctx);
+        const uint32_t bit = br.Get(f.BrickContext(x, y, z));
         if (!br.ok()) return DataLoss("g3.bricks: coded data is truncated or corrupt");
         if (bit > 1) return DataLoss("g3.bricks: brick flag " + Str(bit) + " is not 0 or 1");
-        const size_t b = static_cast<size_t>(x) + static_cast<size_t>(f.bx) * (static_cast<size_t>(y) + static_cast<size_t>(f.by) * static_cast<size_t>(z));
+        const size_t b = f.Brick(x, y, z);
         if (bit) {
           if (occupied.size() >= kSurfaceMaxOccupiedBricks)
             return DataLoss("g3.bricks: more than " + Str(kSurfaceMaxOccupiedBricks) + " occupied bricks");
