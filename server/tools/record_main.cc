@@ -332,9 +332,10 @@ int PackageLive(holo::record::LivePackagerOptions o, const std::string& connect,
     // site for one when a segment is due (LivePackager::WantsKeyFrame).
     co.capabilities.color = {holo::protocol::ColorCodec::kC1, holo::protocol::ColorCodec::kC0,
                              holo::protocol::ColorCodec::kV1};
-    // The browser viewer (web/src/geometry.js) decodes G1 and G0, not G3: a
-    // site publishing G3 refuses the packager, naming the codec.
-    co.capabilities.geometry = {holo::protocol::GeometryCodec::kG1, holo::protocol::GeometryCodec::kG0};
+    // Every geometry codec a site publishes: the browser viewer decodes all
+    // three (web/src/geometry.js), G3 since it was ported.
+    co.capabilities.geometry = {holo::protocol::GeometryCodec::kG1, holo::protocol::GeometryCodec::kG0,
+                                holo::protocol::GeometryCodec::kG3};
     co.subscribe = holo::net::kSubscribeAll;  // live segments carry no Regions (docs/regions.md)
     holo::Status check = co.Check();
     if (!check.ok()) return Fail(check);

@@ -1,8 +1,8 @@
 // The live path with G3 geometry (protocol/surface_codec.h): a site that
 // publishes the stream mesh's distance grid reaches its native viewers as a
 // mesh on the surface, a frame without its grid is refused with a reason,
-// and a viewer that cannot decode G3 (the browser's packager) is refused
-// with a message naming the codec.
+// and a viewer that cannot decode G3 (one that lists only G1 and G0) is
+// refused with a message naming the codec.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -6,16 +6,22 @@
 //             foreground mask, through ColorEncoder) and PCM AudioPose.
 //   golden  — decodes the first N MeshFrames and ColorFrames of a recording
 //             with the C++ decoders and writes what they decode to, for the
-//             JavaScript decoders' test (tests/web/decoders_test.mjs).
+//             JavaScript decoders' test (tests/web/decoders_test.mjs); with
+//             --g3 N also N G3 geometry blobs of the studio's foreground (a
+//             distance grid made from its ground-truth mesh), their C++
+//             decodes, and the marching-cubes case table.
 //   render  — the native renderer's image (client/render, as holoport-client
 //             draws) of one frame of a recording from a fixed camera, PNG.
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <limits>
 #include <memory>
+#include <random>
 #include <string>
 #include <variant>
 #include <vector>
@@ -27,10 +33,13 @@
 #include "client/render/renderer.h"
 #include "common/image_io.h"
 #include "common/log.h"
+#include "common/marching_cubes_table.h"
 #include "common/pose.h"
+#include "common/sdf_grid.h"
 #include "protocol/color_codec.h"
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
+#include "protocol/surface_codec.h"
 #include "server/record/recording_reader.h"
 #include "server/record/recording_writer.h"
 #include "server/record/synthetic_stream.h"
@@ -115,9 +124,28 @@ StatusOr<std::vector<std::pair<protocol::Header, std::vector<uint8_t>>>> ReadAll
   return out;
 }
 
-// Golden files: mesh_K.bin = u32 nv, u32 nt, positions (f32), normals (f32,
-// nv×3 or none: u32 flag first), colours (u8), indices (u32); color_K_P.bin =
-// u32 w, u32 h, RGBA8 (alpha = mask).
+// mesh_K.bin: u32 nv, u32 nt, u32 has_normals, u32 has_colours, positions
+// (f32), normals (f32, nv×3 or none), colours (u8), indices (u32).
+std::vector<uint8_t> MeshBytes(const Mesh& mesh) {
+  std::vector<uint8_t> b;
+  auto put = [&b](const void* p, size_t n) {
+    b.insert(b.end(), static_cast<const uint8_t*>(p), static_cast<const uint8_t*>(p) + n);
+  };
+  const auto nv = static_cast<uint32_t>(mesh.num_vertices()), nt = static_cast<uint32_t>(mesh.triangles.size());
+  const uint32_t has_normals = mesh.normals.empty() ? 0 : 1, has_colors = mesh.colors.empty() ? 0 : 1;
+  put(&nv, 4);
+  put(&nt, 4);
+  put(&has_normals, 4);
+  put(&has_colors, 4);
+  for (const auto& p : mesh.positions) put(p.data(), 12);
+  for (const auto& n : mesh.normals) put(n.data(), 12);
+  for (const auto& c : mesh.colors) put(c.data(), 3);
+  for (const auto& t : mesh.triangles) put(t.data(), 12);
+  return b;
+}
+
+// Golden files: mesh_K.bin (MeshBytes); color_K_P.bin = u32 w, u32 h, RGBA8
+// (alpha = mask).
 Status Golden(const std::string& recording, const std::string& dir, int count) {
   std::filesystem::create_directories(dir);
   HOLO_ASSIGN_OR_RETURN(auto messages, ReadAll(recording));
@@ -127,20 +155,7 @@ Status Golden(const std::string& recording, const std::string& dir, int count) {
       HOLO_ASSIGN_OR_RETURN(protocol::MeshFrame mf, DecodeAs<protocol::MeshFrame>(h, payload));
       Mesh mesh;
       HOLO_RETURN_IF_ERROR(protocol::DecodeGeometry(mf.data, &mesh));
-      std::vector<uint8_t> b;
-      auto put = [&b](const void* p, size_t n) {
-        b.insert(b.end(), static_cast<const uint8_t*>(p), static_cast<const uint8_t*>(p) + n);
-      };
-      const auto nv = static_cast<uint32_t>(mesh.num_vertices()), nt = static_cast<uint32_t>(mesh.triangles.size());
-      const uint32_t has_normals = mesh.normals.empty() ? 0 : 1, has_colors = mesh.colors.empty() ? 0 : 1;
-      put(&nv, 4);
-      put(&nt, 4);
-      put(&has_normals, 4);
-      put(&has_colors, 4);
-      for (const auto& p : mesh.positions) put(p.data(), 12);
-      for (const auto& n : mesh.normals) put(n.data(), 12);
-      for (const auto& c : mesh.colors) put(c.data(), 3);
-      for (const auto& t : mesh.triangles) put(t.data(), 12);
+      const std::vector<uint8_t> b = MeshBytes(mesh);
       HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("mesh_" + std::to_string(mf.frame_index) + ".bin"),
                                      b.data(), b.size()));
       ++meshes;
@@ -168,6 +183,167 @@ Status Golden(const std::string& recording, const std::string& dir, int count) {
     }
   }
   std::printf("golden: %d meshes, %d colour frames in %s\n", meshes, colors, dir.c_str());
+  return OkStatus();
+}
+
+// Distance from p to the triangle (a, b, c).
+double PointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                             const Eigen::Vector3d& c) {
+  const Eigen::Vector3d n = (b - a).cross(c - a);
+  const double n2 = n.squaredNorm();
+  if (n2 > 0) {
+    // Barycentric weights of a and b for p's projection onto the plane.
+    const double wa = (c - b).cross(p - b).dot(n) / n2, wb = (a - c).cross(p - c).dot(n) / n2;
+    if (wa >= 0 && wb >= 0 && wa + wb <= 1) return std::abs((p - a).dot(n)) / std::sqrt(n2);
+  }
+  auto segment = [&p](const Eigen::Vector3d& s, const Eigen::Vector3d& t) {
+    const Eigen::Vector3d d = t - s;
+    const double l2 = d.squaredNorm();
+    const double h = l2 > 0 ? std::clamp((p - s).dot(d) / l2, 0.0, 1.0) : 0.0;
+    return (p - s - h * d).norm();
+  };
+  return std::min({segment(a, b), segment(b, c), segment(c, a)});
+}
+
+// What fusion would leave of a closed mesh on a grid of `voxel`: signed
+// distances clamped to ±trunc with a little noise, and samples deeper inside
+// than `observed_depth` unobserved (NaN). The studio's figures are unions of
+// overlapping closed parts, so inside is decided by the winding number along
+// each grid row (not by the nearest triangle, whose side is ambiguous where
+// parts overlap). `open_rows` counts rows whose winding does not return to 0
+// (a hole in the mesh; 0 for the studio).
+SdfGrid GridFromMesh(const Mesh& m, float voxel, float trunc, float observed_depth, float noise_m, size_t* open_rows) {
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::infinity()), hi = -lo;
+  for (const auto& p : m.positions) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  constexpr int kMargin = 3;
+  SdfGrid g;
+  g.voxel_m = voxel;
+  // A fraction of a voxel off the bounding box, so that no row of samples
+  // runs through the extreme vertices (a crossing there would count twice).
+  g.origin = lo - voxel * Eigen::Vector3f(kMargin + 0.37f, kMargin + 0.61f, kMargin + 0.29f);
+  g.nx = static_cast<int>(std::ceil((hi.x() - lo.x()) / voxel)) + 2 * kMargin + 1;
+  g.ny = static_cast<int>(std::ceil((hi.y() - lo.y()) / voxel)) + 2 * kMargin + 1;
+  g.nz = static_cast<int>(std::ceil((hi.z() - lo.z()) / voxel)) + 2 * kMargin + 1;
+  std::vector<Eigen::Vector3d> q(m.positions.size());  // grid coordinates
+  for (size_t i = 0; i < q.size(); ++i) q[i] = ((m.positions[i] - g.origin) / voxel).cast<double>();
+  double volume = 0;
+  for (const auto& t : m.triangles) volume += q[t[0]].dot(q[t[1]].cross(q[t[2]]));
+  const double outward = volume > 0 ? 1.0 : -1.0;
+  // Per row (y, z): where the row crosses the surface, +1 entering, −1 leaving.
+  std::vector<std::vector<std::pair<double, int>>> rows(static_cast<size_t>(g.ny) * static_cast<size_t>(g.nz));
+  auto area2 = [](const Eigen::Vector3d& a, const Eigen::Vector3d& b, double y, double z) {
+    return (a.y() - y) * (b.z() - z) - (a.z() - z) * (b.y() - y);
+  };
+  for (const auto& t : m.triangles) {
+    const Eigen::Vector3d &a = q[t[0]], &b = q[t[1]], &c = q[t[2]];
+    const double n_x = (b.y() - a.y()) * (c.z() - a.z()) - (b.z() - a.z()) * (c.y() - a.y());
+    if (n_x == 0) continue;
+    const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a.y(), b.y(), c.y()}))));
+    const int y1 = std::min(g.ny - 1, static_cast<int>(std::floor(std::max({a.y(), b.y(), c.y()}))));
+    const int z0 = std::max(0, static_cast<int>(std::ceil(std::min({a.z(), b.z(), c.z()}))));
+    const int z1 = std::min(g.nz - 1, static_cast<int>(std::floor(std::max({a.z(), b.z(), c.z()}))));
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y) {
+        const double wa = area2(b, c, y, z) / n_x, wb = area2(c, a, y, z) / n_x, wc = 1 - wa - wb;
+        if (wa < 0 || wb < 0 || wc < 0) continue;
+        rows[static_cast<size_t>(y) + static_cast<size_t>(g.ny) * static_cast<size_t>(z)].emplace_back(
+            wa * a.x() + wb * b.x() + wc * c.x(), n_x * outward < 0 ? 1 : -1);
+      }
+  }
+  std::vector<uint8_t> inside(g.size(), 0);
+  *open_rows = 0;
+  for (size_t r = 0; r < rows.size(); ++r) {
+    auto& row = rows[r];
+    std::sort(row.begin(), row.end());
+    int winding = 0;
+    size_t next = 0;
+    for (int x = 0; x < g.nx; ++x) {
+      for (; next < row.size() && row[next].first < x; ++next) winding += row[next].second;
+      inside[r * static_cast<size_t>(g.nx) + static_cast<size_t>(x)] = winding > 0;
+    }
+    for (; next < row.size(); ++next) winding += row[next].second;
+    *open_rows += winding != 0;
+  }
+  // Unsigned distances within the band that matters.
+  std::vector<float> dist(g.size(), std::numeric_limits<float>::infinity());
+  const double band = std::max(trunc, observed_depth) / voxel;
+  for (const auto& t : m.triangles) {
+    const Eigen::Vector3d &a = q[t[0]], &b = q[t[1]], &c = q[t[2]];
+    const Eigen::Vector3d tlo = (a.cwiseMin(b).cwiseMin(c).array() - band).matrix();
+    const Eigen::Vector3d thi = (a.cwiseMax(b).cwiseMax(c).array() + band).matrix();
+    const int x0 = std::max(0, static_cast<int>(std::ceil(tlo.x())));
+    const int y0 = std::max(0, static_cast<int>(std::ceil(tlo.y())));
+    const int z0 = std::max(0, static_cast<int>(std::ceil(tlo.z())));
+    const int x1 = std::min(g.nx - 1, static_cast<int>(thi.x()));
+    const int y1 = std::min(g.ny - 1, static_cast<int>(thi.y()));
+    const int z1 = std::min(g.nz - 1, static_cast<int>(thi.z()));
+    for (int z = z0; z <= z1; ++z)
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const Eigen::Vector3d p(static_cast<double>(x), static_cast<double>(y), static_cast<double>(z));
+          float& d = dist[g.Index(x, y, z)];
+          d = std::min(d, static_cast<float>(voxel * PointTriangleDistance(p, a, b, c)));
+        }
+  }
+  std::mt19937 rng(7);
+  std::normal_distribution<float> gauss(0.0f, noise_m);
+  g.sdf.resize(g.size());
+  for (size_t i = 0; i < g.size(); ++i) {
+    if (inside[i] && dist[i] > observed_depth) {
+      g.sdf[i] = std::nanf("");
+      continue;
+    }
+    g.sdf[i] = std::clamp((inside[i] ? -dist[i] : dist[i]) + gauss(rng), -trunc, trunc);
+  }
+  return g;
+}
+
+// G3 golden files, for the JS G3 decoder: g3_K.geom (a G3 geometry blob of
+// the studio's foreground at frame 20·K, on the stream mesh's grid) and
+// g3mesh_K.bin (the C++ decode, as mesh_K.bin); the last has two figures and
+// two props. mc_table.bin: per case 0..255, u8 triangles and 36 u8 edges
+// (common/marching_cubes_table.h), which the JS generates for itself.
+Status GoldenSurface(const std::string& dir, const std::string& workload, int count) {
+  std::filesystem::create_directories(dir);
+  std::vector<uint8_t> table;
+  for (int i = 0; i < 256; ++i) {
+    const McCase& c = McTableCase(i);
+    table.push_back(c.num_triangles);
+    table.insert(table.end(), c.edges, c.edges + 3 * kMcMaxTriangles);
+  }
+  HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / "mc_table.bin", table.data(), table.size()));
+  HOLO_ASSIGN_OR_RETURN(Workload w, GetWorkload(workload));
+  StudioOptions so = w.studio;
+  so.threads = 1;
+  std::unique_ptr<SyntheticStudio> studio;
+  for (int k = 0; k < count; ++k) {
+    if (k == 0 || (k == count - 1 && count > 1)) {
+      if (k > 0) {
+        so.num_figures = 2;
+        so.num_props = 2;
+      }
+      HOLO_ASSIGN_OR_RETURN(studio, SyntheticStudio::Create(w.rig, so));
+    }
+    const Mesh truth = studio->ForegroundMesh(20 * k);
+    size_t open_rows = 0;
+    // The stream mesh's grid: twice the workload's fusion voxel (StreamMeshOptions::step).
+    const SdfGrid grid = GridFromMesh(truth, 2 * w.voxel_size_m, 0.032f, 0.05f, 0.0005f, &open_rows);
+    if (open_rows) return Internal("the studio's mesh is not closed: " + std::to_string(open_rows) + " grid rows");
+    std::vector<uint8_t> blob;
+    protocol::SurfaceEncodeStats st;
+    HOLO_RETURN_IF_ERROR(protocol::EncodeSurface(grid, protocol::SurfaceEncodeOptions{}, &blob, nullptr, &st));
+    Mesh mesh;
+    HOLO_RETURN_IF_ERROR(protocol::DecodeGeometry(blob, &mesh));
+    const std::vector<uint8_t> b = MeshBytes(mesh);
+    const std::string name = std::to_string(k);
+    HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("g3_" + name + ".geom"), blob.data(), blob.size()));
+    HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("g3mesh_" + name + ".bin"), b.data(), b.size()));
+    std::printf("golden g3 %d: grid %d×%d×%d, %zu bytes, %zu vertices, %zu triangles (%zu cubes dropped)\n", k, grid.nx,
+                grid.ny, grid.nz, blob.size(), mesh.num_vertices(), mesh.num_triangles(), st.dropped_cubes);
+  }
   return OkStatus();
 }
 
@@ -254,7 +430,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(0, 1);
   std::string out, recording, dir, workload = "S8-QVGA", mode = "vertex";
   double seconds = 8, hfov = 50;
-  int count = 3, width = 640, height = 360;
+  int count = 3, g3_count = 0, width = 640, height = 360;
   int64_t frame = 0;
   std::vector<float> eye{2.2f, -1.6f, 1.6f}, target{0.0f, 0.0f, 1.0f};
   auto* rec = app.add_subcommand("record", "write a recording of the synthetic studio with colour");
@@ -265,6 +441,9 @@ int main(int argc, char** argv) {
   gold->add_option("--recording", recording, "recording file")->required();
   gold->add_option("--out-dir", dir, "directory for the golden files")->required();
   gold->add_option("--count", count, "mesh and colour frames to write")->check(CLI::Range(1, 1000));
+  gold->add_option("--g3", g3_count, "G3 blobs of the studio's foreground to write, with their decodes")
+      ->check(CLI::Range(0, 100));
+  gold->add_option("--workload", workload, "studio workload of the G3 blobs");
   auto* ren = app.add_subcommand("render", "render one frame of a recording with the native renderer, PNG");
   ren->add_option("--recording", recording, "recording file")->required();
   ren->add_option("--frame", frame, "frame index (MeshFrame.frame_index)")->required();
@@ -282,7 +461,10 @@ int main(int argc, char** argv) {
   }
   holo::Status s;
   if (*rec) s = holo::Record(out, workload, seconds);
-  if (*gold) s = holo::Golden(recording, dir, count);
+  if (*gold) {
+    s = holo::Golden(recording, dir, count);
+    if (s.ok() && g3_count > 0) s = holo::GoldenSurface(dir, workload, g3_count);
+  }
   if (*ren) s = holo::Render(recording, frame, eye, target, hfov, width, height, mode, out);
   if (!s.ok()) {
     spdlog::error("holoport-web-fixture: {}", s.ToString());

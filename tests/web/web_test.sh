@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The browser viewer's tests (web/), run by CTest:
-#   web_test.sh fixture  BUILD_DIR SOURCE_DIR   recording + golden decodes (once per build)
+#   web_test.sh fixture  BUILD_DIR SOURCE_DIR   recording + golden decodes (G1, G3, colour; once per build)
 #   web_test.sh decoders BUILD_DIR SOURCE_DIR   JS decoders vs the C++ decoders (node)
 #   web_test.sh live     BUILD_DIR SOURCE_DIR   the player's part sequencing against a scripted edge (node)
 #   web_test.sh playback BUILD_DIR SOURCE_DIR   headless Chromium vs the native renderer, PSNR ≥ 30 dB
@@ -25,7 +25,7 @@ case "$what" in
       "$fixture_bin" record --out "$fx/rec.hrec" --seconds 4 || exit 1
     fi
     rm -rf "$fx/golden"
-    "$fixture_bin" golden --recording "$fx/rec.hrec" --out-dir "$fx/golden" --count 3 || exit 1
+    "$fixture_bin" golden --recording "$fx/rec.hrec" --out-dir "$fx/golden" --count 3 --g3 3 || exit 1
     node "$src/web/build.mjs" "$fx/dist" || exit 1
     ;;
   decoders)

@@ -1,12 +1,14 @@
-// Geometry codecs of MeshFrame (PROTOCOL.md §7): G0 and G1, a port of
-// protocol/geometry_codec.cc's decoders. Safe on untrusted input: every count
-// is checked against its limit and the bytes that remain before allocation;
-// malformed data throws a DecodeError naming the field.
+// Geometry codecs of MeshFrame (PROTOCOL.md §7): G0, G1 and G3, a port of
+// protocol/geometry_codec.cc's and protocol/surface_codec.cc's decoders. Safe
+// on untrusted input: every count is checked against its limit and the bytes
+// that remain before allocation; malformed data throws a DecodeError naming
+// the field.
 //
 // The result: { positions: Float32Array(3n), normals: Float32Array(3n) | null,
 //               colors: Uint8Array(3n) | null, indices: Uint32Array(3t) }.
 
 import { Reader, fail, lz4DecodeBlock } from './bytes.js';
+import { EDGE_AXIS, EDGE_LOW, mcCases } from './marching_cubes.js';
 
 export const LIMITS = { maxVertices: 2 << 20, maxTriangles: 4 << 20 };
 
@@ -531,6 +533,251 @@ function decodeG0(r, flags, nv, nt) {
   return { positions, normals: nrm, colors: rgb, indices };
 }
 
+// ---------------------------------------------------------------- G3
+
+const G3_MAX_AXIS = 4096, G3_MAX_SAMPLES = 1 << 24, G3_MAX_OCCUPIED_BRICKS = 65536;
+const BRICK_SAMPLES = 64, BRICK_CONTEXTS = 8, LABEL_CONTEXTS = 81, CROSSING_CONTEXTS = 16;
+const INSIDE = 2;
+const LABEL_SIGN = new Int8Array([0, 1, -1, 0]);
+
+// The labelled part of the grid (PROTOCOL.md §7.2), as the C++ Field: labels
+// dense with a margin of two samples on every side (neighbourhoods need no
+// bounds checks), crossings per occupied brick, sample × 3 + axis.
+class SurfaceField {
+  constructor(nx, ny, nz) {
+    this.nx = nx;
+    this.ny = ny;
+    this.nz = nz;
+    this.bx = (nx + 3) >> 2;
+    this.by = (ny + 3) >> 2;
+    this.bz = (nz + 3) >> 2;
+    this.brickSlot = new Int32Array(this.bx * this.by * this.bz).fill(-1);
+    this.px = nx + 4;
+    this.pxy = this.px * (ny + 4);
+    this.lab = new Uint8Array(this.pxy * (nz + 4));
+    this.slots = 0;
+  }
+  brick(ix, iy, iz) {
+    return ix + this.bx * (iy + this.by * iz);
+  }
+  brickContext(ix, iy, iz) {
+    const s = this.brickSlot;
+    return (ix > 0 && s[this.brick(ix - 1, iy, iz)] !== -1 ? 1 : 0) +
+      (iy > 0 && s[this.brick(ix, iy - 1, iz)] !== -1 ? 2 : 0) +
+      (iz > 0 && s[this.brick(ix, iy, iz - 1)] !== -1 ? 4 : 0);
+  }
+  // Slots in the order of `bricks` (raster order), then the per-slot arrays.
+  addSlots(bricks) {
+    for (const b of bricks) this.brickSlot[b] = this.slots++;
+    const n = this.slots * BRICK_SAMPLES * 3;
+    this.cross = new Int16Array(n);
+    this.levels = new Uint8Array(n);
+    this.vid = new Uint32Array(n);  // vertex id + 1; 0 = none yet
+  }
+  // Position of (x, y, z) in `lab`; x, y, z within [−2, n + 1].
+  p(x, y, z) {
+    return x + 2 + this.px * (y + 2) + this.pxy * (z + 2);
+  }
+  // Index into `cross` / 3 of a sample in an occupied brick.
+  at(x, y, z) {
+    return this.brickSlot[(x >> 2) + this.bx * ((y >> 2) + this.by * (z >> 2))] * BRICK_SAMPLES +
+      (x & 3) + 4 * ((y & 3) + 4 * (z & 3));
+  }
+  // fn(x, y, z, p) for every sample of an occupied brick, in raster order
+  // over the whole grid (x fastest); p is its position in `lab`. Stops when
+  // fn returns true.
+  forEachSample(fn) {
+    const { nx, ny, nz, bx, by, brickSlot } = this;
+    for (let z = 0; z < nz; ++z) {
+      for (let y = 0; y < ny; ++y) {
+        const row = bx * ((y >> 2) + by * (z >> 2));
+        const p0 = this.p(0, y, z);
+        for (let b = 0; b < bx; ++b) {
+          if (brickSlot[row + b] < 0) continue;
+          const x1 = Math.min(nx, 4 * b + 4);
+          for (let x = 4 * b; x < x1; ++x) if (fn(x, y, z, p0 + x)) return;
+        }
+      }
+    }
+  }
+}
+
+// Levels of the crossing on the edge from (x, y, z) along `axis`
+// (PROTOCOL.md §7.2 "Crossings"): the surface's normal estimated from the
+// labels of the 4×3×3 box around the edge, in doubled integer coordinates.
+function edgeLevels(f, x, y, z, axis, levelOf) {
+  const lab = f.lab;
+  const hx = x + 1 + (axis === 0 ? 1 : 0), hy = y + 1 + (axis === 1 ? 1 : 0), hz = z + 1 + (axis === 2 ? 1 : 0);
+  const mx = 2 * x + (axis === 0 ? 1 : 0), my = 2 * y + (axis === 1 ? 1 : 0), mz = 2 * z + (axis === 2 ? 1 : 0);
+  let g0 = 0, g1 = 0, g2 = 0;
+  for (let qz = z - 1; qz <= hz; ++qz) {
+    for (let qy = y - 1; qy <= hy; ++qy) {
+      const row = f.p(0, qy, qz);
+      let sum = 0, sumX = 0;
+      for (let qx = x - 1; qx <= hx; ++qx) {
+        const sg = LABEL_SIGN[lab[row + qx] & 3];
+        sum += sg;
+        sumX += sg * (2 * qx - mx);
+      }
+      g0 += sumX;
+      g1 += sum * (2 * qy - my);
+      g2 += sum * (2 * qz - mz);
+    }
+  }
+  const norm2 = g0 * g0 + g1 * g1 + g2 * g2;
+  const ga = axis === 0 ? g0 : axis === 1 ? g1 : g2;
+  // Small integers (|g| < 200): the double quotient floors exactly.
+  return levelOf[norm2 > 0 ? Math.floor((64 * ga * ga) / norm2) : 64];
+}
+
+function decodeG3(r, nv, nt) {
+  const origin = [r.f32('g3.origin'), r.f32('g3.origin'), r.f32('g3.origin')];
+  const voxel = r.f32('g3.voxel');
+  const levels = r.u8('g3.levels');
+  const nx = r.u16('g3.nx') + 1, ny = r.u16('g3.ny') + 1, nz = r.u16('g3.nz') + 1;
+  for (const o of origin) if (Math.abs(o) > 1e6) fail('g3.origin: not a finite coordinate');
+  if (!(voxel >= Math.fround(1e-4) && voxel <= 1)) fail('g3.voxel: must be in [1e-4, 1] m');
+  if (levels < 2) fail('g3.levels: must be in [2, 255]');
+  if (nx > G3_MAX_AXIS || ny > G3_MAX_AXIS || nz > G3_MAX_AXIS) {
+    fail(`g3.nx/ny/nz: an axis exceeds ${G3_MAX_AXIS} samples`);
+  }
+  if ((nx + 4) * (ny + 4) * (nz + 4) > G3_MAX_SAMPLES) {
+    fail(`g3.nx/ny/nz: the grid is too large ((nx+4)(ny+4)(nz+4) must be ≤ ${G3_MAX_SAMPLES})`);
+  }
+  const bricksB = r.blob32('g3.bricks');
+  const labelsB = r.blob32('g3.labels');
+  const crossingsB = r.blob32('g3.crossings');
+  r.expectEnd('g3');
+  if (nv > nt * 3) fail(`g3.num_vertices: ${nv} vertices cannot all be referenced by ${nt} triangles`);
+
+  const br = new TokenReader(bricksB, BRICK_CONTEXTS, 'g3.bricks');
+  // Every brick costs a symbol: checked before anything is allocated.
+  const numBricks = ((nx + 3) >> 2) * ((ny + 3) >> 2) * ((nz + 3) >> 2);
+  if (numBricks > br.maxSymbols()) fail(`g3.bricks: ${numBricks} bricks cannot fit in ${bricksB.length} bytes`);
+  const f = new SurfaceField(nx, ny, nz);
+  const occupied = [];
+  for (let z = 0; z < f.bz; ++z) {
+    for (let y = 0; y < f.by; ++y) {
+      for (let x = 0; x < f.bx; ++x) {
+        const bit = br.get(f.brickContext(x, y, z));
+        if (!br.ok) fail('g3.bricks: coded data is truncated or corrupt');
+        if (bit > 1) fail(`g3.bricks: brick flag ${bit} is not 0 or 1`);
+        if (!bit) continue;
+        if (occupied.length >= G3_MAX_OCCUPIED_BRICKS) {
+          fail(`g3.bricks: more than ${G3_MAX_OCCUPIED_BRICKS} occupied bricks`);
+        }
+        const b = f.brick(x, y, z);
+        f.brickSlot[b] = -2;  // occupied; its slot is given once the count is checked
+        occupied.push(b);
+      }
+    }
+  }
+  br.finish();
+
+  const lr = new TokenReader(labelsB, LABEL_CONTEXTS, 'g3.labels');
+  // Every sample of an occupied brick costs a label symbol.
+  if (occupied.length > Math.floor(lr.maxSymbols() / BRICK_SAMPLES) + 1) {
+    fail(`g3.bricks: ${occupied.length} occupied bricks cannot fit in ${labelsB.length} bytes of labels`);
+  }
+  f.addSlots(occupied);
+  const lab = f.lab, px = f.px, pxy = f.pxy;
+  let badLabel = false;
+  f.forEachSample((x, y, z, p) => {
+    const l = lr.get(lab[p - 1] + 3 * lab[p - px] + 9 * lab[p - pxy] + 27 * lab[p + 1 - px]);
+    if (l > INSIDE) badLabel = true;
+    lab[p] = l > INSIDE ? INSIDE : l;
+    return !lr.ok;
+  });
+  if (!lr.ok) fail('g3.labels: coded data is truncated or corrupt');
+  if (badLabel) fail('g3.labels: a label is not 0, 1 or 2');
+  lr.finish();
+
+  const cr = new TokenReader(crossingsB, CROSSING_CONTEXTS, 'g3.crossings');
+  const levelOf = new Uint8Array(65);
+  for (let c = 0; c <= 64; ++c) levelOf[c] = Math.max(1, Math.round(levels * Math.sqrt(c / 64)));
+  const step = [1, px, pxy];
+  let badCrossing = false, crossed = 0;
+  f.forEachSample((x, y, z, p) => {
+    const l = lab[p];
+    if (!l) return false;
+    const e0 = 3 * f.at(x, y, z);
+    for (let axis = 0; axis < 3; ++axis) {
+      const other = lab[p + step[axis]];
+      if (!other || other === l) continue;
+      const le = edgeLevels(f, x, y, z, axis, levelOf);
+      const k = le > 1 ? cr.getValue(Math.min(le, CROSSING_CONTEXTS) - 1) : 0;
+      if (!cr.ok) return true;
+      if (k >= le) badCrossing = true;
+      f.cross[e0 + axis] = k < le ? k : 0;
+      f.levels[e0 + axis] = le;
+      ++crossed;
+    }
+    return false;
+  });
+  if (!cr.ok) fail('g3.crossings: coded data is truncated or corrupt');
+  if (badCrossing) fail('g3.crossings: a crossing is outside its edge');
+  cr.finish();
+  return surfaceMesh(f, origin, voxel, nv, nt, crossed);
+}
+
+// Marching cubes over the cubes whose eight corners are labelled, vertices
+// numbered in order of first use (one per crossed edge), positions in
+// float32 steps as the C++ computes them. `crossed` (the crossed edges)
+// bounds what is allocated: a vertex per crossed edge, and at most 12
+// triangles in each of the ≤ 4 cubes around one (hostile counts in the
+// prefix cost nothing until the labels and crossings bear them out).
+function surfaceMesh(f, origin, voxel, nv, nt, crossed) {
+  const fr = Math.fround;
+  const maxV = Math.min(nv, crossed), maxT = Math.min(nt, 48 * crossed);
+  const positions = new Float32Array(3 * maxV), indices = new Uint32Array(3 * maxT);
+  const { lab, vid, cross, levels } = f;
+  let numV = 0, numT = 0, overflow = false;
+  const vertex = (x, y, z, axis) => {
+    const e = 3 * f.at(x, y, z) + axis;
+    if (vid[e]) return vid[e] - 1;
+    if (numV >= maxV) {
+      overflow = true;
+      return 0;
+    }
+    const t = fr(fr(cross[e] + 0.5) / levels[e]);
+    const o = 3 * numV;
+    positions[o] = origin[0] + fr(voxel * (axis === 0 ? fr(x + t) : x));
+    positions[o + 1] = origin[1] + fr(voxel * (axis === 1 ? fr(y + t) : y));
+    positions[o + 2] = origin[2] + fr(voxel * (axis === 2 ? fr(z + t) : z));
+    vid[e] = numV + 1;
+    return numV++;
+  };
+  const cases = mcCases();
+  const corner = new Int32Array(8);
+  for (let c = 0; c < 8; ++c) corner[c] = (c & 1) + f.px * ((c >> 1) & 1) + f.pxy * ((c >> 2) & 1);
+  f.forEachSample((x, y, z, p) => {
+    if (!lab[p]) return false;
+    let code = 0;
+    for (let c = 0; c < 8; ++c) {
+      const l = lab[p + corner[c]];
+      if (!l) return false;
+      if (l === INSIDE) code |= 1 << c;
+    }
+    if (code === 0 || code === 255) return false;
+    const edges = cases[code];
+    for (let k = 0; k < edges.length; k += 3) {
+      if (numT >= maxT) overflow = true;
+      for (let j = 0; j < 3 && !overflow; ++j) {
+        const e = edges[k + j], c = EDGE_LOW[e];
+        indices[3 * numT + j] = vertex(x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1), EDGE_AXIS[e]);
+      }
+      if (overflow) return true;
+      ++numT;
+    }
+    return false;
+  });
+  if (overflow) fail('g3: the surface has more vertices or triangles than the prefix says');
+  if (numV !== nv || numT !== nt) {
+    fail(`g3: the surface has ${numV} vertices and ${numT} triangles, the prefix says ${nv} and ${nt}`);
+  }
+  return { positions, normals: recomputeNormals(positions, indices, nv), colors: null, indices };
+}
+
 // Decodes a geometry blob (Uint8Array).
 export function decodeGeometry(blob, limits = LIMITS) {
   const r = new Reader(blob);
@@ -546,5 +793,9 @@ export function decodeGeometry(blob, limits = LIMITS) {
   if (nt > limits.maxTriangles) fail(`geometry.num_triangles: ${nt} exceeds limit ${limits.maxTriangles}`);
   if (codec === 1) return decodeG0(r, flags, nv, nt);
   if (codec === 2) return decodeG1(r, flags, nv, nt);
+  if (codec === 4) {
+    if (flags !== 0) fail('geometry.flags: must be 0 for G3');
+    return decodeG3(r, nv, nt);
+  }
   return fail(`geometry.codec: unknown geometry codec ${codec}`);
 }

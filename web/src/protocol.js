@@ -131,7 +131,8 @@ export function parseMeshFrame(payload) {
   const r = new Reader(payload);
   const frameIndex = r.i64('mesh_frame.frame_index');
   const codec = r.u8('mesh_frame.codec');
-  if (codec < 1 || codec > 2) fail(`mesh_frame.codec: unknown geometry codec ${codec}`);
+  // G0, G1, G3 (the native reader's set: G2 is not sent on this path).
+  if (codec < 1 || codec > 4 || codec === 3) fail(`mesh_frame.codec: unknown geometry codec ${codec}`);
   const data = r.blob32('mesh_frame.data');
   r.expectEnd('mesh_frame');
   return { frameIndex, codec, data };

@@ -4,9 +4,11 @@
 // the C++ decoders wrote (holoport-web-fixture golden): geometry exactly
 // (positions, colours, triangles; recomputed normals within 1e-6), colour
 // images within a JPEG-decoder tolerance (the page uses the browser's
-// decoder; node uses jpeg-js) and masks exactly. Then truncated prefixes and
-// bit flips of every decoder's input must give a DecodeError (or, for a
-// flip, a valid result), never another exception or a hang.
+// decoder; node uses jpeg-js) and masks exactly. The G3 blobs of the
+// studio's foreground (golden --g3) likewise, and the marching-cubes table
+// the JS generates against the C++ one. Then truncated prefixes and bit
+// flips of every decoder's input must give a DecodeError (or, for a flip, a
+// valid result), never another exception or a hang.
 //
 // Usage: node decoders_test.mjs RECORDING GOLDEN_DIR
 
@@ -16,6 +18,7 @@ import jpeg from 'jpeg-js';
 import { DecodeError } from '../src/bytes.js';
 import { parseRecording, parseRecords, parseMeshFrame, parseColorFrame, parseRig, parseAudioPose, MSG } from '../src/protocol.js';
 import { decodeGeometry } from '../src/geometry.js';
+import { mcCases } from '../src/marching_cubes.js';
 import { decodeColor } from '../src/color.js';
 
 const [recordingPath, goldenDir] = process.argv.slice(2);
@@ -50,39 +53,99 @@ for (const m of messages) {
 }
 
 // ---- geometry, exactly
-let meshChecked = 0;
-const geometryMs = [];
-for (const g of golden.filter((f) => f.startsWith('mesh_'))) {
-  const k = Number(g.slice(5, -4));
-  const b = readFileSync(join(goldenDir, g));
+function readGoldenMesh(name) {
+  const b = readFileSync(join(goldenDir, name));
   const dv = new DataView(b.buffer, b.byteOffset, b.byteLength);
   const nv = dv.getUint32(0, true), nt = dv.getUint32(4, true), hasN = dv.getUint32(8, true), hasC = dv.getUint32(12, true);
+  const take = (n) => {
+    const a = b.buffer.slice(b.byteOffset + o, b.byteOffset + o + n);
+    o += n;
+    return a;
+  };
   let o = 16;
-  const pos = new Float32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 12));
-  o += nv * 12;
-  const nrm = hasN ? new Float32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 12)) : null;
-  o += hasN ? nv * 12 : 0;
-  const col = hasC ? new Uint8Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nv * 3)) : null;
-  o += hasC ? nv * 3 : 0;
-  const idx = new Uint32Array(b.buffer.slice(b.byteOffset + o, b.byteOffset + o + nt * 12));
-  const mf = parseMeshFrame(meshes.get(k).payload);
-  const t0 = performance.now();
-  const mesh = decodeGeometry(mf.data);
-  geometryMs.push(performance.now() - t0);
-  check(mesh.positions.length === nv * 3 && mesh.indices.length === nt * 3, `frame ${k}: counts ${nv}/${nt}`);
+  const pos = new Float32Array(take(nv * 12));
+  const nrm = hasN ? new Float32Array(take(nv * 12)) : null;
+  const col = hasC ? new Uint8Array(take(nv * 3)) : null;
+  const idx = new Uint32Array(take(nt * 12));
+  return { nv, nt, pos, nrm, col, idx };
+}
+function compareMesh(what, mesh, g) {
+  const { nv, nt, pos, nrm, col, idx } = g;
+  check(mesh.positions.length === nv * 3 && mesh.indices.length === nt * 3, `${what}: counts ${nv}/${nt}`);
   let posDiff = 0, idxDiff = 0, colDiff = 0, nrmMax = 0;
   for (let i = 0; i < nv * 3; ++i) if (mesh.positions[i] !== pos[i]) posDiff++;
   for (let i = 0; i < nt * 3; ++i) if (mesh.indices[i] !== idx[i]) idxDiff++;
   if (col) for (let i = 0; i < nv * 3; ++i) if (mesh.colors[i] !== col[i]) colDiff++;
   if (nrm) for (let i = 0; i < nv * 3; ++i) nrmMax = Math.max(nrmMax, Math.abs(mesh.normals[i] - nrm[i]));
-  check(posDiff === 0, `frame ${k}: ${posDiff} position components differ`);
-  check(idxDiff === 0, `frame ${k}: ${idxDiff} indices differ`);
-  check(colDiff === 0, `frame ${k}: ${colDiff} colour components differ`);
-  check(!!nrm === !!mesh.normals && nrmMax <= 1e-6, `frame ${k}: normals differ by ${nrmMax}`);
-  console.log(`geometry frame ${k}: ${nv} vertices, ${nt} triangles; positions/indices/colours identical, normals max diff ${nrmMax.toExponential(1)}`);
+  check(posDiff === 0, `${what}: ${posDiff} position components differ`);
+  check(idxDiff === 0, `${what}: ${idxDiff} indices differ`);
+  check(colDiff === 0 && !!col === !!mesh.colors, `${what}: ${colDiff} colour components differ`);
+  check(!!nrm === !!mesh.normals && nrmMax <= 1e-6, `${what}: normals differ by ${nrmMax}`);
+  return nrmMax;
+}
+const median = (a) => [...a].sort((x, y) => x - y)[a.length >> 1];
+// Cold: the first call per frame (the G1 figure before G3 was the median of
+// these); warm: below, once every frame has been checked.
+function timeDecode(blob, cold) {
+  const t0 = performance.now();
+  const mesh = decodeGeometry(blob);
+  cold.push(performance.now() - t0);
+  return mesh;
+}
+// The median of 5 calls after 10 more, once the JIT has optimized the code.
+function warmMs(blob) {
+  for (let i = 0; i < 10; ++i) decodeGeometry(blob);
+  const t = [];
+  for (let i = 0; i < 5; ++i) {
+    const t0 = performance.now();
+    decodeGeometry(blob);
+    t.push(performance.now() - t0);
+  }
+  return median(t);
+}
+let meshChecked = 0;
+const geometryMs = [], g1Blobs = [];
+for (const g of golden.filter((f) => f.startsWith('mesh_'))) {
+  const k = Number(g.slice(5, -4));
+  const gm = readGoldenMesh(g);
+  const mf = parseMeshFrame(meshes.get(k).payload);
+  const mesh = timeDecode(mf.data, geometryMs);
+  const nrmMax = compareMesh(`frame ${k}`, mesh, gm);
+  console.log(`geometry frame ${k}: ${mf.data.length} bytes, ${gm.nv} vertices, ${gm.nt} triangles; ` +
+    `positions/indices/colours identical, normals max diff ${nrmMax.toExponential(1)}; ` +
+    `decode ${geometryMs.at(-1).toFixed(1)} ms cold`);
+  g1Blobs.push(mf.data);
   meshChecked++;
 }
 check(meshChecked >= 1, 'golden meshes were found');
+
+// ---- G3: the marching-cubes table, then the studio's foreground, exactly
+const mcGolden = readFileSync(join(goldenDir, 'mc_table.bin'));
+const cases = mcCases();
+let mcDiff = 0;
+for (let i = 0; i < 256; ++i) {
+  const n = mcGolden[37 * i], e = mcGolden.subarray(37 * i + 1, 37 * i + 1 + 3 * n);
+  if (cases[i].length !== 3 * n || e.some((v, j) => v !== cases[i][j])) mcDiff++;
+}
+check(mcDiff === 0, `marching cubes: ${mcDiff} of 256 cases differ from common/marching_cubes_table.cc`);
+console.log(`marching cubes: the generated table equals the C++ one in ${256 - mcDiff} of 256 cases`);
+const g3Blobs = [], g3Ms = [];
+for (const g of golden.filter((f) => f.startsWith('g3_')).sort()) {
+  const k = Number(g.slice(3, -5));
+  const blob = new Uint8Array(readFileSync(join(goldenDir, g)));
+  const gm = readGoldenMesh(`g3mesh_${k}.bin`);
+  const mesh = timeDecode(blob, g3Ms);
+  const nrmMax = compareMesh(`g3 frame ${k}`, mesh, gm);
+  console.log(`g3 frame ${k}: ${blob.length} bytes, ${gm.nv} vertices, ${gm.nt} triangles; ` +
+    `positions/indices identical, normals max diff ${nrmMax.toExponential(1)}; ` +
+    `decode ${g3Ms.at(-1).toFixed(1)} ms cold`);
+  g3Blobs.push(blob);
+}
+check(g3Blobs.length >= 1, 'golden G3 blobs were found');
+const geometryWarmMs = g1Blobs.map(warmMs), g3WarmMs = g3Blobs.map(warmMs);
+const list = (a) => a.map((t) => t.toFixed(1)).join(' / ');
+console.log(`geometry decode, warm (median of 5 calls after 10): G1 frames ${list(geometryWarmMs)} ms; ` +
+  `G3 frames ${list(g3WarmMs)} ms`);
 
 // ---- colour, within tolerance; masks exactly
 let colorChecked = 0, worst = 0, sumAbs = 0, count = 0;
@@ -149,29 +212,33 @@ const rand = (n) => {
   rng = (rng * 1103515245 + 12345) % 2147483648;
   return rng % n;
 };
-const firstMesh = parseMeshFrame(meshes.values().next().value.payload).data;
-// Prefixes: all of the first 512 bytes, then 300 spread over the rest.
-const prefixes = new Set();
-for (let n = 0; n < Math.min(512, firstMesh.length); ++n) prefixes.add(n);
-for (let i = 0; i < 300; ++i) prefixes.add(Math.floor((firstMesh.length * i) / 300));
-let refused = 0;
-for (const n of prefixes) {
-  if (n >= firstMesh.length) continue;
-  const blob = firstMesh.slice(0, n);
-  if (expectDecodeError(() => decodeGeometry(blob), `geometry prefix ${n}`)) refused++;
-  else check(false, `geometry prefix ${n} of ${firstMesh.length} bytes was accepted`);
-}
-let flipsOk = 0;
-for (let i = 0; i < 300; ++i) {
-  const blob = firstMesh.slice();
-  blob[rand(blob.length)] ^= 1 << rand(8);
-  let m = null;
-  if (!expectDecodeError(() => { m = decodeGeometry(blob); }, `geometry flip ${i}`) && m) {
-    check(validMesh(m), `geometry flip ${i}: decoded an invalid mesh`);
-    flipsOk++;
+// The first G1 frame and the first G3 blob.
+const geometryInputs = [['g1', parseMeshFrame(meshes.values().next().value.payload).data]];
+if (g3Blobs.length) geometryInputs.push(['g3', g3Blobs[0]]);
+for (const [name, firstMesh] of geometryInputs) {
+  // Prefixes: all of the first 512 bytes, then 300 spread over the rest.
+  const prefixes = new Set();
+  for (let n = 0; n < Math.min(512, firstMesh.length); ++n) prefixes.add(n);
+  for (let i = 0; i < 300; ++i) prefixes.add(Math.floor((firstMesh.length * i) / 300));
+  let refused = 0;
+  for (const n of prefixes) {
+    if (n >= firstMesh.length) continue;
+    const blob = firstMesh.slice(0, n);
+    if (expectDecodeError(() => decodeGeometry(blob), `${name} prefix ${n}`)) refused++;
+    else check(false, `${name} prefix ${n} of ${firstMesh.length} bytes was accepted`);
   }
+  let flipsOk = 0;
+  for (let i = 0; i < 300; ++i) {
+    const blob = firstMesh.slice();
+    blob[rand(blob.length)] ^= 1 << rand(8);
+    let m = null;
+    if (!expectDecodeError(() => { m = decodeGeometry(blob); }, `${name} flip ${i}`) && m) {
+      check(validMesh(m), `${name} flip ${i}: decoded an invalid mesh`);
+      flipsOk++;
+    }
+  }
+  console.log(`geometry ${name}: ${refused} truncated prefixes refused; 300 bit flips: ${300 - flipsOk} refused, ${flipsOk} decoded to valid meshes`);
 }
-console.log(`geometry: ${refused} truncated prefixes refused; 300 bit flips: ${300 - flipsOk} refused, ${flipsOk} decoded to valid meshes`);
 
 const firstColor = parseColorFrame(colors.values().next().value.payload).images[0].data;
 let cRefused = 0;
@@ -239,8 +306,9 @@ console.log(`records: ${recRefused} truncated runs refused`);
     `${lean.length * 8 - leanFlipsOk} refused, ${leanFlipsOk} decoded to valid frames`);
 }
 
-geometryMs.sort((a, b) => a - b);
-console.log(JSON.stringify({ figure: 'web_decode_node', geometry_ms_median: geometryMs[geometryMs.length >> 1] }));
+const ms = (a) => (a.length ? Number(median(a).toFixed(2)) : null);
+console.log(JSON.stringify({ figure: 'web_decode_node', geometry_ms_median: ms(geometryMs),
+  geometry_warm_ms_median: ms(geometryWarmMs), g3_ms_median: ms(g3Ms), g3_warm_ms_median: ms(g3WarmMs) }));
 
 if (failures) {
   console.log(`${failures} failure(s)`);
