@@ -78,8 +78,8 @@
 namespace holo::bench {
 namespace {
 
-constexpr char kPublisherToken[] = "live-bench-publisher";
-constexpr char kViewerToken[] = "live-bench-viewer";
+constexpr char kLivePublisherToken[] = "live-bench-publisher";
+constexpr char kLiveViewerToken[] = "live-bench-viewer";
 
 struct LiveOptions {
   std::string content = "fused";  // fused | temporal | truth
@@ -131,22 +131,11 @@ struct Child {
   }
 };
 
-std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
-  std::vector<nlohmann::json> out;
-  std::ifstream f(path);
-  std::string line;
-  while (std::getline(f, line)) {
-    auto j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
-    if (!j.is_discarded() && j.is_object()) out.push_back(std::move(j));
-  }
-  return out;
-}
-
 std::vector<std::string> SiteArgs(const LiveOptions& o, const std::string& workload, uint16_t port,
                                   const std::string& stats, bool serial) {
   std::vector<std::string> a = {o.site_binary, "--source", "synthetic", "--workload", workload, "--listen",
-                                "127.0.0.1:" + std::to_string(port), "--publisher-token", kPublisherToken,
-                                "--viewer-token", kViewerToken, "--stats", stats, "--pace", "30"};
+                                "127.0.0.1:" + std::to_string(port), "--publisher-token", kLivePublisherToken,
+                                "--viewer-token", kLiveViewerToken, "--stats", stats, "--pace", "30"};
   a.insert(a.end(), o.site_args.begin(), o.site_args.end());
   if (!serial) a.insert(a.end(), {"--voice", o.voice});
   if (o.content == "truth") {
@@ -207,7 +196,7 @@ StatusOr<std::unique_ptr<net::SiteClient>> StartViewer(uint16_t port, const std:
                                                        net::ClientCallbacks cb) {
   net::ClientOptions o;
   o.port = port;
-  o.token = kViewerToken;
+  o.token = kLiveViewerToken;
   o.name = name;
   o.subscribe = net::kSubscribeAll;
   o.decode = true;

@@ -62,27 +62,6 @@ struct PodsOptions {
   std::string keep_dir;
 };
 
-uint16_t FreePort() { return FreeTcpPort(); }
-
-struct Child {
-  pid_t pid = -1;
-  static pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
-    return SpawnLogged(argv, log_path);
-  }
-  static int Stop(pid_t pid, int sig = SIGTERM, double grace_s = 10) { return StopProcess(pid, sig, grace_s); }
-};
-
-std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
-  std::vector<nlohmann::json> out;
-  std::ifstream f(path);
-  std::string line;
-  while (std::getline(f, line)) {
-    auto j = nlohmann::json::parse(line, nullptr, false);
-    if (!j.is_discarded() && j.is_object()) out.push_back(std::move(j));
-  }
-  return out;
-}
-
 int Sh(const std::string& cmd) { return std::system((cmd + " >/dev/null 2>&1").c_str()); }
 
 // The pods' network namespace: a veth pair 10.77.0.1 (site) ↔ 10.77.0.2 (pods).
@@ -126,7 +105,7 @@ struct RunResult {
 RunResult RunPeer(const BenchArgs& args, const PodsOptions& o, const std::string& dir, const std::string& server) {
   RunResult r;
   const std::string stats = dir + "/peer.jsonl";
-  const pid_t pid = Child::Spawn({server, "--source", "synthetic", "--workload", args.workload, "--prerender",
+  const pid_t pid = SpawnLogged({server, "--source", "synthetic", "--workload", args.workload, "--prerender",
                                   std::to_string(o.prerender), "--pace", "30", "--stats", stats, "-n", "-1"},
                                  dir + "/peer.log");
   // Background learning and pre-rendering first; then the warm-up and the window.
@@ -145,7 +124,7 @@ RunResult RunPeer(const BenchArgs& args, const PodsOptions& o, const std::string
   const size_t n1 = frames_now();
   const double cpu1 = ProcessCpuMsOf(pid);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  Child::Stop(pid);
+  StopProcess(pid);
   size_t i = 0;
   for (const auto& j : ReadJsonLines(stats)) {
     if (!j.contains("latency_ms")) continue;
@@ -204,10 +183,10 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
     peer = RunPeer(args, o, dir, server);
   }
 
-  const uint16_t port = FreePort();
+  const uint16_t port = FreeTcpPort();
   const std::string site_stats = dir + "/site.jsonl";
   if (!args.json) spdlog::info("pods: site on port {}, 8 pods ({})...", port, link);
-  const pid_t site = Child::Spawn({server, "--workload", W, "--pods", (o.netns && ns.up ? "10.77.0.1:" : "127.0.0.1:") + std::to_string(port),
+  const pid_t site = SpawnLogged({server, "--workload", W, "--pods", (o.netns && ns.up ? "10.77.0.1:" : "127.0.0.1:") + std::to_string(port),
                                    "--pod-token", kToken, "--pod-set-stats", "--pod-timeout-ms", std::to_string(o.pod_timeout_ms),
                                    "--stats", site_stats, "-n", "-1"},
                                   dir + "/site.log");
@@ -229,7 +208,7 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   for (int k = 0; k < kPods; ++k) {
     offsets[k] = (k % 2 ? 1 : -1) * o.offset_ms * (0.5 + 0.5 * k / (kPods - 1.0));
     drifts[k] = o.drift_ppm * (2.0 * k / (kPods - 1.0) - 1.0);
-    pods[k] = Child::Spawn(pod_argv(k), dir + "/pod" + std::to_string(k) + ".log");
+    pods[k] = SpawnLogged(pod_argv(k), dir + "/pod" + std::to_string(k) + ".log");
   }
   // Wait for all eight pods to be connected and the site's pipeline to run.
   bool started = false;
@@ -245,8 +224,8 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   }
   if (!started) {
     spdlog::error("pods: the site never fused a set from 8 connected pods (logs in {})", dir);
-    for (pid_t p : pods) Child::Stop(p);
-    Child::Stop(site);
+    for (pid_t p : pods) StopProcess(p);
+    StopProcess(site);
     if (ns.up) ns.Teardown();
     return 1;
   }
@@ -257,14 +236,14 @@ int RunPods(const BenchArgs& args, const PodsOptions& o) {
   const int64_t w1 = net::WallUs();
   const double site_cpu1 = ProcessCpuMsOf(site);
   // One pod killed for kill_s, then restarted.
-  Child::Stop(pods[0], SIGKILL);
+  StopProcess(pods[0], SIGKILL);
   const int64_t killed = net::WallUs();
   std::this_thread::sleep_for(std::chrono::duration<double>(o.kill_s));
   const int64_t restarted = net::WallUs();
-  pods[0] = Child::Spawn(pod_argv(0), dir + "/pod0-restarted.log");
+  pods[0] = SpawnLogged(pod_argv(0), dir + "/pod0-restarted.log");
   std::this_thread::sleep_for(std::chrono::duration<double>(o.after_s));
-  for (pid_t p : pods) Child::Stop(p);
-  Child::Stop(site);
+  for (pid_t p : pods) StopProcess(p);
+  StopProcess(site);
   if (ns.up) ns.Teardown();
 
   // Figures over the measured window [w0, w1).

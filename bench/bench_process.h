@@ -1,7 +1,8 @@
 // Child processes for the benchmarks that run whole programs (live, pods,
 // broadcast, soak): spawning with output to a log file, stopping, their CPU
 // time, the wall clock their stamps use, a free TCP port and the directory
-// of holoport-bench (where the other programs are).
+// of holoport-bench (where the other programs are), and reading the JSON
+// lines they write.
 #pragma once
 
 #include <arpa/inet.h>
@@ -20,6 +21,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "common/clock.h"
 
@@ -117,6 +120,19 @@ inline int StopProcess(pid_t pid, int sig = SIGTERM, double grace_s = 10) {
   kill(pid, SIGKILL);
   waitpid(pid, &status, 0);
   return status;
+}
+
+// The JSON objects of a file of JSON lines (a program's figures), skipping
+// lines that are not objects (a line cut short by a killed process).
+inline std::vector<nlohmann::json> ReadJsonLines(const std::string& path) {
+  std::vector<nlohmann::json> out;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    auto j = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!j.is_discarded() && j.is_object()) out.push_back(std::move(j));
+  }
+  return out;
 }
 
 }  // namespace holo::bench

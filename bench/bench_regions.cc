@@ -65,8 +65,8 @@
 namespace holo::bench {
 namespace {
 
-constexpr char kPublisherToken[] = "regions-bench-publisher";
-constexpr char kViewerToken[] = "regions-bench-viewer";
+constexpr char kRegionsPublisherToken[] = "regions-bench-publisher";
+constexpr char kRegionsViewerToken[] = "regions-bench-viewer";
 
 struct RegionsBenchOptions {
   double seconds = 40;
@@ -380,8 +380,8 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
   const uint16_t port = FreeTcpPort();
   const std::string stats_path = dir + "/site_stats.jsonl";
   std::vector<std::string> argv = {site_binary, "--source", "synthetic", "--workload", wl, "--listen",
-                                   "127.0.0.1:" + std::to_string(port), "--publisher-token", kPublisherToken,
-                                   "--viewer-token", kViewerToken, "--stats", stats_path, "--pace", "30",
+                                   "127.0.0.1:" + std::to_string(port), "--publisher-token", kRegionsPublisherToken,
+                                   "--viewer-token", kRegionsViewerToken, "--stats", stats_path, "--pace", "30",
                                    "--prerender", std::to_string(o.prerender), "-n", "-1", "--regions",
                                    dir + "/regions.yaml"};
   progress("starting the site (fused " + wl + ", pre-rendering " + std::to_string(o.prerender) + " frames) on port " +
@@ -399,7 +399,7 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
   std::map<int64_t, int64_t> received_at;  // frame → when the viewer received its report
   net::ClientOptions co;
   co.port = port;
-  co.token = kViewerToken;
+  co.token = kRegionsViewerToken;
   co.name = "regions-bench";
   co.subscribe = net::kSubscribeGeometry | net::kSubscribeRegions;  // geometry: a viewer's usual load
   co.decode = false;

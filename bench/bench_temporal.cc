@@ -99,7 +99,7 @@ void DeclareOptions(CLI::App& app, Extra* a) {
 }
 
 // One fusion run (a mode) over the frames, with its figures.
-struct Run {
+struct TemporalRun {
   std::string mode;
   std::unique_ptr<TemporalFusion> fusion;
   metrics::FlickerAccumulator flicker;
@@ -472,7 +472,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
   if (extra.min_track_weight >= 0) base.min_track_weight = static_cast<float>(extra.min_track_weight);
   if (extra.fail_residual_mm > 0) base.tracker.fail_residual_m = static_cast<float>(extra.fail_residual_mm / 1000);
 
-  std::vector<Run> runs(extra.drop_pod >= 0 ? 4 : 2);
+  std::vector<TemporalRun> runs(extra.drop_pod >= 0 ? 4 : 2);
   const char* names[4] = {"per_frame", "temporal", "per_frame_dropped", "temporal_dropped"};
   for (size_t r = 0; r < runs.size(); ++r) {
     runs[r].mode = names[r];
@@ -510,7 +510,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
       exclusive = ExclusiveVertices(rig, gt, extra.drop_pod);
     }
     for (size_t r = 0; r < runs.size(); ++r) {
-      Run& run = runs[r];
+      TemporalRun& run = runs[r];
       const RgbdFrameSet& in = (r >= 2 && f >= extra.drop_from) ? dropped : set;
       TemporalFrameStats st;
       const double cpu0 = ProcessCpuMs();
@@ -602,7 +602,7 @@ int RunTemporal(const BenchArgs& args, const Extra& extra) {
   q["masks"] = "truth";
   q["frames"] = std::to_string(frames);
   for (size_t r = 0; r < 2; ++r) {
-    Run& run = runs[r];
+    TemporalRun& run = runs[r];
     auto qm = q;
     qm["mode"] = run.mode;
     qm["content"] = r % 2 == 1 ? "temporal" : "fused";
