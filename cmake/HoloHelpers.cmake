@@ -30,3 +30,26 @@ function(holo_add_test)
   add_test(NAME ${ARG_NAME} COMMAND ${ARG_NAME} --gtest_brief=1)
   set_tests_properties(${ARG_NAME} PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT 900)
 endfunction()
+
+# holo_unity(TARGET BATCH [SKIP file.cc ...]): compiles TARGET as unity
+# sources of BATCH files each. Most of a source's compile time here is the
+# headers (Eigen, spdlog, nlohmann::json, asio) and the code they emit, so
+# files that share them compile in 40–60 % less CPU together. It asks that
+# the names a file keeps to itself (its anonymous namespace) differ from
+# its neighbours'; SKIP lists files that stay alone. -DHOLO_UNITY=OFF
+# compiles every file alone (to check that each includes what it uses).
+function(holo_unity target batch)
+  cmake_parse_arguments(ARG "" "" "SKIP" ${ARGN})
+  if(NOT HOLO_UNITY)
+    return()
+  endif()
+  set_target_properties(${target} PROPERTIES UNITY_BUILD ON UNITY_BUILD_BATCH_SIZE ${batch})
+  foreach(f ${ARG_SKIP})
+    set_source_files_properties(${f} TARGET_DIRECTORY ${target} PROPERTIES SKIP_UNITY_BUILD_INCLUSION ON)
+  endforeach()
+  # A class that holds a file-local type (the pimpl pattern) is no longer in
+  # "the main file" once included by the unity source: GCC would warn.
+  if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+    target_compile_options(${target} PRIVATE -Wno-subobject-linkage)
+  endif()
+endfunction()

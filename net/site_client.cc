@@ -31,7 +31,7 @@ using protocol::MessageType;
 
 namespace {
 
-std::chrono::microseconds Seconds(double s) { return std::chrono::microseconds(static_cast<int64_t>(s * 1e6)); }
+std::chrono::microseconds Timeout(double s) { return std::chrono::microseconds(static_cast<int64_t>(s * 1e6)); }
 
 const char* ReasonName(protocol::RefuseReason r) {
   switch (r) {
@@ -208,7 +208,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     tls.reset();  // the previous connection's handlers have all run (backoff ≥ its timer)
     sock.reset();
     auto self = shared_from_this();
-    timer.expires_after(Seconds(opt.connect_timeout_s));
+    timer.expires_after(Timeout(opt.connect_timeout_s));
     timer.async_wait(asio::bind_executor(strand, [this, self, my](std::error_code ec) {
       if (ec || my != attempt_id || welcomed || stopped) return;
       Lost(Unavailable("no Welcome from " + opt.host + ":" + std::to_string(opt.port) + " within " +
@@ -307,7 +307,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     SetState(ClientState::kBackoff, why);
     auto self = shared_from_this();
     const uint64_t my = attempt_id;
-    timer.expires_after(Seconds(delay));
+    timer.expires_after(Timeout(delay));
     timer.async_wait(asio::bind_executor(strand, [this, self, my](std::error_code ec) {
       if (ec || my != attempt_id || stopped) return;
       Connect();
@@ -606,7 +606,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     }
     auto self = shared_from_this();
     const uint64_t my = attempt_id;
-    color_timer.expires_after(Seconds(opt.color_wait_s));
+    color_timer.expires_after(Timeout(opt.color_wait_s));
     color_timer.async_wait(asio::bind_executor(strand, [this, self, my](std::error_code ec) {
       if (ec || my != attempt_id) return;
       FlushPending();
@@ -755,7 +755,7 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     auto self = shared_from_this();
     const uint64_t my = attempt_id;
     // First ping at once (RTT and clock offset early), then every interval.
-    ping_timer.expires_after(ping_count == 0 ? std::chrono::microseconds(0) : Seconds(opt.ping_interval_s));
+    ping_timer.expires_after(ping_count == 0 ? std::chrono::microseconds(0) : Timeout(opt.ping_interval_s));
     ping_timer.async_wait(asio::bind_executor(strand, [this, self, my](std::error_code ec) {
       if (ec || my != attempt_id || stopped) return;
       ++ping_count;
@@ -914,7 +914,7 @@ std::optional<Rig> SiteClient::rig() const {
 
 bool SiteClient::WaitConnected(double timeout_s) {
   std::unique_lock<std::mutex> l(impl_->mu);
-  impl_->cv.wait_for(l, Seconds(timeout_s), [&] {
+  impl_->cv.wait_for(l, Timeout(timeout_s), [&] {
     return impl_->state == ClientState::kConnected || impl_->state == ClientState::kRefused ||
            impl_->state == ClientState::kStopped;
   });
@@ -943,7 +943,7 @@ bool SiteClient::LatestFrame(ReceivedFrame* out) {
 bool SiteClient::WaitFrame(ReceivedFrame* out, double timeout_s) {
   std::unique_lock<std::mutex> l(impl_->mu);
   impl_->keep_frames = true;
-  impl_->cv.wait_for(l, Seconds(timeout_s), [&] { return !impl_->frames.empty(); });
+  impl_->cv.wait_for(l, Timeout(timeout_s), [&] { return !impl_->frames.empty(); });
   if (impl_->frames.empty()) return false;
   *out = std::move(impl_->frames.front());
   impl_->frames.pop_front();

@@ -21,6 +21,9 @@ static_assert(std::endian::native == std::endian::little, "holo_protocol assumes
 
 namespace holo::protocol {
 
+// Decimal text of a count, size or field value, for error messages.
+inline std::string Str(uint64_t v) { return std::to_string(v); }
+
 // Appends little-endian scalars to a growing byte vector it borrows (the
 // vector must outlive the writer).
 class ByteWriter {

@@ -22,8 +22,6 @@
 namespace holo::protocol {
 namespace {
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 struct TjDeleter {
   void operator()(void* h) const {
     if (h) tjDestroy(h);
@@ -793,7 +791,7 @@ struct C1Scratch {
   std::vector<uint32_t> transitions, row_at;  // decoder: every box row's transitions
   std::vector<int32_t> occupied, block_of_slot, last_mcu_row;
 };
-C1Scratch& Scratch() {
+C1Scratch& C1ThreadScratch() {
   thread_local C1Scratch s;
   return s;
 }
@@ -801,7 +799,7 @@ C1Scratch& Scratch() {
 Status EncodeC1(const ImageRgb8& image, const ImageGray8& mask, const ColorEncodeOptions& o, HuffmanTables* tables,
                 std::vector<uint8_t>* out) {
   const int W = image.width(), H = image.height();
-  C1Scratch& sc = Scratch();
+  C1Scratch& sc = C1ThreadScratch();
   std::vector<uint8_t>& ones = sc.ones;
   if (mask.empty()) ones.assign(static_cast<size_t>(W), 255);
   auto mask_row = [&](int y) { return mask.empty() ? ones.data() : mask.data() + static_cast<size_t>(y) * W; };
@@ -1079,7 +1077,7 @@ Status DecodeC1(ByteReader& r, uint32_t W, uint32_t H, bool packed, ImageRgb8* i
       declared < bh) {
     return DataLoss("c1.mask: zstd frame size is missing or impossible for the box");
   }
-  C1Scratch& sc = Scratch();
+  C1Scratch& sc = C1ThreadScratch();
   std::vector<uint8_t>& rle = sc.rle;
   rle.resize(declared);
   thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> zd(ZSTD_createDCtx(), ZSTD_freeDCtx);

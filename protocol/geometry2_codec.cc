@@ -33,8 +33,6 @@ constexpr int32_t kRotScale = 4096;        // motion rotation: quaternion vector
 constexpr int32_t kMaxTrans = kMaxCoord / kTransUnits;
 constexpr float kFarCap = 0.05f;           // error samples farther than this count as this, metres
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 // PROTOCOL.md §7.1 "Reference hash".
 uint32_t HashPositions(const std::vector<std::array<int32_t, 3>>& pos) {
   uint64_t h = 14695981039346656037ull;

@@ -21,8 +21,6 @@ constexpr uint8_t kRecomputeNormals = 1u << 2;
 constexpr uint8_t kColorsByMean = 1u << 3;  // G1: colours predicted by the mean, not the parallelogram
 constexpr size_t kPrefixBytes = 12;
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 void WritePrefix(ByteWriter& w, GeometryCodec codec, uint8_t flags, size_t nv, size_t nt) {
   w.U8(static_cast<uint8_t>(codec));
   w.U8(flags);
@@ -395,7 +393,7 @@ struct G1Scratch {
   std::vector<uint16_t> syms[2];
   std::vector<Eigen::Vector3f> normal_sum;
 };
-G1Scratch& Scratch() {
+G1Scratch& G1ThreadScratch() {
   thread_local G1Scratch s;
   return s;
 }
@@ -405,7 +403,7 @@ G1Scratch& Scratch() {
 void EncodeConnectivity(const std::vector<uint32_t>& idx, size_t nu, TokenWriter* tw, std::vector<uint32_t>* order,
                         std::vector<uint32_t>* tris, std::vector<VertexPred>* preds) {
   const size_t nt = idx.size() / 3;
-  G1Scratch& sc = Scratch();
+  G1Scratch& sc = G1ThreadScratch();
   using Out = OutEdge;
   std::vector<uint32_t>& off = sc.off;
   off.assign(nu + 1, 0);
@@ -712,7 +710,7 @@ void SmoothedAreaWeightedNormals(Mesh* mesh) {
   // quantized normals are noise; their small areas let the neighbouring large
   // triangles decide. Measured on the 6 mm blob: mean error vs the SDF normals
   // 8.0° → 4.0°, 99th percentile 70° → 12° (unquantized area-weighted: 3.4°, 11°).
-  std::vector<Eigen::Vector3f>& sum = Scratch().normal_sum;
+  std::vector<Eigen::Vector3f>& sum = G1ThreadScratch().normal_sum;
   sum.assign(mesh->num_vertices(), Eigen::Vector3f::Zero());
   for (const auto& t : mesh->triangles) {
     const Eigen::Vector3f n = mesh->normals[t[0]] + mesh->normals[t[1]] + mesh->normals[t[2]];
@@ -733,7 +731,7 @@ void AppendBlob32(std::vector<uint8_t>* out, const std::vector<uint8_t>& b) {
 
 Status EncodeG1(const Mesh& mesh, const GeometryEncodeOptions& o, std::vector<uint8_t>* out,
                 std::vector<uint32_t>* vertex_map) {
-  G1Scratch& sc = Scratch();
+  G1Scratch& sc = G1ThreadScratch();
   std::vector<uint32_t>&weld = sc.weld, &unique = sc.unique;
   WeldExactPositions(mesh, &weld, &unique);
   const bool send_normals = o.normals == NormalMode::kTransmit && !mesh.normals.empty();
@@ -899,7 +897,7 @@ Status DecodeG1(ByteReader& r, uint8_t flags, uint32_t nv, uint32_t nt, Mesh* me
   if (uint64_t{nv} * 3 > pos.MaxSymbols()) {
     return DataLoss("g1.num_vertices: " + Str(nv) + " vertices cannot fit in " + Str(pos_b.size()) + " bytes");
   }
-  G1Scratch& sc = Scratch();
+  G1Scratch& sc = G1ThreadScratch();
   std::vector<uint32_t>& tris = sc.tris;
   std::vector<VertexPred>& preds = sc.preds;
   HOLO_RETURN_IF_ERROR(DecodeConnectivity(conn, nv, nt, &tris, &preds));

@@ -9,8 +9,6 @@
 namespace holo::protocol {
 namespace {
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 // ---------------------------------------------------------------- shared pieces
 
 template <typename E>

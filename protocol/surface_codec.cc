@@ -27,8 +27,6 @@ constexpr int kMinLevels = 2, kMaxLevels = 255;
 
 constexpr uint8_t kNone = 0, kOutside = 1, kInside = 2;  // labels
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 int CeilDiv(int a, int b) { return (a + b - 1) / b; }
 
 // The labelled part of a grid, stored per occupied brick: what the encoder
@@ -240,7 +238,7 @@ Status MeshFromField(const Field& f, const Eigen::Vector3f& origin, float voxel,
   return OkStatus();
 }
 
-struct EncoderScratch {
+struct G3Scratch {
   std::vector<uint8_t> bits;      // per sample: 1 observed, 2 negative
   std::vector<uint8_t> row_bits;  // per row of samples (y, z)
   std::vector<uint8_t> and4, or4; // per x of a cube row: the AND / OR of its four sample rows
@@ -252,8 +250,8 @@ struct EncoderScratch {
   std::vector<uint16_t> syms;
   std::vector<uint8_t> bricks_b, labels_b, crossings_b;
 };
-EncoderScratch& Scratch() {
-  thread_local EncoderScratch s;
+G3Scratch& G3ThreadScratch() {
+  thread_local G3Scratch s;
   return s;
 }
 
@@ -295,7 +293,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   SurfaceEncodeStats local;
   SurfaceEncodeStats& st = stats ? *stats : local;
   st = SurfaceEncodeStats{};
-  EncoderScratch& sc = Scratch();
+  G3Scratch& sc = G3ThreadScratch();
   const size_t n = g.size();
   const int nx = g.nx, ny = g.ny, nz = g.nz;
   const size_t sx = 1, sy = static_cast<size_t>(nx), sz = static_cast<size_t>(nx) * static_cast<size_t>(ny);

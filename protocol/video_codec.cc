@@ -21,8 +21,6 @@ extern "C" {
 namespace holo::protocol {
 namespace {
 
-std::string Str(uint64_t v) { return std::to_string(v); }
-
 std::string AvError(int err) {
   char buf[AV_ERROR_MAX_STRING_SIZE] = {};
   av_strerror(err, buf, sizeof(buf));

@@ -9,16 +9,12 @@
 #include <cstdio>
 #include <cstring>
 
+#include "server/record/recording_writer.h"
+
 namespace holo::record {
 namespace {
 
 std::string At(uint64_t offset) { return "offset " + std::to_string(offset) + ": "; }
-
-bool IsRecordable(protocol::MessageType t) {
-  using protocol::MessageType;
-  return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
-}
 
 }  // namespace
 

@@ -3,15 +3,6 @@
 #include <algorithm>
 
 namespace holo::record {
-namespace {
-
-bool Recordable(protocol::MessageType t) {
-  using protocol::MessageType;
-  return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
-}
-
-}  // namespace
 
 RecordingSink::RecordingSink(RecordingWriter* writer, uint32_t max_message_bytes, size_t max_in_progress)
     : writer_(writer), max_message_bytes_(max_message_bytes), max_in_progress_(max_in_progress) {}
@@ -26,7 +17,7 @@ Status RecordingSink::AddFrame(const protocol::Frame& frame, int64_t receive_tim
   auto it = partial_.find(key);
   const bool more = (h.flags & protocol::kFlagMoreFragments) != 0;
   if (it == partial_.end() && !more) {
-    if (!Recordable(h.type)) {
+    if (!IsRecordable(h.type)) {
       stats_.ignored_types += 1;
       return OkStatus();
     }
@@ -48,7 +39,7 @@ Status RecordingSink::AddFrame(const protocol::Frame& frame, int64_t receive_tim
   if (more) return OkStatus();
   Partial done = std::move(p);
   partial_.erase(it);
-  if (!Recordable(h.type)) {
+  if (!IsRecordable(h.type)) {
     stats_.ignored_types += 1;
     return OkStatus();
   }

@@ -77,12 +77,6 @@ class PosixRecordingFile final : public RecordingFile {
   std::string path_;
 };
 
-bool Recordable(protocol::MessageType t) {
-  using protocol::MessageType;
-  return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
-         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
-}
-
 std::string Seconds(int64_t us) {
   char buf[32];
   std::snprintf(buf, sizeof(buf), "%.3f s", static_cast<double>(us) * 1e-6);
@@ -200,7 +194,7 @@ Status RecordingWriter::WriteMessage(int64_t time_us, std::span<const uint8_t> f
                            std::to_string(frame.size() - protocol::kHeaderSize) + " given");
   if (header->flags & protocol::kFlagMoreFragments)
     return InvalidArgument("a fragment cannot be recorded: reassemble the message first");
-  if (!Recordable(header->type))
+  if (!IsRecordable(header->type))
     return InvalidArgument(std::string("message type ") + protocol::MessageTypeName(header->type) +
                            " is not recorded (only Rig, MeshFrame, ColorFrame, AudioPose, Stats)");
   if (!have_rig_ && header->type != protocol::MessageType::kRig)

@@ -21,6 +21,14 @@
 
 namespace holo::record {
 
+// The message types a recording keeps; the others (Hello, Control, Ping…)
+// belong to a live session.
+inline bool IsRecordable(protocol::MessageType t) {
+  using protocol::MessageType;
+  return t == MessageType::kRig || t == MessageType::kMeshFrame || t == MessageType::kColorFrame ||
+         t == MessageType::kAudioPose || t == MessageType::kStats || t == MessageType::kRegions;
+}
+
 // Where the bytes go; a seam for failure injection in tests.
 class RecordingFile {
  public:
