@@ -75,6 +75,7 @@ struct ClientBenchOptions {
   int reduced_jpeg_quality = -1;                 // stream part: the reduced layer's (-1: SitePublisher's default)
   int video_frames = 30;                         // stream part, fused: frames of V1 video before the measured one (0: no V1)
   std::string video_crfs = "24,30";              // stream part: the full layer's V1 CRFs to measure
+  std::string video_preset;                      // stream part: V1's encoder preset ("": SitePublisher's)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -698,6 +699,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         spdlog::error("client: --video-crfs wants numbers 0..51, got '{}'", item);
         return 2;
       }
+      if (!options.video_preset.empty()) vp.video.preset = options.video_preset;
       if (holo::Status s = vp.video.Check(); !s.ok()) return Fail(s);
       for (int layer = 0; layer < 2; ++layer) {
         const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(vp, layer);
@@ -920,6 +922,8 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--video-crfs", o->video_crfs, "stream part: the full layer's V1 CRFs to measure, comma-separated")
       ->capture_default_str();
+  app.add_option("--video-preset", o->video_preset,
+                 "stream part: V1's encoder preset (x264: ultrafast..veryslow; default: the live server's)");
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 

@@ -306,6 +306,18 @@ Status VideoEncodeOptions::Check() const {
   if (keyframe_interval < 1 || keyframe_interval > 1000) {
     return InvalidArgument("video.keyframe_interval must be 1..1000, got " + std::to_string(keyframe_interval));
   }
+  if (!preset.empty()) {
+    if (library == VideoLibrary::kH264) {
+      static constexpr const char* kPresets[] = {"ultrafast", "superfast", "veryfast", "faster", "fast",
+                                                 "medium",    "slow",      "slower",   "veryslow"};
+      if (std::find(std::begin(kPresets), std::end(kPresets), preset) == std::end(kPresets)) {
+        return InvalidArgument("video.preset for x264 must be ultrafast, superfast, veryfast, faster, fast, medium, "
+                               "slow, slower or veryslow, got '" + preset + "'");
+      }
+    } else if (preset.size() != 1 || preset[0] < '5' || preset[0] > '9') {
+      return InvalidArgument("video.preset for VP9 is its cpu-used, 5..9, got '" + preset + "'");
+    }
+  }
   return OkStatus();
 }
 
@@ -355,7 +367,7 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
   AVDictionary* opts = nullptr;
   switch (o.library) {
     case VideoLibrary::kH264:
-      av_dict_set(&opts, "preset", o.preset.empty() ? "ultrafast" : o.preset.c_str(), 0);
+      av_dict_set(&opts, "preset", o.preset.empty() ? "veryfast" : o.preset.c_str(), 0);
       av_dict_set(&opts, "tune", "zerolatency,psnr", 0);
       av_dict_set(&opts, "crf", std::to_string(o.crf < 0 ? 24 : o.crf).c_str(), 0);
       av_dict_set(&opts, "forced-idr", "1", 0);

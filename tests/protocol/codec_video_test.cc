@@ -122,6 +122,19 @@ TEST(VideoCodec, OptionsAreChecked) {
   o = {};
   o.library = static_cast<VideoLibrary>(3);  // AV1: reserved
   EXPECT_EQ(VideoEncoder::Create(o).status().code(), StatusCode::kInvalidArgument);
+  o = {};
+  o.preset = "fastest";  // not an x264 preset: named in the error, not left to libx264
+  Status bad = VideoEncoder::Create(o).status();
+  EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.message().find("'fastest'"), std::string::npos) << bad.message();
+  o.library = VideoLibrary::kVp9;
+  o.preset = "3";  // VP9 cpu-used outside 5..9
+  EXPECT_EQ(VideoEncoder::Create(o).status().code(), StatusCode::kInvalidArgument);
+  o.preset = "8";
+  EXPECT_TRUE(VideoEncoder::Create(o).ok());
+  o = {};
+  o.preset = "ultrafast";
+  EXPECT_TRUE(VideoEncoder::Create(o).ok());
   auto enc = MakeEncoder({});
   ImageRgb8 im(161, 120);
   ImageGray8 mask(161, 120);
