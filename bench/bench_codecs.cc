@@ -126,6 +126,7 @@ struct CodecsOptions {
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
   int video_crf = -1;                       // -1: the encoder's default
   std::string video_preset;                 // "": the library's default
+  std::string video_mask = "blocks";        // V1 mask format: blocks | rows
   std::optional<int> keyframe_interval;     // unset: VideoEncodeOptions' default
   std::optional<int> chroma_shift;          // unset: GeometryEncodeOptions' default
   // C1 options (unset: ColorEncodeOptions' defaults).
@@ -454,6 +455,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       r.o.crf = crf;
       r.label.append(1, '@').append(std::to_string(crf));
       r.o.preset = co.video_preset;
+      r.o.mask_blocks = co.video_mask == "blocks";
       r.o.keyframe_interval = co.keyframe_interval.value_or(r.o.keyframe_interval);
       if (const Status st = r.o.Check(); !st.ok()) {
         spdlog::error("codecs: --video {}: {}", label, st.ToString());
@@ -1116,6 +1118,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
         {"chroma", o.chroma_444 ? "444" : "420"},
         {"crf", std::to_string(o.crf)},
         {"preset", o.preset.empty() ? "default" : o.preset},
+        {"mask", o.mask_blocks ? "blocks" : "rows"},
         {"keyframe_interval", std::to_string(o.keyframe_interval)},
         {"frames", std::to_string(inputs.size())}};
     const double bytes = Mean(fig.bytes);  // keyframes included
@@ -1268,6 +1271,9 @@ BenchFn SetupCodecs(CLI::App& app) {
   app.add_option("--video-crf", co->video_crf, "V1 CRF for runs without @CRF (-1: the encoder's default)")
       ->capture_default_str();
   app.add_option("--video-preset", co->video_preset, "V1 encoder preset (default: the library's)");
+  app.add_option("--video-mask", co->video_mask, "V1 mask format: blocks (coded 16x16 blocks) or rows (zstd rows)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"blocks", "rows"}));
   app.add_option("--keyframe-interval", co->keyframe_interval, "V1 frames between key frames");
   app.add_option("--g2-step-mm", co->g2_step_mm, "G2 displacement step, mm");
   app.add_option("--g2-max-rms-mm", co->g2_max_rms_mm, "G2 keyframe when the two-sided RMS would exceed this, mm");

@@ -45,6 +45,7 @@ inline constexpr uint8_t kColorCodecVideo = 4;
 // Colour-blob flags of V1 (the byte after the codec id).
 inline constexpr uint8_t kVideoFlagKeyframe = 1;  // decodes without earlier blobs
 inline constexpr uint8_t kVideoFlagChroma444 = 2; // the picture is 4:4:4 (else 4:2:0)
+inline constexpr uint8_t kVideoFlagMaskBlocks = 4; // the mask is coded blocks (else zstd rows)
 
 enum class VideoLibrary : uint8_t { kH264 = 1, kVp9 = 2 };
 
@@ -72,6 +73,10 @@ struct VideoEncodeOptions {
   // this many frames (2 s at 30 fps by default). RequestKeyframe() forces one
   // sooner.
   int keyframe_interval = 60;
+  // The mask as coded blocks: 16×16 block types, then the mixed blocks'
+  // pixels through an adaptive binary range coder (about half the bytes of
+  // the zstd row format on the site's masks; PROTOCOL.md §8). false: rows.
+  bool mask_blocks = true;
   Status Check() const;
 };
 
