@@ -76,6 +76,7 @@ struct BroadcastOptions {
   double manifest_poll_ms = 250;  // the manifest's update_interval_ms, as a player polls
   double in_time_ms = 2000;
   std::string keep_dir;
+  std::vector<std::string> site_args;  // extra holoport-server arguments
 };
 
 int64_t SteadyUs() {
@@ -370,6 +371,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   } else {
     site.insert(site.end(), {"--prerender", std::to_string(o.prerender), "-n", "-1"});
   }
+  site.insert(site.end(), o.site_args.begin(), o.site_args.end());
   progress("site: " + o.content + " " + args.workload + " (pre-rendering " + std::to_string(o.prerender) + " frames)");
   const pid_t site_pid = Spawn(site, dir + "/site.log");
   const pid_t packager_pid =
@@ -586,6 +588,8 @@ BenchFn Setup(CLI::App& app) {
   app.add_option("--in-time-ms", o->in_time_ms, "a part is in time within this of its newest frame's capture")
       ->check(CLI::Range(100.0, 60000.0));
   app.add_option("--keep", o->keep_dir, "keep logs, configs and the broadcast in this directory");
+  app.add_option("--site-arg", o->site_args,
+                 "an extra holoport-server argument (repeatable; e.g. --site-arg=--geometry-codec --site-arg=g3)");
   return [o](const BenchArgs& args) { return RunBroadcast(args, *o); };
 }
 
