@@ -40,6 +40,7 @@
 #include "protocol/geometry_codec.h"
 #include "protocol/messages.h"
 #include "protocol/surface_codec.h"
+#include "protocol/video_codec.h"
 #include "server/record/recording_reader.h"
 #include "server/record/recording_writer.h"
 #include "server/record/synthetic_stream.h"
@@ -145,7 +146,7 @@ std::vector<uint8_t> MeshBytes(const Mesh& mesh) {
 }
 
 // Golden files: mesh_K.bin (MeshBytes); color_K_P.bin = u32 w, u32 h, RGBA8
-// (alpha = mask).
+// (alpha = mask). GoldenVideo adds the V1 files.
 Status Golden(const std::string& recording, const std::string& dir, int count) {
   std::filesystem::create_directories(dir);
   HOLO_ASSIGN_OR_RETURN(auto messages, ReadAll(recording));
@@ -183,6 +184,102 @@ Status Golden(const std::string& recording, const std::string& dir, int count) {
     }
   }
   std::printf("golden: %d meshes, %d colour frames in %s\n", meshes, colors, dir.c_str());
+  return OkStatus();
+}
+
+// V1 golden files, for the JS V1 decoder: the first `count` colour frames'
+// pod-0 images and masks (as the recording's C1 decodes them) coded as one
+// V1 stream per mask format: v1_K_blocks.bin and v1_K_rows.bin (the blobs;
+// frame 0 a keyframe, then delta frames) and v1mask_K.bin (u32 w, u32 h,
+// the C++ decoder's mask, 0 or 255 per pixel).
+Status GoldenVideo(const std::string& recording, const std::string& dir, int count) {
+  HOLO_ASSIGN_OR_RETURN(auto messages, ReadAll(recording));
+  std::unique_ptr<protocol::VideoEncoder> enc[2];
+  protocol::VideoDecoder dec[2];
+  for (int f = 0; f < 2; ++f) {
+    protocol::VideoEncodeOptions o;
+    o.mask_blocks = f == 0;
+    HOLO_ASSIGN_OR_RETURN(enc[f], protocol::VideoEncoder::Create(o));
+  }
+  int k = 0;
+  for (const auto& [h, payload] : messages) {
+    if (h.type != protocol::MessageType::kColorFrame || k >= count) continue;
+    HOLO_ASSIGN_OR_RETURN(protocol::ColorFrame cf, DecodeAs<protocol::ColorFrame>(h, payload));
+    if (cf.images.empty()) continue;
+    ImageRgb8 image;
+    ImageGray8 mask;
+    HOLO_RETURN_IF_ERROR(protocol::DecodeColor(cf.images[0].data, &image, &mask));
+    for (int f = 0; f < 2; ++f) {
+      std::vector<uint8_t> blob;
+      HOLO_RETURN_IF_ERROR(enc[f]->Encode(image, mask, &blob));
+      HOLO_RETURN_IF_ERROR(dec[f].Decode(blob));
+      if (!(dec[f].mask() == dec[0].mask())) return Internal("v1 golden: the two mask formats decode differently");
+      const std::string name = "v1_" + std::to_string(k) + (f == 0 ? "_blocks.bin" : "_rows.bin");
+      HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / name, blob.data(), blob.size()));
+    }
+    const ImageGray8& m = dec[0].mask();
+    std::vector<uint8_t> b(8 + size_t(m.width()) * m.height());
+    const auto w = static_cast<uint32_t>(m.width()), hh = static_cast<uint32_t>(m.height());
+    std::memcpy(b.data(), &w, 4);
+    std::memcpy(b.data() + 4, &hh, 4);
+    for (int y = 0; y < m.height(); ++y) std::memcpy(b.data() + 8 + size_t(y) * m.width(), m.row(y), size_t(m.width()));
+    HOLO_RETURN_IF_ERROR(WriteFile(std::filesystem::path(dir) / ("v1mask_" + std::to_string(k) + ".bin"), b.data(), b.size()));
+    ++k;
+  }
+  std::printf("golden v1: %d frames of pod 0 in both mask formats\n", k);
+  return OkStatus();
+}
+
+// The recording with its colour as V1 video (the site's defaults but a
+// keyframe every 30 frames): every ColorFrame's C1 images are decoded and
+// coded again, one V1 stream per pod; a MeshFrame keeps its KEY_FRAME flag
+// only where the pods' pictures are keyframes, as a V1 site sends them, so
+// that segments start where the video decodes.
+Status ToV1(const std::string& recording, const std::string& out) {
+  HOLO_ASSIGN_OR_RETURN(auto reader, record::RecordingReader::Open(recording));
+  record::RecordingWriterOptions wo;
+  wo.source = "holoport-web-fixture to-v1";
+  HOLO_ASSIGN_OR_RETURN(auto writer, record::RecordingWriter::Create(out, wo, true));
+  protocol::VideoEncodeOptions vo;
+  vo.keyframe_interval = 30;
+  vo.crf = 32;
+  std::map<uint16_t, std::unique_ptr<protocol::VideoEncoder>> video;
+  uint32_t meshes = 0;
+  for (uint64_t off = reader->summary().data_begin; off < reader->summary().data_end;) {
+    HOLO_ASSIGN_OR_RETURN(record::RecordedMessage m, reader->ReadAt(off));
+    off = m.next_offset;
+    protocol::Header h = m.header;
+    const std::vector<uint8_t> payload(m.bytes->begin() + 32, m.bytes->end());
+    if (h.type == protocol::MessageType::kMeshFrame) {
+      HOLO_ASSIGN_OR_RETURN(protocol::MeshFrame mf, DecodeAs<protocol::MeshFrame>(h, payload));
+      const bool key = meshes++ % static_cast<uint32_t>(vo.keyframe_interval) == 0;
+      h.flags = static_cast<uint16_t>(key ? (h.flags | protocol::kFlagKeyFrame) : (h.flags & ~protocol::kFlagKeyFrame));
+      HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, protocol::EncodeMessage(h, mf)));
+    } else if (h.type == protocol::MessageType::kColorFrame) {
+      HOLO_ASSIGN_OR_RETURN(protocol::ColorFrame cf, DecodeAs<protocol::ColorFrame>(h, payload));
+      cf.codec = protocol::ColorCodec::kV1;
+      bool key = !cf.images.empty();
+      for (auto& im : cf.images) {
+        ImageRgb8 image;
+        ImageGray8 mask;
+        HOLO_RETURN_IF_ERROR(protocol::DecodeColor(im.data, &image, &mask));
+        auto& enc = video[im.pod_id];
+        if (!enc) {
+          HOLO_ASSIGN_OR_RETURN(enc, protocol::VideoEncoder::Create(vo));
+        }
+        im.data.clear();
+        HOLO_RETURN_IF_ERROR(enc->Encode(image, mask, &im.data));
+        HOLO_ASSIGN_OR_RETURN(protocol::VideoBlobInfo info, protocol::ParseVideoBlob(im.data));
+        key = key && info.keyframe();
+      }
+      h.flags = static_cast<uint16_t>(key ? (h.flags | protocol::kFlagKeyFrame) : (h.flags & ~protocol::kFlagKeyFrame));
+      HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, protocol::EncodeMessage(h, cf)));
+    } else {
+      HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, *m.bytes));
+    }
+  }
+  HOLO_RETURN_IF_ERROR(writer->Close());
+  std::printf("wrote %s: %u mesh frames, colour as V1\n", out.c_str(), meshes);
   return OkStatus();
 }
 
@@ -365,6 +462,7 @@ Status Render(const std::string& recording, int64_t frame, const std::vector<flo
   Mesh mesh;
   std::vector<ImageRgb8> images;
   std::vector<ImageGray8> masks;
+  std::map<uint16_t, protocol::VideoDecoder> video;  // V1: one decoder per pod
   for (const auto& [hd, payload] : messages) {
     if (hd.type == protocol::MessageType::kRig && !have_rig) {
       HOLO_ASSIGN_OR_RETURN(rig, DecodeAs<protocol::RigMessage>(hd, payload));
@@ -376,6 +474,21 @@ Status Render(const std::string& recording, int64_t frame, const std::vector<flo
       have_mesh = true;
     } else if (hd.type == protocol::MessageType::kColorFrame) {
       HOLO_ASSIGN_OR_RETURN(protocol::ColorFrame cf, DecodeAs<protocol::ColorFrame>(hd, payload));
+      if (cf.codec == protocol::ColorCodec::kV1) {
+        // V1: every frame up to the wanted one goes through its pod's decoder.
+        if (cf.frame_index > frame || have_color) continue;
+        for (const auto& im : cf.images) {
+          const Status st = video[im.pod_id].Decode(im.data);
+          if (!st.ok() && cf.frame_index == frame) return st.WithContext("v1 frame " + std::to_string(frame));
+        }
+        if (cf.frame_index != frame) continue;
+        for (const auto& im : cf.images) {
+          images.push_back(video[im.pod_id].image());
+          masks.push_back(video[im.pod_id].mask());
+        }
+        have_color = true;
+        continue;
+      }
       if (cf.frame_index != frame) continue;
       for (const auto& im : cf.images) {
         images.emplace_back();
@@ -444,6 +557,9 @@ int main(int argc, char** argv) {
   gold->add_option("--g3", g3_count, "G3 blobs of the studio's foreground to write, with their decodes")
       ->check(CLI::Range(0, 100));
   gold->add_option("--workload", workload, "studio workload of the G3 blobs");
+  auto* tov1 = app.add_subcommand("to-v1", "write a recording's colour as V1 video (a keyframe every 30 frames)");
+  tov1->add_option("--recording", recording, "recording file to read")->required();
+  tov1->add_option("--out", out, "recording file to write")->required();
   auto* ren = app.add_subcommand("render", "render one frame of a recording with the native renderer, PNG");
   ren->add_option("--recording", recording, "recording file")->required();
   ren->add_option("--frame", frame, "frame index (MeshFrame.frame_index)")->required();
@@ -456,7 +572,7 @@ int main(int argc, char** argv) {
   ren->add_option("--color", mode, "vertex or projective")->check(CLI::IsMember({"vertex", "projective"}));
   CLI11_PARSE(app, argc, argv);
   if (app.get_subcommands().empty()) {
-    spdlog::error("holoport-web-fixture: give a subcommand (record, golden or render); --help lists them");
+    spdlog::error("holoport-web-fixture: give a subcommand (record, golden, to-v1 or render); --help lists them");
     return 2;
   }
   holo::Status s;
@@ -464,7 +580,9 @@ int main(int argc, char** argv) {
   if (*gold) {
     s = holo::Golden(recording, dir, count);
     if (s.ok() && g3_count > 0) s = holo::GoldenSurface(dir, workload, g3_count);
+    if (s.ok()) s = holo::GoldenVideo(recording, dir, count);
   }
+  if (*tov1) s = holo::ToV1(recording, out);
   if (*ren) s = holo::Render(recording, frame, eye, target, hfov, width, height, mode, out);
   if (!s.ok()) {
     spdlog::error("holoport-web-fixture: {}", s.ToString());

@@ -19,7 +19,7 @@ function checkSize(field, w, h, limits) {
   }
 }
 
-function getVarint(buf, st) {
+export function getVarint(buf, st) {
   let r = 0;
   for (let shift = 0; shift <= 28; shift += 7) {
     if (st.p >= buf.length) return -1;
@@ -167,7 +167,7 @@ async function decodeC1(r, W, H, packed, decodeJpeg) {
 }
 
 // Frame_Content_Size of a zstd frame header, or -1 if absent or malformed.
-function zstdContentSize(z) {
+export function zstdContentSize(z) {
   if (z.length < 5 || z[0] !== 0x28 || z[1] !== 0xb5 || z[2] !== 0x2f || z[3] !== 0xfd) return -1;
   const fhd = z[4];
   const fcsFlag = fhd >> 6, single = (fhd >> 5) & 1, didFlag = fhd & 3;

@@ -18,6 +18,7 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { VRButton } from 'three/examples/jsm/webxr/VRButton.js';
 import { decodeGeometry } from './geometry.js';
 import { decodeColor } from './color.js';
+import { VideoColorStream } from './video.js';
 import { MSG, parseRig, parseMeshFrame, parseColorFrame, parseAudioPose, parseRecords } from './protocol.js';
 import { applyNativeProjection } from './view.js';
 import { PersonRenderer } from './person.js';
@@ -133,6 +134,7 @@ window.holoport.benchmark = async (urls) => {
   const geo = [], col = {}, ways = { bitmap: decodeJpegBitmap };
   if (globalThis.ImageDecoder) ways.imagedecoder = decodeJpegWebCodecs;
   for (const w of Object.keys(ways)) col[w] = [];
+  const benchStreams = new Map();
   for (const url of urls) {
     const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
     for (const m of parseRecords(bytes)) {
@@ -142,6 +144,16 @@ window.holoport.benchmark = async (urls) => {
         geo.push(performance.now() - t0);
       } else if (m.header.type === MSG.COLOR) {
         const cf = parseColorFrame(m.payload);
+        if (cf.codec === 4) {  // V1: WebCodecs' VideoDecoder, the pods' streams in order
+          col.video = col.video || [];
+          const t0 = performance.now();
+          const images = await Promise.all(cf.images.map((im) => {
+            if (!benchStreams.has(im.podId)) benchStreams.set(im.podId, new VideoColorStream());
+            return benchStreams.get(im.podId).decode(im.data);
+          }));
+          if (images.every((im) => im !== null)) col.video.push(performance.now() - t0);
+          continue;
+        }
         for (const [w, fn] of Object.entries(ways)) {
           const t0 = performance.now();
           for (const im of cf.images) await decodeColor(im.data, fn);
@@ -153,6 +165,7 @@ window.holoport.benchmark = async (urls) => {
   const med = (a) => (a.length ? [...a].sort((x, y) => x - y)[a.length >> 1] : null);
   const out = { frames: geo.length, geometry_ms_median: med(geo) };
   for (const w of Object.keys(col)) out[`color_ms_median_${w}`] = med(col[w]);
+  for (const st of benchStreams.values()) st.close();
   return out;
 };
 
@@ -168,6 +181,7 @@ let newestShownUs = null;
 const voice = new SpatialVoice();
 window.holoport.voice = voice;
 const colorBusy = { n: 0 };
+const videoStreams = new Map();  // pod id → VideoColorStream (V1 colour)
 
 function nowUnixUs() {
   return (performance.timeOrigin + performance.now()) * 1000;
@@ -261,13 +275,33 @@ async function handle(m) {
       if (cf0.frameIndex !== state.frozenFrame) return;
     }
     const cf = parseColorFrame(m.payload);
-    // V1 video colour (codec 4) is not decoded here yet: say so once and
-    // keep showing the shape, instead of an error for every frame.
-    if (cf.images.length && cf.images[0].data.length && cf.images[0].data[0] === 4) {
-      if (!state.videoColorNoted) {
-        state.videoColorNoted = true;
-        showStatus('warn', 'This broadcast sends its colour as V1 video, which this page cannot decode yet: the person is shown uncoloured. The native viewer (holoport-client --http) shows it in colour.');
+    // V1 video colour (codec 4): every pod's frames go, in order, to its own
+    // WebCodecs decoder (none may be skipped: a delta frame needs the one
+    // before); the picture shows once every pod has one.
+    if (cf.codec === 4) {
+      if (typeof VideoDecoder === 'undefined') {
+        if (!state.videoColorNoted) {
+          state.videoColorNoted = true;
+          showStatus('warn', 'This broadcast sends its colour as V1 video, and this browser has no WebCodecs video decoder: the person is shown uncoloured.');
+        }
+        return;
       }
+      const t0 = performance.now();
+      let images;
+      try {
+        images = await Promise.all(cf.images.map((im) => {
+          if (!videoStreams.has(im.podId)) videoStreams.set(im.podId, new VideoColorStream());
+          return videoStreams.get(im.podId).decode(im.data);
+        }));
+      } catch (err) {
+        showStatus('warn', `A colour frame could not be decoded (${err.message}); waiting for the next key frame.`);
+        return;
+      }
+      // A pod still waits for its key frame, or newer frames are queued.
+      if (!rig || images.some((im) => im === null || im.skipped)) return;
+      state.colorMs.push(performance.now() - t0);
+      person.setPodImages(cf.frameIndex, cf.images.map((im) => im.podId), images);
+      state.colorFrame = person.imagesFrame;
       return;
     }
     // Falling behind: drop colour, never geometry (the still's colour is never dropped).

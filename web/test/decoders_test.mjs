@@ -20,6 +20,7 @@ import { parseRecording, parseRecords, parseMeshFrame, parseColorFrame, parseRig
 import { decodeGeometry } from '../src/geometry.js';
 import { mcCases } from '../src/marching_cubes.js';
 import { decodeColor } from '../src/color.js';
+import { parseVideoBlob, decodeVideoMask, h264CodecString } from '../src/video.js';
 
 const [recordingPath, goldenDir] = process.argv.slice(2);
 if (!recordingPath || !goldenDir) {
@@ -258,6 +259,59 @@ for (let i = 0; i < 200; ++i) {
   }
 }
 console.log(`colour: ${cRefused} truncated prefixes refused; 200 bit flips in the header and mask handled`);
+
+// V1 masks (golden v1_K_blocks|rows.bin, v1mask_K.bin): exactly the C++
+// decoder's mask in both formats; every prefix of a blob and of its mask
+// bytes refused; bit flips in the mask refused or decoded to a whole mask.
+{
+  let v1Checked = 0;
+  const v1Blobs = [];
+  for (const g of golden.filter((f) => f.startsWith('v1_')).sort()) {
+    const k = g.split('_')[1];
+    const want = new Uint8Array(readFileSync(join(goldenDir, `v1mask_${k}.bin`)));
+    const w = new DataView(want.buffer, want.byteOffset).getUint32(0, true), h = new DataView(want.buffer, want.byteOffset).getUint32(4, true);
+    const blob = new Uint8Array(readFileSync(join(goldenDir, g)));
+    const info = parseVideoBlob(blob);
+    check(info.width === w && info.height === h, `${g}: size ${info.width}x${info.height}`);
+    check(info.maskBlocks === g.includes('blocks'), `${g}: mask format flag`);
+    check(info.keyframe === (k === '0'), `${g}: keyframe flag`);
+    if (k === '0') check(/^avc1\.F4[0-9A-F]{4}$/.test(h264CodecString(info.video)), `${g}: codec ${h264CodecString(info.video)}`);
+    const mask = decodeVideoMask(info);
+    let diff = 0;
+    for (let i = 0; i < w * h; ++i) diff += mask[i] !== want[8 + i];
+    check(diff === 0, `${g}: mask differs from the C++ decode in ${diff} pixels`);
+    v1Checked++;
+    v1Blobs.push([g, blob]);
+  }
+  check(v1Checked >= 2, 'golden V1 blobs were found');
+  let v1Refused = 0, v1FlipsOk = 0, v1Prefixes = 0;
+  for (const [g, blob] of v1Blobs.slice(0, 2)) {
+    for (let n = 0; n < blob.length; n += Math.max(1, Math.floor(blob.length / 300))) {
+      v1Prefixes++;
+      if (expectDecodeError(() => decodeVideoMask(parseVideoBlob(blob.slice(0, n))), `${g} prefix ${n}`)) v1Refused++;
+      else check(false, `${g} prefix ${n} of ${blob.length} bytes was accepted`);
+    }
+    const info = parseVideoBlob(blob);
+    // Cut mask bytes inside an otherwise whole blob: the mask decoder itself must notice.
+    for (let cut = 1; cut < info.mask.length; cut += Math.max(1, Math.floor(info.mask.length / 100))) {
+      const m = info.mask.slice(0, info.mask.length - cut);
+      if (!expectDecodeError(() => decodeVideoMask({ ...info, mask: m }), `${g} mask cut ${cut}`)) {
+        check(false, `${g}: mask cut by ${cut} bytes was accepted`);
+      }
+    }
+    for (let i = 0; i < 200; ++i) {
+      const m = info.mask.slice();
+      m[rand(m.length)] ^= 1 << rand(8);
+      let out = null;
+      if (!expectDecodeError(() => { out = decodeVideoMask({ ...info, mask: m }); }, `${g} mask flip ${i}`) && out) {
+        check(out.length === info.width * info.height, `${g} mask flip ${i}: a mask of the wrong size`);
+        v1FlipsOk++;
+      }
+    }
+  }
+  console.log(`v1: ${v1Checked} golden masks exact; ${v1Refused} of ${v1Prefixes} prefixes refused; 400 mask bit flips: ` +
+    `${400 - v1FlipsOk} refused, ${v1FlipsOk} decoded to whole masks`);
+}
 
 // Records: every prefix of the first part-sized run of records is refused or parses whole records.
 const recs = file.subarray(64, 64 + Math.min(file.length - 64, 4096));

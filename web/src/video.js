@@ -1,0 +1,327 @@
+// V1 video colour (PROTOCOL.md §8, colour codec 4) in the browser: the blob
+// parser and the mask decoders are a port of protocol/video_codec.cc (the
+// masks bit-identical, checked against the C++ decoder's golden files); the
+// picture is decoded by the browser's own H.264 decoder through WebCodecs
+// (VideoColorStream, one per pod). Safe on untrusted input: malformed data
+// throws a DecodeError naming the field.
+
+import { decompress as zstdDecompress } from 'fzstd';
+import { Reader, DecodeError, fail } from './bytes.js';
+import { LIMITS, zstdContentSize, getVarint } from './color.js';
+
+const FLAG_KEY = 1, FLAG_444 = 2, FLAG_MASK_BLOCKS = 4;
+
+// The header and the two byte ranges of a V1 blob (views into `blob`).
+export function parseVideoBlob(blob, limits = LIMITS) {
+  const r = new Reader(blob);
+  const codec = r.u8('v1.codec');
+  if (codec !== 4) fail(`v1.codec: ${codec} is not the video codec (4)`);
+  const flags = r.u8('v1.flags');
+  if (flags & ~(FLAG_KEY | FLAG_444 | FLAG_MASK_BLOCKS)) fail(`v1.flags: unknown bits in ${flags}`);
+  const width = r.u16('v1.width'), height = r.u16('v1.height');
+  if (!width || !height || width & 1 || height & 1 || width > limits.maxImageDim || height > limits.maxImageDim ||
+      width * height > limits.maxImagePixels) {
+    fail(`v1.size: ${width}x${height} is not even or exceeds the limits`);
+  }
+  const library = r.u8('v1.library');
+  if (library < 1 || library > 3) fail(`v1.library: unknown video library ${library}`);
+  if (library === 3) fail('v1.library: 3 (AV1) is reserved, not implemented');
+  const frameNumber = r.u32('v1.frame_number');
+  const mask = r.blob32('v1.mask');
+  const video = r.blob32('v1.video');
+  r.expectEnd('v1 blob');
+  if (!video.length) fail('v1.video: empty picture');
+  return {
+    flags, width, height, library, frameNumber, mask, video,
+    keyframe: (flags & FLAG_KEY) !== 0, chroma444: (flags & FLAG_444) !== 0, maskBlocks: (flags & FLAG_MASK_BLOCKS) !== 0,
+  };
+}
+
+// ------------------------------------------------------------ mask blocks
+// PROTOCOL.md §8 "Coded mask blocks": block types, then the mixed blocks'
+// pixels, through an adaptive binary range decoder.
+
+class BitDecoder {
+  constructor(bytes) {
+    this.bytes = bytes;
+    this.pos = 0;
+    this.pastEnd = 0;
+    this.range = 0xffffffff;
+    this.code = 0;
+    for (let i = 0; i < 5; ++i) this.code = ((this.code << 8) | this.next()) >>> 0;
+  }
+  next() {
+    if (this.pos < this.bytes.length) return this.bytes[this.pos++];
+    this.pastEnd++;
+    return 0;
+  }
+  // probs[i]: the probability of a 0, in 1/4096.
+  get(probs, i) {
+    const p = probs[i];
+    const bound = (this.range >>> 12) * p;  // < 2^32: exact in a double
+    let bit;
+    if (this.code < bound) {
+      this.range = bound;
+      probs[i] = p + ((4096 - p) >> 4);
+      bit = 0;
+    } else {
+      this.code -= bound;
+      this.range -= bound;
+      probs[i] = p - (p >> 4);
+      bit = 1;
+    }
+    while (this.range < 0x1000000) {
+      this.range = (this.range * 256) >>> 0;
+      this.code = ((this.code << 8) | this.next()) >>> 0;
+    }
+    return bit;
+  }
+}
+
+function decodeMaskBlocks(data, w, h) {
+  const B = 16, bw = Math.ceil(w / B), bh = Math.ceil(h / B);
+  if (!data.length || data[0] !== 0) fail('v1.mask: coded blocks do not start with a zero byte');
+  const dec = new BitDecoder(data);
+  const types = new Uint8Array(bw * bh);
+  const mixed = new Uint16Array(9).fill(2048), full = new Uint16Array(4).fill(2048);
+  for (let by = 0; by < bh; ++by) {
+    for (let bx = 0; bx < bw; ++bx) {
+      const left = bx > 0 ? types[by * bw + bx - 1] : 0, upper = by > 0 ? types[(by - 1) * bw + bx] : 0;
+      if (dec.get(mixed, left * 3 + upper)) types[by * bw + bx] = 2;
+      else types[by * bw + bx] = dec.get(full, (left === 1 ? 1 : 0) + (upper === 1 ? 2 : 0));
+    }
+  }
+  const mask = new Uint8Array(w * h);
+  for (let y = 0; y < h; ++y) {
+    for (let bx = 0; bx < bw; ++bx) {
+      if (types[Math.floor(y / B) * bw + bx] === 1) mask.fill(255, y * w + bx * B, y * w + Math.min(w, (bx + 1) * B));
+    }
+  }
+  const probs = new Uint16Array(64).fill(2048);
+  const zeros = new Uint8Array(w);
+  for (let y = 0; y < h; ++y) {
+    const row = y * w;
+    const up = y > 0 ? mask.subarray(row - w, row) : zeros;
+    const trow = Math.floor(y / B) * bw;
+    for (let bx = 0; bx < bw; ++bx) {
+      if (types[trow + bx] !== 2) continue;
+      const x0 = bx * B, x1 = Math.min(w, x0 + B);
+      let cur = (x0 >= 1 && mask[row + x0 - 1] ? 1 : 0) | (x0 >= 2 && mask[row + x0 - 2] ? 2 : 0) |
+        (x0 >= 3 && mask[row + x0 - 3] ? 4 : 0);
+      let upc = (x0 + 1 < w && up[x0 + 1] ? 1 : 0) | (up[x0] ? 2 : 0) | (x0 >= 1 && up[x0 - 1] ? 4 : 0);
+      for (let x = x0; x < x1; ++x) {
+        const bit = dec.get(probs, cur | (upc << 3));
+        mask[row + x] = bit ? 255 : 0;
+        cur = ((cur << 1) | bit) & 7;
+        upc = ((upc << 1) | (x + 2 < w && up[x + 2] ? 1 : 0)) & 7;
+      }
+    }
+    if (dec.pastEnd) fail(`v1.mask: coded blocks end early, at row ${y}`);
+  }
+  if (dec.pastEnd) fail('v1.mask: coded blocks end early');
+  if (dec.pos !== data.length) fail(`v1.mask: ${data.length - dec.pos} bytes after the coded blocks`);
+  return mask;
+}
+
+// The zstd row format (PROTOCOL.md §8 "Mask rows", the box = the image).
+function decodeMaskRows(zmask, w, h) {
+  const declared = zstdContentSize(zmask);
+  if (declared < 0 || declared > h * (w + 1) * 3 || declared < h) {
+    fail('v1.mask: zstd frame size is missing or impossible for the image');
+  }
+  let rle;
+  try {
+    rle = zstdDecompress(zmask, new Uint8Array(declared));
+  } catch (e) {
+    fail(`v1.mask: zstd data is corrupt (${e.message})`);
+  }
+  if (rle.length !== declared) fail('v1.mask: zstd data is corrupt');
+  const mask = new Uint8Array(w * h);
+  const st = { p: 0 };
+  let prev = [];
+  for (let y = 0; y < h; ++y) {
+    const head = getVarint(rle, st);
+    if (head < 0) fail(`v1.mask: row ${y} ends early`);
+    const cur = [];
+    if (head === 0) {
+      for (let i = 0; i < prev.length; ++i) {
+        const z = getVarint(rle, st);
+        if (z < 0) fail(`v1.mask: row ${y} ends early`);
+        const t = prev[i] + (z % 2 ? -(z + 1) / 2 : z / 2);
+        if (t < 0 || t >= w || (i > 0 && t <= cur[i - 1])) fail(`v1.mask: row ${y} transition ${i} out of order or outside the row`);
+        cur.push(t);
+      }
+    } else {
+      if (head - 1 > w) fail(`v1.mask: row ${y} has ${head - 1} transitions`);
+      let t = -1;
+      for (let i = 0; i + 1 < head; ++i) {
+        const g = getVarint(rle, st);
+        if (g < 0) fail(`v1.mask: row ${y} ends early`);
+        t = i === 0 ? g : t + g + 1;
+        if (t >= w) fail(`v1.mask: row ${y} transition ${i} outside the row`);
+        cur.push(t);
+      }
+    }
+    for (let i = 0; i < cur.length; i += 2) mask.fill(255, y * w + cur[i], y * w + (i + 1 < cur.length ? cur[i + 1] : w));
+    prev = cur;
+  }
+  if (st.p !== rle.length) fail(`v1.mask: ${rle.length - st.p} bytes after the last row`);
+  return mask;
+}
+
+// The blob's mask: Uint8Array(width × height), 255 foreground, 0 background.
+export function decodeVideoMask(info) {
+  return info.maskBlocks ? decodeMaskBlocks(info.mask, info.width, info.height)
+    : decodeMaskRows(info.mask, info.width, info.height);
+}
+
+// ------------------------------------------------------------ picture
+
+// WebCodecs' codec string from the keyframe's SPS (Annex B): avc1.PPCCLL.
+export function h264CodecString(annexB) {
+  for (let i = 0; i + 6 < annexB.length; ++i) {
+    if (annexB[i] === 0 && annexB[i + 1] === 0 && annexB[i + 2] === 1 && (annexB[i + 3] & 0x1f) === 7) {
+      const hex = (v) => v.toString(16).padStart(2, '0').toUpperCase();
+      return `avc1.${hex(annexB[i + 4])}${hex(annexB[i + 5])}${hex(annexB[i + 6])}`;
+    }
+  }
+  return fail('v1.video: the keyframe has no sequence parameter set');
+}
+
+// One pod's V1 stream, decoded in order by the browser's VideoDecoder.
+// decode(blob) must be called in the stream's order; it hands the picture to
+// the decoder at once (pictures are decoded one after another while the
+// caller waits) and resolves to {width, height, rgba, box} as decodeColor
+// does (alpha = the mask, background 0); to null while the stream waits for
+// a keyframe (joined mid-stream, a gap, or an error); or to {skipped: true}
+// when a newer blob of the stream was handed over before this one's
+// picture came out: it is decoded (the next one needs it) but not read
+// back, so a viewer that falls behind catches up instead of queueing more.
+export class VideoColorStream {
+  constructor() {
+    this.decoder = null;
+    this.config = '';
+    this.synced = false;
+    this.lastFrame = 0;
+    this.waiting = [];  // {ts, resolve, reject} of the pictures handed over, in order
+    this.handed = 0;    // pictures handed to the decoder so far
+  }
+
+  close() {
+    if (this.decoder && this.decoder.state !== 'closed') this.decoder.close();
+    this.decoder = null;
+    this.synced = false;
+    for (const w of this.waiting.splice(0)) w.reject(new Error('stream closed'));
+  }
+
+  decode(blob) {
+    let info, mask;
+    try {
+      info = parseVideoBlob(blob);
+      if (!info.keyframe && (!this.synced || info.frameNumber !== ((this.lastFrame + 1) >>> 0))) {
+        this.synced = false;
+        return Promise.resolve(null);
+      }
+      mask = decodeVideoMask(info);
+      if (info.library !== 1) fail('v1.library: this page decodes H.264 only');
+      if (info.keyframe) this._configure(info);
+    } catch (e) {
+      this.synced = false;
+      return Promise.reject(e);
+    }
+    if (!this.decoder || this.decoder.state !== 'configured') {
+      this.synced = false;
+      return Promise.resolve(null);
+    }
+    // Pictures are matched to their blobs by timestamp (the count of
+    // pictures handed over), not by order: a picture the decoder never
+    // returns must not shift every later one onto the wrong frame.
+    const seq = ++this.handed;
+    const picture = new Promise((resolve, reject) => this.waiting.push({ ts: seq, resolve, reject }));
+    try {
+      this.decoder.decode(new EncodedVideoChunk({ type: info.keyframe ? 'key' : 'delta', timestamp: seq,
+        data: info.video }));
+    } catch (e) {
+      this.waiting.pop();
+      this.synced = false;
+      return Promise.reject(new DecodeError(`v1.video: the browser's decoder refused frame ${info.frameNumber} (${e.message})`));
+    }
+    this.synced = true;
+    this.lastFrame = info.frameNumber;
+    return picture.then(async (frame) => {
+      if (!frame) return { skipped: true };  // the decoder returned no picture for it
+      try {
+        if (seq !== this.handed) return { skipped: true };
+        const W = info.width, H = info.height;
+        return { width: W, height: H, rgba: await frameToRgba(frame, W, H, mask), box: { x: 0, y: 0, w: W, h: H } };
+      } finally {
+        frame.close();
+      }
+    }, (e) => {
+      throw new DecodeError(`v1.video: the browser's decoder failed on frame ${info.frameNumber} (${e.message || e})`);
+    });
+  }
+
+  _configure(info) {
+    const codec = h264CodecString(info.video);
+    const config = `${codec} ${info.width}x${info.height}`;
+    if (this.decoder && this.decoder.state === 'configured' && config === this.config) return;
+    this.close();
+    this.decoder = new VideoDecoder({
+      output: (frame) => {
+        const i = this.waiting.findIndex((w) => w.ts === frame.timestamp);
+        if (i < 0) {
+          frame.close();
+          return;
+        }
+        for (const w of this.waiting.splice(0, i)) w.resolve(null);  // handed before it, no picture
+        this.waiting.shift().resolve(frame);
+      },
+      error: (e) => {
+        this.synced = false;
+        for (const w of this.waiting.splice(0)) w.reject(e);
+      },
+    });
+    this.decoder.configure({ codec, codedWidth: info.width, codedHeight: info.height, optimizeForLatency: true });
+    this.config = config;
+  }
+}
+
+const clamp8 = (v) => (v < 0 ? 0 : v > 255 ? 255 : v);
+
+// The decoded planes to RGBA with the C++ decoder's full-range BT.601
+// arithmetic (protocol/video_codec.cc, YccToRgb), so that the page shows
+// the colours the native viewer shows; background pixels 0, alpha = mask.
+// Frames in another layout (a GPU frame) go through a canvas instead.
+async function frameToRgba(frame, W, H, mask) {
+  const rgba = new Uint8Array(W * H * 4);
+  if (frame.format === 'I444' || frame.format === 'I420') {
+    const buf = new Uint8Array(frame.allocationSize());
+    const [ly, lu, lv] = await frame.copyTo(buf);
+    const s = frame.format === 'I420' ? 1 : 0;
+    for (let y = 0; y < H; ++y) {
+      const py = ly.offset + y * ly.stride, pu = lu.offset + (y >> s) * lu.stride, pv = lv.offset + (y >> s) * lv.stride;
+      for (let x = 0, o = y * W * 4; x < W; ++x, o += 4) {
+        if (!mask[y * W + x]) continue;
+        const Y = buf[py + x], cb = buf[pu + (x >> s)] - 128, cr = buf[pv + (x >> s)] - 128;
+        rgba[o] = clamp8(Y + ((91881 * cr + 32768) >> 16));
+        rgba[o + 1] = clamp8(Y - ((22554 * cb + 46802 * cr - 32768) >> 16));
+        rgba[o + 2] = clamp8(Y + ((116130 * cb + 32768) >> 16));
+        rgba[o + 3] = 255;
+      }
+    }
+    return rgba;
+  }
+  const canvas = new OffscreenCanvas(W, H);
+  const g = canvas.getContext('2d', { willReadFrequently: true });
+  g.drawImage(frame, 0, 0, W, H);
+  const px = g.getImageData(0, 0, W, H, { colorSpace: 'srgb' }).data;
+  for (let i = 0; i < W * H; ++i) {
+    if (!mask[i]) continue;
+    rgba[4 * i] = px[4 * i];
+    rgba[4 * i + 1] = px[4 * i + 1];
+    rgba[4 * i + 2] = px[4 * i + 2];
+    rgba[4 * i + 3] = 255;
+  }
+  return rgba;
+}
