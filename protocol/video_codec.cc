@@ -348,14 +348,9 @@ Status DecodeMaskBlocks(std::span<const uint8_t> data, int w, int h, std::vector
   if (!dec.first_byte_zero()) return DataLoss("v1.mask: coded blocks do not start with a zero byte");
   types->assign(size_t(bw) * bh, 0);
   CodeBlockTypes(bw, bh, types, [&](uint16_t* p, int) { return dec.Get(p); });
+  // Row by row, blocks left to right: a full block's pixels are set before
+  // the mixed block to its right reads them as context.
   mask->Resize(w, h, 0);
-  for (int y = 0; y < h; ++y) {
-    uint8_t* row = mask->row(y);
-    const uint8_t* brow = types->data() + size_t(y / kMaskBlock) * bw;
-    for (int bx = 0; bx < bw; ++bx) {
-      if (brow[bx] == 1) std::memset(row + bx * kMaskBlock, 255, size_t(std::min(w, (bx + 1) * kMaskBlock) - bx * kMaskBlock));
-    }
-  }
   std::vector<uint16_t> probs(kMaskPixelContexts, kMaskProbInit);
   const std::vector<uint8_t> zeros(size_t(w), 0);
   for (int y = 0; y < h; ++y) {
@@ -363,16 +358,19 @@ Status DecodeMaskBlocks(std::span<const uint8_t> data, int w, int h, std::vector
     const uint8_t* up = y > 0 ? mask->row(y - 1) : zeros.data();
     const uint8_t* brow = types->data() + size_t(y / kMaskBlock) * bw;
     for (int bx = 0; bx < bw; ++bx) {
-      if (brow[bx] != 2) continue;
-      CodeSpan(row, up, bx * kMaskBlock, std::min(w, (bx + 1) * kMaskBlock), w, probs.data(), [&](uint16_t* p, int x) {
-        const int bit = dec.Get(p);
-        row[x] = bit ? 255 : 0;
-        return bit;
-      });
+      const int x0 = bx * kMaskBlock, x1 = std::min(w, x0 + kMaskBlock);
+      if (brow[bx] == 1) {
+        std::memset(row + x0, 255, size_t(x1 - x0));
+      } else if (brow[bx] == 2) {
+        CodeSpan(row, up, x0, x1, w, probs.data(), [&](uint16_t* p, int x) {
+          const int bit = dec.Get(p);
+          row[x] = bit ? 255 : 0;
+          return bit;
+        });
+      }
     }
     if (dec.overrun()) return DataLoss("v1.mask: coded blocks end early, at row " + Str(y));
   }
-  if (dec.overrun()) return DataLoss("v1.mask: coded blocks end early");
   if (dec.unread() > 0) return DataLoss("v1.mask: " + Str(dec.unread()) + " bytes after the coded blocks");
   return OkStatus();
 }

@@ -80,17 +80,7 @@ async function decodeC1(r, W, H, packed, decodeJpeg) {
   const bx = info.mcuW, by = info.mcuH;
   const cols = Math.ceil(bw / bx), rows = Math.ceil(bh / by);
   const slot = new Int32Array(cols * rows);
-  // zstd frame with its content size declared (checked against the box).
-  const declared = zstdContentSize(zmask);
-  const bound = bh * (bw + 1) * 3;
-  if (declared < 0 || declared > bound || declared < bh) fail('c1.mask: zstd frame size is missing or impossible for the box');
-  let rle;
-  try {
-    rle = zstdDecompress(zmask, new Uint8Array(declared));
-  } catch (e) {
-    fail(`c1.mask: zstd data is corrupt (${e.message})`);
-  }
-  if (rle.length !== declared) fail('c1.mask: zstd data is corrupt');
+  const rle = unzstdRows(zmask, bw, bh, 'c1.mask', 'box');
   const st = { p: 0 };
   const transitions = [];
   const rowAt = new Uint32Array(bh + 1);
@@ -166,8 +156,25 @@ async function decodeC1(r, W, H, packed, decodeJpeg) {
   return { width: W, height: H, rgba, box: { x: x0, y: y0, w: bw, h: bh } };
 }
 
+// The mask rows of a w × h area from a zstd frame that declares its content
+// size (checked against the area before anything is allocated).
+export function unzstdRows(zmask, w, h, field, area) {
+  const declared = zstdContentSize(zmask);
+  if (declared < 0 || declared > h * (w + 1) * 3 || declared < h) {
+    fail(`${field}: zstd frame size is missing or impossible for the ${area}`);
+  }
+  let rle;
+  try {
+    rle = zstdDecompress(zmask, new Uint8Array(declared));
+  } catch (e) {
+    fail(`${field}: zstd data is corrupt (${e.message})`);
+  }
+  if (rle.length !== declared) fail(`${field}: zstd data is corrupt`);
+  return rle;
+}
+
 // Frame_Content_Size of a zstd frame header, or -1 if absent or malformed.
-export function zstdContentSize(z) {
+function zstdContentSize(z) {
   if (z.length < 5 || z[0] !== 0x28 || z[1] !== 0xb5 || z[2] !== 0x2f || z[3] !== 0xfd) return -1;
   const fhd = z[4];
   const fcsFlag = fhd >> 6, single = (fhd >> 5) & 1, didFlag = fhd & 3;

@@ -126,6 +126,15 @@ const decodeJpegWebCodecs = async (bytes) => {
   return out;
 };
 
+// A V1 ColorFrame's pictures, each pod's through its stream in `streams`
+// (pod id → VideoColorStream, made on first use).
+function decodeVideoFrame(streams, cf) {
+  return Promise.all(cf.images.map((im) => {
+    if (!streams.has(im.podId)) streams.set(im.podId, new VideoColorStream());
+    return streams.get(im.podId).decode(im.data);
+  }));
+}
+
 // Decode timing in this browser with rendering stopped: every MeshFrame and
 // ColorFrame of the given parts (URLs), medians per frame.
 window.holoport.benchmark = async (urls) => {
@@ -147,10 +156,7 @@ window.holoport.benchmark = async (urls) => {
         if (cf.codec === 4) {  // V1: WebCodecs' VideoDecoder, the pods' streams in order
           col.video = col.video || [];
           const t0 = performance.now();
-          const images = await Promise.all(cf.images.map((im) => {
-            if (!benchStreams.has(im.podId)) benchStreams.set(im.podId, new VideoColorStream());
-            return benchStreams.get(im.podId).decode(im.data);
-          }));
+          const images = await decodeVideoFrame(benchStreams, cf);
           if (images.every((im) => im !== null)) col.video.push(performance.now() - t0);
           continue;
         }
@@ -289,10 +295,7 @@ async function handle(m) {
       const t0 = performance.now();
       let images;
       try {
-        images = await Promise.all(cf.images.map((im) => {
-          if (!videoStreams.has(im.podId)) videoStreams.set(im.podId, new VideoColorStream());
-          return videoStreams.get(im.podId).decode(im.data);
-        }));
+        images = await decodeVideoFrame(videoStreams, cf);
       } catch (err) {
         showStatus('warn', `A colour frame could not be decoded (${err.message}); waiting for the next key frame.`);
         return;

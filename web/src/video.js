@@ -5,9 +5,8 @@
 // (VideoColorStream, one per pod). Safe on untrusted input: malformed data
 // throws a DecodeError naming the field.
 
-import { decompress as zstdDecompress } from 'fzstd';
 import { Reader, DecodeError, fail } from './bytes.js';
-import { LIMITS, zstdContentSize, getVarint } from './color.js';
+import { LIMITS, unzstdRows, getVarint } from './color.js';
 
 const FLAG_KEY = 1, FLAG_444 = 2, FLAG_MASK_BLOCKS = 4;
 
@@ -91,12 +90,9 @@ function decodeMaskBlocks(data, w, h) {
       else types[by * bw + bx] = dec.get(full, (left === 1 ? 1 : 0) + (upper === 1 ? 2 : 0));
     }
   }
+  // Row by row, blocks left to right: a full block's pixels are set before
+  // the mixed block to its right reads them as context.
   const mask = new Uint8Array(w * h);
-  for (let y = 0; y < h; ++y) {
-    for (let bx = 0; bx < bw; ++bx) {
-      if (types[Math.floor(y / B) * bw + bx] === 1) mask.fill(255, y * w + bx * B, y * w + Math.min(w, (bx + 1) * B));
-    }
-  }
   const probs = new Uint16Array(64).fill(2048);
   const zeros = new Uint8Array(w);
   for (let y = 0; y < h; ++y) {
@@ -104,8 +100,12 @@ function decodeMaskBlocks(data, w, h) {
     const up = y > 0 ? mask.subarray(row - w, row) : zeros;
     const trow = Math.floor(y / B) * bw;
     for (let bx = 0; bx < bw; ++bx) {
-      if (types[trow + bx] !== 2) continue;
       const x0 = bx * B, x1 = Math.min(w, x0 + B);
+      if (types[trow + bx] === 1) {
+        mask.fill(255, row + x0, row + x1);
+        continue;
+      }
+      if (types[trow + bx] !== 2) continue;
       let cur = (x0 >= 1 && mask[row + x0 - 1] ? 1 : 0) | (x0 >= 2 && mask[row + x0 - 2] ? 2 : 0) |
         (x0 >= 3 && mask[row + x0 - 3] ? 4 : 0);
       let upc = (x0 + 1 < w && up[x0 + 1] ? 1 : 0) | (up[x0] ? 2 : 0) | (x0 >= 1 && up[x0 - 1] ? 4 : 0);
@@ -118,24 +118,13 @@ function decodeMaskBlocks(data, w, h) {
     }
     if (dec.pastEnd) fail(`v1.mask: coded blocks end early, at row ${y}`);
   }
-  if (dec.pastEnd) fail('v1.mask: coded blocks end early');
   if (dec.pos !== data.length) fail(`v1.mask: ${data.length - dec.pos} bytes after the coded blocks`);
   return mask;
 }
 
 // The zstd row format (PROTOCOL.md §8 "Mask rows", the box = the image).
 function decodeMaskRows(zmask, w, h) {
-  const declared = zstdContentSize(zmask);
-  if (declared < 0 || declared > h * (w + 1) * 3 || declared < h) {
-    fail('v1.mask: zstd frame size is missing or impossible for the image');
-  }
-  let rle;
-  try {
-    rle = zstdDecompress(zmask, new Uint8Array(declared));
-  } catch (e) {
-    fail(`v1.mask: zstd data is corrupt (${e.message})`);
-  }
-  if (rle.length !== declared) fail('v1.mask: zstd data is corrupt');
+  const rle = unzstdRows(zmask, w, h, 'v1.mask', 'image');
   const mask = new Uint8Array(w * h);
   const st = { p: 0 };
   let prev = [];
