@@ -127,6 +127,7 @@ struct CodecsOptions {
   int video_crf = -1;                       // -1: the encoder's default
   std::string video_preset;                 // "": the library's default
   std::string video_mask = "blocks";        // V1 mask format: blocks | rows
+  std::string video_window = "on";          // V1 picture: a window around the foreground (on) or the whole image
   std::optional<int> keyframe_interval;     // unset: VideoEncodeOptions' default
   std::optional<int> chroma_shift;          // unset: GeometryEncodeOptions' default
   // C1 options (unset: ColorEncodeOptions' defaults).
@@ -456,6 +457,7 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       r.label.append(1, '@').append(std::to_string(crf));
       r.o.preset = co.video_preset;
       r.o.mask_blocks = co.video_mask == "blocks";
+      r.o.window = co.video_window == "on";
       r.o.keyframe_interval = co.keyframe_interval.value_or(r.o.keyframe_interval);
       if (const Status st = r.o.Check(); !st.ok()) {
         spdlog::error("codecs: --video {}: {}", label, st.ToString());
@@ -1057,7 +1059,8 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
   std::map<std::string, double> video_bytes_of, video_cpu_of;
   for (const VideoRun& run : (wanted("video") ? video_runs : std::vector<VideoRun>{})) {
     Figures fig;
-    std::vector<double> key_bytes, delta_bytes, mask_bytes;
+    std::vector<double> key_bytes, delta_bytes, mask_bytes, window_fraction;
+    double window_resizes = 0;
     const size_t npods = inputs.empty() ? 0 : inputs[0].pods.size();
     for (int rep = 0; rep < args.repeats; ++rep) {
       std::vector<std::unique_ptr<protocol::VideoEncoder>> encoders;
@@ -1100,6 +1103,8 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
             if (info.ok()) {
               (info->keyframe() ? key_bytes : delta_bytes).push_back(static_cast<double>(blob.size()));
               mask_bytes.push_back(static_cast<double>(info->mask_bytes));
+              window_fraction.push_back(double(info->window.w) * info->window.h /
+                                        (double(info->width) * info->height));
             }
           }
         }
@@ -1110,9 +1115,13 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
         fig.dec_cpu.push_back(dec_cpu);
         if (rep == 0) fig.a.push_back(psnr);
       }
+      if (rep == 0) {
+        for (const auto& e : encoders) window_resizes += static_cast<double>(e->window_resizes());
+      }
     }
     const protocol::VideoEncodeOptions& o = run.o;
     std::map<std::string, std::string> extra{
+        {"window", o.window ? "on" : "off"},
         {"pods", std::to_string(npods)},
         {"library", protocol::VideoLibraryName(o.library)},
         {"chroma", o.chroma_444 ? "444" : "420"},
@@ -1128,6 +1137,8 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("video", "keyframe_bytes_per_pod", Mean(key_bytes), "B", extra);
     emit("video", "delta_bytes_per_pod", Mean(delta_bytes), "B", extra);
     emit("video", "mask_bytes_per_pod", Mean(mask_bytes), "B", extra);
+    emit("video", "picture_area_fraction", Mean(window_fraction), "1", extra);
+    emit("video", "window_resizes", window_resizes, "1", extra);
     emit_times("video", fig, extra);
     emit("video", "encode_cpu_ms_mean", Mean(fig.enc_cpu), "ms", extra);
     emit("video", "decode_cpu_ms_mean", Mean(fig.dec_cpu), "ms", extra);
@@ -1274,6 +1285,10 @@ BenchFn SetupCodecs(CLI::App& app) {
   app.add_option("--video-mask", co->video_mask, "V1 mask format: blocks (coded 16x16 blocks) or rows (zstd rows)")
       ->capture_default_str()
       ->check(CLI::IsMember({"blocks", "rows"}));
+  app.add_option("--video-window", co->video_window,
+                 "V1 picture: on = a window around the foreground, off = the whole pod image")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}));
   app.add_option("--keyframe-interval", co->keyframe_interval, "V1 frames between key frames");
   app.add_option("--g2-step-mm", co->g2_step_mm, "G2 displacement step, mm");
   app.add_option("--g2-max-rms-mm", co->g2_max_rms_mm, "G2 keyframe when the two-sided RMS would exceed this, mm");

@@ -20,6 +20,13 @@ int FuzzVideoDecoder(const uint8_t* data, size_t size) {
     HOLO_CHECK(dec.image().height() == static_cast<int>(info->height));
     HOLO_CHECK(dec.mask().width() == dec.image().width() && dec.mask().height() == dec.image().height());
     HOLO_CHECK(dec.synced());
+    // Every foreground pixel lies in the picture's window.
+    const VideoWindow& win = info->window;
+    for (int y = 0; y < dec.mask().height(); ++y)
+      for (int x = 0; x < dec.mask().width(); ++x) {
+        const bool inside = x >= win.x && x < win.x + win.w && y >= win.y && y < win.y + win.h;
+        HOLO_CHECK_MSG(inside || dec.mask().at(x, y) == 0, "foreground outside the window was accepted");
+      }
     ++decoded;
   };
   VideoDecoder fresh;

@@ -402,8 +402,11 @@ constexpr uint8_t kFlat = 128;
 // Writes `image` as YCbCr 4:4:4 into three planes (`stride` bytes per row),
 // filling the background: flat grey in blocks without foreground, the
 // foreground continued along rows, then columns, in blocks with some.
-void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, uint8_t* const planes[3], const int strides[3]) {
-  const int w = image.width(), h = image.height();
+// Only the window `win` of the image is written (plane pixel (0, 0) is image
+// pixel (win.x, win.y)); its 16×16 blocks start at the window's corner.
+void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, const VideoWindow& win, uint8_t* const planes[3],
+                    const int strides[3]) {
+  const int w = win.w, h = win.h;
   for (int by = 0; by < h; by += kBlock) {
     const int bh = std::min(kBlock, h - by);
     for (int bx = 0; bx < w; bx += kBlock) {
@@ -413,7 +416,7 @@ void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, uint8_t* con
         fg = bw * bh;
       } else {
         for (int y = by; y < by + bh; ++y) {
-          const uint8_t* m = mask.row(y) + bx;
+          const uint8_t* m = mask.row(win.y + y) + win.x + bx;
           for (int x = 0; x < bw; ++x) fg += m[x] != 0;
         }
       }
@@ -425,8 +428,8 @@ void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, uint8_t* con
       }
       bool row_has[kBlock] = {};
       for (int y = by; y < by + bh; ++y) {
-        const uint8_t* src = image.row(y) + size_t(bx) * 3;
-        const uint8_t* m = mask.empty() ? nullptr : mask.row(y) + bx;
+        const uint8_t* src = image.row(win.y + y) + size_t(win.x + bx) * 3;
+        const uint8_t* m = mask.empty() ? nullptr : mask.row(win.y + y) + win.x + bx;
         uint8_t* py = planes[0] + size_t(y) * strides[0] + bx;
         uint8_t* pu = planes[1] + size_t(y) * strides[1] + bx;
         uint8_t* pv = planes[2] + size_t(y) * strides[2] + bx;
@@ -510,7 +513,6 @@ using CodecCtxPtr = std::unique_ptr<AVCodecContext, CodecCtxDeleter>;
 using FramePtr = std::unique_ptr<AVFrame, FrameDeleter>;
 using PacketPtr = std::unique_ptr<AVPacket, PacketDeleter>;
 
-constexpr size_t kHeaderBytes = 6 + 1 + 4;
 
 }  // namespace
 
@@ -554,7 +556,8 @@ struct VideoEncoder::Impl {
   CodecCtxPtr ctx;
   FramePtr frame;
   PacketPtr packet;
-  int width = 0, height = 0;
+  int width = 0, height = 0;  // the stream's images
+  int pic_w = 0, pic_h = 0;   // the open library's pictures (the window's size)
   // 4:2:0: the full-resolution chroma planes before subsampling.
   std::vector<uint8_t> cb, cr;
   std::vector<uint8_t> rle, zmask;
@@ -617,6 +620,68 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
 
 }  // namespace
 
+// ------------------------------------------------------------ window
+// How the encoder picks the picture's window (PROTOCOL.md §8 leaves it to
+// the encoder; the decoder only checks that the mask lies inside).
+
+namespace {
+
+constexpr int kWindowStep = 16;  // the window moves in block steps, so its blocks stay the image's blocks
+
+int AlignDown(int v) { return v / kWindowStep * kWindowStep; }
+int AlignUp(int v) { return (v + kWindowStep - 1) / kWindowStep * kWindowStep; }
+
+// The 16×16 blocks of the image that hold foreground, as one rectangle
+// (clamped to the image); w = 0 when there is no foreground.
+VideoWindow ForegroundBlocks(const ImageGray8& mask, int w, int h) {
+  if (mask.empty()) return {0, 0, w, h};
+  int x0 = w, x1 = -1, y0 = -1, y1 = -1;
+  for (int y = 0; y < h; ++y) {
+    const uint8_t* m = mask.row(y);
+    int a = 0;
+    while (a < w && m[a] == 0) ++a;
+    if (a == w) continue;
+    int b = w - 1;
+    while (m[b] == 0) --b;
+    x0 = std::min(x0, a);
+    x1 = std::max(x1, b);
+    if (y0 < 0) y0 = y;
+    y1 = y;
+  }
+  if (y0 < 0) return {};
+  VideoWindow r;
+  r.x = AlignDown(x0);
+  r.y = AlignDown(y0);
+  r.w = std::min(AlignUp(x1 + 1), w) - r.x;
+  r.h = std::min(AlignUp(y1 + 1), h) - r.y;
+  return r;
+}
+
+// A window size for `need` with room to spare: half its size more, at least
+// two blocks, on each axis (at most the image). On the fused S8-QVGA
+// sequence a quarter more made 6 keyframes for growth in 60 frames of 8 pods
+// (an arm swung out), half 4, twice 0 at 1.6x the picture area; the flat
+// grey of the room costs few bytes but encoder time (docs/codecs.md).
+int RoomyLength(int need, int image) { return std::min(image, AlignUp(need + std::max(2 * kWindowStep, need / 2))); }
+
+// The start of a window of length `len` (≥ need_len) on one axis that holds
+// [need_pos, need_pos + need_len): centred on it when `centre`, else moved
+// from `cur` as little as possible; on the block grid where it can be.
+int PlaceAxis(int cur, int len, int need_pos, int need_len, int image, bool centre) {
+  int x = cur;
+  if (centre) {
+    x = AlignDown(need_pos + need_len / 2 - len / 2);
+    if (x + len < need_pos + need_len) x = AlignUp(need_pos + need_len - len);
+  } else if (need_pos < cur) {
+    x = need_pos;
+  } else if (need_pos + need_len > cur + len) {
+    x = AlignUp(need_pos + need_len - len);
+  }
+  return std::clamp(x, 0, image - len);
+}
+
+}  // namespace
+
 Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std::vector<uint8_t>* out) {
   const int w = image.width(), h = image.height();
   if (w <= 0 || h <= 0 || w > 8192 || h > 8192 || (w & 1) || (h & 1)) {
@@ -627,45 +692,78 @@ Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std:
                            Str(h));
   }
   Impl& s = *impl_;
-  if (s.ctx && (w != s.width || h != s.height)) {
+  if (s.width != 0 && (w != s.width || h != s.height)) {
     return InvalidArgument("video: the stream's images are " + Str(s.width) + "x" + Str(s.height) + ", got " + Str(w) +
                            "x" + Str(h));
   }
+  // The window: kept while the foreground stays inside, moved when it fits
+  // elsewhere, chosen anew (size and place) at a keyframe, and resized with
+  // a keyframe when the foreground outgrows it.
+  VideoWindow win{0, 0, w, h};
+  if (options_.window) {
+    const VideoWindow need = ForegroundBlocks(mask, w, h);
+    const bool key_due = !s.ctx || keyframe_requested_ || since_keyframe_ >= options_.keyframe_interval;
+    win = s.ctx ? window_ : VideoWindow{0, 0, std::min(w, kWindowStep), std::min(h, kWindowStep)};
+    if (need.w > 0) {
+      const bool fits = need.w <= win.w && need.h <= win.h;
+      const int roomy_w = RoomyLength(need.w, w), roomy_h = RoomyLength(need.h, h);
+      // At a keyframe the size may change for free: grow to fit, or shrink
+      // when a roomy window would be much smaller (less than 60 %).
+      const bool resize = !fits || (key_due && int64_t{roomy_w} * roomy_h * 10 < int64_t{win.w} * win.h * 6);
+      if (resize && !key_due) {
+        // Between keyframes the window only grows: a foreground that grew on
+        // one axis keeps the room it had on the other.
+        ++window_resizes_;
+        win.w = std::max(win.w, roomy_w);
+        win.h = std::max(win.h, roomy_h);
+      } else if (resize) {
+        win.w = roomy_w;
+        win.h = roomy_h;
+      }
+      win.x = PlaceAxis(win.x, win.w, need.x, need.w, w, key_due || resize);
+      win.y = PlaceAxis(win.y, win.h, need.y, need.h, h, key_due || resize);
+    }
+  }
+  if (s.ctx && (win.w != s.pic_w || win.h != s.pic_h)) s.ctx.reset();
   if (!s.ctx) {
-    HOLO_RETURN_IF_ERROR(OpenEncoder(options_, w, h, &s.ctx));
+    HOLO_RETURN_IF_ERROR(OpenEncoder(options_, win.w, win.h, &s.ctx));
     s.width = w;
     s.height = h;
+    s.pic_w = win.w;
+    s.pic_h = win.h;
     s.frame.reset(av_frame_alloc());
     s.packet.reset(av_packet_alloc());
     if (!s.frame || !s.packet) return Internal("video: cannot allocate a frame");
     s.frame->format = s.ctx->pix_fmt;
-    s.frame->width = w;
-    s.frame->height = h;
+    s.frame->width = win.w;
+    s.frame->height = win.h;
     s.frame->color_range = AVCOL_RANGE_JPEG;
     if (av_frame_get_buffer(s.frame.get(), 0) < 0) return Internal("video: cannot allocate frame planes");
     since_keyframe_ = 0;
     keyframe_requested_ = true;
   }
+  window_ = win;
   AVFrame* f = s.frame.get();
   if (av_frame_make_writable(f) < 0) return Internal("video: cannot make the frame writable");
   if (options_.chroma_444) {
     uint8_t* planes[3] = {f->data[0], f->data[1], f->data[2]};
     const int strides[3] = {f->linesize[0], f->linesize[1], f->linesize[2]};
-    ConvertAndFill(image, mask, planes, strides);
+    ConvertAndFill(image, mask, win, planes, strides);
   } else {
-    s.cb.resize(size_t(w) * h);
-    s.cr.resize(size_t(w) * h);
+    const int pw = win.w, ph = win.h;
+    s.cb.resize(size_t(pw) * ph);
+    s.cr.resize(size_t(pw) * ph);
     uint8_t* planes[3] = {f->data[0], s.cb.data(), s.cr.data()};
-    const int strides[3] = {f->linesize[0], w, w};
-    ConvertAndFill(image, mask, planes, strides);
-    for (int y = 0; y < h / 2; ++y) {
-      const uint8_t* a = s.cb.data() + size_t(2 * y) * w;
-      const uint8_t* b = s.cr.data() + size_t(2 * y) * w;
+    const int strides[3] = {f->linesize[0], pw, pw};
+    ConvertAndFill(image, mask, win, planes, strides);
+    for (int y = 0; y < ph / 2; ++y) {
+      const uint8_t* a = s.cb.data() + size_t(2 * y) * pw;
+      const uint8_t* b = s.cr.data() + size_t(2 * y) * pw;
       uint8_t* u = f->data[1] + size_t(y) * f->linesize[1];
       uint8_t* v = f->data[2] + size_t(y) * f->linesize[2];
-      for (int x = 0; x < w / 2; ++x) {
-        u[x] = static_cast<uint8_t>((a[2 * x] + a[2 * x + 1] + a[w + 2 * x] + a[w + 2 * x + 1] + 2) >> 2);
-        v[x] = static_cast<uint8_t>((b[2 * x] + b[2 * x + 1] + b[w + 2 * x] + b[w + 2 * x + 1] + 2) >> 2);
+      for (int x = 0; x < pw / 2; ++x) {
+        u[x] = static_cast<uint8_t>((a[2 * x] + a[2 * x + 1] + a[pw + 2 * x] + a[pw + 2 * x + 1] + 2) >> 2);
+        v[x] = static_cast<uint8_t>((b[2 * x] + b[2 * x + 1] + b[pw + 2 * x] + b[pw + 2 * x + 1] + 2) >> 2);
       }
     }
   }
@@ -694,11 +792,18 @@ Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std:
   ByteWriter wr(out);
   wr.U8(kColorCodecVideo);
   wr.U8(static_cast<uint8_t>((key ? kVideoFlagKeyframe : 0) | (options_.chroma_444 ? kVideoFlagChroma444 : 0) |
-                             (options_.mask_blocks ? kVideoFlagMaskBlocks : 0)));
+                             (options_.mask_blocks ? kVideoFlagMaskBlocks : 0) |
+                             (options_.window ? kVideoFlagWindow : 0)));
   wr.U16(static_cast<uint16_t>(w));
   wr.U16(static_cast<uint16_t>(h));
   wr.U8(static_cast<uint8_t>(options_.library));
   wr.U32(frame_number_);
+  if (options_.window) {
+    wr.U16(static_cast<uint16_t>(win.x));
+    wr.U16(static_cast<uint16_t>(win.y));
+    wr.U16(static_cast<uint16_t>(win.w));
+    wr.U16(static_cast<uint16_t>(win.h));
+  }
   wr.Blob32(s.zmask);
   wr.Blob32(std::span<const uint8_t>(s.packet->data, static_cast<size_t>(s.packet->size)));
   av_packet_unref(s.packet.get());
@@ -723,7 +828,7 @@ StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limi
   HOLO_RETURN_IF_ERROR(r.U8("v1.codec", &codec));
   if (codec != kColorCodecVideo) return DataLoss("v1.codec: " + Str(codec) + " is not the video codec (4)");
   HOLO_RETURN_IF_ERROR(r.U8("v1.flags", &info.flags));
-  if (info.flags & ~(kVideoFlagKeyframe | kVideoFlagChroma444 | kVideoFlagMaskBlocks)) {
+  if (info.flags & ~(kVideoFlagKeyframe | kVideoFlagChroma444 | kVideoFlagMaskBlocks | kVideoFlagWindow)) {
     return DataLoss("v1.flags: unknown bits in " + Str(info.flags));
   }
   HOLO_RETURN_IF_ERROR(r.U16("v1.width", &w));
@@ -739,8 +844,23 @@ StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limi
   if (lib < 1 || lib > 3) return UnsupportedVersion("v1.library: unknown video library " + Str(lib));
   info.library = static_cast<VideoLibrary>(lib);
   HOLO_RETURN_IF_ERROR(r.U32("v1.frame_number", &info.frame_number));
+  info.window = VideoWindow{0, 0, w, h};
+  if (info.flags & kVideoFlagWindow) {
+    uint16_t x = 0, y = 0, ww = 0, wh = 0;
+    HOLO_RETURN_IF_ERROR(r.U16("v1.window_x", &x));
+    HOLO_RETURN_IF_ERROR(r.U16("v1.window_y", &y));
+    HOLO_RETURN_IF_ERROR(r.U16("v1.window_width", &ww));
+    HOLO_RETURN_IF_ERROR(r.U16("v1.window_height", &wh));
+    if (ww == 0 || wh == 0 || (ww & 1) || (wh & 1) || x + ww > w || y + wh > h) {
+      return DataLoss("v1.window: " + Str(ww) + "x" + Str(wh) + " at " + Str(x) + "," + Str(y) +
+                      " is not even-sized or leaves the " + Str(w) + "x" + Str(h) + " image");
+    }
+    info.window = VideoWindow{x, y, ww, wh};
+  }
   std::span<const uint8_t> zmask, video;
+  info.mask_offset = r.position() + 4;
   HOLO_RETURN_IF_ERROR(r.Blob32("v1.mask", r.remaining(), &zmask));
+  info.video_offset = r.position() + 4;
   HOLO_RETURN_IF_ERROR(r.Blob32("v1.video", r.remaining(), &video));
   HOLO_RETURN_IF_ERROR(r.ExpectEnd("v1 blob"));
   if (video.empty()) return DataLoss("v1.video: empty picture");
@@ -756,7 +876,8 @@ struct VideoDecoder::Impl {
   PacketPtr packet;
   VideoLibrary library = VideoLibrary::kH264;
   uint8_t chroma_flag = 0;
-  uint32_t width = 0, height = 0;
+  uint32_t width = 0, height = 0;  // the stream's images
+  uint32_t pic_w = 0, pic_h = 0;   // its pictures (the window's size)
   uint32_t last_frame = 0;
   std::vector<uint8_t> rle;
   std::vector<uint8_t> padded;
@@ -787,6 +908,22 @@ Status OpenDecoder(VideoLibrary lib, uint32_t w, uint32_t h, CodecCtxPtr* out) {
   return OkStatus();
 }
 
+// Every foreground pixel of the mask must lie in the window (the picture
+// holds no colour for any other).
+Status CheckMaskInside(const ImageGray8& mask, const VideoWindow& win) {
+  const auto outside = [](const uint8_t* a, const uint8_t* b) { return std::find_if(a, b, [](uint8_t v) { return v; }) != b; };
+  for (int y = 0; y < mask.height(); ++y) {
+    const uint8_t* m = mask.row(y);
+    const bool in_rows = y >= win.y && y < win.y + win.h;
+    if (in_rows ? outside(m, m + win.x) || outside(m + win.x + win.w, m + mask.width())
+                : outside(m, m + mask.width())) {
+      return DataLoss("v1.mask: foreground in row " + Str(y) + " outside the window " + Str(win.w) + "x" +
+                      Str(win.h) + " at " + Str(win.x) + "," + Str(win.y));
+    }
+  }
+  return OkStatus();
+}
+
 }  // namespace
 
 Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits) {
@@ -796,6 +933,7 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
   auto info_or = ParseVideoBlob(blob, limits);
   if (!info_or.ok()) return info_or.status();
   const VideoBlobInfo& info = *info_or;
+  const VideoWindow& win = info.window;
   const uint8_t chroma = info.flags & kVideoFlagChroma444;
   if (!info.keyframe()) {
     if (!was_synced) return Unavailable("v1: delta frame " + Str(info.frame_number) + ": waiting for a keyframe");
@@ -803,33 +941,37 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
       return Unavailable("v1: frame " + Str(info.frame_number) + " after " + Str(s.last_frame) +
                          ": frames missing, waiting for a keyframe");
     }
-    if (info.width != s.width || info.height != s.height || info.library != s.library || chroma != s.chroma_flag) {
+    if (info.width != s.width || info.height != s.height || uint32_t(win.w) != s.pic_w ||
+        uint32_t(win.h) != s.pic_h || info.library != s.library || chroma != s.chroma_flag) {
       return Unavailable("v1: delta frame " + Str(info.frame_number) +
                          " changes the stream's size, library or chroma: waiting for a keyframe");
     }
   }
-  // Both blobs were bounds-checked by ParseVideoBlob: re-read their positions.
-  const std::span<const uint8_t> zmask = blob.subspan(kHeaderBytes + 4, info.mask_bytes);
-  const std::span<const uint8_t> video = blob.subspan(kHeaderBytes + 4 + info.mask_bytes + 4, info.video_bytes);
+  // Both blobs were bounds-checked by ParseVideoBlob.
+  const std::span<const uint8_t> zmask = blob.subspan(info.mask_offset, info.mask_bytes);
+  const std::span<const uint8_t> video = blob.subspan(info.video_offset, info.video_bytes);
   if (info.flags & kVideoFlagMaskBlocks) {
     HOLO_RETURN_IF_ERROR(
         DecodeMaskBlocks(zmask, static_cast<int>(info.width), static_cast<int>(info.height), &s.rle, &mask_));
   } else {
     HOLO_RETURN_IF_ERROR(DecodeMask(zmask, static_cast<int>(info.width), static_cast<int>(info.height), &s.rle, &mask_));
   }
+  HOLO_RETURN_IF_ERROR(CheckMaskInside(mask_, win));
 
   if (info.keyframe()) {
-    if (!s.ctx || info.library != s.library || info.width != s.width || info.height != s.height ||
+    if (!s.ctx || info.library != s.library || uint32_t(win.w) != s.pic_w || uint32_t(win.h) != s.pic_h ||
         chroma != s.chroma_flag) {
       s.ctx.reset();
-      HOLO_RETURN_IF_ERROR(OpenDecoder(info.library, info.width, info.height, &s.ctx));
+      HOLO_RETURN_IF_ERROR(OpenDecoder(info.library, uint32_t(win.w), uint32_t(win.h), &s.ctx));
       s.library = info.library;
-      s.width = info.width;
-      s.height = info.height;
+      s.pic_w = uint32_t(win.w);
+      s.pic_h = uint32_t(win.h);
       s.chroma_flag = chroma;
     } else {
       avcodec_flush_buffers(s.ctx.get());
     }
+    s.width = info.width;
+    s.height = info.height;
   }
   if (!s.frame) s.frame.reset(av_frame_alloc());
   if (!s.extra) s.extra.reset(av_frame_alloc());
@@ -857,9 +999,9 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
   const bool is444 = f->format == AV_PIX_FMT_YUV444P || f->format == AV_PIX_FMT_YUVJ444P;
   const bool is420 = f->format == AV_PIX_FMT_YUV420P || f->format == AV_PIX_FMT_YUVJ420P;
   Status bad;
-  if (f->width != static_cast<int>(info.width) || f->height != static_cast<int>(info.height)) {
+  if (f->width != win.w || f->height != win.h) {
     bad = DataLoss("v1.video: picture is " + Str(f->width) + "x" + Str(f->height) + ", the header says " +
-                   Str(info.width) + "x" + Str(info.height));
+                   Str(win.w) + "x" + Str(win.h));
   } else if (!(chroma ? is444 : is420)) {
     const char* name = av_get_pix_fmt_name(static_cast<AVPixelFormat>(f->format));
     bad = DataLoss(std::string("v1.video: picture format ") + (name ? name : "?") + " does not match the header");
@@ -876,16 +1018,15 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
     s.ctx.reset();
     return bad;
   }
-  const int w = static_cast<int>(info.width), h = static_cast<int>(info.height);
-  image_.Resize(w, h, 0);
+  image_.Resize(static_cast<int>(info.width), static_cast<int>(info.height), 0);
   const int shift = chroma ? 0 : 1;
-  for (int y = 0; y < h; ++y) {
-    const uint8_t* m = mask_.row(y);
+  for (int y = 0; y < win.h; ++y) {
+    const uint8_t* m = mask_.row(win.y + y) + win.x;
     const uint8_t* py = f->data[0] + size_t(y) * f->linesize[0];
     const uint8_t* pu = f->data[1] + size_t(y >> shift) * f->linesize[1];
     const uint8_t* pv = f->data[2] + size_t(y >> shift) * f->linesize[2];
-    uint8_t* dst = image_.row(y);
-    for (int x = 0; x < w; ++x) {
+    uint8_t* dst = image_.row(win.y + y) + size_t(win.x) * 3;
+    for (int x = 0; x < win.w; ++x) {
       if (m[x]) YccToRgb(py[x], pu[x >> shift], pv[x >> shift], dst + size_t(x) * 3);
     }
   }

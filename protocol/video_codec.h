@@ -5,9 +5,11 @@
 // frame: the encoder emits exactly one coded picture per input image (zero
 // latency, no B-frames, no lookahead, one thread), the decoder returns that
 // picture at once. A blob is either a keyframe (decodes alone) or a delta
-// frame (needs the previous frame of the same stream). The mask travels
-// losslessly in every blob (C1's row-transition coding of the whole image,
-// zstd), so the mask never depends on earlier blobs.
+// frame (needs the previous frame of the same stream). The mask of the whole
+// image travels losslessly in every blob (coded blocks through a binary range
+// coder, or C1's row-transition coding with zstd), so the mask never depends
+// on earlier blobs. The picture covers only a window around the foreground
+// (the encoder picks and moves it; PROTOCOL.md §8).
 //
 // Background pixels carry no information; the encoder fills them so they cost
 // almost nothing and stay stable from frame to frame: every 16×16 block
@@ -46,6 +48,14 @@ inline constexpr uint8_t kColorCodecVideo = 4;
 inline constexpr uint8_t kVideoFlagKeyframe = 1;  // decodes without earlier blobs
 inline constexpr uint8_t kVideoFlagChroma444 = 2; // the picture is 4:4:4 (else 4:2:0)
 inline constexpr uint8_t kVideoFlagMaskBlocks = 4; // the mask is coded blocks (else zstd rows)
+inline constexpr uint8_t kVideoFlagWindow = 8;     // the picture is a window of the image (else all of it)
+
+// The part of a pod's image that the coded picture holds (pixels; even width
+// and height, inside the image). Every foreground pixel lies inside it.
+struct VideoWindow {
+  int x = 0, y = 0, w = 0, h = 0;
+  bool operator==(const VideoWindow&) const = default;
+};
 
 enum class VideoLibrary : uint8_t { kH264 = 1, kVp9 = 2 };
 
@@ -77,6 +87,14 @@ struct VideoEncodeOptions {
   // pixels through an adaptive binary range coder (about half the bytes of
   // the zstd row format on the site's masks; PROTOCOL.md §8). false: rows.
   bool mask_blocks = true;
+  // Code only a window around the foreground (flag bit 3), not the whole
+  // image: the library's cost follows the picture's pixels, and a pod sees
+  // the person in a fraction of its image. The window keeps its size from
+  // keyframe to keyframe and moves in 16-pixel steps to follow the
+  // foreground; it is chosen with room to spare, and a foreground that
+  // outgrows it starts a keyframe with a larger window. false: the picture
+  // is the whole image.
+  bool window = true;
   Status Check() const;
 };
 
@@ -102,6 +120,11 @@ class VideoEncoder {
   const VideoEncodeOptions& options() const { return options_; }
   int64_t frames() const { return frame_number_; }
   int64_t keyframes() const { return keyframes_; }
+  // The window of the last blob (the whole image with `window` off).
+  const VideoWindow& window() const { return window_; }
+  // Keyframes that a new window size forced (a foreground that outgrew the
+  // window between two keyframes).
+  int64_t window_resizes() const { return window_resizes_; }
 
  private:
   struct Impl;
@@ -112,6 +135,8 @@ class VideoEncoder {
   uint32_t frame_number_ = 0;
   int64_t keyframes_ = 0;
   int64_t since_keyframe_ = 0;
+  VideoWindow window_;
+  int64_t window_resizes_ = 0;
 };
 
 // Decodes one pod's V1 blobs into images it keeps. Safe on untrusted input:
@@ -121,7 +146,8 @@ class VideoEncoder {
 // decoder per stream.
 //
 // A delta frame decodes only right after the previous frame of its stream
-// (frame number + 1, same size, library and chroma). Otherwise Decode returns
+// (frame number + 1, same image and picture size, library and chroma; the
+// window may move). Otherwise Decode returns
 // Unavailable ("waiting for a keyframe ...") and keeps refusing delta frames
 // until a keyframe arrives: the receiver should ask the sender for one
 // (Control) and show the last picture meanwhile. After DataLoss (a malformed
@@ -159,6 +185,8 @@ struct VideoBlobInfo {
   VideoLibrary library = VideoLibrary::kH264;
   uint32_t frame_number = 0;
   size_t mask_bytes = 0, video_bytes = 0;
+  size_t mask_offset = 0, video_offset = 0;  // where the two byte ranges start in the blob
+  VideoWindow window;  // the whole image when flag bit 3 is clear
   bool keyframe() const { return (flags & kVideoFlagKeyframe) != 0; }
 };
 StatusOr<VideoBlobInfo> ParseVideoBlob(std::span<const uint8_t> blob, const Limits& limits = {});

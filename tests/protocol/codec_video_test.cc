@@ -167,7 +167,7 @@ TEST(VideoCodec, CutOrPaddedMaskBlocksAreRefused) {
   const std::vector<uint8_t> blob = EncodeMaskOnly(NoisySilhouette(96, 64, 5), 96, 64, true);
   auto info = ParseVideoBlob(blob);
   ASSERT_TRUE(info.ok());
-  constexpr size_t kHeader = 11;  // codec, flags, width, height, library, frame number
+  const size_t kHeader = info->mask_offset - 4;  // codec, flags, width, height, library, frame number, window
   const std::vector<uint8_t> mask(blob.begin() + kHeader + 4, blob.begin() + kHeader + 4 + info->mask_bytes);
   const std::vector<uint8_t> video(blob.end() - info->video_bytes, blob.end());
   auto rebuild = [&](const std::vector<uint8_t>& m) {
@@ -334,6 +334,147 @@ TEST(VideoCodec, ALostFrameRecoversAtTheRequestedKeyframe) {
   Scene(96, 64, 6, &im, &mask);
   EXPECT_TRUE(dec.mask() == mask);
   EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 30);
+}
+
+// A square of `side` pixels at (x, y) over an otherwise empty `w`x`h` image.
+void Square(int w, int h, int x0, int y0, int side, ImageRgb8* im, ImageGray8* mask) {
+  im->Resize(w, h, 0);
+  mask->Resize(w, h, 0);
+  for (int y = y0; y < y0 + side; ++y)
+    for (int x = x0; x < x0 + side; ++x) {
+      mask->at(x, y) = 255;
+      im->at(x, y, 0) = static_cast<uint8_t>(40 + 7 * ((x - x0) / 4 % 2) * 20);
+      im->at(x, y, 1) = static_cast<uint8_t>(200 - (y - y0));
+      im->at(x, y, 2) = 90;
+    }
+}
+
+bool Inside(const VideoWindow& win, int x, int y, int side) {
+  return x >= win.x && y >= win.y && x + side <= win.x + win.w && y + side <= win.y + win.h;
+}
+
+TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
+  const int w = 320, h = 240;
+  auto enc = MakeEncoder({});
+  VideoDecoder dec;
+  ImageRgb8 im;
+  ImageGray8 mask;
+  std::vector<uint8_t> blob;
+  // A 40-pixel square drifts right by 6 pixels a frame: the window holds it,
+  // is much smaller than the image, and moves without keyframes.
+  std::vector<int> xs;
+  for (int t = 0; t < 30; ++t) {
+    const int x = 20 + 6 * t, y = 100;
+    Square(w, h, x, y, 40, &im, &mask);
+    blob.clear();
+    ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
+    auto info = ParseVideoBlob(blob);
+    ASSERT_TRUE(info.ok());
+    EXPECT_TRUE(info->flags & kVideoFlagWindow);
+    EXPECT_EQ(info->window, enc->window());
+    EXPECT_TRUE(Inside(info->window, x, y, 40)) << "frame " << t;
+    EXPECT_LE(info->window.w * info->window.h, w * h / 8) << "frame " << t;
+    EXPECT_EQ(info->window.x % 16, 0);
+    EXPECT_EQ(info->keyframe(), t == 0) << "frame " << t;
+    xs.push_back(info->window.x);
+    ASSERT_TRUE(dec.Decode(blob).ok()) << "frame " << t;
+    EXPECT_TRUE(dec.mask() == mask);
+    EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 35) << "frame " << t;
+    // Nothing outside the mask: the decoded image is 0 there.
+    EXPECT_EQ(dec.image().at(0, 0, 0), 0);
+  }
+  EXPECT_GT(xs.back(), xs.front() + 100);  // it moved with the square
+  EXPECT_EQ(enc->window_resizes(), 0);
+  // The square grows past the window: the encoder starts a keyframe with a
+  // larger window, and the decoder follows.
+  Square(w, h, 200, 60, 110, &im, &mask);
+  blob.clear();
+  ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
+  auto info = ParseVideoBlob(blob);
+  ASSERT_TRUE(info.ok());
+  EXPECT_TRUE(info->keyframe());
+  EXPECT_EQ(enc->window_resizes(), 1);
+  EXPECT_TRUE(Inside(info->window, 200, 60, 110));
+  ASSERT_TRUE(dec.Decode(blob).ok());
+  EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 35);
+  // The foreground vanishes: the window stays, the picture is empty.
+  im.Resize(w, h, 0);
+  mask.Resize(w, h, 0);
+  blob.clear();
+  ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
+  ASSERT_TRUE(dec.Decode(blob).ok());
+  EXPECT_EQ(ParseVideoBlob(blob)->window, info->window);
+}
+
+TEST(VideoCodec, TheWindowCodesTheSameForegroundAsTheWholeImage) {
+  VideoEncodeOptions whole;
+  whole.window = false;
+  auto a = MakeEncoder({});
+  auto b = MakeEncoder(whole);
+  VideoDecoder da, db;
+  for (int t = 0; t < 8; ++t) {
+    ImageRgb8 im;
+    ImageGray8 mask;
+    Scene(160, 96, t, &im, &mask);
+    std::vector<uint8_t> ba, bb;
+    ASSERT_TRUE(a->Encode(im, mask, &ba).ok());
+    ASSERT_TRUE(b->Encode(im, mask, &bb).ok());
+    auto ib = ParseVideoBlob(bb);
+    ASSERT_TRUE(ib.ok());
+    EXPECT_FALSE(ib->flags & kVideoFlagWindow);
+    EXPECT_EQ(ib->window, (VideoWindow{0, 0, 160, 96}));
+    EXPECT_LT(ParseVideoBlob(ba)->window.w, 160);
+    ASSERT_TRUE(da.Decode(ba).ok());
+    ASSERT_TRUE(db.Decode(bb).ok());
+    EXPECT_TRUE(da.mask() == db.mask());
+    EXPECT_GT(ForegroundPsnr(da.image(), im, mask), 33) << "frame " << t;
+    EXPECT_GT(ForegroundPsnr(db.image(), im, mask), 33) << "frame " << t;
+  }
+}
+
+// Rewrites the window fields of a windowed blob.
+std::vector<uint8_t> WithWindow(std::vector<uint8_t> blob, const VideoWindow& win) {
+  const int at = 11;  // codec, flags, width, height, library, frame number
+  const int v[4] = {win.x, win.y, win.w, win.h};
+  for (int i = 0; i < 4; ++i) {
+    blob[at + 2 * i] = static_cast<uint8_t>(v[i]);
+    blob[at + 2 * i + 1] = static_cast<uint8_t>(v[i] >> 8);
+  }
+  return blob;
+}
+
+TEST(VideoCodec, BadWindowsAreRefused) {
+  auto enc = MakeEncoder({});
+  ImageRgb8 im;
+  ImageGray8 mask;
+  Square(160, 96, 40, 30, 30, &im, &mask);
+  std::vector<uint8_t> key, delta;
+  ASSERT_TRUE(enc->Encode(im, mask, &key).ok());
+  Square(160, 96, 44, 30, 30, &im, &mask);
+  ASSERT_TRUE(enc->Encode(im, mask, &delta).ok());
+  const VideoWindow win = ParseVideoBlob(key)->window;
+  ASSERT_TRUE(ParseVideoBlob(WithWindow(key, win)).ok());  // the rewrite itself is sound
+  auto refused = [](const std::vector<uint8_t>& b, const char* field) {
+    VideoDecoder dec;
+    const Status s = dec.Decode(b);
+    EXPECT_EQ(s.code(), StatusCode::kDataLoss) << s.ToString();
+    EXPECT_NE(s.message().find(field), std::string::npos) << s.message();
+  };
+  refused(WithWindow(key, {win.x, win.y, win.w + 1, win.h}), "v1.window");     // odd
+  refused(WithWindow(key, {win.x, win.y, 0, win.h}), "v1.window");             // empty
+  refused(WithWindow(key, {150, win.y, 16, win.h}), "v1.window");              // leaves the image
+  refused(WithWindow(key, {win.x, 90, win.w, 16}), "v1.window");
+  refused(WithWindow(key, {48, win.y, win.w, win.h}), "outside the window");  // cuts the square (x 40..69)
+  ASSERT_LE(48 + win.w, 160);
+  // A delta frame whose picture size differs from its stream's waits for a keyframe.
+  VideoDecoder dec;
+  ASSERT_TRUE(dec.Decode(key).ok());
+  const Status s = dec.Decode(WithWindow(delta, {0, 0, win.w + 16, win.h}));
+  EXPECT_EQ(s.code(), StatusCode::kUnavailable) << s.ToString();
+  // Moved, same size: the header is sound; the picture decodes where it says.
+  VideoDecoder moved;
+  ASSERT_TRUE(moved.Decode(key).ok());
+  EXPECT_TRUE(moved.Decode(delta).ok());
 }
 
 TEST(VideoCodec, EveryPrefixIsRefused) {

@@ -244,6 +244,8 @@ Status ToV1(const std::string& recording, const std::string& out) {
   vo.keyframe_interval = 30;
   vo.crf = 32;
   std::map<uint16_t, std::unique_ptr<protocol::VideoEncoder>> video;
+  std::map<uint16_t, std::pair<int, int>> picture_size;  // per pod, to count size changes (the browser reconfigures)
+  int64_t size_changes = 0;
   uint32_t meshes = 0;
   for (uint64_t off = reader->summary().data_begin; off < reader->summary().data_end;) {
     HOLO_ASSIGN_OR_RETURN(record::RecordedMessage m, reader->ReadAt(off));
@@ -271,6 +273,9 @@ Status ToV1(const std::string& recording, const std::string& out) {
         HOLO_RETURN_IF_ERROR(enc->Encode(image, mask, &im.data));
         HOLO_ASSIGN_OR_RETURN(protocol::VideoBlobInfo info, protocol::ParseVideoBlob(im.data));
         key = key && info.keyframe();
+        auto& size = picture_size[im.pod_id];
+        if (size.first != 0 && size != std::pair{info.window.w, info.window.h}) ++size_changes;
+        size = {info.window.w, info.window.h};
       }
       h.flags = static_cast<uint16_t>(key ? (h.flags | protocol::kFlagKeyFrame) : (h.flags & ~protocol::kFlagKeyFrame));
       HOLO_RETURN_IF_ERROR(writer->WriteMessage(m.time_us, protocol::EncodeMessage(h, cf)));
@@ -279,7 +284,11 @@ Status ToV1(const std::string& recording, const std::string& out) {
     }
   }
   HOLO_RETURN_IF_ERROR(writer->Close());
-  std::printf("wrote %s: %u mesh frames, colour as V1\n", out.c_str(), meshes);
+  int64_t resizes = 0;
+  for (const auto& [pod, enc] : video) resizes += enc->window_resizes();
+  std::printf("wrote %s: %u mesh frames, colour as V1 (%zu pods, %lld picture sizes changed, %lld of them between "
+              "keyframes)\n",
+              out.c_str(), meshes, video.size(), static_cast<long long>(size_changes), static_cast<long long>(resizes));
   return OkStatus();
 }
 

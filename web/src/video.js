@@ -8,7 +8,7 @@
 import { Reader, DecodeError, fail } from './bytes.js';
 import { LIMITS, unzstdRows, getVarint } from './color.js';
 
-const FLAG_KEY = 1, FLAG_444 = 2, FLAG_MASK_BLOCKS = 4;
+const FLAG_KEY = 1, FLAG_444 = 2, FLAG_MASK_BLOCKS = 4, FLAG_WINDOW = 8;
 
 // The header and the two byte ranges of a V1 blob (views into `blob`).
 export function parseVideoBlob(blob, limits = LIMITS) {
@@ -16,7 +16,7 @@ export function parseVideoBlob(blob, limits = LIMITS) {
   const codec = r.u8('v1.codec');
   if (codec !== 4) fail(`v1.codec: ${codec} is not the video codec (4)`);
   const flags = r.u8('v1.flags');
-  if (flags & ~(FLAG_KEY | FLAG_444 | FLAG_MASK_BLOCKS)) fail(`v1.flags: unknown bits in ${flags}`);
+  if (flags & ~(FLAG_KEY | FLAG_444 | FLAG_MASK_BLOCKS | FLAG_WINDOW)) fail(`v1.flags: unknown bits in ${flags}`);
   const width = r.u16('v1.width'), height = r.u16('v1.height');
   if (!width || !height || width & 1 || height & 1 || width > limits.maxImageDim || height > limits.maxImageDim ||
       width * height > limits.maxImagePixels) {
@@ -26,12 +26,21 @@ export function parseVideoBlob(blob, limits = LIMITS) {
   if (library < 1 || library > 3) fail(`v1.library: unknown video library ${library}`);
   if (library === 3) fail('v1.library: 3 (AV1) is reserved, not implemented');
   const frameNumber = r.u32('v1.frame_number');
+  // The picture's window in the image (the whole image without flag bit 3).
+  let window = { x: 0, y: 0, w: width, h: height };
+  if (flags & FLAG_WINDOW) {
+    const x = r.u16('v1.window_x'), y = r.u16('v1.window_y'), w = r.u16('v1.window_width'), h = r.u16('v1.window_height');
+    if (!w || !h || w & 1 || h & 1 || x + w > width || y + h > height) {
+      fail(`v1.window: ${w}x${h} at ${x},${y} is not even-sized or leaves the ${width}x${height} image`);
+    }
+    window = { x, y, w, h };
+  }
   const mask = r.blob32('v1.mask');
   const video = r.blob32('v1.video');
   r.expectEnd('v1 blob');
   if (!video.length) fail('v1.video: empty picture');
   return {
-    flags, width, height, library, frameNumber, mask, video,
+    flags, width, height, library, frameNumber, window, mask, video,
     keyframe: (flags & FLAG_KEY) !== 0, chroma444: (flags & FLAG_444) !== 0, maskBlocks: (flags & FLAG_MASK_BLOCKS) !== 0,
   };
 }
@@ -159,9 +168,19 @@ function decodeMaskRows(zmask, w, h) {
 }
 
 // The blob's mask: Uint8Array(width × height), 255 foreground, 0 background.
+// Foreground outside the picture's window is a violation.
 export function decodeVideoMask(info) {
-  return info.maskBlocks ? decodeMaskBlocks(info.mask, info.width, info.height)
+  const m = info.maskBlocks ? decodeMaskBlocks(info.mask, info.width, info.height)
     : decodeMaskRows(info.mask, info.width, info.height);
+  const { x, y, w, h } = info.window, W = info.width;
+  for (let row = 0; row < info.height; ++row) {
+    const inside = row >= y && row < y + h;
+    const o = row * W;
+    const bad = inside ? m.subarray(o, o + x).some((v) => v) || m.subarray(o + x + w, o + W).some((v) => v)
+      : m.subarray(o, o + W).some((v) => v);
+    if (bad) fail(`v1.mask: foreground in row ${row} outside the window ${w}x${h} at ${x},${y}`);
+  }
+  return m;
 }
 
 // ------------------------------------------------------------ picture
@@ -192,6 +211,7 @@ export class VideoColorStream {
     this.config = '';
     this.synced = false;
     this.lastFrame = 0;
+    this.size = '';     // the stream's image and picture sizes (a delta frame must keep them)
     this.waiting = [];  // {ts, resolve, reject} of the pictures handed over, in order
     this.handed = 0;    // pictures handed to the decoder so far
   }
@@ -207,7 +227,8 @@ export class VideoColorStream {
     let info, mask;
     try {
       info = parseVideoBlob(blob);
-      if (!info.keyframe && (!this.synced || info.frameNumber !== ((this.lastFrame + 1) >>> 0))) {
+      if (!info.keyframe && (!this.synced || info.frameNumber !== ((this.lastFrame + 1) >>> 0) ||
+          `${info.width}x${info.height} ${info.window.w}x${info.window.h}` !== this.size)) {
         this.synced = false;
         return Promise.resolve(null);
       }
@@ -237,12 +258,13 @@ export class VideoColorStream {
     }
     this.synced = true;
     this.lastFrame = info.frameNumber;
+    this.size = `${info.width}x${info.height} ${info.window.w}x${info.window.h}`;
     return picture.then(async (frame) => {
       if (!frame) return { skipped: true };  // the decoder returned no picture for it
       try {
         if (seq !== this.handed) return { skipped: true };
         const W = info.width, H = info.height;
-        return { width: W, height: H, rgba: await frameToRgba(frame, W, H, mask), box: { x: 0, y: 0, w: W, h: H } };
+        return { width: W, height: H, rgba: await frameToRgba(frame, W, H, info.window, mask), box: { ...info.window } };
       } finally {
         frame.close();
       }
@@ -253,8 +275,17 @@ export class VideoColorStream {
 
   _configure(info) {
     const codec = h264CodecString(info.video);
-    const config = `${codec} ${info.width}x${info.height}`;
-    if (this.decoder && this.decoder.state === 'configured' && config === this.config) return;
+    const config = `${codec} ${info.window.w}x${info.window.h}`;
+    if (this.decoder && this.decoder.state === 'configured') {
+      // A new picture size or level at a keyframe: the same decoder is
+      // reconfigured, so pictures already handed over still come out (closing
+      // it would drop them).
+      if (config !== this.config) {
+        this.decoder.configure({ codec, codedWidth: info.window.w, codedHeight: info.window.h, optimizeForLatency: true });
+        this.config = config;
+      }
+      return;
+    }
     this.close();
     this.decoder = new VideoDecoder({
       output: (frame) => {
@@ -271,27 +302,29 @@ export class VideoColorStream {
         for (const w of this.waiting.splice(0)) w.reject(e);
       },
     });
-    this.decoder.configure({ codec, codedWidth: info.width, codedHeight: info.height, optimizeForLatency: true });
+    this.decoder.configure({ codec, codedWidth: info.window.w, codedHeight: info.window.h, optimizeForLatency: true });
     this.config = config;
   }
 }
 
 const clamp8 = (v) => (v < 0 ? 0 : v > 255 ? 255 : v);
 
-// The decoded planes to RGBA with the C++ decoder's full-range BT.601
-// arithmetic (protocol/video_codec.cc, YccToRgb), so that the page shows
-// the colours the native viewer shows; background pixels 0, alpha = mask.
-// Frames in another layout (a GPU frame) go through a canvas instead.
-async function frameToRgba(frame, W, H, mask) {
+// The decoded planes (the window `win` of the W×H image) to RGBA of the
+// whole image with the C++ decoder's full-range BT.601 arithmetic
+// (protocol/video_codec.cc, YccToRgb), so that the page shows the colours the
+// native viewer shows; background pixels 0, alpha = mask. Frames in another
+// layout (a GPU frame) go through a canvas instead.
+async function frameToRgba(frame, W, H, win, mask) {
   const rgba = new Uint8Array(W * H * 4);
   if (frame.format === 'I444' || frame.format === 'I420') {
     const buf = new Uint8Array(frame.allocationSize());
     const [ly, lu, lv] = await frame.copyTo(buf);
     const s = frame.format === 'I420' ? 1 : 0;
-    for (let y = 0; y < H; ++y) {
+    for (let y = 0; y < win.h; ++y) {
       const py = ly.offset + y * ly.stride, pu = lu.offset + (y >> s) * lu.stride, pv = lv.offset + (y >> s) * lv.stride;
-      for (let x = 0, o = y * W * 4; x < W; ++x, o += 4) {
-        if (!mask[y * W + x]) continue;
+      const row = (win.y + y) * W + win.x;
+      for (let x = 0, o = row * 4; x < win.w; ++x, o += 4) {
+        if (!mask[row + x]) continue;
         const Y = buf[py + x], cb = buf[pu + (x >> s)] - 128, cr = buf[pv + (x >> s)] - 128;
         rgba[o] = clamp8(Y + ((91881 * cr + 32768) >> 16));
         rgba[o + 1] = clamp8(Y - ((22554 * cb + 46802 * cr - 32768) >> 16));
@@ -301,16 +334,19 @@ async function frameToRgba(frame, W, H, mask) {
     }
     return rgba;
   }
-  const canvas = new OffscreenCanvas(W, H);
+  const canvas = new OffscreenCanvas(win.w, win.h);
   const g = canvas.getContext('2d', { willReadFrequently: true });
-  g.drawImage(frame, 0, 0, W, H);
-  const px = g.getImageData(0, 0, W, H, { colorSpace: 'srgb' }).data;
-  for (let i = 0; i < W * H; ++i) {
-    if (!mask[i]) continue;
-    rgba[4 * i] = px[4 * i];
-    rgba[4 * i + 1] = px[4 * i + 1];
-    rgba[4 * i + 2] = px[4 * i + 2];
-    rgba[4 * i + 3] = 255;
+  g.drawImage(frame, 0, 0, win.w, win.h);
+  const px = g.getImageData(0, 0, win.w, win.h, { colorSpace: 'srgb' }).data;
+  for (let y = 0; y < win.h; ++y) {
+    for (let x = 0; x < win.w; ++x) {
+      const i = (win.y + y) * W + win.x + x, j = y * win.w + x;
+      if (!mask[i]) continue;
+      rgba[4 * i] = px[4 * j];
+      rgba[4 * i + 1] = px[4 * j + 1];
+      rgba[4 * i + 2] = px[4 * j + 2];
+      rgba[4 * i + 3] = 255;
+    }
   }
   return rgba;
 }

@@ -284,6 +284,34 @@ console.log(`colour: ${cRefused} truncated prefixes refused; 200 bit flips in th
     v1Blobs.push([g, blob]);
   }
   check(v1Checked >= 2, 'golden V1 blobs were found');
+  // The picture's window (flag bit 3): parsed as the C++ encoder wrote it;
+  // a window that cuts the foreground, is odd-sized or leaves the image is refused.
+  {
+    const [g, blob] = v1Blobs[0];
+    const info = parseVideoBlob(blob);
+    const win = info.window;
+    check((info.flags & 8) !== 0 && win.w * win.h < info.width * info.height, `${g}: window ${JSON.stringify(win)}`);
+    const at = 11;  // codec, flags, width, height, library, frame number
+    const rewrite = (x, y, w, h) => {
+      const b = blob.slice();
+      const dv = new DataView(b.buffer);
+      [x, y, w, h].forEach((v, i) => dv.setUint16(at + 2 * i, v, true));
+      return b;
+    };
+    check(JSON.stringify(parseVideoBlob(rewrite(win.x, win.y, win.w, win.h)).window) === JSON.stringify(win),
+      'window rewrite is sound');
+    const bad = [[win.x, win.y, win.w + 1, win.h, 'v1.window'], [win.x, win.y, 0, win.h, 'v1.window'],
+      [info.width - 2, win.y, 16, win.h, 'v1.window'], [win.x, win.y, win.w, 2, 'outside the window']];
+    for (const [x, y, w, h, field] of bad) {
+      let msg = '';
+      try {
+        decodeVideoMask(parseVideoBlob(rewrite(x, y, w, h)));
+      } catch (e) {
+        msg = e instanceof DecodeError ? e.message : `threw ${e.name}`;
+      }
+      check(msg.includes(field), `window ${x},${y} ${w}x${h}: ${msg || 'accepted'}`);
+    }
+  }
   let v1Refused = 0, v1FlipsOk = 0, v1Prefixes = 0;
   for (const [g, blob] of v1Blobs.slice(0, 2)) {
     for (let n = 0; n < blob.length; n += Math.max(1, Math.floor(blob.length / 300))) {
