@@ -212,7 +212,7 @@ export class VideoColorStream {
     this.synced = false;
     this.lastFrame = 0;
     this.size = '';     // the stream's image and picture sizes (a delta frame must keep them)
-    this.waiting = [];  // {ts, resolve, reject} of the pictures handed over, in order
+    this.waiting = [];  // {ts, decoder, resolve, reject} of the pictures handed over, in order
     this.handed = 0;    // pictures handed to the decoder so far
   }
 
@@ -247,7 +247,8 @@ export class VideoColorStream {
     // pictures handed over), not by order: a picture the decoder never
     // returns must not shift every later one onto the wrong frame.
     const seq = ++this.handed;
-    const picture = new Promise((resolve, reject) => this.waiting.push({ ts: seq, resolve, reject }));
+    const decoder = this.decoder;
+    const picture = new Promise((resolve, reject) => this.waiting.push({ ts: seq, decoder, resolve, reject }));
     try {
       this.decoder.decode(new EncodedVideoChunk({ type: info.keyframe ? 'key' : 'delta', timestamp: seq,
         data: info.video }));
@@ -276,34 +277,51 @@ export class VideoColorStream {
   _configure(info) {
     const codec = h264CodecString(info.video);
     const config = `${codec} ${info.window.w}x${info.window.h}`;
+    if (this.decoder && this.decoder.state === 'configured' && config === this.config) return;
     if (this.decoder && this.decoder.state === 'configured') {
-      // A new picture size or level at a keyframe: the same decoder is
-      // reconfigured, so pictures already handed over still come out (closing
-      // it would drop them).
-      if (config !== this.config) {
-        this.decoder.configure({ codec, codedWidth: info.window.w, codedHeight: info.window.h, optimizeForLatency: true });
-        this.config = config;
-      }
-      return;
+      // A new picture size or level at a keyframe: a new decoder takes the
+      // stream from here; the old one is flushed, so that the pictures
+      // already handed to it still come out, then closed. (Closing it at once
+      // dropped them; reconfiguring it in place sometimes never returned the
+      // picture before the new size.)
+      const old = this.decoder;
+      old.flush().catch(() => {}).finally(() => {
+        this._settle(old, null);
+        if (old.state !== 'closed') old.close();
+      });
+    } else {
+      this.close();
     }
-    this.close();
-    this.decoder = new VideoDecoder({
+    const decoder = new VideoDecoder({
       output: (frame) => {
         const i = this.waiting.findIndex((w) => w.ts === frame.timestamp);
         if (i < 0) {
           frame.close();
           return;
         }
-        for (const w of this.waiting.splice(0, i)) w.resolve(null);  // handed before it, no picture
-        this.waiting.shift().resolve(frame);
+        // Pictures handed to this decoder before this one never came out.
+        this._settle(decoder, frame.timestamp);
+        this.waiting.splice(this.waiting.findIndex((w) => w.ts === frame.timestamp), 1)[0].resolve(frame);
       },
       error: (e) => {
-        this.synced = false;
-        for (const w of this.waiting.splice(0)) w.reject(e);
+        if (decoder === this.decoder) this.synced = false;
+        this._settle(decoder, null, e);
       },
     });
-    this.decoder.configure({ codec, codedWidth: info.window.w, codedHeight: info.window.h, optimizeForLatency: true });
+    decoder.configure({ codec, codedWidth: info.window.w, codedHeight: info.window.h, optimizeForLatency: true });
+    this.decoder = decoder;
     this.config = config;
+  }
+
+  // Resolves to null (or rejects with `error`) the pictures handed to
+  // `decoder` before timestamp `before` (all of them when null).
+  _settle(decoder, before, error) {
+    this.waiting = this.waiting.filter((w) => {
+      if (w.decoder !== decoder || (before !== null && w.ts >= before)) return true;
+      if (error) w.reject(error);
+      else w.resolve(null);
+      return false;
+    });
   }
 }
 
