@@ -302,22 +302,31 @@ void CodeBlockTypes(int bw, int bh, std::vector<uint8_t>* types, Coder&& code) {
   }
 }
 
-Status EncodeMaskBlocks(const ImageGray8& mask, int w, int h, std::vector<uint8_t>* types, std::vector<uint8_t>* out) {
+// The type of every 16×16 block of the image in raster order: 0 no
+// foreground, 1 all foreground (every block when there is no mask), 2 both.
+// The encoder classifies once per image: the mask coder and the window's
+// placement both read the types.
+void ClassifyMaskBlocks(const ImageGray8& mask, int w, int h, std::vector<uint8_t>* types) {
   const int bw = (w + kMaskBlock - 1) / kMaskBlock, bh = (h + kMaskBlock - 1) / kMaskBlock;
-  types->assign(size_t(bw) * bh, 1);  // no mask: every pixel foreground
-  if (!mask.empty()) {
-    for (int by = 0; by < bh; ++by) {
-      for (int bx = 0; bx < bw; ++bx) {
-        int ones = 0, all = 0;
-        for (int y = by * kMaskBlock; y < std::min(h, (by + 1) * kMaskBlock); ++y) {
-          const uint8_t* m = mask.row(y);
-          for (int x = bx * kMaskBlock; x < std::min(w, (bx + 1) * kMaskBlock); ++x) ones += m[x] != 0;
-          all += std::min(w, (bx + 1) * kMaskBlock) - bx * kMaskBlock;
-        }
-        (*types)[size_t(by) * bw + bx] = ones == 0 ? 0 : (ones == all ? 1 : 2);
+  types->assign(size_t(bw) * bh, 1);
+  if (mask.empty()) return;
+  for (int by = 0; by < bh; ++by) {
+    for (int bx = 0; bx < bw; ++bx) {
+      int ones = 0, all = 0;
+      for (int y = by * kMaskBlock; y < std::min(h, (by + 1) * kMaskBlock); ++y) {
+        const uint8_t* m = mask.row(y);
+        for (int x = bx * kMaskBlock; x < std::min(w, (bx + 1) * kMaskBlock); ++x) ones += m[x] != 0;
+        all += std::min(w, (bx + 1) * kMaskBlock) - bx * kMaskBlock;
       }
+      (*types)[size_t(by) * bw + bx] = ones == 0 ? 0 : (ones == all ? 1 : 2);
     }
   }
+}
+
+// `types` from ClassifyMaskBlocks of the same mask; the coder's contexts
+// update them in place to what it coded (the same values).
+Status EncodeMaskBlocks(const ImageGray8& mask, int w, int h, std::vector<uint8_t>* types, std::vector<uint8_t>* out) {
+  const int bw = (w + kMaskBlock - 1) / kMaskBlock, bh = (h + kMaskBlock - 1) / kMaskBlock;
   BitEncoder enc(out);
   CodeBlockTypes(bw, bh, types, [&](uint16_t* p, int bit) {
     enc.Put(p, bit);
@@ -559,6 +568,7 @@ struct VideoEncoder::Impl {
   int width = 0, height = 0;  // the stream's images
   int pic_w = 0, pic_h = 0;   // the open library's pictures (the window's size)
   int seen_w = 0, seen_h = 0; // the largest foreground block rectangle since the last keyframe
+  std::vector<uint8_t> block_types;  // this image's 16×16 block types (ClassifyMaskBlocks)
   // 4:2:0: the full-resolution chroma planes before subsampling.
   std::vector<uint8_t> cb, cr;
   std::vector<uint8_t> rle, zmask;
@@ -627,34 +637,35 @@ Status OpenEncoder(const VideoEncodeOptions& o, int w, int h, CodecCtxPtr* out) 
 
 namespace {
 
-constexpr int kWindowStep = 16;  // the window moves in block steps, so its blocks stay the image's blocks
+constexpr int kWindowStep = kMaskBlock;  // the window moves in block steps, so its blocks stay the image's blocks
 
 int AlignDown(int v) { return v / kWindowStep * kWindowStep; }
 int AlignUp(int v) { return (v + kWindowStep - 1) / kWindowStep * kWindowStep; }
 
-// The 16×16 blocks of the image that hold foreground, as one rectangle
-// (clamped to the image); w = 0 when there is no foreground.
-VideoWindow ForegroundBlocks(const ImageGray8& mask, int w, int h) {
-  if (mask.empty()) return {0, 0, w, h};
-  int x0 = w, x1 = -1, y0 = -1, y1 = -1;
-  for (int y = 0; y < h; ++y) {
-    const uint8_t* m = mask.row(y);
+// The 16×16 blocks of the image that hold foreground (from their types,
+// ClassifyMaskBlocks), as one rectangle clamped to the image; w = 0 when
+// there is no foreground.
+VideoWindow ForegroundBlocks(const std::vector<uint8_t>& types, int w, int h) {
+  const int bw = (w + kMaskBlock - 1) / kMaskBlock, bh = (h + kMaskBlock - 1) / kMaskBlock;
+  int x0 = bw, x1 = -1, y0 = -1, y1 = -1;
+  for (int by = 0; by < bh; ++by) {
+    const uint8_t* t = types.data() + size_t(by) * bw;
     int a = 0;
-    while (a < w && m[a] == 0) ++a;
-    if (a == w) continue;
-    int b = w - 1;
-    while (m[b] == 0) --b;
+    while (a < bw && t[a] == 0) ++a;
+    if (a == bw) continue;
+    int b = bw - 1;
+    while (t[b] == 0) --b;
     x0 = std::min(x0, a);
     x1 = std::max(x1, b);
-    if (y0 < 0) y0 = y;
-    y1 = y;
+    if (y0 < 0) y0 = by;
+    y1 = by;
   }
   if (y0 < 0) return {};
   VideoWindow r;
-  r.x = AlignDown(x0);
-  r.y = AlignDown(y0);
-  r.w = std::min(AlignUp(x1 + 1), w) - r.x;
-  r.h = std::min(AlignUp(y1 + 1), h) - r.y;
+  r.x = x0 * kWindowStep;
+  r.y = y0 * kWindowStep;
+  r.w = std::min((x1 + 1) * kWindowStep, w) - r.x;
+  r.h = std::min((y1 + 1) * kWindowStep, h) - r.y;
   return r;
 }
 
@@ -701,9 +712,10 @@ Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std:
   // The window: kept while the foreground stays inside, moved when it fits
   // elsewhere, chosen anew (size and place) at a keyframe, and resized with
   // a keyframe when the foreground outgrows it.
+  if (options_.window || options_.mask_blocks) ClassifyMaskBlocks(mask, w, h, &s.block_types);
   VideoWindow win{0, 0, w, h};
   if (options_.window) {
-    const VideoWindow need = ForegroundBlocks(mask, w, h);
+    const VideoWindow need = ForegroundBlocks(s.block_types, w, h);
     const bool key_due = !s.ctx || keyframe_requested_ || since_keyframe_ >= options_.keyframe_interval;
     win = s.ctx ? window_ : VideoWindow{0, 0, std::min(w, kWindowStep), std::min(h, kWindowStep)};
     if (need.w > 0) {
@@ -793,7 +805,7 @@ Status VideoEncoder::Encode(const ImageRgb8& image, const ImageGray8& mask, std:
     return Internal(std::string("video: ") + EncoderName(options_.library) + " ignored a keyframe request");
   }
   if (options_.mask_blocks) {
-    HOLO_RETURN_IF_ERROR(EncodeMaskBlocks(mask, w, h, &s.rle, &s.zmask));
+    HOLO_RETURN_IF_ERROR(EncodeMaskBlocks(mask, w, h, &s.block_types, &s.zmask));
   } else {
     HOLO_RETURN_IF_ERROR(EncodeMask(mask, w, h, &s.rle, &s.zmask));
   }

@@ -224,11 +224,11 @@ export class VideoColorStream {
   }
 
   decode(blob) {
-    let info, mask;
+    let info, mask, size;
     try {
       info = parseVideoBlob(blob);
-      if (!info.keyframe && (!this.synced || info.frameNumber !== ((this.lastFrame + 1) >>> 0) ||
-          `${info.width}x${info.height} ${info.window.w}x${info.window.h}` !== this.size)) {
+      size = `${info.width}x${info.height} ${info.window.w}x${info.window.h}`;
+      if (!info.keyframe && (!this.synced || info.frameNumber !== ((this.lastFrame + 1) >>> 0) || size !== this.size)) {
         this.synced = false;
         return Promise.resolve(null);
       }
@@ -259,7 +259,7 @@ export class VideoColorStream {
     }
     this.synced = true;
     this.lastFrame = info.frameNumber;
-    this.size = `${info.width}x${info.height} ${info.window.w}x${info.window.h}`;
+    this.size = size;
     return picture.then(async (frame) => {
       if (!frame) return { skipped: true };  // the decoder returned no picture for it
       try {
