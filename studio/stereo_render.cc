@@ -95,6 +95,10 @@ inline float GaussFromHash(uint64_t h) {
 
 struct StereoStudioRenderer::Impl {
   struct PodViews {
+    // Set up on the pod's first render (ready): a renderer that serves one
+    // pod (a network pod's process) does not hold the other pods' views,
+    // ~10 MB each at QVGA with 2×2 supersampling.
+    bool ready = false;
     studio::ViewCache left_ss, right_ss;  // supersampled IR views
     studio::ViewCache left_truth;         // output resolution, for the truth
     const SpecklePattern* pattern = nullptr;
@@ -105,22 +109,20 @@ struct StereoStudioRenderer::Impl {
   std::vector<std::unique_ptr<SpecklePattern>> patterns;
   std::vector<std::pair<double, double>> pattern_params;
   std::vector<studio::RenderScratch> scratch;
+
+  // Renders `pod`'s pair (views `v`) of the posed frame into `p` with scratch buffers `s`.
+  void RenderPair(const PodCalibration& pod, PodViews& v, const StereoRenderOptions& options, int64_t frame_index,
+                  const studio::SceneTemplate& tmpl, const studio::FrameScene& scene, studio::RenderScratch& s,
+                  StereoPair* p);
 };
 
 StereoStudioRenderer::StereoStudioRenderer(SyntheticStudio* studio, Rig rig_in, StereoRenderOptions options)
     : studio_(studio), rig_(std::move(rig_in)), options_(options), impl_(std::make_unique<Impl>()) {
   const Rig& rig = rig_;
   impl_->pods.resize(rig.pods.size());
-  const int ss = options_.supersample;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
     const PodCalibration& pod = rig.pods[i];
     Impl::PodViews& v = impl_->pods[i];
-    CameraModel l = pod.LeftIrCamera(), r = pod.RightIrCamera();
-    v.left_truth.Init(l);
-    l.intrinsics = l.intrinsics.Scaled(ss);
-    r.intrinsics = r.intrinsics.Scaled(ss);
-    v.left_ss.Init(l);
-    v.right_ss.Init(r);
     const std::pair<double, double> key(pod.stereo.projector.dot_pitch_mrad, pod.stereo.projector.dot_density);
     size_t k = 0;
     while (k < impl_->pattern_params.size() && impl_->pattern_params[k] != key) ++k;
@@ -207,39 +209,63 @@ void ShadeIr(const studio::ViewCache& view, const studio::RenderScratch& s, int 
 
 }  // namespace
 
+void StereoStudioRenderer::Impl::RenderPair(const PodCalibration& pod, PodViews& v, const StereoRenderOptions& options,
+                                            int64_t frame_index, const studio::SceneTemplate& tmpl,
+                                            const studio::FrameScene& scene, studio::RenderScratch& s, StereoPair* p) {
+  const int ss = options.supersample;
+  if (!v.ready) {
+    CameraModel l = pod.LeftIrCamera(), r = pod.RightIrCamera();
+    v.left_truth.Init(l);
+    l.intrinsics = l.intrinsics.Scaled(ss);
+    r.intrinsics = r.intrinsics.Scaled(ss);
+    v.left_ss.Init(l);
+    v.right_ss.Init(r);
+    v.ready = true;
+  }
+  p->pod_id = pod.id;
+  p->fx = pod.stereo.ir.fx;
+  p->baseline_m = pod.stereo.baseline_m;
+  // The noise depends on the frame and the pod's id only: a pod rendered
+  // alone gets the bytes it gets among all pods.
+  const uint64_t stream =
+      studio::HashOf(options.seed, static_cast<uint64_t>(frame_index), static_cast<uint64_t>(pod.id), 0x1E1EULL);
+  studio::RenderViewCore(v.left_ss, tmpl, scene, false, &s);
+  ShadeIr(v.left_ss, s, ss, 0.0f, pod, *v.pattern, options, stream, &p->left);
+  studio::RenderViewCore(v.right_ss, tmpl, scene, false, &s);
+  ShadeIr(v.right_ss, s, ss, static_cast<float>(pod.stereo.baseline_m), pod, *v.pattern, options, stream + 1,
+          &p->right);
+  studio::RenderViewCore(v.left_truth, tmpl, scene, false, &s);
+  const int W = pod.stereo.ir.width, H = pod.stereo.ir.height;
+  if (p->disparity.width() != W || p->disparity.height() != H) p->disparity.Resize(W, H);
+  const float fb = static_cast<float>(pod.stereo.ir.fx * pod.stereo.baseline_m);
+  for (size_t j = 0; j < static_cast<size_t>(W) * H; ++j) {
+    const float z = s.out_z[j];
+    p->disparity.data()[j] = std::isfinite(z) && z > 0.0f ? fb / z : 0.0f;
+  }
+  studio::WriteTruth(v.left_truth, s, nullptr, &p->mask);
+}
+
 void StereoStudioRenderer::Render(int64_t frame_index, std::vector<StereoPair>* pairs) {
   const Rig& rig = rig_;
   const int num_pods = static_cast<int>(rig.pods.size());
   pairs->resize(num_pods);
-  const int ss = options_.supersample;
   studio_->WithPosedFrame(frame_index, [&](const studio::SceneTemplate& tmpl, const studio::FrameScene& scene,
                                            WorkerPool* pool) {
     if (impl_->scratch.size() < static_cast<size_t>(pool->num_threads())) impl_->scratch.resize(pool->num_threads());
     pool->Run(num_pods, [&](int i, int worker) {
-      const PodCalibration& pod = rig.pods[i];
-      Impl::PodViews& v = impl_->pods[i];
-      studio::RenderScratch& s = impl_->scratch[worker];
-      StereoPair& p = (*pairs)[i];
-      p.pod_id = pod.id;
-      p.fx = pod.stereo.ir.fx;
-      p.baseline_m = pod.stereo.baseline_m;
-      const uint64_t stream = studio::HashOf(options_.seed, static_cast<uint64_t>(frame_index),
-                                             static_cast<uint64_t>(pod.id), 0x1E1EULL);
-      studio::RenderViewCore(v.left_ss, tmpl, scene, false, &s);
-      ShadeIr(v.left_ss, s, ss, 0.0f, pod, *v.pattern, options_, stream, &p.left);
-      studio::RenderViewCore(v.right_ss, tmpl, scene, false, &s);
-      ShadeIr(v.right_ss, s, ss, static_cast<float>(pod.stereo.baseline_m), pod, *v.pattern, options_, stream + 1,
-              &p.right);
-      studio::RenderViewCore(v.left_truth, tmpl, scene, false, &s);
-      const int W = pod.stereo.ir.width, H = pod.stereo.ir.height;
-      if (p.disparity.width() != W || p.disparity.height() != H) p.disparity.Resize(W, H);
-      const float fb = static_cast<float>(pod.stereo.ir.fx * pod.stereo.baseline_m);
-      for (size_t j = 0; j < static_cast<size_t>(W) * H; ++j) {
-        const float z = s.out_z[j];
-        p.disparity.data()[j] = std::isfinite(z) && z > 0.0f ? fb / z : 0.0f;
-      }
-      studio::WriteTruth(v.left_truth, s, nullptr, &p.mask);
+      impl_->RenderPair(rig.pods[i], impl_->pods[i], options_, frame_index, tmpl, scene, impl_->scratch[worker],
+                        &(*pairs)[i]);
     });
+  });
+}
+
+void StereoStudioRenderer::RenderPod(int64_t frame_index, int pod_index, StereoPair* pair) {
+  HOLO_CHECK(pod_index >= 0 && pod_index < static_cast<int>(rig_.pods.size()));
+  studio_->WithPosedFrame(frame_index, [&](const studio::SceneTemplate& tmpl, const studio::FrameScene& scene,
+                                           WorkerPool*) {
+    if (impl_->scratch.empty()) impl_->scratch.resize(1);
+    impl_->RenderPair(rig_.pods[pod_index], impl_->pods[pod_index], options_, frame_index, tmpl, scene,
+                      impl_->scratch[0], pair);
   });
 }
 

@@ -67,6 +67,12 @@ class StereoStudioRenderer {
   // its buffers). Deterministic: same frame, options and seed → same bytes.
   void Render(int64_t frame_index, std::vector<StereoPair>* pairs);
 
+  // Renders the pair of the pod at `pod_index` (0..rig().pods.size()-1) alone
+  // (what a network pod captures, holoport-pod --depth stereo): the same bytes
+  // Render gives that pod, at 1/N of the cost. A pod's views are set up on
+  // its first render, so a renderer used for one pod holds only that pod's.
+  void RenderPod(int64_t frame_index, int pod_index, StereoPair* pair);
+
   const StereoRenderOptions& options() const { return options_; }
 
  private:

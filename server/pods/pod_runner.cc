@@ -18,6 +18,7 @@
 #include "server/capture/prerendered.h"
 #include "server/pods/pod_client.h"
 #include "server/pods/socket_io.h"
+#include "server/stereo/stereo_depth.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 
@@ -32,6 +33,13 @@ Status PodRunOptions::Check() const {
   if (queue_frames < 1) return InvalidArgument("--queue must be >= 1");
   if (depth_codec != "d1" && depth_codec != "d2")
     return InvalidArgument("--depth-codec must be d1 or d2, got '" + depth_codec + "'");
+  if (depth != "direct" && depth != "stereo")
+    return InvalidArgument("--depth must be direct or stereo, got '" + depth + "'");
+  // A dataset's frames carry their depth already (and no IR pairs to match).
+  if (depth == "stereo" && !dataset.empty())
+    return InvalidArgument("--depth stereo needs the synthetic studio (its IR pairs); a --dataset already has depth: "
+                           "drop one of the two");
+  if (stereo_threads < 0 || stereo_threads > 256) return InvalidArgument("--stereo-threads must be in 0..256");
   if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
   std::string host;
   uint16_t port = 0;
@@ -42,21 +50,25 @@ Status PodRunOptions::Check() const {
 
 namespace {
 
-// This pod's frames, by slot.
-class PodFrames {
- public:
-  virtual ~PodFrames() = default;
-  virtual Status Get(int64_t slot, RgbdFrame* out) = 0;
-};
-
+// The studio's view of this pod. With stereo parts set, each frame's depth is
+// replaced by PatchMatch depth from the pod's IR pair (the colour stays the
+// studio's, as a stereo pod's colour camera is the same camera).
 class StudioFrames final : public PodFrames {
  public:
-  StudioFrames(std::unique_ptr<SyntheticStudio> studio, int pod_index, int prerender)
-      : studio_(std::move(studio)), pod_index_(pod_index) {
-    for (int k = 0; k < prerender; ++k) {
-      loop_.emplace_back();
-      studio_->RenderPod(k, pod_index_, &loop_.back());
-    }
+  struct Stereo {
+    std::unique_ptr<StereoStudioRenderer> renderer;  // renders this pod's pair only
+    std::unique_ptr<PatchMatchStereo> matcher;
+    float far_m = 0;  // depth beyond is dropped (the server's StereoDepthOptions)
+  };
+  StudioFrames(std::unique_ptr<SyntheticStudio> studio, int pod_index, const PodCalibration& calibration, Stereo stereo)
+      : studio_(std::move(studio)), pod_index_(pod_index), stereo_(std::move(stereo)) {
+    calibration_ = calibration;
+  }
+  // Renders (and matches) the first `count` frames; Get loops them.
+  Status Prerender(int count) {
+    loop_.resize(static_cast<size_t>(count));
+    for (int k = 0; k < count; ++k) HOLO_RETURN_IF_ERROR(Render(k, &loop_[static_cast<size_t>(k)]));
+    return OkStatus();
   }
   Status Get(int64_t slot, RgbdFrame* out) override {
     if (!loop_.empty()) {
@@ -64,19 +76,32 @@ class StudioFrames final : public PodFrames {
       return OkStatus();
     }
     // Live rendering: the studio's animation repeats every 2 minutes of slots.
-    studio_->RenderPod(slot % 3600, pod_index_, out);
-    return OkStatus();
+    return Render(slot % 3600, out);
   }
 
  private:
+  Status Render(int64_t frame_index, RgbdFrame* out) {
+    studio_->RenderPod(frame_index, pod_index_, out);
+    if (!stereo_.renderer) return OkStatus();
+    stereo_.renderer->RenderPod(frame_index, pod_index_, &pair_);
+    HOLO_RETURN_IF_ERROR(stereo_.matcher->Compute(pair_.left, pair_.right, &disparity_));
+    return DisparityToDepth(stereo_.renderer->rig().pods[static_cast<size_t>(pod_index_)], disparity_, stereo_.far_m,
+                            &out->depth);
+  }
+
   std::unique_ptr<SyntheticStudio> studio_;
   int pod_index_;
+  Stereo stereo_;
+  StereoPair pair_;
+  ImageFloat disparity_;
   std::vector<RgbdFrame> loop_;
 };
 
 class DatasetFrames final : public PodFrames {
  public:
-  DatasetFrames(std::unique_ptr<DatasetReader> reader, size_t index) : reader_(std::move(reader)), index_(index) {}
+  DatasetFrames(std::unique_ptr<DatasetReader> reader, size_t index) : reader_(std::move(reader)), index_(index) {
+    calibration_ = reader_->rig().pods[index_];
+  }
   Status Get(int64_t, RgbdFrame* out) override {
     Status s = reader_->Next(&set_);
     if (s.code() == StatusCode::kOutOfRange) {  // loop the recording
@@ -94,7 +119,63 @@ class DatasetFrames final : public PodFrames {
   RgbdFrameSet set_;
 };
 
+Status FindPod(const Rig& rig, int pod_id, size_t* index) {
+  for (size_t i = 0; i < rig.pods.size(); ++i)
+    if (rig.pods[i].id == pod_id) {
+      *index = i;
+      return OkStatus();
+    }
+  return InvalidArgument("--pod " + std::to_string(pod_id) + " is not in rig '" + rig.name + "'");
+}
+
 }  // namespace
+
+StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
+                                                   const std::function<void(const std::string&)>& log) {
+  HOLO_RETURN_IF_ERROR(o.Check());
+  auto say = [&](const std::string& s) {
+    if (log) log(s);
+  };
+  if (!o.dataset.empty()) {
+    HOLO_ASSIGN_OR_RETURN(auto reader, DatasetReader::Open(o.dataset));
+    size_t index = 0;
+    HOLO_RETURN_IF_ERROR(FindPod(reader->rig(), o.pod_id, &index));
+    return std::unique_ptr<PodFrames>(std::make_unique<DatasetFrames>(std::move(reader), index));
+  }
+  HOLO_ASSIGN_OR_RETURN(Workload w, GetWorkload(o.workload));
+  Rig rig = w.rig;
+  if (!o.rig_path.empty()) {
+    HOLO_ASSIGN_OR_RETURN(rig, LoadRig(o.rig_path));
+  }
+  size_t index = 0;
+  HOLO_RETURN_IF_ERROR(FindPod(rig, o.pod_id, &index));
+  StudioOptions so = w.studio;
+  so.threads = 1;  // one pod per process: eight of them share the machine
+  HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(rig, so));
+  StudioFrames::Stereo stereo;
+  if (o.depth == "stereo") {
+    // As holoport-server --depth stereo: the server's default stereo options
+    // and the default stereo block where the rig has none. The depth lands in
+    // the pod's depth camera, so the calibration the pod sends (depth and
+    // colour cameras, poses) is the one the site's rig holds, stereo or not.
+    StereoDepthOptions sd;
+    HOLO_ASSIGN_OR_RETURN(stereo.renderer,
+                          StereoStudioRenderer::Create(studio.get(), WithStereoPods(studio->rig()), sd.render));
+    PatchMatchOptions pm = sd.patchmatch;
+    StereoSearchRange(stereo.renderer->rig().pods[index], sd.near_m, sd.far_m, &pm);
+    pm.threads = o.stereo_threads;
+    HOLO_ASSIGN_OR_RETURN(stereo.matcher, PatchMatchStereo::Create(pm));
+    stereo.far_m = sd.far_m;
+  }
+  auto frames = std::make_unique<StudioFrames>(std::move(studio), static_cast<int>(index), rig.pods[index],
+                                               std::move(stereo));
+  if (o.prerender > 0) {
+    say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name +
+        (o.depth == "stereo" ? " with stereo depth (PatchMatch: ~0.5 s per QVGA frame and core)" : ""));
+    HOLO_RETURN_IF_ERROR(frames->Prerender(o.prerender));
+  }
+  return std::unique_ptr<PodFrames>(std::move(frames));
+}
 
 Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
   HOLO_RETURN_IF_ERROR(o.Check());
@@ -102,37 +183,11 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
     if (!o.quiet) spdlog::info("holoport-pod {}: {}", o.pod_id, s);
   };
   // This pod's calibration and frame producer.
-  PodCalibration calibration;
-  std::unique_ptr<PodFrames> frames;
-  auto find_pod = [&](const Rig& rig, size_t* index) -> Status {
-    for (size_t i = 0; i < rig.pods.size(); ++i)
-      if (rig.pods[i].id == o.pod_id) {
-        *index = i;
-        return OkStatus();
-      }
-    return InvalidArgument("--pod " + std::to_string(o.pod_id) + " is not in rig '" + rig.name + "'");
-  };
-  if (!o.dataset.empty()) {
-    HOLO_ASSIGN_OR_RETURN(auto reader, DatasetReader::Open(o.dataset));
-    size_t index = 0;
-    HOLO_RETURN_IF_ERROR(find_pod(reader->rig(), &index));
-    calibration = reader->rig().pods[index];
-    frames = std::make_unique<DatasetFrames>(std::move(reader), index);
-  } else {
-    HOLO_ASSIGN_OR_RETURN(Workload w, GetWorkload(o.workload));
-    Rig rig = w.rig;
-    if (!o.rig_path.empty()) {
-      HOLO_ASSIGN_OR_RETURN(rig, LoadRig(o.rig_path));
-    }
-    size_t index = 0;
-    HOLO_RETURN_IF_ERROR(find_pod(rig, &index));
-    calibration = rig.pods[index];
-    StudioOptions so = w.studio;
-    so.threads = 1;  // one pod per process: eight of them share the machine
-    HOLO_ASSIGN_OR_RETURN(auto studio, SyntheticStudio::Create(rig, so));
-    if (o.prerender > 0) say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name);
-    frames = std::make_unique<StudioFrames>(std::move(studio), static_cast<int>(index), o.prerender);
-  }
+  HOLO_ASSIGN_OR_RETURN(std::unique_ptr<PodFrames> frames, OpenPodFrames(o, say));
+  const PodCalibration calibration = frames->calibration();
+  if (o.depth == "stereo" && o.prerender == 0)
+    say("stereo depth live: PatchMatch takes ~0.5 s per QVGA frame and core, slots in between are skipped "
+        "(--prerender N matches N frames first and loops them)");
 
   // The pod's clock: the system clock plus the simulated offset and drift.
   const int64_t t_start = net::WallUs();
@@ -232,6 +287,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
         j["depth_bytes"] = depth_bytes;
         j["color_bytes"] = color_bytes;
         j["depth_codec"] = o.depth_codec;
+        j["depth"] = o.depth;
         std::fprintf(stats, "%s\n", j.dump().c_str());
         std::fflush(stats);
       }

@@ -1,7 +1,9 @@
 // holoport-pod: one RGB-D pod as its own process (docs/capture.md). It
 // renders its own view of the synthetic studio (or reads its images from a
-// dataset folder), stamps every frame with its own clock, compresses it and
-// streams it to a site started with `holoport-server --pods PORT`.
+// dataset folder), with the studio's depth or, as an active-stereo pod
+// (--depth stereo), depth matched from its own IR pair; stamps every frame
+// with its own clock, compresses it and streams it to a site started with
+// `holoport-server --pods PORT`.
 #include <CLI/CLI.hpp>
 
 #include <atomic>
@@ -29,7 +31,16 @@ int main(int argc, char** argv) {
   app.add_option("--dataset", o.dataset, "read this pod's frames from a dataset folder (looped) instead of the studio");
   app.add_option("--fps", o.fps, "camera rate; frames are triggered at wall-clock slots k/fps")->capture_default_str();
   app.add_option("-n,--frames", o.frames, "stop after this many frames (-1: until interrupted)")->capture_default_str();
-  app.add_option("--prerender", o.prerender, "studio: render this many frames first and loop them (0: render live)")
+  app.add_option("--prerender", o.prerender,
+                 "studio: render this many frames first (with --depth stereo: and match them) and loop them "
+                 "(0: render live)")
+      ->capture_default_str();
+  app.add_option("--depth", o.depth,
+                 "studio: direct (the studio's depth-sensor model) or stereo (an active-stereo pod: PatchMatch on "
+                 "its own IR pair, ~0.5 s per QVGA frame and core; docs/stereo.md); not with --dataset")
+      ->check(CLI::IsMember({"direct", "stereo"}))
+      ->capture_default_str();
+  app.add_option("--stereo-threads", o.stereo_threads, "--depth stereo: PatchMatch threads (0: every core)")
       ->capture_default_str();
   app.add_option("--clock-offset-ms", o.clock_offset_ms, "simulate a pod clock offset from the system clock, ms")
       ->capture_default_str();

@@ -108,7 +108,8 @@ int main(int argc, char** argv) {
   app.add_option("--masks", masks_name, "segment | truth (synthetic only) | dataset | none")->capture_default_str();
   std::string depth_mode = "direct";
   app.add_option("--depth", depth_mode, "synthetic source: direct (the studio's depth sensor model) or stereo "
-                 "(PatchMatch on each pod's IR pair, docs/stereo.md)")->check(CLI::IsMember({"direct", "stereo"}))
+                 "(PatchMatch on each pod's IR pair, docs/stereo.md); not with --pods, where each pod makes its "
+                 "depth (holoport-pod --depth stereo)")->check(CLI::IsMember({"direct", "stereo"}))
       ->capture_default_str();
   std::string reconstruct = "tsdf";
   app.add_option("--reconstruct", reconstruct,
@@ -261,7 +262,8 @@ int main(int argc, char** argv) {
   bool pod_set_stats = false;
   app.add_option("--pods", pods_spec,
                  "take the frames from pod processes (holoport-pod) connecting to [HOST:]PORT instead of the "
-                 "local source; the workload / --rig gives the rig they must match, its empty room the background");
+                 "local source; the workload / --rig gives the rig they must match, its empty room the background; "
+                 "direct and stereo pods (holoport-pod --depth) alike");
   app.add_option("--pod-token", pod_token, "--pods: the token pods must present");
   app.add_option("--pod-tolerance-ms", pod_tolerance_ms, "--pods: frames within this of each other form one set")
       ->capture_default_str();
@@ -505,6 +507,13 @@ int main(int argc, char** argv) {
   // Stereo depth: the studio's IR pairs through PatchMatch replace its depth.
   std::unique_ptr<holo::FrameSource> stereo_source;
   if (depth_mode == "stereo") {
+    // Pods send depth, whichever way they made it: a stereo pod matches its
+    // own IR pair, and its calibration (depth and colour cameras, poses) is
+    // checked like any pod's. A stereo source here would never be read.
+    if (!pods_spec.empty())
+      return Fail(holo::InvalidArgument(
+          "--depth stereo is the local synthetic source's; with --pods each pod makes its depth: start the pods "
+          "with holoport-pod --depth stereo (a --pods site takes stereo and direct pods alike)"));
     if (!studio) return Fail(holo::InvalidArgument("--depth stereo needs --source synthetic"));
     auto st = holo::StereoStudioSource::Create(studio.get(), holo::StereoDepthOptions{});
     if (!st.ok()) return Fail(st.status());
