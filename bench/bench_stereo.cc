@@ -11,8 +11,8 @@
 //
 // Options: --middlebury DIR (default ../shared/data/stereo next to the
 // repository: a folder holding aloeL.jpg, aloeR.jpg, aloeGT.png, or a parent
-// of one), --threads N (2), --baseline M (0.15), --iterations N (PatchMatch),
-// --fuse-frames N (2; 0 skips the fused-mesh comparison), --contact-sheet PNG.
+// of one), --threads N (2), --baseline M (0.15), --iterations N,
+// --coarse-levels N and --fine-iterations N (PatchMatch), --fuse-frames N (2; 0 skips the fused-mesh comparison), --contact-sheet PNG.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -164,6 +164,7 @@ struct StereoBenchOptions {
   std::string contact_sheet;                                                         // PNG of the depth maps
   int threads = 2;
   int iterations = -1;  // PatchMatch iterations (-1: its default)
+  int coarse_levels = -1, fine_iterations = -1;  // PatchMatch coarse to fine (-1: its defaults)
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   double baseline = kDefaultStereoBaselineM;
 };
@@ -188,6 +189,8 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   StereoDepthOptions sdo;
   sdo.patchmatch.threads = threads;
   if (iterations > 0) sdo.patchmatch.iterations = iterations;
+  if (o.coarse_levels >= 0) sdo.patchmatch.coarse_levels = o.coarse_levels;
+  if (o.fine_iterations > 0) sdo.patchmatch.fine_iterations = o.fine_iterations;
   auto source = StereoStudioSource::Create(studio->get(), sdo);
   if (!source.ok()) return Fail(source.status().ToString());
   auto renderer = StereoStudioRenderer::Create(studio->get(), rig, sdo.render);
@@ -372,6 +375,11 @@ BenchFn SetupStereo(CLI::App& app) {
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
   app.add_option("--iterations", o->iterations, "PatchMatch iterations (-1: its default)")->capture_default_str();
+  app.add_option("--coarse-levels", o->coarse_levels, "PatchMatch half-resolution levels first (-1: its default)")
+      ->capture_default_str();
+  app.add_option("--fine-iterations", o->fine_iterations,
+                 "PatchMatch iterations at full resolution after the coarse levels (-1: its default)")
+      ->capture_default_str();
   app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
       ->check(CLI::Range(0, 100))
       ->capture_default_str();

@@ -55,7 +55,7 @@ SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
   return p;
 }
 
-void ExpectRecoversPlane(bool force_scalar) {
+void ExpectRecoversPlane(bool force_scalar, int coarse_levels) {
   const int W = 160, H = 120;
   const SyntheticPair pair = SlantedPlane(W, H, 0.06f, -0.04f, 14.0f);  // d from ~9.2 to ~23.6 px
   PatchMatchOptions o;
@@ -63,6 +63,7 @@ void ExpectRecoversPlane(bool force_scalar) {
   o.max_disparity = 40;
   o.threads = 2;
   o.force_scalar = force_scalar;
+  o.coarse_levels = coarse_levels;
   PatchMatchStereo pm(o);
   ImageFloat disp;
   ASSERT_TRUE(pm.Compute(pair.left, pair.right, &disp).ok());
@@ -89,8 +90,11 @@ void ExpectRecoversPlane(bool force_scalar) {
   EXPECT_LT(mean, 0.2) << "mean |error|, px";
 }
 
-TEST(PatchMatchTest, RecoversSlantedPlaneToSubPixel) { ExpectRecoversPlane(false); }
-TEST(PatchMatchTest, ScalarPathRecoversSlantedPlane) { ExpectRecoversPlane(true); }
+// Default: a half-resolution level first, then one full-resolution iteration.
+TEST(PatchMatchTest, RecoversSlantedPlaneToSubPixel) { ExpectRecoversPlane(false, 1); }
+TEST(PatchMatchTest, ScalarPathRecoversSlantedPlane) { ExpectRecoversPlane(true, 1); }
+TEST(PatchMatchTest, OneLevelRecoversSlantedPlane) { ExpectRecoversPlane(false, 0); }
+TEST(PatchMatchTest, TwoCoarseLevelsRecoverSlantedPlane) { ExpectRecoversPlane(false, 2); }
 
 TEST(PatchMatchTest, ResultDoesNotDependOnThreadCount) {
   const SyntheticPair pair = SlantedPlane(96, 64, 0.0f, 0.05f, 10.0f);
@@ -122,6 +126,19 @@ TEST(PatchMatchTest, RefusesBadInputAndOptions) {
   o.window_rows = 4;
   EXPECT_NE(o.Check().message().find("window_rows"), std::string::npos);
   EXPECT_FALSE(PatchMatchStereo::Create(o).ok());
+  o = PatchMatchOptions{};
+  o.coarse_levels = 5;
+  EXPECT_NE(o.Check().message().find("coarse_levels"), std::string::npos);
+  o = PatchMatchOptions{};
+  o.fine_iterations = 0;
+  EXPECT_NE(o.Check().message().find("fine_iterations"), std::string::npos);
+  // An image too small to halve runs one level.
+  PatchMatchOptions small;
+  small.max_disparity = 8;
+  PatchMatchStereo pm_small(small);
+  ImageGray8 s16(24, 12, 128);
+  EXPECT_TRUE(pm_small.Compute(s16, s16, &d).ok());
+  EXPECT_EQ(d.width(), 24);
 }
 
 // ---- The studio's IR pairs -------------------------------------------------
