@@ -121,6 +121,7 @@ double NowMs() {
 struct CodecsOptions {
   bool synthetic = false, hash = false;
   bool full_mesh = false;  // fused: the full-resolution mesh, not the stream mesh the live server sends
+  int stream_step = 2;     // fused: the stream mesh's grid step in voxels (holoport-server --stream-step)
   std::string only;                         // "G1,C1": only these codecs
   std::string content = "truth";            // truth | fused
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
@@ -361,7 +362,8 @@ double ForegroundPsnr(const PodImageInput& in, const ImageRgb8& out) {
 // frames and keeps, per frame, the site's fused textured mesh and the pods'
 // colour images with the masks the site used. Returns the frames kept, or -1
 // (error printed).
-int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal, std::vector<FrameInput>* inputs) {
+int FusedInputs(const Workload& wl, int frames, bool stream_mesh, int stream_step, bool temporal,
+                std::vector<FrameInput>* inputs) {
   auto studio = SyntheticStudio::Create(wl.rig, wl.studio);
   StudioOptions empty_options = wl.studio;
   empty_options.empty_room = true;
@@ -377,6 +379,7 @@ int FusedInputs(const Workload& wl, int frames, bool stream_mesh, bool temporal,
   // The live server's default (holoport-server --stream-step 2 --stream-triangles 20000).
   o.stream_mesh = stream_mesh;
   o.stream_field = stream_mesh;
+  o.stream.step = stream_step;
   // --content temporal: the site's temporal fusion (docs/temporal.md: the
   // previous volume tracked non-rigidly and fused into), not a fresh volume per frame.
   o.temporal = temporal;
@@ -500,9 +503,10 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
       return 2;
     }
     if (content == "fused" || content == "temporal") {
-      const int got = FusedInputs(*wl, frames, !co.full_mesh, content == "temporal", &inputs);
+      const int got = FusedInputs(*wl, frames, !co.full_mesh, co.stream_step, content == "temporal", &inputs);
       if (got < 0) return 1;
       q0["mesh"] = co.full_mesh ? "site-fused" : "site-stream";
+      if (!co.full_mesh) q0["stream_step"] = std::to_string(co.stream_step);
       q0["masks"] = "segment";
     } else {
     SyntheticStudio studio(wl->rig, wl->studio);
@@ -1257,6 +1261,10 @@ BenchFn SetupCodecs(CLI::App& app) {
       ->capture_default_str();
   app.add_flag("--full-mesh", co->full_mesh,
                "fused: the site's full-resolution mesh instead of the stream mesh (20 k triangles) the live server sends");
+  app.add_option("--stream-step", co->stream_step,
+                 "fused: the stream mesh's grid step in voxels, 2..4 (holoport-server --stream-step)")
+      ->check(CLI::Range(2, 4))
+      ->capture_default_str();
   app.add_flag("--synthetic", co->synthetic, "workload synthetic-sphere (a noisy blob) instead of the studio");
   app.add_option("--only", co->only, "only these codecs, comma-separated (e.g. G1,C1)");
   app.add_flag("--hash", co->hash, "print a hash of every geometry blob of the first repeat to stderr");

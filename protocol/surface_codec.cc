@@ -279,9 +279,6 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     return InvalidArgument("g3: grid of " + Str(static_cast<uint64_t>(std::max(g.nx, 0))) + "×" +
                            Str(static_cast<uint64_t>(std::max(g.ny, 0))) + "×" + Str(static_cast<uint64_t>(std::max(g.nz, 0))) +
                            " samples: each axis must be in [1, " + Str(kSurfaceMaxAxis) + "]");
-  if (SurfacePaddedSamples(g.nx, g.ny, g.nz) > kSurfaceMaxSamples)
-    return InvalidArgument("g3: grid of " + Str(g.size()) + " samples is too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
-                           Str(kSurfaceMaxSamples) + ")");
   if (g.sdf.size() != g.size())
     return InvalidArgument("g3: grid has " + Str(g.sdf.size()) + " values for " + Str(g.size()) + " samples");
   if (!(g.voxel_m >= 1e-4f && g.voxel_m <= 1.0f)) return InvalidArgument("g3: voxel must be in [1e-4, 1] m");
@@ -382,6 +379,49 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   sc.size.assign(nc, 0);
   for (size_t c = 0; c < nc; ++c)
     sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))] += McTableCase(sc.codes[c]).num_triangles;
+  // A grid larger than the format allows (a site's box spans every piece
+  // behind the surface, and a few far floaters of a fused volume can stretch
+  // it to metres) is cut to the box of the cubes kept; the pieces dropped
+  // stay dropped in the cut (a piece can only lose cubes there), so the blob
+  // says the same surface. The cut costs a second pass over the smaller box.
+  if (SurfacePaddedSamples(nx, ny, nz) > kSurfaceMaxSamples) {
+    int lo[3] = {nx, ny, nz}, hi[3] = {-1, -1, -1};
+    for (size_t c = 0; c < nc; ++c) {
+      if (static_cast<size_t>(sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))]) <
+          o.min_component_triangles)
+        continue;
+      const size_t i = sc.cubes[c];
+      const int p[3] = {static_cast<int>(i % sy), static_cast<int>((i / sy) % static_cast<size_t>(ny)),
+                        static_cast<int>(i / sz)};
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], p[a]);
+        hi[a] = std::max(hi[a], p[a] + 1);  // the cube's far corner
+      }
+    }
+    for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
+    const bool none = hi[0] < 0;  // nothing kept: a one-sample grid says so
+    if (none) lo[0] = lo[1] = lo[2] = hi[0] = hi[1] = hi[2] = 0;
+    const int cx = hi[0] - lo[0] + 1, cy = hi[1] - lo[1] + 1, cz = hi[2] - lo[2] + 1;
+    if (SurfacePaddedSamples(cx, cy, cz) > kSurfaceMaxSamples)
+      return InvalidArgument("g3: grid of " + Str(static_cast<uint64_t>(nx)) + "×" + Str(static_cast<uint64_t>(ny)) +
+                             "×" + Str(static_cast<uint64_t>(nz)) + " samples whose surface spans " +
+                             Str(static_cast<uint64_t>(cx)) + "×" + Str(static_cast<uint64_t>(cy)) + "×" +
+                             Str(static_cast<uint64_t>(cz)) + ": too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
+                             Str(kSurfaceMaxSamples) + ")");
+    SdfGrid crop;
+    crop.voxel_m = g.voxel_m;
+    crop.nx = cx;
+    crop.ny = cy;
+    crop.nz = cz;
+    crop.origin = g.origin + g.voxel_m * Eigen::Vector3f(static_cast<float>(lo[0]), static_cast<float>(lo[1]),
+                                                         static_cast<float>(lo[2]));
+    crop.sdf.assign(crop.size(), std::numeric_limits<float>::quiet_NaN());
+    if (!none)
+      for (int z = 0; z < cz; ++z)
+        for (int y = 0; y < cy; ++y)
+          std::copy_n(&g.sdf[g.Index(lo[0], lo[1] + y, lo[2] + z)], cx, &crop.sdf[crop.Index(0, y, z)]);
+    return EncodeSurface(crop, o, out, decoded, stats);
+  }
   // Labels: the corners of the kept cubes.
   Field& f = sc.field;
   f.Reset(nx, ny, nz);

@@ -7,6 +7,8 @@
 #include <chrono>
 #include <string>
 
+#include <spdlog/spdlog.h>
+
 namespace holo::net {
 namespace {
 double MsSince(std::chrono::steady_clock::time_point t0) {
@@ -106,8 +108,22 @@ Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t captur
     out->codec = g.codec;
     out->geometry.clear();  // the encoder appends
     if (g.codec == protocol::GeometryCodec::kG3) {
-      HOLO_RETURN_IF_ERROR(protocol::EncodeSurface(*field, st.surface, &out->geometry)
-                               .WithContext("frame " + std::to_string(frame_index)));
+      const Status s = protocol::EncodeSurface(*field, st.surface, &out->geometry);
+      if (s.code() == StatusCode::kInvalidArgument && s.message().find("too large") != std::string::npos) {
+        // A surface wider than G3's grid (two people far apart at a fine
+        // step): this frame as G1 rather than none; the viewer decodes either.
+        t->geometry_fallback = true;
+        if (geometry_fallbacks_++ % 100 == 0)
+          spdlog::warn("publisher: frame {} sent as G1: {} ({} such frames)", frame_index, s.message(),
+                       geometry_fallbacks_);
+        g.codec = protocol::GeometryCodec::kG1;
+        out->codec = g.codec;
+        out->geometry.clear();
+        HOLO_RETURN_IF_ERROR(
+            protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));
+      } else {
+        HOLO_RETURN_IF_ERROR(s.WithContext("frame " + std::to_string(frame_index)));
+      }
     } else {
       HOLO_RETURN_IF_ERROR(
           protocol::EncodeGeometry(mesh, g, &out->geometry).WithContext("frame " + std::to_string(frame_index)));

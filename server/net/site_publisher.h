@@ -111,6 +111,9 @@ struct PublishTimings {
   size_t color_bytes = 0;
   size_t viewers = 0;       // viewers the frame was offered to
   bool color_keyframe = false;  // V1: this frame's colour is a key frame on every pod
+  // G3 could not code this frame's grid (its surface spans more than the
+  // format allows): the frame went out as G1 instead.
+  bool geometry_fallback = false;
   // The reduced layer, when it was encoded with this frame (its encode
   // time is not in geometry_ms/color_ms).
   bool reduced = false;
@@ -180,6 +183,7 @@ class SitePublisher {
   WorkerPool pool_{2};  // geometry and colour of a layer at once
   std::atomic<int64_t> encoded_[2] = {0, 0};
   int64_t frames_seen_ = 0;
+  uint64_t geometry_fallbacks_ = 0;  // G3 frames sent as G1 (EncodeLayer)
 };
 
 }  // namespace holo::net

@@ -897,6 +897,7 @@ int main(int argc, char** argv) {
       j["geometry_bytes"] = pt.geometry_bytes;
       j["color_bytes"] = pt.color_bytes;
       j["color_keyframe"] = pt.color_keyframe;
+      if (pt.geometry_fallback) j["geometry_fallback"] = true;  // G3 frame sent as G1
       if (pt.reduced) {
         j["reduced_bytes"] = pt.reduced_bytes;
         j["reduced_ms"] = pt.reduced_ms;

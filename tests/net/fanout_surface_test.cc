@@ -54,15 +54,28 @@ net::ClientOptions Viewer(net::Server* server) {
   return o;
 }
 
-TEST(FanoutSurfaceTest, ViewersGetTheSurfaceFromTheGrid) {
+// A site (G3 publisher) and one connected viewer.
+struct SiteAndViewer {
+  std::unique_ptr<net::Server> server;
+  std::unique_ptr<net::SitePublisher> pub;
+  std::unique_ptr<net::SiteClient> viewer;
+};
+void Connect(SiteAndViewer* c) {
   auto server = test::StartServerRetrying(test::LoopbackConfig());
   ASSERT_TRUE(server.ok()) << server.status().ToString();
-  net::SitePublisher pub(server->get(), SurfaceOptions());
-  auto viewer = net::SiteClient::Start(Viewer(server->get()));
+  c->server = std::move(server).value();
+  c->pub = std::make_unique<net::SitePublisher>(c->server.get(), SurfaceOptions());
+  auto viewer = net::SiteClient::Start(Viewer(c->server.get()));
   ASSERT_TRUE(viewer.ok());
-  ASSERT_TRUE((*viewer)->WaitConnected(10));
-  ASSERT_EQ((*viewer)->welcome()->geometry_codec, protocol::GeometryCodec::kG3);
-  ASSERT_TRUE(test::Eventually([&] { return (*server)->num_subscribed(3) == 1; }));
+  c->viewer = std::move(viewer).value();
+  ASSERT_TRUE(c->viewer->WaitConnected(10));
+  ASSERT_TRUE(test::Eventually([&] { return c->server->num_subscribed(3) == 1; }));
+}
+
+TEST(FanoutSurfaceTest, ViewersGetTheSurfaceFromTheGrid) {
+  SiteAndViewer c;
+  ASSERT_NO_FATAL_FAILURE(Connect(&c));
+  ASSERT_EQ(c.viewer->welcome()->geometry_codec, protocol::GeometryCodec::kG3);
   // The stand-in mesh goes with the grid (regions and logs use it); what
   // travels is the grid's surface.
   const Mesh stand_in = test::NoisySphere(10, 12);
@@ -70,10 +83,10 @@ TEST(FanoutSurfaceTest, ViewersGetTheSurfaceFromTheGrid) {
     const Eigen::Vector3f centre(0.01f * static_cast<float>(index), 1.0f, 2.0f);
     const SdfGrid grid = BallGrid(centre);
     net::PublishTimings t;
-    ASSERT_TRUE(pub.Publish(index, net::WallUs(), stand_in, {}, &t, &grid).ok());
+    ASSERT_TRUE(c.pub->Publish(index, net::WallUs(), stand_in, {}, &t, &grid).ok());
     EXPECT_GT(t.geometry_bytes, 100u);
     net::ReceivedFrame f;
-    ASSERT_TRUE((*viewer)->WaitFrame(&f, 5.0)) << "frame " << index;
+    ASSERT_TRUE(c.viewer->WaitFrame(&f, 5.0)) << "frame " << index;
     ASSERT_TRUE(f.has_mesh);
     ASSERT_GT(f.mesh.num_triangles(), 1000u) << "frame " << index;
     ASSERT_EQ(f.mesh.normals.size(), f.mesh.num_vertices());
@@ -83,9 +96,45 @@ TEST(FanoutSurfaceTest, ViewersGetTheSurfaceFromTheGrid) {
   }
   // A frame without its grid is refused, naming what is missing.
   net::PublishTimings t;
-  const Status s = pub.Publish(5, net::WallUs(), stand_in, {}, &t);
+  const Status s = c.pub->Publish(5, net::WallUs(), stand_in, {}, &t);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("G3"), std::string::npos) << s.ToString();
+}
+
+TEST(FanoutSurfaceTest, ASurfaceTooWideForG3GoesOutAsG1) {
+  SiteAndViewer c;
+  ASSERT_NO_FATAL_FAILURE(Connect(&c));
+  // Two balls at opposite corners of a 262³ grid (4.2 m at 16 mm): more
+  // than G3's grid limit even when cut to the surface.
+  const float voxel = 0.016f;
+  SdfGrid wide;
+  wide.voxel_m = voxel;
+  wide.nx = wide.ny = wide.nz = 262;
+  wide.sdf.assign(wide.size(), std::nanf(""));
+  for (const int corner : {8, 253}) {
+    const SdfGrid ball = BallGrid(Eigen::Vector3f::Constant(voxel * static_cast<float>(corner)));
+    const int o = static_cast<int>(std::lround(ball.origin.x() / voxel));
+    for (int z = 0; z < ball.nz; ++z)
+      for (int y = 0; y < ball.ny; ++y)
+        for (int x = 0; x < ball.nx; ++x)
+          if (o + x >= 0 && o + y >= 0 && o + z >= 0 && o + x < 262 && o + y < 262 && o + z < 262)
+            wide.sdf[wide.Index(o + x, o + y, o + z)] = ball.sdf[ball.Index(x, y, z)];
+  }
+  const Mesh stand_in = test::NoisySphere(10, 12);
+  net::PublishTimings t;
+  ASSERT_TRUE(c.pub->Publish(0, net::WallUs(), stand_in, {}, &t, &wide).ok());
+  EXPECT_TRUE(t.geometry_fallback);
+  net::ReceivedFrame f;
+  ASSERT_TRUE(c.viewer->WaitFrame(&f, 5.0));
+  ASSERT_TRUE(f.has_mesh);
+  EXPECT_EQ(f.mesh.num_triangles(), stand_in.num_triangles()) << "the mesh, as G1";
+  // The next frame that fits is G3 again.
+  const SdfGrid grid = BallGrid(Eigen::Vector3f(0.0f, 1.0f, 2.0f));
+  ASSERT_TRUE(c.pub->Publish(1, net::WallUs(), stand_in, {}, &t, &grid).ok());
+  EXPECT_FALSE(t.geometry_fallback);
+  ASSERT_TRUE(c.viewer->WaitFrame(&f, 5.0));
+  ASSERT_GT(f.mesh.num_triangles(), 1000u);
+  EXPECT_NE(f.mesh.num_triangles(), stand_in.num_triangles());
 }
 
 TEST(FanoutSurfaceTest, AViewerWithoutG3IsRefusedNamingTheCodec) {

@@ -227,6 +227,71 @@ TEST(SurfaceCodec, BadGridsAreRefusedWithAReason) {
   EXPECT_EQ(EncodeGeometry(Mesh{}, go, &blob).code(), StatusCode::kInvalidArgument);
 }
 
+// A grid over the format's limit, unobserved except near `balls` (each
+// entry: a ball and the half-size of the observed cube around it).
+SdfGrid SparseBigGrid(const std::vector<std::pair<Ball, float>>& balls, int n) {
+  SdfGrid g;
+  g.origin = Eigen::Vector3f(-0.5f, -0.5f, -0.5f);
+  g.voxel_m = kVoxel;
+  g.nx = g.ny = g.nz = n;
+  g.sdf.assign(g.size(), std::nanf(""));
+  for (const auto& [b, half] : balls) {
+    const Eigen::Vector3f lo = (b.centre - Eigen::Vector3f::Constant(half) - g.origin) / kVoxel;
+    const Eigen::Vector3f hi = (b.centre + Eigen::Vector3f::Constant(half) - g.origin) / kVoxel;
+    for (int z = std::max(0, static_cast<int>(lo.z())); z <= std::min(n - 1, static_cast<int>(hi.z())); ++z)
+      for (int y = std::max(0, static_cast<int>(lo.y())); y <= std::min(n - 1, static_cast<int>(hi.y())); ++y)
+        for (int x = std::max(0, static_cast<int>(lo.x())); x <= std::min(n - 1, static_cast<int>(hi.x())); ++x) {
+          const Eigen::Vector3f p =
+              g.origin + kVoxel * Eigen::Vector3f(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+          const float d = std::clamp((p - b.centre).norm() - b.radius, -kTrunc, kTrunc);
+          float& v = g.sdf[g.Index(x, y, z)];
+          v = std::isnan(v) ? d : std::min(v, d);
+        }
+  }
+  return g;
+}
+
+TEST(SurfaceCodec, AGridOverTheLimitIsCutToTheSurfaceItKeeps) {
+  // 262³ samples (padded 266³ > 2^24): a body near one corner and, 3.5 m
+  // away, a speck too small to keep (as a fused volume's far floater
+  // stretches the site's box).
+  const int n = 262;
+  ASSERT_GT(SurfacePaddedSamples(n, n, n), kSurfaceMaxSamples);
+  const Ball body{Eigen::Vector3f(0.0f, 0.05f, -0.02f), 0.3f};
+  const Ball speck{Eigen::Vector3f(3.5f, 3.5f, 3.4f), 0.012f};
+  {  // one big grid alive at a time
+    const SdfGrid g = SparseBigGrid({{body, 0.4f}, {speck, 0.05f}}, n);
+    std::vector<uint8_t> blob;
+    Mesh enc;
+    SurfaceEncodeStats st;
+    const Status s = EncodeSurface(g, {}, &blob, &enc, &st);
+    ASSERT_TRUE(s.ok()) << s.ToString();
+    EXPECT_LT(st.grid_samples, g.size() / 100) << "coded on the cut";
+    Mesh out;
+    ASSERT_TRUE(DecodeGeometry(blob, &out).ok());
+    ASSERT_EQ(out.triangles, enc.triangles);
+    ASSERT_GT(out.num_triangles(), 2000u);
+    // The same surface as the body's grid alone gives, nothing of the speck.
+    const SdfGrid alone = SparseBigGrid({{body, 0.4f}}, 80);
+    std::vector<uint8_t> blob_alone;
+    Mesh enc_alone;
+    ASSERT_TRUE(EncodeSurface(alone, {}, &blob_alone, &enc_alone).ok());
+    ASSERT_EQ(out.num_vertices(), enc_alone.num_vertices());
+    ASSERT_EQ(out.triangles, enc_alone.triangles);
+    for (size_t i = 0; i < out.num_vertices(); ++i)
+      ASSERT_LT((out.positions[i] - enc_alone.positions[i]).norm(), 1e-5f) << i;
+    for (const auto& p : out.positions) EXPECT_LT(DistanceToBalls(p, {body}), 0.002);
+  }
+  // Two kept bodies at opposite corners still do not fit: refused, naming the span.
+  const SdfGrid two = SparseBigGrid(
+      {{Ball{Eigen::Vector3f::Constant(-0.15f), 0.3f}, 0.4f}, {Ball{Eigen::Vector3f::Constant(3.35f), 0.3f}, 0.4f}}, n);
+  std::vector<uint8_t> blob;
+  const Status t = EncodeSurface(two, {}, &blob);
+  EXPECT_EQ(t.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(t.message().find("surface spans"), std::string::npos) << t.ToString();
+  EXPECT_TRUE(blob.empty());
+}
+
 TEST(SurfaceCodec, EncodingIsDeterministic) {
   const SdfGrid g = BallsGrid({{Eigen::Vector3f(0.02f, 0.0f, 0.0f), 0.2f}});
   std::vector<uint8_t> a, b;
