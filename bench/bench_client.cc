@@ -543,7 +543,8 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       }
       const auto& st = (*renderer)->atlas_stats();
       auto qb = q;
-      qb["texels_per_edge"] = std::to_string(base.projective.bake_texels_per_edge);
+      qb["texels_per_edge"] = std::to_string(st.texels_per_edge);  // as baked (halved if the atlas did not fit)
+      if (st.fallback) qb["fallback"] = "per-fragment";
       qb["texels_per_pod_pixel"] = fmt::format("{:g}", base.projective.bake_texels_per_pod_pixel);
       qb["atlas"] = std::to_string(st.width) + "x" + std::to_string(st.height);
       EmitFigure("client", args.workload, "bake_ms", Median(bake_ms), "ms", qb);

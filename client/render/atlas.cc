@@ -20,8 +20,8 @@ Status AtlasBakeOptions::Check() const {
     return InvalidArgument("atlas texels_per_pod_pixel must be in [0, 64]");
   }
   if (!(min_pod_weight >= 0 && min_pod_weight <= 1)) return InvalidArgument("atlas min_pod_weight must be in [0, 1]");
-  if (max_width < texels_per_edge + 1 || max_height < texels_per_edge + 1) {
-    return InvalidArgument("atlas max_width/max_height must hold one cell");
+  if (max_width < texels_per_edge + 1 || max_height < 2) {
+    return InvalidArgument("atlas max_width must hold one cell, max_height one cell of one texel per edge");
   }
   if (!(alpha >= 0 && alpha <= 64)) return InvalidArgument("atlas alpha must be in [0, 64]");
   if (!(visibility_tolerance_m > 0 && visibility_tolerance_m < 1)) {
@@ -269,10 +269,18 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
     p.height = cam.intrinsics.height;
   }
 
-  const int L = options.texels_per_edge;
+  // Every triangle has an (L+1)² cell: a mesh whose cells would not fit
+  // max_height gets L/2, L/4, … texels per edge before it is refused.
+  int L = options.texels_per_edge;
+  auto rows_for = [&](int l) {
+    const size_t per_row = static_cast<size_t>(std::max(1, options.max_width / (l + 1)));
+    return nt == 0 ? size_t{0} : (nt + per_row - 1) / per_row;
+  };
+  while (L > 1 && rows_for(L) * static_cast<size_t>(L + 1) > static_cast<size_t>(options.max_height)) L /= 2;
+  out->texels_per_edge = L;
   const int cell = L + 1;
   const int cells_per_row = std::max(1, options.max_width / cell);
-  const size_t rows = nt == 0 ? 0 : (nt + cells_per_row - 1) / cells_per_row;
+  const size_t rows = rows_for(L);
   if (rows * cell > static_cast<size_t>(options.max_height)) {
     return OutOfRange("atlas bake: " + std::to_string(nt) + " triangles at " + std::to_string(L) +
                              " texels per edge need " + std::to_string(rows * cell) + " rows, more than " +

@@ -46,7 +46,7 @@ class WorkerPool;
 namespace holo::render {
 
 struct AtlasBakeOptions {
-  int texels_per_edge = 4;  // L: cell of (L+1)² texels per triangle, 1..16
+  int texels_per_edge = 8;  // L: cell of (L+1)² texels per triangle, 1..16 (ProjectiveOptions' default)
   // Texels along a triangle's edge per pixel of that edge in its most
   // heavily weighted pod's image (at least 1, at most L): a triangle smaller
   // than a pod pixel needs no more than its corners. 0 = always L.
@@ -58,7 +58,7 @@ struct AtlasBakeOptions {
   // but −0.1 dB on the studio's exact mesh; 0.5 38 % fewer for −0.02 dB.
   float min_pod_weight = 0.1f;
   int max_width = 2048;     // atlas width limit (texels); the height grows
-  int max_height = 16384;   // refuse meshes needing more
+  int max_height = 16384;   // fewer texels per edge for meshes needing more; refuse them at L = 1
   float alpha = 2.0f;       // exponent of the facing term
   float visibility_tolerance_m = 0.015f;
   float discontinuity_weight = 0.001f;
@@ -100,6 +100,7 @@ struct Atlas {
   std::vector<std::array<float, 2>> uv;
   size_t texels_baked = 0;  // texels computed (cells' used part)
   size_t samples = 0;       // pod samples taken (texel × pod)
+  int texels_per_edge = 0;  // L used: the options', halved until the cells fit max_height
 };
 
 // A pod's world-to-image map as one 3×4 matrix: rows u·z, v·z, z for a camera

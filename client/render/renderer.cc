@@ -1209,6 +1209,7 @@ Status Renderer::UpdateAtlas(const ProjectiveOptions& options) {
   Atlas atlas;
   atlas_stats_ = {};
   const Status baked = BakeAtlas(in, pods, bo, pool_.get(), &atlas);
+  atlas_stats_.texels_per_edge = atlas.texels_per_edge;
   atlas_texels_ = options.bake_texels_per_edge;
   atlas_density_ = options.bake_texels_per_pod_pixel;
   atlas_tol_ = options.visibility_tolerance_m;

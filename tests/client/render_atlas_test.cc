@@ -104,6 +104,7 @@ TEST(AtlasTest, EveryTexelTakesThePodsColourAtItsSurfacePoint) {
   const TestPod pod(2.0f, false, 255);
   const TestMesh mesh(6, 0.5f, 2.0f, 0x1);
   AtlasBakeOptions o;
+  o.texels_per_edge = 4;
   o.texels_per_pod_pixel = 0;  // always texels_per_edge
   Atlas atlas;
   ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
@@ -210,6 +211,7 @@ TEST(AtlasTest, SmallTrianglesGetFewerTexels) {
   // Triangle legs of 1 cm: about 0.28 pod pixels at 2 m.
   const TestMesh mesh(10, 0.05f, 2.0f, 0x1);
   AtlasBakeOptions o;
+  o.texels_per_edge = 4;
   Atlas atlas;
   ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
   ForEachTexel(mesh, atlas, [&](size_t, int, int, int l, const Eigen::Vector3f&, const uint8_t*) { EXPECT_EQ(l, 1); });
@@ -218,6 +220,49 @@ TEST(AtlasTest, SmallTrianglesGetFewerTexels) {
   o.texels_per_pod_pixel = 0;
   ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
   EXPECT_EQ(atlas.texels_baked, 19 * mesh.triangles.size());  // L = 4: 15 on the triangle + 4 past it
+}
+
+TEST(AtlasTest, TrianglesLargeInTheirPodGetUpToEightTexelsPerEdge) {
+  const TestPod pod(2.0f, false, 255);
+  // Legs of 0.5 m at 2 m: about 14 pod pixels, more than 8.
+  const TestMesh mesh(2, 0.5f, 2.0f, 0x1);
+  AtlasBakeOptions o;  // the default, as the viewer bakes
+  Atlas atlas;
+  ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
+  int checked = 0;
+  ForEachTexel(mesh, atlas, [&](size_t, int, int, int l, const Eigen::Vector3f&, const uint8_t*) {
+    EXPECT_EQ(l, 8);
+    ++checked;
+  });
+  EXPECT_EQ(checked, 8 * 45);  // 8 triangles × 45 texels on each (L = 8)
+}
+
+TEST(AtlasTest, AMeshTooLargeForTheAtlasGetsFewerTexelsBeforeItIsRefused) {
+  const TestPod pod(2.0f, false, 255);
+  const TestMesh mesh(6, 0.5f, 2.0f, 0x1);  // 72 triangles
+  AtlasBakeOptions o;
+  o.texels_per_pod_pixel = 0;  // always L
+  o.max_width = 45;            // 5 cells of L = 8 per row: 15 rows of 9 = 135 texels
+  o.max_height = 100;          // L = 4: 9 cells per row, 8 rows of 5 = 40
+  Atlas atlas;
+  ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
+  EXPECT_EQ(atlas.texels_per_edge, 4);
+  EXPECT_LE(atlas.height, 100);
+  int checked = 0;
+  ForEachTexel(mesh, atlas, [&](size_t, int, int, int l, const Eigen::Vector3f& p, const uint8_t* texel) {
+    EXPECT_EQ(l, 4);
+    Eigen::Vector2f px;
+    ASSERT_TRUE(pod.camera.ProjectWorld(p, &px));
+    EXPECT_NEAR(texel[0], 2 * px.x(), 1.01);
+    ++checked;
+  });
+  EXPECT_EQ(checked, 72 * 15);
+  // Room for one texel per edge only (L = 2 needs 5 rows of 3), and less: refused.
+  o.max_height = 10;  // L = 1: 22 cells per row, 4 rows of 2 = 8
+  ASSERT_TRUE(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).ok());
+  EXPECT_EQ(atlas.texels_per_edge, 1);
+  o.max_height = 7;
+  EXPECT_EQ(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).code(), StatusCode::kOutOfRange);
 }
 
 // The AVX2 sampling loop against the portable one on a scene that reaches
@@ -288,8 +333,9 @@ TEST(AtlasTest, BadInputIsRefusedWithAReason) {
   o.texels_per_pod_pixel = -1;
   EXPECT_EQ(BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas).code(), StatusCode::kInvalidArgument);
   o = {};
+  o.texels_per_edge = 4;
   o.max_width = 10;
-  o.max_height = 10;  // 8 triangles in cells of 5: 2 per row, 4 rows = 20 > 10
+  o.max_height = 3;  // 8 triangles: 4 rows of 5 (L = 4), 3 of 3 (L = 2), 2 of 2 (L = 1): all > 3
   const Status too_big = BakeAtlas(mesh.Input(), {pod.View()}, o, nullptr, &atlas);
   EXPECT_EQ(too_big.code(), StatusCode::kOutOfRange);
   EXPECT_NE(too_big.message().find("triangles"), std::string::npos) << too_big.message();
