@@ -453,7 +453,6 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     });
   };
   int iterations = o.iterations;
-  const int refine_per_sweep = o.refine_per_sweep;
   int step_index = 0;
   if (from_coarse) {
     if (!im.coarse) {
@@ -478,7 +477,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
 
   auto refine = [&](View& v, const View& other, int x, int y, uint64_t pass, float scale, const SelfWindow& sw) {
     const size_t i = static_cast<size_t>(y) * W + x;
-    for (int k = 0; k < refine_per_sweep; ++k) {
+    for (int k = 0; k < o.refine_per_sweep; ++k) {
       const uint64_t h = rng(pass, x, y, static_cast<uint64_t>(k) + 1);
       const float s = scale * std::ldexp(1.0f, -k);
       const Plane& cur = v.plane[i];
@@ -526,7 +525,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const View& other = vi == 0 ? R : L;
       const uint64_t pass = static_cast<uint64_t>(it) * 8 + static_cast<uint64_t>(vi) * 4 + 16;
       scatter(v, other);
-      const int per_sweep = std::max(1, refine_per_sweep);
+      const int per_sweep = std::max(1, o.refine_per_sweep);
       const float scale_h = std::ldexp(1.0f, -step_index);
       const float scale_v = std::ldexp(1.0f, -(step_index + per_sweep));
       // Horizontal sweep: view proposal, left (or right) neighbour, refinement.
@@ -556,7 +555,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         }
       });
     }
-    step_index += 2 * std::max(1, refine_per_sweep);
+    step_index += 2 * std::max(1, o.refine_per_sweep);
   }
 
   // Disparities and the left-right check.
