@@ -403,8 +403,8 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     if (none) lo[0] = lo[1] = lo[2] = hi[0] = hi[1] = hi[2] = 0;
     const int cx = hi[0] - lo[0] + 1, cy = hi[1] - lo[1] + 1, cz = hi[2] - lo[2] + 1;
     if (SurfacePaddedSamples(cx, cy, cz) > kSurfaceMaxSamples)
-      return InvalidArgument("g3: grid of " + Str(static_cast<uint64_t>(nx)) + "×" + Str(static_cast<uint64_t>(ny)) +
-                             "×" + Str(static_cast<uint64_t>(nz)) + " samples whose surface spans " +
+      return OutOfRange("g3: grid of " + Str(static_cast<uint64_t>(nx)) + "×" + Str(static_cast<uint64_t>(ny)) +
+                        "×" + Str(static_cast<uint64_t>(nz)) + " samples whose surface spans " +
                              Str(static_cast<uint64_t>(cx)) + "×" + Str(static_cast<uint64_t>(cy)) + "×" +
                              Str(static_cast<uint64_t>(cz)) + ": too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
                              Str(kSurfaceMaxSamples) + ")");
@@ -443,8 +443,8 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   st.occupied_bricks = f.slot_brick.size();
   if (st.occupied_bricks > kSurfaceMaxOccupiedBricks) {
     for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
-    return InvalidArgument("g3: the surface occupies " + Str(st.occupied_bricks) + " bricks of 4³ samples, more than " +
-                           Str(kSurfaceMaxOccupiedBricks));
+    return OutOfRange("g3: the surface occupies " + Str(st.occupied_bricks) + " bricks of 4³ samples, more than " +
+                      Str(kSurfaceMaxOccupiedBricks));
   }
   for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
 

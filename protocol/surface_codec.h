@@ -85,8 +85,9 @@ struct SurfaceEncodeStats {
 
 // Encodes the surface of `grid` into a G3 blob appended to `out`.
 // `decoded` (optional) receives the mesh a decoder makes from the blob.
-// InvalidArgument if the grid is malformed (sizes, spacing, origin) or too
-// large for the format or the protocol limits.
+// InvalidArgument if the grid is malformed (sizes, spacing, origin);
+// OutOfRange if its surface does not fit the format's limits (a grid larger
+// than kSurfaceMaxSamples is first cut to the box of the surface it keeps).
 Status EncodeSurface(const SdfGrid& grid, const SurfaceEncodeOptions& options, std::vector<uint8_t>* out,
                      Mesh* decoded = nullptr, SurfaceEncodeStats* stats = nullptr);
 

@@ -109,7 +109,7 @@ Status SitePublisher::EncodeLayer(int layer, int64_t frame_index, int64_t captur
     out->geometry.clear();  // the encoder appends
     if (g.codec == protocol::GeometryCodec::kG3) {
       const Status s = protocol::EncodeSurface(*field, st.surface, &out->geometry);
-      if (s.code() == StatusCode::kInvalidArgument && s.message().find("too large") != std::string::npos) {
+      if (s.code() == StatusCode::kOutOfRange) {
         // A surface wider than G3's grid (two people far apart at a fine
         // step): this frame as G1 rather than none; the viewer decodes either.
         t->geometry_fallback = true;

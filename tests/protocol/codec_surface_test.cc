@@ -287,7 +287,7 @@ TEST(SurfaceCodec, AGridOverTheLimitIsCutToTheSurfaceItKeeps) {
       {{Ball{Eigen::Vector3f::Constant(-0.15f), 0.3f}, 0.4f}, {Ball{Eigen::Vector3f::Constant(3.35f), 0.3f}, 0.4f}}, n);
   std::vector<uint8_t> blob;
   const Status t = EncodeSurface(two, {}, &blob);
-  EXPECT_EQ(t.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(t.code(), StatusCode::kOutOfRange);
   EXPECT_NE(t.message().find("surface spans"), std::string::npos) << t.ToString();
   EXPECT_TRUE(blob.empty());
 }
