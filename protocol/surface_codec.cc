@@ -379,6 +379,11 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   sc.size.assign(nc, 0);
   for (size_t c = 0; c < nc; ++c)
     sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))] += McTableCase(sc.codes[c]).num_triangles;
+  // Cube c lies in a piece too small to keep.
+  auto dropped = [&](size_t c) {
+    return static_cast<size_t>(sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))]) <
+           o.min_component_triangles;
+  };
   // A grid larger than the format allows (a site's box spans every piece
   // behind the surface, and a few far floaters of a fused volume can stretch
   // it to metres) is cut to the box of the cubes kept; the pieces dropped
@@ -387,9 +392,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   if (SurfacePaddedSamples(nx, ny, nz) > kSurfaceMaxSamples) {
     int lo[3] = {nx, ny, nz}, hi[3] = {-1, -1, -1};
     for (size_t c = 0; c < nc; ++c) {
-      if (static_cast<size_t>(sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))]) <
-          o.min_component_triangles)
-        continue;
+      if (dropped(c)) continue;
       const size_t i = sc.cubes[c];
       const int p[3] = {static_cast<int>(i % sy), static_cast<int>((i / sy) % static_cast<size_t>(ny)),
                         static_cast<int>(i / sz)};
@@ -426,7 +429,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   Field& f = sc.field;
   f.Reset(nx, ny, nz);
   for (size_t c = 0; c < nc; ++c) {
-    if (static_cast<size_t>(sc.size[static_cast<size_t>(Find(sc.parent, static_cast<int32_t>(c)))]) < o.min_component_triangles) {
+    if (dropped(c)) {
       ++st.dropped_cubes;
       continue;
     }

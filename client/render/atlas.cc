@@ -271,16 +271,17 @@ Status BakeAtlas(const AtlasMeshInput& mesh, const std::vector<AtlasPod>& pods, 
 
   // Every triangle has an (L+1)² cell: a mesh whose cells would not fit
   // max_height gets L/2, L/4, … texels per edge before it is refused.
-  int L = options.texels_per_edge;
-  auto rows_for = [&](int l) {
+  // Texel rows the cells of L texels per edge take.
+  auto height_for = [&](int l) {
     const size_t per_row = static_cast<size_t>(std::max(1, options.max_width / (l + 1)));
-    return nt == 0 ? size_t{0} : (nt + per_row - 1) / per_row;
+    return (nt + per_row - 1) / per_row * static_cast<size_t>(l + 1);
   };
-  while (L > 1 && rows_for(L) * static_cast<size_t>(L + 1) > static_cast<size_t>(options.max_height)) L /= 2;
+  int L = options.texels_per_edge;
+  while (L > 1 && height_for(L) > static_cast<size_t>(options.max_height)) L /= 2;
   out->texels_per_edge = L;
   const int cell = L + 1;
   const int cells_per_row = std::max(1, options.max_width / cell);
-  const size_t rows = rows_for(L);
+  const size_t rows = height_for(L) / static_cast<size_t>(cell);
   if (rows * cell > static_cast<size_t>(options.max_height)) {
     return OutOfRange("atlas bake: " + std::to_string(nt) + " triangles at " + std::to_string(L) +
                              " texels per edge need " + std::to_string(rows * cell) + " rows, more than " +

@@ -9,6 +9,8 @@
 #define HOLO_PM_X86 1
 #endif
 
+#include <opencv2/imgproc.hpp>
+
 #include "common/worker_pool.h"
 
 namespace holo {
@@ -299,16 +301,14 @@ struct PatchMatchStereo::Impl {
 };
 
 namespace {
-// 2×2 box average (rounded); an odd last row or column is left out.
+// 2×2 box average (OpenCV's area resampling at exactly half size); an odd
+// last row or column is left out.
 void HalveImage(const ImageGray8& in, ImageGray8* out) {
   const int w = in.width() / 2, h = in.height() / 2;
   if (out->width() != w || out->height() != h) out->Resize(w, h);
-  for (int y = 0; y < h; ++y) {
-    const uint8_t* a = in.row(2 * y);
-    const uint8_t* b = in.row(2 * y + 1);
-    uint8_t* o = out->row(y);
-    for (int x = 0; x < w; ++x) o[x] = static_cast<uint8_t>((a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1] + 2) / 4);
-  }
+  const cv::Mat src(in.height(), in.width(), CV_8UC1, const_cast<uint8_t*>(in.data()));
+  cv::Mat dst(h, w, CV_8UC1, out->data());
+  cv::resize(src(cv::Rect(0, 0, 2 * w, 2 * h)), dst, dst.size(), 0, 0, cv::INTER_AREA);
 }
 }  // namespace
 

@@ -37,7 +37,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--depth", o.depth,
                  "studio: direct (the studio's depth-sensor model) or stereo (an active-stereo pod: PatchMatch on "
-                 "its own IR pair, ~0.5 s per QVGA frame and core; docs/stereo.md); not with --dataset")
+                 "its own IR pair, ~0.25 s of CPU per QVGA frame; docs/stereo.md); not with --dataset")
       ->check(CLI::IsMember({"direct", "stereo"}))
       ->capture_default_str();
   app.add_option("--stereo-threads", o.stereo_threads, "--depth stereo: PatchMatch threads (0: every core)")
