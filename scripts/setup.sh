@@ -9,7 +9,7 @@ PACKAGES=(
   liblz4-dev libopus-dev libopenal-dev libglfw3-dev libasio-dev
   libcli11-dev libyaml-cpp-dev nlohmann-json3-dev libspdlog-dev
   libgtest-dev
-  libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev
+  libzstd-dev libturbojpeg0-dev libmeshoptimizer-dev libdraco-dev clang libclang-rt-14-dev lld
   python3-open3d
   openssl libepoxy-dev libegl-dev libgl1-mesa-dri xvfb xauth libssl-dev espeak-ng
   libsoxr-dev
