@@ -512,6 +512,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
   std::vector<uint64_t> bytes0;
   for (auto& d : decoders) bytes0.push_back(d->stats().bytes_received);
   const uint64_t render_bytes0 = render_client ? render_client->stats().bytes_received : 0;
+  const net::ClientStats render_stats0 = render_client ? render_client->stats() : net::ClientStats{};
   const auto w0 = std::chrono::steady_clock::now();
   for (auto& sy : decoder_syncs) sy->sync().ResetStats();
   if (render_sync) render_sync->sync().ResetStats();
@@ -546,6 +547,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
   std::vector<uint64_t> bytes1;
   for (auto& d : decoders) bytes1.push_back(d->stats().bytes_received);
   const uint64_t render_bytes1 = render_client ? render_client->stats().bytes_received : 0;
+  const net::ClientStats render_stats1 = render_client ? render_client->stats() : net::ClientStats{};
 
   // Site figures.
   const double site_frames = static_cast<double>(site_frames1 - site_frames0);
@@ -686,6 +688,17 @@ int Run(const BenchArgs& args, LiveOptions o) {
          {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}, {"color", o.color}});
     emit("mbps", static_cast<double>(render_bytes1 - render_bytes0) * 8.0 / (window_s * 1e6), "Mbit/s",
          {{"viewer", "render"}});
+    // Every received frame is decoded (a video stream cannot skip one), even
+    // those the renderer never shows: decoding per received frame, wall ms
+    // on the client's network thread.
+    const auto received = static_cast<double>(render_stats1.frames_received - render_stats0.frames_received);
+    if (received > 0) {
+      emit("viewer_received_fps", received / window_s, "1/s", {{"viewer", "render"}});
+      emit("viewer_decode_ms", (render_stats1.mesh_decode_ms - render_stats0.mesh_decode_ms) / received, "ms",
+           {{"viewer", "render"}, {"part", "geometry"}, {"per", "received frame"}});
+      emit("viewer_decode_ms", (render_stats1.color_decode_ms - render_stats0.color_decode_ms) / received, "ms",
+           {{"viewer", "render"}, {"part", "color"}, {"per", "received frame"}});
+    }
   }
   emit("viewers_cpu_ms_per_s", (self_cpu1 - self_cpu0) / window_s, "ms",
        {{"note", "this process: all viewers' io, decoding and GL threads"}});
