@@ -25,8 +25,9 @@
 // published frame), viewer_fps per viewer kind (new frames decoded /
 // displayed per second, not redraws), latency_p50_ms / latency_p99_ms
 // from the pods' acquisition to decoded and to displayed ("at"), mbps per
-// viewer, triangles, chamfer_mm and novel_view_psnr_db / novel_view_ssim at
-// the viewer. The site also publishes its person's voice (--voice synthetic:
+// viewer, the rendering viewer's viewer_received_fps and viewer_decode_ms
+// per received frame (geometry, color), triangles, chamfer_mm and
+// novel_view_psnr_db / novel_view_ssim at the viewer. The site also publishes its person's voice (--voice synthetic:
 // syllables at footsteps, knocks at ball bounces, stamped on the pictures'
 // capture clock); every viewer plays it in sync with the pictures
 // (client/net/site_av_sync.h) and av_offset_ms (p1, p50, p99: voice playout
