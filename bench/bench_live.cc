@@ -88,6 +88,7 @@ struct LiveOptions {
   double warmup_s = 4;
   int decoders = 4;
   bool render = true;
+  int viewer_quality = 10;  // the rendering viewer's Control set quality (0..4: the reduced layer)
   int width = 960, height = 540;
   std::string color = "projective";  // rendering viewer: projective | projective-fragment
   int prerender = 60;
@@ -194,8 +195,9 @@ Status SetDecodedPodImages(render::Renderer* renderer, const Rig& rig, const std
 }
 
 StatusOr<std::unique_ptr<net::SiteClient>> StartViewer(uint16_t port, const std::string& name,
-                                                       net::ClientCallbacks cb) {
+                                                       net::ClientCallbacks cb, int quality = 10) {
   net::ClientOptions o;
+  o.quality = quality;
   o.port = port;
   o.token = kLiveViewerToken;
   o.name = name;
@@ -389,7 +391,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
   std::mutex kept_mu;
   std::unique_ptr<net::SiteAvSync> render_sync;
   if (o.render) {
-    auto c = StartViewer(port, "renderer", {});
+    auto c = StartViewer(port, "renderer", {}, o.viewer_quality);
     if (!c.ok()) {
       spdlog::error("live: {}", c.status().ToString());
       return 1;
@@ -694,7 +696,9 @@ int Run(const BenchArgs& args, LiveOptions o) {
     // on the client's network thread.
     const auto received = static_cast<double>(render_stats1.frames_received - render_stats0.frames_received);
     if (received > 0) {
-      emit("viewer_received_fps", received / window_s, "1/s", {{"viewer", "render"}});
+      emit("viewer_received_fps", received / window_s, "1/s",
+           {{"viewer", "render"}, {"layer", std::to_string(render_stats1.layer)},
+            {"layer_changes", std::to_string(render_stats1.layer_changes - render_stats0.layer_changes)}});
       emit("viewer_decode_ms", (render_stats1.mesh_decode_ms - render_stats0.mesh_decode_ms) / received, "ms",
            {{"viewer", "render"}, {"part", "geometry"}, {"per", "received frame"}});
       emit("viewer_decode_ms", (render_stats1.color_decode_ms - render_stats0.color_decode_ms) / received, "ms",
@@ -793,6 +797,10 @@ BenchFn SetupLive(CLI::App& app) {
     app.add_option("--warmup", o.warmup_s, "seconds after every viewer's first frame before measuring")
         ->check(CLI::Range(0.0, 60.0));
     app.add_option("--decoders", o.decoders, "viewers that only decode")->check(CLI::Range(0, 32));
+    app.add_option("--viewer-quality", o.viewer_quality,
+                   "the rendering viewer's quality cap 0..10 (Control set quality; 0..4 keep it on the site's "
+                   "reduced layer, to measure that layer end to end)")
+        ->check(CLI::Range(0, 10));
     app.add_option("--width", o.width, "rendering viewer's width")->check(CLI::Range(64, 4096));
     app.add_option("--height", o.height, "rendering viewer's height")->check(CLI::Range(64, 4096));
     app.add_option("--color", o.color,

@@ -128,6 +128,17 @@ class Server::Impl {
   WireMessagePtr regions_announce;  // Stats "site.regions" (null: this site publishes no Regions)
   protocol::GeometryCodec geometry = protocol::GeometryCodec::kG1;
   protocol::ColorCodec color = protocol::ColorCodec::kC1;
+  // Each layer's codecs (SetLayerCodecs; layer 0's are the two above).
+  std::array<protocol::GeometryCodec, kMaxLayers> layer_geometry = [] {
+    std::array<protocol::GeometryCodec, kMaxLayers> a;
+    a.fill(protocol::GeometryCodec::kG1);
+    return a;
+  }();
+  std::array<protocol::ColorCodec, kMaxLayers> layer_color = [] {
+    std::array<protocol::ColorCodec, kMaxLayers> a;
+    a.fill(protocol::ColorCodec::kC1);
+    return a;
+  }();
   uint64_t next_id = 1;
   uint32_t rig_sequence = 0;
   std::atomic<uint32_t> audio_sequence{0};
@@ -624,10 +635,14 @@ class Session : public std::enable_shared_from_this<Session> {
     w.session_id = id_;
     w.max_message_bytes = srv_->cfg.max_message_bytes;
     w.server_name = srv_->cfg.name;
+    std::array<protocol::GeometryCodec, kMaxLayers> layer_geometry;
+    std::array<protocol::ColorCodec, kMaxLayers> layer_color;
     {
       std::lock_guard<std::mutex> l(srv_->mu);
       w.geometry_codec = srv_->geometry;
       w.color_codec = srv_->color;
+      layer_geometry = srv_->layer_geometry;
+      layer_color = srv_->layer_color;
     }
     // Lean frames (PROTOCOL.md §9.1) when the peer has them: 31 instead of 55 kbit/s a voice.
     if (has(h.capabilities.audio, protocol::AudioCodec::kOpusLean)) {
@@ -656,6 +671,13 @@ class Session : public std::enable_shared_from_this<Session> {
                    ", which the client does not list");
         return;
       }
+      // The layers this viewer can be moved to: those down to the first
+      // whose codecs its Hello does not list.
+      int decodable = 1;
+      while (decodable < kMaxLayers && has(h.capabilities.geometry, layer_geometry[static_cast<size_t>(decodable)]) &&
+             has(h.capabilities.color, layer_color[static_cast<size_t>(decodable)]))
+        ++decodable;
+      decodable_layers_ = decodable;
     }
     std::string why;
     if (!srv_->Register(shared_from_this(), h.role, &why)) {
@@ -680,7 +702,7 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       if (rig) EnqueuePriorityAlways(rig);
       if (announce) EnqueuePriorityAlways(announce);
-      const int layers = srv_->num_layers.load();
+      const int layers = std::min(srv_->num_layers.load(), decodable_layers_.load());
       if (layers > 1) {
         EnqueuePriorityAlways(LayerStats(0, layers));  // the site has layers: the viewer starts on the full one
       }
@@ -925,6 +947,9 @@ class Session : public std::enable_shared_from_this<Session> {
   std::atomic<uint32_t> subscription_{0};
   std::atomic<bool> lean_audio_{false};  // negotiated audio codec 3 (lean AudioPose frames)
   std::atomic<int> quality_{10};
+  // Layers 0..n-1 have codecs this viewer listed in its Hello (set before
+  // Register; SetNumLayers never gives it more).
+  std::atomic<int> decodable_layers_{kMaxLayers};
   // Quality layer policy (mu_); recorders always take the full layer.
   LayerController layers_;
   int64_t write_start_us_ = 0;
@@ -933,7 +958,7 @@ class Session : public std::enable_shared_from_this<Session> {
  public:
   void SetNumLayers(int n) {
     std::lock_guard<std::mutex> l(mu_);
-    layers_.SetNumLayers(role_ == Role::kRecorder ? 1 : n);
+    layers_.SetNumLayers(role_ == Role::kRecorder ? 1 : std::min(n, decodable_layers_.load()));
     layers_.SetMinLayer(LayerController::MinLayerForQuality(quality_, layers_.num_layers()), SteadyUs());
   }
 };
@@ -1078,6 +1103,15 @@ void Server::SetPublishedCodecs(protocol::GeometryCodec geometry, protocol::Colo
   std::lock_guard<std::mutex> l(impl_->mu);
   impl_->geometry = geometry;
   impl_->color = color;
+  impl_->layer_geometry.fill(geometry);
+  impl_->layer_color.fill(color);
+}
+
+void Server::SetLayerCodecs(int layer, protocol::GeometryCodec geometry, protocol::ColorCodec color) {
+  HOLO_CHECK(layer >= 1 && layer < kMaxLayers);
+  std::lock_guard<std::mutex> l(impl_->mu);
+  impl_->layer_geometry[static_cast<size_t>(layer)] = geometry;
+  impl_->layer_color[static_cast<size_t>(layer)] = color;
 }
 
 void Server::SetRig(const Rig& rig) {

@@ -116,7 +116,15 @@ class Server {
 
   // The codecs this site publishes in; a client whose Hello lists neither
   // is refused with NO_COMMON_CODEC. Default G1, C1.
+  // (These are the full layer's, told in Welcome; every layer uses them
+  // unless SetLayerCodecs says otherwise.)
   void SetPublishedCodecs(protocol::GeometryCodec geometry, protocol::ColorCodec color);
+  // The codecs of layer `layer` (1..kMaxLayers-1) where they differ from the
+  // full layer's. A viewer is only ever moved to the layers whose codecs its
+  // Hello lists (every frame names its codec, so one that does decodes the
+  // new layer's frames without a new handshake); the others keep the layers
+  // above them.
+  void SetLayerCodecs(int layer, protocol::GeometryCodec geometry, protocol::ColorCodec color);
   // The rig, sent to every viewer after Welcome and to all viewers now.
   void SetRig(const Rig& rig);
   // The same with an already encoded Rig message (a replay sends the

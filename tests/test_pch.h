@@ -1,6 +1,6 @@
 // Headers nearly every test compiles (gtest, Eigen through the project's
 // headers, nlohmann/json, the standard library), precompiled once for all
-// test programs of a GCC build (tests/CMakeLists.txt, HOLO_TEST_PCH). Only
+// test programs of the sanitizer build (tests/CMakeLists.txt, HOLO_TEST_PCH). Only
 // system headers: a test's own includes still name everything it uses.
 #pragma once
 #include <gtest/gtest.h>

@@ -25,6 +25,10 @@ Status ReducedLayerOptions::Check() const {
     return InvalidArgument("reduced layer: crf_offset must be 0..51, got " + std::to_string(crf_offset));
   if (frame_divisor < 1 || frame_divisor > 8)
     return InvalidArgument("reduced layer: frame_divisor must be 1..8, got " + std::to_string(frame_divisor));
+  if (geometry_codec && *geometry_codec != protocol::GeometryCodec::kG1 && *geometry_codec != protocol::GeometryCodec::kG3)
+    return InvalidArgument("reduced layer: geometry codec must be G1 or G3");
+  if (color_codec && *color_codec != protocol::ColorCodec::kC1 && *color_codec != protocol::ColorCodec::kV1)
+    return InvalidArgument("reduced layer: colour codec must be C1 or V1");
   return OkStatus();
 }
 
@@ -36,16 +40,24 @@ LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int
   o.color.jpeg_quality = options.reduced.jpeg_quality;
   const int crf = options.video.crf < 0 ? 24 : options.video.crf;
   o.video.crf = std::min(51, crf + options.reduced.crf_offset);
+  if (options.reduced.geometry_codec) o.geometry.codec = *options.reduced.geometry_codec;
+  if (options.reduced.color_codec) o.color.codec = *options.reduced.color_codec;
   return o;
+}
+
+bool PublisherNeedsField(const SitePublisherOptions& options) {
+  return options.geometry.codec == protocol::GeometryCodec::kG3 ||
+         (options.reduced.enabled && EncodeOptionsOfLayer(options, 1).geometry.codec == protocol::GeometryCodec::kG3);
 }
 
 SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
     : server_(server), options_(std::move(options)) {
   HOLO_CHECK(options_.reduced.Check().ok());
-  HOLO_CHECK(options_.geometry.codec != protocol::GeometryCodec::kG3 || options_.surface.Check().ok());
+  HOLO_CHECK(!PublisherNeedsField(options_) || options_.surface.Check().ok());
   server_->SetPublishedCodecs(options_.geometry.codec, options_.color_options.codec);
   for (int layer = 0; layer < 2; ++layer)
     static_cast<LayerEncodeOptions&>(layers_[layer]) = EncodeOptionsOfLayer(options_, layer);
+  server_->SetLayerCodecs(1, layers_[1].geometry.codec, layers_[1].color.codec);
   if (options_.reduced.enabled) {
     server_->SetLayers(2);
     server_->SetLayerFrameStep(1, options_.reduced.frame_divisor);
@@ -63,7 +75,7 @@ Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, cons
 Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
                              const std::vector<PodColor>& pods, EncodedFrame* out, const SdfGrid* field) {
   out->timings = PublishTimings{};
-  if (options_.geometry.codec == protocol::GeometryCodec::kG3 && field == nullptr)
+  if (PublisherNeedsField(options_) && field == nullptr)
     return InvalidArgument("frame " + std::to_string(frame_index) + ": G3 geometry needs the stream mesh's grid");
   HOLO_RETURN_IF_ERROR(EncodeLayer(0, frame_index, capture_wall_us, mesh, field, pods, out));
   const int64_t n = frames_seen_++;

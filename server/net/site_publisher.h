@@ -19,6 +19,7 @@
 #include <chrono>
 #include <map>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "common/image.h"
@@ -39,8 +40,22 @@ struct ReducedLayerOptions {
   bool enabled = true;
   double position_step_scale = 2.0;  // G1 position step × this
   int jpeg_quality = 35;             // C1 quality, 1..100
-  int crf_offset = 8;                // V1: the full layer's CRF (the codec's default 24 when -1) + this, ≤ 51
+  // V1: the full layer's CRF (the codec's default 24 when -1) + this, ≤ 51.
+  // 0: at S8-QVGA a reduced layer of G3 + V1 at CRF 32 showed the viewer
+  // 19.72 dB, at CRF 36 19.33 and at CRF 40 18.8, against 19.98 for G1 + C1
+  // (holoport-bench live --viewer-quality 0, docs/sessions.md); the layer's
+  // bytes come mostly from its frame rate and geometry.
+  int crf_offset = 0;
   int frame_divisor = 2;             // every n-th frame (1..8): 30 fps → 15
+  // The reduced layer's codecs where they differ from the full layer's
+  // (unset: the same). The reduced layer exists for links that cannot take
+  // the full one, so it may spend CPU on fewer bytes (G3 + V1: about a
+  // quarter of G1 + C1's) while the full layer keeps the cheaper codecs; it
+  // is encoded only while a viewer receives it. G3 needs the stream mesh's
+  // grid with every frame (Publish's `field`). A viewer whose Hello does not
+  // list these codecs stays on the full layer.
+  std::optional<protocol::GeometryCodec> geometry_codec;  // kG1 or kG3
+  std::optional<protocol::ColorCodec> color_codec;        // kC1 or kV1
   Status Check() const;
 };
 
@@ -101,6 +116,9 @@ struct LayerEncodeOptions {
   protocol::VideoEncodeOptions video;
 };
 LayerEncodeOptions EncodeOptionsOfLayer(const SitePublisherOptions& options, int layer);
+// Whether some layer codes the stream mesh's grid (G3): Publish then needs
+// the grid with every frame.
+bool PublisherNeedsField(const SitePublisherOptions& options);
 
 struct PublishTimings {
   double geometry_ms = 0;   // geometry encode

@@ -253,6 +253,22 @@ int main(int argc, char** argv) {
                  "reduced layer: every n-th frame (2: 30 fps -> 15)")
       ->capture_default_str()
       ->check(CLI::Range(1, 8));
+  // The reduced layer is for links that cannot take the full one: by
+  // default its codecs are the ones with the fewest bytes (G3 + V1: 1.1-1.4
+  // against 4.8 Mbit/s for G1 + C1 at S8-QVGA, 15 fps, docs/sessions.md),
+  // while the full layer keeps G1 + C1's lower CPU.
+  std::string reduced_geometry_codec = "auto", reduced_color_codec = "v1";
+  app.add_option("--reduced-geometry-codec", reduced_geometry_codec,
+                 "reduced layer's geometry codec: auto (g3 when the site streams the stream mesh, else as "
+                 "--geometry-codec), same (as --geometry-codec), g1 or g3 (g3 needs the stream mesh); viewers that "
+                 "do not decode it stay on the full layer")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "same", "g1", "g3"}));
+  app.add_option("--reduced-color-codec", reduced_color_codec,
+                 "reduced layer's colour codec: same (as --color-codec), c1 or v1 (v1 at the full layer's "
+                 "--video-crf + --reduced-crf-offset); viewers that do not decode it stay on the full layer")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"same", "c1", "v1"}));
   app.add_flag("--mesh-colors", mesh_colors,
                "texture the streamed mesh per vertex and send the colours in it even when the pods' images are "
                "streamed (by default the viewer colours the mesh from the images, as Holoportation does: the "
@@ -385,21 +401,30 @@ int main(int argc, char** argv) {
   publish_options.color = !no_color_stream;
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
   publish_options.color_options.jpeg_quality = jpeg_quality;
-  if (geometry_codec == "g3") {
-    if (truth_mesh || stream_step < 2)
-      return Fail(holo::InvalidArgument("--geometry-codec g3 needs the stream mesh (--stream-step 2..4, not --truth-mesh)"));
-    publish_options.geometry.codec = holo::protocol::GeometryCodec::kG3;
+  if (reduced_geometry_codec == "auto") reduced_geometry_codec = truth_mesh || stream_step < 2 ? "same" : "g3";
+  const bool any_g3 = geometry_codec == "g3" || (layers > 1 && reduced_geometry_codec == "g3");
+  if (any_g3 && (truth_mesh || stream_step < 2))
+    return Fail(holo::InvalidArgument(std::string(geometry_codec == "g3" ? "--geometry-codec" : "--reduced-geometry-codec") +
+                                      " g3 needs the stream mesh (--stream-step 2..4, not --truth-mesh)"));
+  if (any_g3) {
     publish_options.surface.position_step_m = static_cast<float>(g3_step_mm * 1e-3);
     if (holo::Status st = publish_options.surface.Check(); !st.ok()) return Fail(st.WithContext("--g3-step-mm"));
   }
-  if (color_codec == "v1") {
-    publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
+  if (geometry_codec == "g3") publish_options.geometry.codec = holo::protocol::GeometryCodec::kG3;
+  if (color_codec == "v1" || (layers > 1 && reduced_color_codec == "v1")) {
     publish_options.video.crf = video_crf;
     publish_options.video.preset = video_preset;
     if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
   }
+  if (color_codec == "v1") publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
   publish_options.reduced = reduced;
   publish_options.reduced.enabled = layers > 1;
+  if (reduced_geometry_codec != "same")
+    publish_options.reduced.geometry_codec =
+        reduced_geometry_codec == "g3" ? holo::protocol::GeometryCodec::kG3 : holo::protocol::GeometryCodec::kG1;
+  if (reduced_color_codec != "same")
+    publish_options.reduced.color_codec =
+        reduced_color_codec == "v1" ? holo::protocol::ColorCodec::kV1 : holo::protocol::ColorCodec::kC1;
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
@@ -436,11 +461,12 @@ int main(int argc, char** argv) {
   options.stream_mesh = stream_step > 1 || stream_triangles > 0;
   options.stream.step = stream_step;
   options.stream.max_triangles = stream_triangles;
-  options.stream_field = options.stream_mesh && geometry_codec == "g3";
+  options.stream_field = options.stream_mesh && holo::net::PublisherNeedsField(publish_options);
   // With G3 the viewers mesh the grid themselves (every marching-cubes
   // triangle, ~22 k at S8-QVGA): simplifying the site's own copy of the
   // stream mesh (regions, stats) to the budget would be work no one sees.
-  if (options.stream_field) options.stream.max_triangles = 0;
+  // (With G3 on the reduced layer only, the full layer's G1 needs it.)
+  if (options.stream_field && geometry_codec == "g3") options.stream.max_triangles = 0;
   options.full_mesh = !export_dir.empty();
   options.depth_filter.radius = depth_filter_radius;
   options.smooth_full_mesh = !raw_full_mesh;

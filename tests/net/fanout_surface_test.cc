@@ -2,13 +2,18 @@
 // publishes the stream mesh's distance grid reaches its native viewers as a
 // mesh on the surface, a frame without its grid is refused with a reason,
 // and a viewer that cannot decode G3 (one that lists only G1 and G0) is
-// refused with a message naming the codec.
+// refused with a message naming the codec. A site whose full layer is G1 +
+// C1 may code its reduced layer as G3 + V1: viewers that decode those get it,
+// the others stay on the full layer.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <memory>
+#include <thread>
 #include <vector>
 
+#include "common/image.h"
 #include "common/sdf_grid.h"
 #include "net/net_fixtures.h"
 #include "net/site_client.h"
@@ -150,6 +155,75 @@ TEST(FanoutSurfaceTest, AViewerWithoutG3IsRefusedNamingTheCodec) {
   ASSERT_TRUE((*viewer)->refusal().has_value());
   EXPECT_EQ((*viewer)->refusal()->reason, protocol::RefuseReason::kNoCommonCodec);
   EXPECT_NE((*viewer)->refusal()->message.find("G3"), std::string::npos) << (*viewer)->refusal()->message;
+}
+
+TEST(FanoutSurfaceTest, AReducedLayerInG3AndV1ReachesOnlyTheViewersThatDecodeIt) {
+  net::ServerConfig cfg = test::LoopbackConfig();
+  cfg.layers.adaptive = false;  // viewers move by their quality cap only
+  auto server = test::StartServerRetrying(cfg);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  net::Server* srv = server->get();
+  net::SitePublisherOptions o;  // full layer: G1 + C1
+  o.reduced.frame_divisor = 1;
+  o.reduced.geometry_codec = protocol::GeometryCodec::kG3;
+  o.reduced.color_codec = protocol::ColorCodec::kV1;
+  net::SitePublisher pub(srv, o);
+  EXPECT_TRUE(net::PublisherNeedsField(o));
+
+  net::ClientOptions can = Viewer(srv);
+  can.name = "can";
+  can.max_pending_frames = 64;
+  net::ClientOptions cannot = can;
+  cannot.name = "cannot";
+  cannot.capabilities.geometry = {protocol::GeometryCodec::kG1, protocol::GeometryCodec::kG0};
+  cannot.capabilities.color = {protocol::ColorCodec::kC1, protocol::ColorCodec::kC0};
+  auto a = net::SiteClient::Start(can);
+  auto b = net::SiteClient::Start(cannot);
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_TRUE((*a)->WaitConnected(10));
+  ASSERT_TRUE((*b)->WaitConnected(10)) << "the full layer's codecs are the handshake's";
+  ASSERT_TRUE(test::Eventually([&] { return srv->num_subscribed(3) == 2; }));
+  (*a)->SetQuality(0);
+  (*b)->SetQuality(0);
+  ASSERT_TRUE(test::Eventually([&] { return srv->ViewersOnLayer(1) == 1; }));
+
+  const Mesh stand_in = test::NoisySphere(10, 12);
+  const SdfGrid grid = BallGrid(Eigen::Vector3f(0.0f, 1.0f, 2.0f));
+  ImageRgb8 image[2];
+  ImageGray8 mask[2];
+  net::PublishTimings t;
+  EXPECT_EQ(pub.Publish(0, net::WallUs(), stand_in, {}, &t).code(), StatusCode::kInvalidArgument)
+      << "the reduced layer's G3 needs the grid";
+  for (int64_t i = 1; i <= 12; ++i) {
+    for (int p = 0; p < 2; ++p) test::MaskedImage(160, 120, &image[p], &mask[p], static_cast<uint32_t>(p + 1 + i % 5));
+    ASSERT_TRUE(pub.Publish(i, net::WallUs(), stand_in, {{0, &image[0], &mask[0]}, {1, &image[1], &mask[1]}}, &t, &grid).ok());
+    EXPECT_TRUE(t.reduced) << "frame " << i;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  // "can" decodes the reduced layer: the grid's surface and V1 pictures.
+  int surfaces = 0, meshes = 0;
+  net::ReceivedFrame f;
+  test::Eventually([&] {
+    while ((*a)->PollFrame(&f)) {
+      if (f.frame_index == 0) continue;  // (refused above: never sent)
+      EXPECT_TRUE(f.has_mesh && f.has_color) << "frame " << f.frame_index;
+      EXPECT_EQ(f.images.size(), 2u) << "frame " << f.frame_index << ": a picture did not decode";
+      if (f.mesh.num_triangles() > 1000 && f.mesh.num_triangles() != stand_in.num_triangles()) ++surfaces;
+    }
+    while ((*b)->PollFrame(&f)) {
+      EXPECT_EQ(f.mesh.num_triangles(), stand_in.num_triangles()) << "frame " << f.frame_index << ": not G1";
+      EXPECT_EQ(f.images.size(), 2u);
+      ++meshes;
+    }
+    return surfaces >= 10 && meshes >= 12;
+  });
+  EXPECT_GE(surfaces, 10);
+  EXPECT_EQ(meshes, 12) << "the viewer without G3 and V1 stays on the full layer, every frame";
+  EXPECT_EQ((*a)->stats().layer, 1);
+  EXPECT_EQ((*b)->stats().layer, 0);
+  EXPECT_EQ((*a)->stats().decode_errors, 0u);
+  EXPECT_EQ((*a)->stats().color_images_waiting, 0u) << "the reduced layer's video started at a key frame";
+  EXPECT_EQ((*b)->stats().decode_errors, 0u);
 }
 
 }  // namespace
