@@ -514,7 +514,6 @@ int Run(const BenchArgs& args, LiveOptions o) {
   const double self_cpu0 = ProcessCpuMs();
   std::vector<uint64_t> bytes0;
   for (auto& d : decoders) bytes0.push_back(d->stats().bytes_received);
-  const uint64_t render_bytes0 = render_client ? render_client->stats().bytes_received : 0;
   const net::ClientStats render_stats0 = render_client ? render_client->stats() : net::ClientStats{};
   const auto w0 = std::chrono::steady_clock::now();
   for (auto& sy : decoder_syncs) sy->sync().ResetStats();
@@ -549,7 +548,6 @@ int Run(const BenchArgs& args, LiveOptions o) {
   const int64_t site_frames1 = count_site_frames();
   std::vector<uint64_t> bytes1;
   for (auto& d : decoders) bytes1.push_back(d->stats().bytes_received);
-  const uint64_t render_bytes1 = render_client ? render_client->stats().bytes_received : 0;
   const net::ClientStats render_stats1 = render_client ? render_client->stats() : net::ClientStats{};
 
   // Site figures.
@@ -689,7 +687,7 @@ int Run(const BenchArgs& args, LiveOptions o) {
     emit("render_ms", Median(render_ms), "ms", {{"viewer", "render"}, {"resolution", res}, {"color", o.color}});
     emit("render_cpu_ms", Median(render_cpu_ms), "ms",
          {{"viewer", "render"}, {"resolution", res}, {"thread", "render"}, {"color", o.color}});
-    emit("mbps", static_cast<double>(render_bytes1 - render_bytes0) * 8.0 / (window_s * 1e6), "Mbit/s",
+    emit("mbps", static_cast<double>(render_stats1.bytes_received - render_stats0.bytes_received) * 8.0 / (window_s * 1e6), "Mbit/s",
          {{"viewer", "render"}});
     // Every received frame is decoded (a video stream cannot skip one), even
     // those the renderer never shows: decoding per received frame, wall ms

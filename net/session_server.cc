@@ -126,19 +126,13 @@ class Server::Impl {
   size_t pending = 0;
   WireMessagePtr rig_msg;
   WireMessagePtr regions_announce;  // Stats "site.regions" (null: this site publishes no Regions)
-  protocol::GeometryCodec geometry = protocol::GeometryCodec::kG1;
-  protocol::ColorCodec color = protocol::ColorCodec::kC1;
-  // Each layer's codecs (SetLayerCodecs; layer 0's are the two above).
-  std::array<protocol::GeometryCodec, kMaxLayers> layer_geometry = [] {
-    std::array<protocol::GeometryCodec, kMaxLayers> a;
-    a.fill(protocol::GeometryCodec::kG1);
-    return a;
-  }();
-  std::array<protocol::ColorCodec, kMaxLayers> layer_color = [] {
-    std::array<protocol::ColorCodec, kMaxLayers> a;
-    a.fill(protocol::ColorCodec::kC1);
-    return a;
-  }();
+  // Each layer's codecs (SetPublishedCodecs, SetLayerCodecs); layer 0's
+  // are the ones Welcome names.
+  struct LayerCodecs {
+    protocol::GeometryCodec geometry = protocol::GeometryCodec::kG1;
+    protocol::ColorCodec color = protocol::ColorCodec::kC1;
+  };
+  std::array<LayerCodecs, kMaxLayers> layer_codecs{};
   uint64_t next_id = 1;
   uint32_t rig_sequence = 0;
   std::atomic<uint32_t> audio_sequence{0};
@@ -635,15 +629,13 @@ class Session : public std::enable_shared_from_this<Session> {
     w.session_id = id_;
     w.max_message_bytes = srv_->cfg.max_message_bytes;
     w.server_name = srv_->cfg.name;
-    std::array<protocol::GeometryCodec, kMaxLayers> layer_geometry;
-    std::array<protocol::ColorCodec, kMaxLayers> layer_color;
+    std::array<Server::Impl::LayerCodecs, kMaxLayers> layer_codecs;
     {
       std::lock_guard<std::mutex> l(srv_->mu);
-      w.geometry_codec = srv_->geometry;
-      w.color_codec = srv_->color;
-      layer_geometry = srv_->layer_geometry;
-      layer_color = srv_->layer_color;
+      layer_codecs = srv_->layer_codecs;
     }
+    w.geometry_codec = layer_codecs[0].geometry;
+    w.color_codec = layer_codecs[0].color;
     // Lean frames (PROTOCOL.md §9.1) when the peer has them: 31 instead of 55 kbit/s a voice.
     if (has(h.capabilities.audio, protocol::AudioCodec::kOpusLean)) {
       w.audio_codec = protocol::AudioCodec::kOpusLean;
@@ -674,8 +666,9 @@ class Session : public std::enable_shared_from_this<Session> {
       // The layers this viewer can be moved to: those down to the first
       // whose codecs its Hello does not list.
       int decodable = 1;
-      while (decodable < kMaxLayers && has(h.capabilities.geometry, layer_geometry[static_cast<size_t>(decodable)]) &&
-             has(h.capabilities.color, layer_color[static_cast<size_t>(decodable)]))
+      while (decodable < kMaxLayers &&
+             has(h.capabilities.geometry, layer_codecs[static_cast<size_t>(decodable)].geometry) &&
+             has(h.capabilities.color, layer_codecs[static_cast<size_t>(decodable)].color))
         ++decodable;
       decodable_layers_ = decodable;
     }
@@ -1101,17 +1094,13 @@ const ServerConfig& Server::config() const { return impl_->cfg; }
 
 void Server::SetPublishedCodecs(protocol::GeometryCodec geometry, protocol::ColorCodec color) {
   std::lock_guard<std::mutex> l(impl_->mu);
-  impl_->geometry = geometry;
-  impl_->color = color;
-  impl_->layer_geometry.fill(geometry);
-  impl_->layer_color.fill(color);
+  impl_->layer_codecs.fill({geometry, color});
 }
 
 void Server::SetLayerCodecs(int layer, protocol::GeometryCodec geometry, protocol::ColorCodec color) {
   HOLO_CHECK(layer >= 1 && layer < kMaxLayers);
   std::lock_guard<std::mutex> l(impl_->mu);
-  impl_->layer_geometry[static_cast<size_t>(layer)] = geometry;
-  impl_->layer_color[static_cast<size_t>(layer)] = color;
+  impl_->layer_codecs[static_cast<size_t>(layer)] = {geometry, color};
 }
 
 void Server::SetRig(const Rig& rig) {

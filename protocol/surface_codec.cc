@@ -408,9 +408,9 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     if (SurfacePaddedSamples(cx, cy, cz) > kSurfaceMaxSamples)
       return OutOfRange("g3: grid of " + Str(static_cast<uint64_t>(nx)) + "×" + Str(static_cast<uint64_t>(ny)) +
                         "×" + Str(static_cast<uint64_t>(nz)) + " samples whose surface spans " +
-                             Str(static_cast<uint64_t>(cx)) + "×" + Str(static_cast<uint64_t>(cy)) + "×" +
-                             Str(static_cast<uint64_t>(cz)) + ": too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
-                             Str(kSurfaceMaxSamples) + ")");
+                        Str(static_cast<uint64_t>(cx)) + "×" + Str(static_cast<uint64_t>(cy)) + "×" +
+                        Str(static_cast<uint64_t>(cz)) + ": too large ((nx+4)(ny+4)(nz+4) must be ≤ " +
+                        Str(kSurfaceMaxSamples) + ")");
     SdfGrid crop;
     crop.voxel_m = g.voxel_m;
     crop.nx = cx;

@@ -53,7 +53,8 @@ bool PublisherNeedsField(const SitePublisherOptions& options) {
 SitePublisher::SitePublisher(Server* server, SitePublisherOptions options)
     : server_(server), options_(std::move(options)) {
   HOLO_CHECK(options_.reduced.Check().ok());
-  HOLO_CHECK(!PublisherNeedsField(options_) || options_.surface.Check().ok());
+  needs_field_ = PublisherNeedsField(options_);
+  HOLO_CHECK(!needs_field_ || options_.surface.Check().ok());
   server_->SetPublishedCodecs(options_.geometry.codec, options_.color_options.codec);
   for (int layer = 0; layer < 2; ++layer)
     static_cast<LayerEncodeOptions&>(layers_[layer]) = EncodeOptionsOfLayer(options_, layer);
@@ -75,7 +76,7 @@ Status SitePublisher::Publish(int64_t frame_index, int64_t capture_wall_us, cons
 Status SitePublisher::Encode(int64_t frame_index, int64_t capture_wall_us, const Mesh& mesh,
                              const std::vector<PodColor>& pods, EncodedFrame* out, const SdfGrid* field) {
   out->timings = PublishTimings{};
-  if (PublisherNeedsField(options_) && field == nullptr)
+  if (needs_field_ && field == nullptr)
     return InvalidArgument("frame " + std::to_string(frame_index) + ": G3 geometry needs the stream mesh's grid");
   HOLO_RETURN_IF_ERROR(EncodeLayer(0, frame_index, capture_wall_us, mesh, field, pods, out));
   const int64_t n = frames_seen_++;

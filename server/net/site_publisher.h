@@ -201,6 +201,7 @@ class SitePublisher {
   WorkerPool pool_{2};  // geometry and colour of a layer at once
   std::atomic<int64_t> encoded_[2] = {0, 0};
   int64_t frames_seen_ = 0;
+  bool needs_field_ = false;  // PublisherNeedsField(options_): some layer is G3
   uint64_t geometry_fallbacks_ = 0;  // G3 frames sent as G1 (EncodeLayer)
 };
 

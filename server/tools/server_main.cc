@@ -402,20 +402,7 @@ int main(int argc, char** argv) {
   publish_options.geometry.position_step_m = static_cast<float>(position_step_mm * 1e-3);
   publish_options.color_options.jpeg_quality = jpeg_quality;
   if (reduced_geometry_codec == "auto") reduced_geometry_codec = truth_mesh || stream_step < 2 ? "same" : "g3";
-  const bool any_g3 = geometry_codec == "g3" || (layers > 1 && reduced_geometry_codec == "g3");
-  if (any_g3 && (truth_mesh || stream_step < 2))
-    return Fail(holo::InvalidArgument(std::string(geometry_codec == "g3" ? "--geometry-codec" : "--reduced-geometry-codec") +
-                                      " g3 needs the stream mesh (--stream-step 2..4, not --truth-mesh)"));
-  if (any_g3) {
-    publish_options.surface.position_step_m = static_cast<float>(g3_step_mm * 1e-3);
-    if (holo::Status st = publish_options.surface.Check(); !st.ok()) return Fail(st.WithContext("--g3-step-mm"));
-  }
   if (geometry_codec == "g3") publish_options.geometry.codec = holo::protocol::GeometryCodec::kG3;
-  if (color_codec == "v1" || (layers > 1 && reduced_color_codec == "v1")) {
-    publish_options.video.crf = video_crf;
-    publish_options.video.preset = video_preset;
-    if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
-  }
   if (color_codec == "v1") publish_options.color_options.codec = holo::protocol::ColorCodec::kV1;
   publish_options.reduced = reduced;
   publish_options.reduced.enabled = layers > 1;
@@ -425,6 +412,19 @@ int main(int argc, char** argv) {
   if (reduced_color_codec != "same")
     publish_options.reduced.color_codec =
         reduced_color_codec == "v1" ? holo::protocol::ColorCodec::kV1 : holo::protocol::ColorCodec::kC1;
+  if (holo::net::PublisherNeedsField(publish_options)) {
+    if (truth_mesh || stream_step < 2)
+      return Fail(holo::InvalidArgument(std::string(geometry_codec == "g3" ? "--geometry-codec" : "--reduced-geometry-codec") +
+                                        " g3 needs the stream mesh (--stream-step 2..4, not --truth-mesh)"));
+    publish_options.surface.position_step_m = static_cast<float>(g3_step_mm * 1e-3);
+    if (holo::Status st = publish_options.surface.Check(); !st.ok()) return Fail(st.WithContext("--g3-step-mm"));
+  }
+  if (color_codec == "v1" || (publish_options.reduced.enabled && publish_options.reduced.color_codec ==
+                                                                       holo::protocol::ColorCodec::kV1)) {
+    publish_options.video.crf = video_crf;
+    publish_options.video.preset = video_preset;
+    if (holo::Status st = publish_options.video.Check(); !st.ok()) return Fail(st.WithContext("--video-crf"));
+  }
   std::unique_ptr<holo::net::SitePublisher> publisher;
   if (server) publisher = std::make_unique<holo::net::SitePublisher>(server.get(), publish_options);
 
