@@ -1,11 +1,17 @@
 #include "protocol/surface_codec.h"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <numeric>
 #include <string>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "common/marching_cubes_table.h"
 #include "protocol/byte_io.h"
@@ -41,9 +47,17 @@ struct Field {
   // that neighbourhoods need no bounds checks.
   std::vector<uint8_t> lab;
   size_t px = 0, pxy = 0;           // strides of `lab`
-  std::vector<int16_t> cross;       // per slot × 64 × 3
-  std::vector<uint8_t> cross_levels;  // per slot × 64 × 3: the edge's levels
-  mutable std::vector<uint32_t> vid;  // per slot × 64 × 3: the edge's vertex (marching cubes)
+  // Per slot × 64 × 3, valid on crossed edges only (set where the crossing
+  // is coded; the arrays keep their size between frames and are not
+  // cleared: a slot's entries are written before they are read).
+  std::vector<int16_t> cross;
+  std::vector<uint8_t> cross_levels;  // the edge's levels
+  mutable std::vector<uint32_t> vid;  // the edge's vertex (marching cubes), UINT32_MAX until made
+  size_t slots = 0;
+  // Per row of bricks (iy, iz): its occupied bricks' ix, in
+  // row_bricks[row_start[r], row_start[r + 1]) (IndexRows, once the slots are given).
+  std::vector<uint32_t> row_start;
+  std::vector<uint16_t> row_bricks;
 
   void Reset(int x, int y, int z) {
     nx = x;
@@ -57,18 +71,32 @@ struct Field {
     px = static_cast<size_t>(x) + 4;
     pxy = px * (static_cast<size_t>(y) + 4);
     lab.assign(pxy * (static_cast<size_t>(z) + 4), kNone);
-    cross.clear();
-    cross_levels.clear();
-    vid.clear();
+    slots = 0;
   }
   int32_t AddSlot(size_t brick) {
     const auto s = static_cast<int32_t>(slot_brick.size());
     brick_slot[brick] = s;
     slot_brick.push_back(static_cast<int32_t>(brick));
-    cross.resize(cross.size() + 3 * kBrickSamples, -1);
-    cross_levels.resize(cross_levels.size() + 3 * kBrickSamples, 1);
-    vid.resize(vid.size() + 3 * kBrickSamples, UINT32_MAX);
+    slots = slot_brick.size();
+    if (cross.size() < slots * 3 * kBrickSamples) {
+      const size_t n = std::max<size_t>(slots * 3 * kBrickSamples, 2 * cross.size());
+      cross.resize(n);
+      cross_levels.resize(n);
+      vid.resize(n);
+    }
     return s;
+  }
+  void IndexRows() {
+    const size_t nrows = static_cast<size_t>(by) * static_cast<size_t>(bz);
+    row_start.assign(nrows + 1, 0);
+    row_bricks.clear();
+    for (size_t r = 0; r < nrows; ++r) {
+      row_start[r] = static_cast<uint32_t>(row_bricks.size());
+      const int32_t* slot = &brick_slot[r * static_cast<size_t>(bx)];
+      for (int b = 0; b < bx; ++b)
+        if (slot[b] >= 0) row_bricks.push_back(static_cast<uint16_t>(b));
+    }
+    row_start[nrows] = static_cast<uint32_t>(row_bricks.size());
   }
   // Index into cross of sample (x, y, z) (× 3 + axis), or -1 outside the
   // grid or an empty brick.
@@ -102,17 +130,24 @@ int LabelContext(const Field& f, int x, int y, int z) {
          27 * f.LabelAt(x + 1, y - 1, z);
 }
 
-// Calls fn(x, y, z) for every sample of an occupied brick inside the grid,
-// in raster order (x fastest) over the whole grid.
+// Calls fn(x, y, z, i) for every sample of an occupied brick inside the
+// grid, in raster order (x fastest) over the whole grid; i = f.At(x, y, z).
 template <typename Fn>
 void ForEachSample(const Field& f, Fn&& fn) {
   for (int z = 0; z < f.nz; ++z)
-    for (int y = 0; y < f.ny; ++y)
-      for (int b = 0; b < f.bx; ++b) {
-        if (!f.Occupied(b * kBrick, y, z)) continue;
-        const int x1 = std::min(f.nx, (b + 1) * kBrick);
-        for (int x = b * kBrick; x < x1; ++x) fn(x, y, z);
+    for (int y = 0; y < f.ny; ++y) {
+      const size_t row = static_cast<size_t>(y >> 2) + static_cast<size_t>(f.by) * static_cast<size_t>(z >> 2);
+      const size_t r1 = f.row_start[row + 1];
+      if (f.row_start[row] == r1) continue;
+      const int32_t* slot = &f.brick_slot[f.Brick(0, y >> 2, z >> 2)];
+      const size_t local = static_cast<size_t>(4 * ((y & 3) + 4 * (z & 3)));
+      for (size_t r = f.row_start[row]; r < r1; ++r) {
+        const int b = f.row_bricks[r];
+        const size_t base = static_cast<size_t>(slot[b]) * kBrickSamples + local;
+        const int x0 = b * kBrick, x1 = std::min(f.nx, x0 + kBrick);
+        for (int x = x0; x < x1; ++x) fn(x, y, z, base + static_cast<size_t>(x - x0));
       }
+    }
 }
 
 // Calls fn(x, y, z, axis, e) for every crossed edge (a labelled sample and
@@ -120,16 +155,17 @@ void ForEachSample(const Field& f, Fn&& fn) {
 // order, axes in turn; `e` indexes the edge in Field::cross.
 template <typename Fn>
 void ForEachCrossedEdge(const Field& f, Fn&& fn) {
-  ForEachSample(f, [&](int x, int y, int z) {
+  ForEachSample(f, [&](int x, int y, int z, size_t i) {
     const uint8_t lab = f.LabelAt(x, y, z);
     if (lab == kNone) return;
-    const size_t i = static_cast<size_t>(f.At(x, y, z));
     for (int axis = 0; axis < 3; ++axis) {
       int p[3] = {x, y, z};
       ++p[axis];
       const uint8_t other = f.LabelAt(p[0], p[1], p[2]);
       if (other == kNone || other == lab) continue;
-      fn(x, y, z, axis, 3 * i + static_cast<size_t>(axis));
+      const size_t e = 3 * i + static_cast<size_t>(axis);
+      f.vid[e] = UINT32_MAX;  // MeshFromField makes its vertex
+      fn(x, y, z, axis, e);
     }
   });
 }
@@ -143,25 +179,52 @@ void ForEachCrossedEdge(const Field& f, Fn&& fn) {
 // edge gets max(1, round(L·c)) levels: a step of about voxel/L along the
 // normal whatever the angle, and nothing spent on where a vertex slides
 // within the surface along an edge that meets it at a grazing angle.
+// Sums over a row of up to four labels d0..d3 (d3 = 0 for a row of three),
+// indexed by 27·d0 + 9·d1 + 3·d2 + d3: the signs, and the signs weighted by
+// 2·qx − mid for a row of four (−3, −1, 1, 3) and of three (−2, 0, 2).
+struct RowSums {
+  int8_t sum, moment4, moment3;
+};
+constexpr std::array<RowSums, 81> MakeRowSums() {
+  std::array<RowSums, 81> t{};
+  constexpr int kSign[3] = {0, 1, -1};
+  for (int c = 0; c < 81; ++c) {
+    const int d[4] = {c / 27, (c / 9) % 3, (c / 3) % 3, c % 3};
+    int sum = 0, m4 = 0, m3 = 0;
+    for (int k = 0; k < 4; ++k) {
+      sum += kSign[d[k]];
+      m4 += kSign[d[k]] * (2 * k - 3);
+      m3 += kSign[d[k]] * (2 * k - 2);
+    }
+    t[static_cast<size_t>(c)] = {static_cast<int8_t>(sum), static_cast<int8_t>(m4), static_cast<int8_t>(m3)};
+  }
+  return t;
+}
+constexpr std::array<RowSums, 81> kRowSums = MakeRowSums();
+
+// The row-sum index of the four labels at `p` (labels are 0..2): one load
+// and one multiply, the base-3 digits collecting in the top byte.
+inline uint32_t RowCode(const uint8_t* p, uint32_t keep) {
+  uint32_t u;
+  std::memcpy(&u, p, 4);
+  return ((u & keep) * 0x1B090301u) >> 24;
+}
+
 int EdgeLevels(const Field& f, int x, int y, int z, int axis, const uint8_t* level_of) {
-  static constexpr int kSign[4] = {0, 1, -1, 0};
   int lo[3] = {x - 1, y - 1, z - 1}, hi[3] = {x + 1, y + 1, z + 1};
   ++hi[axis];
   const int mid2[3] = {2 * x + (axis == 0), 2 * y + (axis == 1), 2 * z + (axis == 2)};
+  // A row along x has four labels on an x edge, three on the others (the
+  // fourth byte, inside the margin, is masked off).
+  const bool four = axis == 0;
+  const uint32_t keep = four ? 0xFFFFFFFFu : 0x00FFFFFFu;
   int64_t g[3] = {0, 0, 0};
   for (int qz = lo[2]; qz <= hi[2]; ++qz)
     for (int qy = lo[1]; qy <= hi[1]; ++qy) {
-      const uint8_t* row = &f.lab[f.P(0, qy, qz)];
-      // Per row: the sum of the signs and of sign × (2·qx − mid).
-      int sum = 0, sum_x = 0;
-      for (int qx = lo[0]; qx <= hi[0]; ++qx) {
-        const int sg = kSign[row[qx] & 3];
-        sum += sg;
-        sum_x += sg * (2 * qx - mid2[0]);
-      }
-      g[0] += sum_x;
-      g[1] += sum * (2 * qy - mid2[1]);
-      g[2] += sum * (2 * qz - mid2[2]);
+      const RowSums& r = kRowSums[RowCode(&f.lab[f.P(x - 1, qy, qz)], keep)];
+      g[0] += four ? r.moment4 : r.moment3;
+      g[1] += r.sum * (2 * qy - mid2[1]);
+      g[2] += r.sum * (2 * qz - mid2[2]);
     }
   const int64_t norm2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
   const int64_t c64 = norm2 > 0 ? (64 * g[axis] * g[axis]) / norm2 : 64;
@@ -183,9 +246,10 @@ Status MeshFromField(const Field& f, const Eigen::Vector3f& origin, float voxel,
                      size_t max_triangles, Mesh* mesh, size_t* counts = nullptr) {
   size_t nv = 0, nt = 0;
   if (!counts) ClearMesh(mesh);
-  // One vertex per crossed edge, made at its first use.
-  auto vertex = [&](int x, int y, int z, int axis, uint32_t* id) -> bool {
-    const size_t e = 3 * static_cast<size_t>(f.At(x, y, z)) + static_cast<size_t>(axis);
+  // One vertex per crossed edge, made at its first use; `i` is the edge's
+  // low sample, f.At(x, y, z).
+  auto vertex = [&](int x, int y, int z, size_t i, int axis, uint32_t* id) -> bool {
+    const size_t e = 3 * i + static_cast<size_t>(axis);
     if (f.vid[e] != UINT32_MAX) {
       *id = f.vid[e];
       return true;
@@ -199,12 +263,19 @@ Status MeshFromField(const Field& f, const Eigen::Vector3f& origin, float voxel,
     mesh->positions.push_back(origin + voxel * p);
     return true;
   };
-  std::fill(f.vid.begin(), f.vid.end(), UINT32_MAX);
-  // Offsets of a cube's corners in `lab`.
-  size_t corner[8];
-  for (int c = 0; c < 8; ++c) corner[c] = f.P(c & 1, (c >> 1) & 1, (c >> 2) & 1) - f.P(0, 0, 0);
+  // Offsets of a cube's corners in `lab`, and within a brick.
+  size_t corner[8], in_brick[8];
+  for (int c = 0; c < 8; ++c) {
+    corner[c] = f.P(c & 1, (c >> 1) & 1, (c >> 2) & 1) - f.P(0, 0, 0);
+    in_brick[c] = static_cast<size_t>((c & 1) + 4 * ((c >> 1) & 1) + 16 * (c >> 2));
+  }
+  int edge_low[12], edge_axis[12];
+  for (int e = 0; e < 12; ++e) {
+    edge_low[e] = McEdgeLowCorner(e);
+    edge_axis[e] = McEdgeAxis(e);
+  }
   bool overflow = false;
-  ForEachSample(f, [&](int x, int y, int z) {
+  ForEachSample(f, [&](int x, int y, int z, size_t i) {
     const size_t p0 = f.P(x, y, z);
     if (overflow || f.lab[p0] == kNone) return;
     int code = 0;
@@ -215,12 +286,16 @@ Status MeshFromField(const Field& f, const Eigen::Vector3f& origin, float voxel,
     }
     if (code == 0 || code == 255) return;
     const McCase& mc = McTableCase(code);
+    // A cube off its brick's far faces has all its corners in that brick.
+    const bool one_brick = (x & 3) != 3 && (y & 3) != 3 && (z & 3) != 3;
     for (int t = 0; t < mc.num_triangles; ++t) {
       std::array<uint32_t, 3> tri{};
       for (int k = 0; k < 3; ++k) {
         const int e = mc.edges[3 * t + k];
-        const int c = McEdgeLowCorner(e);
-        overflow |= !vertex(x + (c & 1), y + ((c >> 1) & 1), z + ((c >> 2) & 1), McEdgeAxis(e), &tri[static_cast<size_t>(k)]);
+        const int c = edge_low[e];
+        const int X = x + (c & 1), Y = y + ((c >> 1) & 1), Z = z + ((c >> 2) & 1);
+        const size_t ci = one_brick ? i + in_brick[c] : static_cast<size_t>(f.At(X, Y, Z));
+        overflow |= !vertex(X, Y, Z, ci, edge_axis[e], &tri[static_cast<size_t>(k)]);
       }
       overflow |= nt >= max_triangles;
       if (overflow) return;
@@ -299,11 +374,39 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   const size_t rows = static_cast<size_t>(ny) * static_cast<size_t>(nz);
   sc.row_bits.assign(rows, 0);
   for (size_t r = 0; r < rows; ++r) {
-    // Branch-free (vectorizable): observed = (v == v), behind = v < 0.
+    // Branch-free: observed = (v == v), behind = v < 0.
     uint8_t rb = 0;
     const float* in = &g.sdf[r * sy];
     uint8_t* bits = &sc.bits[r * sy];
-    for (size_t x = 0; x < sy; ++x) {
+    size_t x = 0;
+#if defined(__SSE2__)
+    // Sixteen samples at a time (the scalar loop's results, byte for byte).
+    {
+      const __m128 zero = _mm_setzero_ps();
+      const __m128i one = _mm_set1_epi32(1), two = _mm_set1_epi32(2), four = _mm_set1_epi32(4);
+      __m128i any = _mm_setzero_si128();
+      for (; x + 16 <= sy; x += 16) {
+        __m128i b[4], f[4];
+        for (int k = 0; k < 4; ++k) {
+          const __m128 v = _mm_loadu_ps(in + x + 4 * k);
+          const __m128i obs = _mm_castps_si128(_mm_cmpord_ps(v, v));
+          const __m128i neg = _mm_castps_si128(_mm_cmplt_ps(v, zero));
+          b[k] = _mm_or_si128(_mm_and_si128(obs, one), _mm_and_si128(neg, two));
+          f[k] = _mm_and_si128(_mm_andnot_si128(neg, obs), four);
+        }
+        const __m128i bytes = _mm_packs_epi16(_mm_packs_epi32(b[0], b[1]), _mm_packs_epi32(b[2], b[3]));
+        const __m128i front = _mm_packs_epi16(_mm_packs_epi32(f[0], f[1]), _mm_packs_epi32(f[2], f[3]));
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(bits + x), bytes);
+        any = _mm_or_si128(any, _mm_or_si128(bytes, front));
+      }
+      any = _mm_or_si128(any, _mm_srli_si128(any, 8));
+      any = _mm_or_si128(any, _mm_srli_si128(any, 4));
+      any = _mm_or_si128(any, _mm_srli_si128(any, 2));
+      any = _mm_or_si128(any, _mm_srli_si128(any, 1));
+      rb = static_cast<uint8_t>(_mm_cvtsi128_si32(any));
+    }
+#endif
+    for (; x < sy; ++x) {
       const float v = in[x];
       const uint8_t obs = v == v, neg = v < 0;
       const uint8_t b = static_cast<uint8_t>(obs | (neg << 1));
@@ -339,7 +442,30 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
         and4[x] = b0[x] & b1[x] & b2[x] & b3[x];
         or4[x] = b0[x] | b1[x] | b2[x] | b3[x];
       }
-      for (int x = 0; x + 1 < nx; ++x) {
+      int x = 0;
+#if defined(__SSE2__)
+      // Sixteen cubes at a time: a cube holds the surface where its corners
+      // are all observed (bit 0 of all), not all behind (bit 1 of all
+      // clear) and some behind (bit 1 of any).
+      {
+        const __m128i three = _mm_set1_epi8(3), one = _mm_set1_epi8(1), two = _mm_set1_epi8(2);
+        for (; x + 17 <= nx; x += 16) {
+          const __m128i a0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(and4 + x));
+          const __m128i a1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(and4 + x + 1));
+          const __m128i o0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(or4 + x));
+          const __m128i o1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(or4 + x + 1));
+          const __m128i all = _mm_and_si128(a0, a1), any = _mm_or_si128(o0, o1);
+          const __m128i hit = _mm_and_si128(_mm_cmpeq_epi8(_mm_and_si128(all, three), one),
+                                            _mm_cmpeq_epi8(_mm_and_si128(any, two), two));
+          for (auto m = static_cast<uint32_t>(_mm_movemask_epi8(hit)); m; m &= m - 1) {
+            const size_t i = row + static_cast<size_t>(x + std::countr_zero(m));
+            sc.cube_id[i] = static_cast<int32_t>(sc.cubes.size());
+            sc.cubes.push_back(static_cast<uint32_t>(i));
+          }
+        }
+      }
+#endif
+      for (; x + 1 < nx; ++x) {
         const uint8_t all = and4[x] & and4[x + 1], any = or4[x] | or4[x + 1];
         if ((all & 1) && (any & 2) && !(all & 2)) {
           const size_t i = row + static_cast<size_t>(x);
@@ -443,6 +569,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
   }
   for (size_t b = 0; b < f.brick_slot.size(); ++b)
     if (f.brick_slot[b] == -2) f.AddSlot(b);
+  f.IndexRows();
   st.occupied_bricks = f.slot_brick.size();
   if (st.occupied_bricks > kSurfaceMaxOccupiedBricks) {
     for (uint32_t i : sc.cubes) sc.cube_id[i] = -1;
@@ -458,7 +585,7 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     for (int y = 0; y < f.by; ++y)
       for (int x = 0; x < f.bx; ++x) bricks.Put(f.BrickContext(x, y, z), f.brick_slot[f.Brick(x, y, z)] >= 0 ? 1 : 0);
   TokenWriter labels(kLabelContexts, f.slot_brick.size() * kBrickSamples, &sc.syms);
-  ForEachSample(f, [&](int x, int y, int z) {
+  ForEachSample(f, [&](int x, int y, int z, size_t) {
     const uint8_t lab = f.LabelAt(x, y, z);
     labels.Put(static_cast<uint32_t>(LabelContext(f, x, y, z)), lab);
     st.labelled += lab != kNone;
@@ -580,8 +707,9 @@ Status DecodeSurfaceBody(ByteReader& r, uint32_t nv, uint32_t nt, Mesh* mesh) {
     return DataLoss("g3.bricks: " + Str(occupied.size()) + " occupied bricks cannot fit in " + Str(labels_b.size()) +
                     " bytes of labels");
   for (size_t b : occupied) f.AddSlot(b);
+  f.IndexRows();
   bool bad_label = false;
-  ForEachSample(f, [&](int x, int y, int z) {
+  ForEachSample(f, [&](int x, int y, int z, size_t) {
     const uint32_t lab = lr.Get(static_cast<uint32_t>(LabelContext(f, x, y, z)));
     bad_label |= lab > kInside;
     f.lab[f.P(x, y, z)] = static_cast<uint8_t>(std::min<uint32_t>(lab, kInside));
