@@ -67,6 +67,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
@@ -155,6 +156,59 @@ struct FrameInput {
   SdfGrid field;  // fused stream mesh: the grid it was extracted from (G3)
   std::vector<PodImageInput> pods;
 };
+
+// What a grid repeats from the previous frame's, at the same world samples
+// (the site's grids sit on one lattice: their origins differ by whole
+// samples): of the current surface cubes (eight observed corners, a sign
+// change), those whose cube in the previous grid has the same corner signs
+// (the same marching-cubes case); of the current crossed edges, those crossed
+// the same way before, and how far the crossing moved (mm). What an
+// inter-frame code of G3's labels and crossings could predict.
+struct GridRepeat {
+  size_t cubes = 0, same_case = 0, edges = 0, edges_alike = 0;
+  std::vector<double> shift_mm;
+};
+GridRepeat FrameToFrame(const SdfGrid& prev, const SdfGrid& cur) {
+  GridRepeat r;
+  int d[3];
+  for (int a = 0; a < 3; ++a) d[a] = static_cast<int>(std::lround((cur.origin[a] - prev.origin[a]) / cur.voxel_m));
+  auto at = [](const SdfGrid& g, int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) return std::numeric_limits<float>::quiet_NaN();
+    return g.sdf[g.Index(x, y, z)];
+  };
+  if (std::abs(prev.voxel_m - cur.voxel_m) > 1e-6f * cur.voxel_m) return r;
+  for (int z = 0; z < cur.nz; ++z)
+    for (int y = 0; y < cur.ny; ++y)
+      for (int x = 0; x < cur.nx; ++x) {
+        const float v = cur.sdf[cur.Index(x, y, z)];
+        if (v != v) continue;
+        for (int axis = 0; axis < 3; ++axis) {
+          const int p[3] = {x + (axis == 0), y + (axis == 1), z + (axis == 2)};
+          const float w = at(cur, p[0], p[1], p[2]);
+          if (w != w || (v < 0) == (w < 0)) continue;
+          ++r.edges;
+          const float u0 = at(prev, x + d[0], y + d[1], z + d[2]), u1 = at(prev, p[0] + d[0], p[1] + d[1], p[2] + d[2]);
+          if (u0 != u0 || u1 != u1 || (u0 < 0) != (v < 0) || (u1 < 0) != (w < 0)) continue;
+          ++r.edges_alike;
+          r.shift_mm.push_back(std::abs(v / (v - w) - u0 / (u0 - u1)) * cur.voxel_m * 1000.0);
+        }
+        if (x + 1 >= cur.nx || y + 1 >= cur.ny || z + 1 >= cur.nz) continue;
+        int code = 0, pcode = 0;
+        bool ok = true, pok = true;
+        for (int c = 0; c < 8 && ok; ++c) {
+          const int X = x + (c & 1), Y = y + ((c >> 1) & 1), Z = z + (c >> 2);
+          const float a = at(cur, X, Y, Z), b = at(prev, X + d[0], Y + d[1], Z + d[2]);
+          ok = a == a;
+          pok = pok && b == b;
+          code |= (a < 0) << c;
+          pcode |= (b < 0) << c;
+        }
+        if (!ok || code == 0 || code == 255) continue;
+        ++r.cubes;
+        r.same_case += pok && pcode == code;
+      }
+  return r;
+}
 
 // ------------------------------------------------------------ synthetic input
 
@@ -841,6 +895,28 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("G3", "triangles", Median(tris), "1", extra);
     emit("G3", "grid_samples", Median(samples), "1", extra);
     if (bytes_of.count("G1")) emit("G3", "bytes_ratio_vs_G1", bytes / bytes_of["G1"], "1", {{"peer", "G1"}});
+    if (inputs.size() >= 2) {
+      GridRepeat all;
+      for (size_t k = 1; k < inputs.size(); ++k) {
+        const GridRepeat r = FrameToFrame(inputs[k - 1].field, inputs[k].field);
+        all.cubes += r.cubes;
+        all.same_case += r.same_case;
+        all.edges += r.edges;
+        all.edges_alike += r.edges_alike;
+        all.shift_mm.insert(all.shift_mm.end(), r.shift_mm.begin(), r.shift_mm.end());
+      }
+      const std::map<std::string, std::string> between{{"between", "consecutive frames, same world samples"}};
+      emit("G3", "repeat_case_fraction", all.cubes ? static_cast<double>(all.same_case) / all.cubes : 0.0, "1", between);
+      emit("G3", "repeat_crossing_fraction", all.edges ? static_cast<double>(all.edges_alike) / all.edges : 0.0, "1",
+           between);
+      if (!all.shift_mm.empty()) {
+        std::sort(all.shift_mm.begin(), all.shift_mm.end());
+        auto q = [&](double f) { return all.shift_mm[static_cast<size_t>(f * static_cast<double>(all.shift_mm.size() - 1))]; };
+        auto with = [&](const char* stat) { auto m = between; m["stat"] = stat; return m; };
+        emit("G3", "crossing_shift_mm", q(0.5), "mm", with("p50"));
+        emit("G3", "crossing_shift_mm", q(0.9), "mm", with("p90"));
+      }
+    }
   }
   for (const GeomRun& run : runs) {
     // Where G1's bytes go: its u32-length streams after the 29 bytes of prefix and G1 header
