@@ -122,7 +122,6 @@ struct Field {
     return static_cast<size_t>(x + 2) + px * static_cast<size_t>(y + 2) + pxy * static_cast<size_t>(z + 2);
   }
   uint8_t LabelAt(int x, int y, int z) const { return lab[P(x, y, z)]; }
-  bool Occupied(int x, int y, int z) const { return brick_slot[BrickOf(x, y, z)] >= 0; }
 };
 
 int LabelContext(const Field& f, int x, int y, int z) {
@@ -170,15 +169,6 @@ void ForEachCrossedEdge(const Field& f, Fn&& fn) {
   });
 }
 
-// Levels of the crossing on the edge from (x, y, z) along `axis`: L scaled
-// by how squarely the surface meets the edge. The surface's normal is
-// estimated from the labels alone (known to both sides before any crossing):
-// g = Σ sign(q)·(q − m) over the labelled samples q of the 4×3×3 box around
-// the edge (sign +1 outside, −1 inside; m the edge's middle; doubled
-// coordinates keep it integer). With c² = g_axis² / |g|² (in 64ths), the
-// edge gets max(1, round(L·c)) levels: a step of about voxel/L along the
-// normal whatever the angle, and nothing spent on where a vertex slides
-// within the surface along an edge that meets it at a grazing angle.
 // Sums over a row of up to four labels d0..d3 (d3 = 0 for a row of three),
 // indexed by 27·d0 + 9·d1 + 3·d2 + d3: the signs, and the signs weighted by
 // 2·qx − mid for a row of four (−3, −1, 1, 3) and of three (−2, 0, 2).
@@ -202,20 +192,30 @@ constexpr std::array<RowSums, 81> MakeRowSums() {
 }
 constexpr std::array<RowSums, 81> kRowSums = MakeRowSums();
 
-// The row-sum index of the four labels at `p` (labels are 0..2): one load
-// and one multiply, the base-3 digits collecting in the top byte.
+// The row-sum index of the four labels at `p` (labels are 0..2): one
+// 32-bit load (byte order spelled out; compilers fold it) and one multiply,
+// the base-3 digits collecting in the top byte without carries (each lower
+// byte of the product stays below 27).
 inline uint32_t RowCode(const uint8_t* p, uint32_t keep) {
-  uint32_t u;
-  std::memcpy(&u, p, 4);
+  const uint32_t u = uint32_t{p[0]} | uint32_t{p[1]} << 8 | uint32_t{p[2]} << 16 | uint32_t{p[3]} << 24;
   return ((u & keep) * 0x1B090301u) >> 24;
 }
 
+// Levels of the crossing on the edge from (x, y, z) along `axis`: L scaled
+// by how squarely the surface meets the edge. The surface's normal is
+// estimated from the labels alone (known to both sides before any crossing):
+// g = Σ sign(q)·(q − m) over the labelled samples q of the 4×3×3 box around
+// the edge (sign +1 outside, −1 inside; m the edge's middle; doubled
+// coordinates keep it integer). With c² = g_axis² / |g|² (in 64ths), the
+// edge gets max(1, round(L·c)) levels: a step of about voxel/L along the
+// normal whatever the angle, and nothing spent on where a vertex slides
+// within the surface along an edge that meets it at a grazing angle.
 int EdgeLevels(const Field& f, int x, int y, int z, int axis, const uint8_t* level_of) {
   int lo[3] = {x - 1, y - 1, z - 1}, hi[3] = {x + 1, y + 1, z + 1};
   ++hi[axis];
   const int mid2[3] = {2 * x + (axis == 0), 2 * y + (axis == 1), 2 * z + (axis == 2)};
   // A row along x has four labels on an x edge, three on the others (the
-  // fourth byte, inside the margin, is masked off).
+  // fourth byte read, still inside the padded row, is masked off).
   const bool four = axis == 0;
   const uint32_t keep = four ? 0xFFFFFFFFu : 0x00FFFFFFu;
   int64_t g[3] = {0, 0, 0};
