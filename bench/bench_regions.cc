@@ -11,16 +11,21 @@
 // no noise; an entry's time is the body's first contact with the box.
 //
 // Figures (content fused unless said):
-//   event_latency_ms p50/p99 (event enter|leave, from contact|threshold):
-//     capture time of the frame in which the true body first enters (leaves)
-//     the box (contact), or in which its true volume crosses the enter
-//     (exit) threshold (threshold) → the viewer receiving the Regions
-//     message that reports the event (a forearm that hovers at the box's
-//     edge fills it slowly: that wait is the body's, not the pipeline's;
-//     without --json the slow events are listed with both frames);
-//   detection_frames: frames from that frame to the frame whose report fired;
+//   event_latency_ms p50/p99 (event enter, from contact|threshold; event
+//     leave, from threshold): capture time of the frame in which the true
+//     body first touches the box (contact), or in which its true volume
+//     crosses the enter (exit) threshold (threshold) → the viewer receiving
+//     the Regions message that reports the event (a forearm that hovers at
+//     the box's edge fills it slowly: that wait is the body's, not the
+//     pipeline's; without --json the slow events are listed with both
+//     frames). An exit is timed from its volume crossing only: a fingertip
+//     may stay in after the body has left;
+//   detection_frames: frames from the contact (exit: the crossing) to the
+//     frame whose report fired;
 //   missed_events, false_events: true entries/exits without an event within
-//     the debounce window, and events with no true entry/exit;
+//     the debounce window, and events with no true entry/exit (an event that
+//     answers a true change too close to the run's end to be counted is
+//     neither);
 //   report_latency_ms p50/p99: every report's own delay (capture of its
 //     frame → viewer), i.e. the site's pipeline and the network in the same
 //     run, and site_fps, the frames the site fused per second: an event's
@@ -472,8 +477,9 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
   }
   const std::vector<TrueEvent> transitions = TrueEvents(truth, *config, first, last);
   const Matched m = MatchEvents(transitions, events, last, window);
-  // From the body's first contact (exit: last contact), and from the frame
-  // its true volume crosses the threshold (what the pipeline can answer).
+  // From the body's first contact (an exit's anchor is its volume crossing),
+  // and from the frame its true volume crosses the threshold (what the
+  // pipeline can answer).
   std::map<std::string, std::vector<double>> latency, latency_threshold;
   for (size_t i = 0; i < m.pairs.size(); ++i) {
     const char* kind = m.kinds_enter[i] ? "enter" : "leave";
@@ -489,9 +495,14 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
     const char* kind = m.kinds_enter[i] ? "enter" : "leave";
     const int64_t frames = m.pairs[i].second - m.pairs[i].first;
     if (static_cast<double>(frames) > 2.0 * Median(detect.at(kind)))
-      progress(std::string("slow ") + kind + ": first true contact at frame " + std::to_string(m.pairs[i].first) +
-               ", the true volume past the threshold at frame " + std::to_string(m.changes[i]) + ", event at frame " +
-               std::to_string(m.pairs[i].second) + " (" + std::to_string(frames) + " frames after the contact)");
+      progress(m.kinds_enter[i]
+                   ? "slow enter: first true contact at frame " + std::to_string(m.pairs[i].first) +
+                         ", the true volume over the threshold at frame " + std::to_string(m.changes[i]) +
+                         ", event at frame " + std::to_string(m.pairs[i].second) + " (" + std::to_string(frames) +
+                         " frames after the contact)"
+                   : "slow leave: the true volume under the exit threshold at frame " +
+                         std::to_string(m.changes[i]) + ", event at frame " + std::to_string(m.pairs[i].second) +
+                         " (" + std::to_string(frames) + " frames)");
   }
   for (size_t e = 0; e < events.size(); ++e) {
     if (!m.used[e] && events[e].first <= last - window)
@@ -503,7 +514,9 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
     q["event"] = kind;
     q["n"] = std::to_string(v.size());
     for (const char* from : {"contact", "threshold"}) {
-      const std::vector<double>& x = std::string(from) == "contact" ? v : latency_threshold[kind];
+      const bool contact = std::string(from) == "contact";
+      if (contact && kind != "enter") continue;  // an exit is timed from its crossing only
+      const std::vector<double>& x = contact ? v : latency_threshold[kind];
       auto qf = q;
       qf["from"] = from;
       EmitFigure("regions", wl, "event_latency_ms", InterpolatedQuantile(x, 0.5), "ms", [&] { auto y = qf; y["stat"] = "p50"; return y; }());

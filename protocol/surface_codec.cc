@@ -38,7 +38,7 @@ int CeilDiv(int a, int b) { return (a + b - 1) / b; }
 // The labelled part of a grid, stored per occupied brick: what the encoder
 // sends and the decoder rebuilds. `cross` holds, per sample and axis, the
 // level k ∈ [0, L) of the surface crossing on the edge to the next sample
-// along that axis, −1 where none is coded (yet).
+// along that axis, where that edge is crossed.
 struct Field {
   int nx = 0, ny = 0, nz = 0, bx = 0, by = 0, bz = 0;
   std::vector<int32_t> brick_slot;  // per brick, -1 = empty
@@ -53,7 +53,6 @@ struct Field {
   std::vector<int16_t> cross;
   std::vector<uint8_t> cross_levels;  // the edge's levels
   mutable std::vector<uint32_t> vid;  // the edge's vertex (marching cubes), UINT32_MAX until made
-  size_t slots = 0;
   // Per row of bricks (iy, iz): its occupied bricks' ix, in
   // row_bricks[row_start[r], row_start[r + 1]) (IndexRows, once the slots are given).
   std::vector<uint32_t> row_start;
@@ -71,15 +70,17 @@ struct Field {
     px = static_cast<size_t>(x) + 4;
     pxy = px * (static_cast<size_t>(y) + 4);
     lab.assign(pxy * (static_cast<size_t>(z) + 4), kNone);
-    slots = 0;
+    // No occupied brick until IndexRows: ForEachSample visits nothing.
+    row_start.assign(static_cast<size_t>(by) * static_cast<size_t>(bz) + 1, 0);
+    row_bricks.clear();
   }
   int32_t AddSlot(size_t brick) {
     const auto s = static_cast<int32_t>(slot_brick.size());
     brick_slot[brick] = s;
     slot_brick.push_back(static_cast<int32_t>(brick));
-    slots = slot_brick.size();
-    if (cross.size() < slots * 3 * kBrickSamples) {
-      const size_t n = std::max<size_t>(slots * 3 * kBrickSamples, 2 * cross.size());
+    const size_t need = slot_brick.size() * 3 * kBrickSamples;
+    if (cross.size() < need) {
+      const size_t n = std::max<size_t>(need, 2 * cross.size());
       cross.resize(n);
       cross_levels.resize(n);
       vid.resize(n);
@@ -454,9 +455,9 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
           const __m128i a1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(and4 + x + 1));
           const __m128i o0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(or4 + x));
           const __m128i o1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(or4 + x + 1));
-          const __m128i all = _mm_and_si128(a0, a1), any = _mm_or_si128(o0, o1);
-          const __m128i hit = _mm_and_si128(_mm_cmpeq_epi8(_mm_and_si128(all, three), one),
-                                            _mm_cmpeq_epi8(_mm_and_si128(any, two), two));
+          const __m128i all8 = _mm_and_si128(a0, a1), any8 = _mm_or_si128(o0, o1);
+          const __m128i hit = _mm_and_si128(_mm_cmpeq_epi8(_mm_and_si128(all8, three), one),
+                                            _mm_cmpeq_epi8(_mm_and_si128(any8, two), two));
           for (auto m = static_cast<uint32_t>(_mm_movemask_epi8(hit)); m; m &= m - 1) {
             const size_t i = row + static_cast<size_t>(x + std::countr_zero(m));
             sc.cube_id[i] = static_cast<int32_t>(sc.cubes.size());

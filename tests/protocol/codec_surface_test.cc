@@ -2,7 +2,9 @@
 // marching cubes reads.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <map>
 #include <random>
@@ -298,6 +300,71 @@ TEST(SurfaceCodec, EncodingIsDeterministic) {
   ASSERT_TRUE(EncodeSurface(g, {}, &a).ok());
   ASSERT_TRUE(EncodeSurface(g, {}, &b).ok());
   EXPECT_EQ(a, b);
+}
+
+// A fixed grid for the G3 bitstream test: two balls, an odd width (SIMD
+// tails), hash noise, unobserved samples (NaN) deep inside and at random,
+// and exact -0.0 samples.
+SdfGrid FrozenGrid() {
+  SdfGrid g;
+  g.origin = Eigen::Vector3f(-0.41f, -0.33f, -0.29f);
+  g.voxel_m = 0.016f;
+  g.nx = 45;
+  g.ny = 38;
+  g.nz = 35;
+  g.sdf.resize(g.size());
+  auto hash = [](uint32_t v) {
+    v ^= v >> 16;
+    v *= 0x7feb352du;
+    v ^= v >> 15;
+    v *= 0x846ca68bu;
+    v ^= v >> 16;
+    return v;
+  };
+  const Eigen::Vector3f c0(-0.05f, 0.0f, 0.0f), c1(0.17f, 0.05f, -0.02f);
+  for (int z = 0; z < g.nz; ++z)
+    for (int y = 0; y < g.ny; ++y)
+      for (int x = 0; x < g.nx; ++x) {
+        const uint32_t i = static_cast<uint32_t>(g.Index(x, y, z));
+        const Eigen::Vector3f p = g.origin + g.voxel_m * Eigen::Vector3f(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+        const float d = std::min((p - c0).norm() - 0.2f, (p - c1).norm() - 0.11f);
+        const float noise = (static_cast<float>(hash(i) % 2001u) - 1000.0f) * 1e-6f;  // ±1 mm
+        float v = std::clamp(d + noise, -0.032f, 0.032f);
+        if (d < -0.05f || hash(i ^ 0x9e3779b9u) % 97u == 0) v = std::nanf("");
+        if (hash(i + 17u) % 89u == 0) v = -0.0f;
+        g.sdf[i] = v;
+      }
+  return g;
+}
+
+uint64_t Fnv1a(uint64_t h, const void* data, size_t n) {
+  const auto* b = static_cast<const uint8_t*>(data);
+  for (size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  return h;
+}
+
+// The encoder's output and the decoder's mesh are frozen: a speed-up must
+// leave both bit for bit as they were (the hashes were made by the code
+// before the 2026-12-06 speed-up and checked against it, with GCC at -O3
+// and clang at -O1). A deliberate change of the format or of the encoder's
+// choices updates them and says so in PROTOCOL.md / docs/codecs.md.
+TEST(SurfaceCodec, TheBitstreamAndTheDecodedMeshAreFrozen) {
+  const SdfGrid g = FrozenGrid();
+  std::vector<uint8_t> blob;
+  Mesh from_encoder, decoded;
+  ASSERT_TRUE(EncodeSurface(g, {}, &blob, &from_encoder).ok());
+  ASSERT_TRUE(DecodeGeometry(blob, &decoded).ok());
+  EXPECT_EQ(blob.size(), 2691u);
+  EXPECT_EQ(decoded.num_vertices(), 3457u);
+  EXPECT_EQ(decoded.num_triangles(), 6425u);
+  uint64_t hb = 1469598103934665603ull, hm = 1469598103934665603ull;
+  hb = Fnv1a(hb, blob.data(), blob.size());
+  for (const Eigen::Vector3f& p : decoded.positions) hm = Fnv1a(hm, p.data(), 3 * sizeof(float));
+  for (const auto& t : decoded.triangles) hm = Fnv1a(hm, t.data(), 3 * sizeof(uint32_t));
+  EXPECT_EQ(hb, 0x10c8f4fb98de0939ull);
+  EXPECT_EQ(hm, 0x41e1b80a1c72baebull);
+  EXPECT_EQ(from_encoder.positions, decoded.positions);
+  EXPECT_EQ(from_encoder.triangles, decoded.triangles);
 }
 
 TEST(SurfaceCodec, EveryPrefixIsRefused) {
