@@ -29,6 +29,10 @@
 // from (fused and temporal content with the stream mesh only); its error is
 // the two-sided surface distance to the site's stream mesh of the same frame
 // (`geom_surface_rms_mm`, as for G2), and `triangles` is what the viewer gets.
+// Between consecutive frames G3 also reports what an inter-frame code could
+// predict (FrameToFrame): `repeat_label_fraction`, `repeat_case_fraction`,
+// `repeat_crossing_fraction`, `crossing_shift_mm` p50/p90 and
+// `crossing_within_step_fraction`.
 //
 // (--hash prints a hash of every geometry blob of the first repeat to stderr;
 // --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
