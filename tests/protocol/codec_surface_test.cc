@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <random>
 #include <utility>
@@ -365,6 +366,28 @@ TEST(SurfaceCodec, TheBitstreamAndTheDecodedMeshAreFrozen) {
   EXPECT_EQ(hm, 0x41e1b80a1c72baebull);
   EXPECT_EQ(from_encoder.positions, decoded.positions);
   EXPECT_EQ(from_encoder.triangles, decoded.triangles);
+}
+
+// The site's grids hold finite distances or NaN; a caller's infinite
+// samples count as observed and far (their crossings on the edge's end), never
+// as undefined behaviour.
+TEST(SurfaceCodec, InfiniteSamplesEncodeToAValidSurface) {
+  SdfGrid g = FrozenGrid();
+  size_t changed = 0;
+  for (size_t i = 0; i < g.sdf.size(); i += 7) {
+    if (g.sdf[i] == g.sdf[i]) {
+      g.sdf[i] = g.sdf[i] < 0 ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
+      ++changed;
+    }
+  }
+  ASSERT_GT(changed, 1000u);
+  std::vector<uint8_t> blob;
+  Mesh from_encoder, decoded;
+  ASSERT_TRUE(EncodeSurface(g, {}, &blob, &from_encoder).ok());
+  ASSERT_TRUE(DecodeGeometry(blob, &decoded).ok());
+  EXPECT_GT(decoded.num_triangles(), 1000u);
+  EXPECT_TRUE(decoded.Validate().ok());
+  EXPECT_EQ(from_encoder.positions, decoded.positions);
 }
 
 TEST(SurfaceCodec, EveryPrefixIsRefused) {
