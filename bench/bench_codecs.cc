@@ -175,6 +175,22 @@ struct FrameInput {
 struct GridRepeat {
   size_t labelled = 0, same_label = 0, cubes = 0, same_case = 0, edges = 0, edges_alike = 0;
   std::vector<double> shift_mm;
+  GridRepeat& operator+=(const GridRepeat& r) {
+    labelled += r.labelled;
+    same_label += r.same_label;
+    cubes += r.cubes;
+    same_case += r.same_case;
+    edges += r.edges;
+    edges_alike += r.edges_alike;
+    shift_mm.insert(shift_mm.end(), r.shift_mm.begin(), r.shift_mm.end());
+    return *this;
+  }
+};
+// A grid with its G3-style labels and cube cases (SurfaceLabels).
+struct LabelledGrid {
+  const SdfGrid* grid = nullptr;
+  std::vector<uint8_t> labels;
+  std::vector<int16_t> codes;
 };
 // Per sample: 0 unlabelled, 1 outside, 2 inside; `codes` per cube origin: its
 // marching-cubes case, or -1 when it is not a surface cube.
@@ -197,7 +213,10 @@ void SurfaceLabels(const SdfGrid& g, std::vector<uint8_t>* labels, std::vector<i
           (*labels)[g.Index(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2))] = (code >> c) & 1 ? 2 : 1;
       }
 }
-GridRepeat FrameToFrame(const SdfGrid& prev, const SdfGrid& cur) {
+GridRepeat FrameToFrame(const LabelledGrid& before, const LabelledGrid& now) {
+  const SdfGrid &prev = *before.grid, &cur = *now.grid;
+  const std::vector<uint8_t>&lp = before.labels, &lc = now.labels;
+  const std::vector<int16_t>&cp = before.codes, &cc = now.codes;
   GridRepeat r;
   if (std::abs(prev.voxel_m - cur.voxel_m) > 1e-6f * cur.voxel_m) return r;
   int d[3];
@@ -206,10 +225,6 @@ GridRepeat FrameToFrame(const SdfGrid& prev, const SdfGrid& cur) {
     d[a] = static_cast<int>(std::lround(off));
     if (std::abs(off - d[a]) > 1e-3) return r;  // not on one lattice
   }
-  std::vector<uint8_t> lp, lc;
-  std::vector<int16_t> cp, cc;
-  SurfaceLabels(prev, &lp, &cp);
-  SurfaceLabels(cur, &lc, &cc);
   // The previous grid's index of the current sample (x, y, z), or -1 outside it.
   auto prev_index = [&](int x, int y, int z) -> int64_t {
     const int X = x + d[0], Y = y + d[1], Z = z + d[2];
@@ -940,16 +955,14 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
     emit("G3", "grid_samples", Median(samples), "1", extra);
     if (bytes_of.count("G1")) emit("G3", "bytes_ratio_vs_G1", bytes / bytes_of["G1"], "1", {{"peer", "G1"}});
     if (inputs.size() >= 2) {
+      // Each grid labelled once, kept for the next pair.
       GridRepeat all;
-      for (size_t k = 1; k < inputs.size(); ++k) {
-        const GridRepeat r = FrameToFrame(inputs[k - 1].field, inputs[k].field);
-        all.labelled += r.labelled;
-        all.same_label += r.same_label;
-        all.cubes += r.cubes;
-        all.same_case += r.same_case;
-        all.edges += r.edges;
-        all.edges_alike += r.edges_alike;
-        all.shift_mm.insert(all.shift_mm.end(), r.shift_mm.begin(), r.shift_mm.end());
+      LabelledGrid before, now;
+      for (size_t k = 0; k < inputs.size(); ++k) {
+        std::swap(before, now);
+        now.grid = &inputs[k].field;
+        SurfaceLabels(*now.grid, &now.labels, &now.codes);
+        if (k > 0) all += FrameToFrame(before, now);
       }
       const std::map<std::string, std::string> between{{"between", "consecutive frames, same world samples"}};
       auto frac = [](size_t a, size_t b) { return b ? static_cast<double>(a) / static_cast<double>(b) : 0.0; };

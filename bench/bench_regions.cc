@@ -513,15 +513,16 @@ int RunRegionsBench(const BenchArgs& args, const RegionsBenchOptions& o) {
     auto q = q_fused;
     q["event"] = kind;
     q["n"] = std::to_string(v.size());
-    for (const char* from : {"contact", "threshold"}) {
-      const bool contact = std::string(from) == "contact";
-      if (contact && kind != "enter") continue;  // an exit is timed from its crossing only
-      const std::vector<double>& x = contact ? v : latency_threshold[kind];
-      auto qf = q;
-      qf["from"] = from;
-      EmitFigure("regions", wl, "event_latency_ms", InterpolatedQuantile(x, 0.5), "ms", [&] { auto y = qf; y["stat"] = "p50"; return y; }());
-      EmitFigure("regions", wl, "event_latency_ms", InterpolatedQuantile(x, 0.99), "ms", [&] { auto y = qf; y["stat"] = "p99"; return y; }());
-    }
+    auto emit_latency = [&](const char* from, const std::vector<double>& x) {
+      for (const auto& [stat, f] : {std::pair{"p50", 0.5}, std::pair{"p99", 0.99}}) {
+        auto y = q;
+        y["from"] = from;
+        y["stat"] = stat;
+        EmitFigure("regions", wl, "event_latency_ms", InterpolatedQuantile(x, f), "ms", y);
+      }
+    };
+    if (kind == "enter") emit_latency("contact", v);  // an exit is timed from its crossing only
+    emit_latency("threshold", latency_threshold[kind]);
     EmitFigure("regions", wl, "detection_frames", Median(detect.at(kind)), "frames", q);
   }
   // The reports' own delay (capture of their frame → viewer): the site's

@@ -139,7 +139,7 @@ void ForEachSample(const Field& f, Fn&& fn) {
       const size_t row = static_cast<size_t>(y >> 2) + static_cast<size_t>(f.by) * static_cast<size_t>(z >> 2);
       const size_t r1 = f.row_start[row + 1];
       if (f.row_start[row] == r1) continue;
-      const int32_t* slot = &f.brick_slot[f.Brick(0, y >> 2, z >> 2)];
+      const int32_t* slot = &f.brick_slot[row * static_cast<size_t>(f.bx)];
       const size_t local = static_cast<size_t>(4 * ((y & 3) + 4 * (z & 3)));
       for (size_t r = f.row_start[row]; r < r1; ++r) {
         const int b = f.row_bricks[r];
