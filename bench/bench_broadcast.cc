@@ -12,6 +12,9 @@
 // fetch every part in order over one keep-alive connection — without
 // decoding or rendering. Viewers are spread over the edges round-robin.
 //
+// The site codes the stream in G3 + V1 unless --codecs says otherwise (G1 +
+// V1 for truth content): the figures carry a "codec" qualifier.
+//
 // Figures (JSON lines, "content" qualifier): viewers_held (viewers that got
 // every part of the window, each within 2 s of the capture of its newest
 // frame), latency_p50_ms / latency_p99_ms (capture of a part's newest frame,
@@ -31,6 +34,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -43,6 +47,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <asio.hpp>
@@ -76,8 +81,25 @@ struct BroadcastOptions {
   double manifest_poll_ms = 250;  // the manifest's update_interval_ms, as a player polls
   double in_time_ms = 2000;
   std::string keep_dir;
+  // The site's codecs: "g3+v1" (fused) / "g1+v1" (truth, whose studio mesh
+  // G3 cannot carry) by default, "g1+c1" (the call's default), or "site"
+  // (whatever holoport-server and --site-arg choose). A broadcast multiplies
+  // every byte by its audience while the site encodes once: at 1,000
+  // viewers G3 + V1 (2.2–2.7 Mbit/s each) held all of them, G1 + C1 (7–9
+  // Mbit/s) 0–608 (docs/broadcast.md §9).
+  std::string codecs = "auto";
   std::vector<std::string> site_args;  // extra holoport-server arguments
 };
+
+// holoport-server arguments and the figure's label for a --codecs choice.
+std::pair<std::vector<std::string>, std::string> SiteCodecs(const std::string& codecs, const std::string& content) {
+  const std::string c = codecs != "auto" ? codecs : content == "truth" ? "g1+v1" : "g3+v1";
+  if (c == "site") return {{}, "site"};
+  const std::string g = c.substr(0, 2), col = c.substr(3, 2);
+  std::string label = c;
+  for (char& ch : label) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+  return {{"--geometry-codec", g, "--color-codec", col}, label};
+}
 
 int64_t SteadyUs() {
   return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -139,13 +161,39 @@ struct ViewerResult {
   std::vector<double> latency_tier_ms;  // packager receive of the part's last message → part received
 };
 
+// The manifests the viewers of one thread have parsed: each distinct live.json
+// body is parsed once per thread (a real audience parses on its own machines;
+// here 1,000 viewers parsing every poll took a quarter of the two cores'
+// samples away from the site and nginx under test). Every viewer still
+// fetches every poll. Two entries: around a rewrite, replies old and new
+// interleave.
+struct ManifestCache {
+  struct Entry {
+    std::string body;
+    std::shared_ptr<const net::LiveManifest> manifest;
+  };
+  Entry entries[2];
+  int next = 0;
+  std::shared_ptr<const net::LiveManifest> Get(std::string_view body) {
+    for (const Entry& e : entries)
+      if (e.manifest && e.body == body) return e.manifest;
+    auto m = net::ParseLiveManifest(body);
+    if (!m.ok()) return nullptr;
+    Entry& e = entries[next];
+    next ^= 1;
+    e.body = std::string(body);
+    e.manifest = std::make_shared<const net::LiveManifest>(std::move(*m));
+    return e.manifest;
+  }
+};
+
 // One light viewer: a keep-alive connection to its edge and a LiveFollower.
 class LightViewer : public std::enable_shared_from_this<LightViewer> {
  public:
   LightViewer(asio::io_context& io, asio::ip::tcp::endpoint edge, std::string dir, const BroadcastOptions& o,
-              std::atomic<bool>* measuring, std::atomic<bool>* stop)
-      : socket_(io), timer_(io), edge_(edge), dir_(std::move(dir)), o_(o), measuring_(measuring),
-        stop_(stop) {}
+              ManifestCache* manifests, std::atomic<bool>* measuring, std::atomic<bool>* stop)
+      : socket_(io), timer_(io), edge_(edge), dir_(std::move(dir)), o_(o), manifests_(manifests),
+        measuring_(measuring), stop_(stop) {}
 
   void Start() {
     auto self = shared_from_this();
@@ -229,13 +277,11 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
     if (manifest) {
       if (head_.status == 200) {
         const std::string_view body(buf_.data() + head_.head_bytes, head_.content_length);
-        if (body != last_manifest_) {
-          auto m = net::ParseLiveManifest(body);
-          if (m.ok()) {
-            follower_.OnManifest(*m);
-            availability_start_ = m->availability_start_unix_us;
-            last_manifest_ = std::string(body);
-          }
+        auto m = manifests_->Get(body);
+        if (m && m != applied_) {
+          follower_.OnManifest(*m);
+          availability_start_ = m->availability_start_unix_us;
+          applied_ = std::move(m);
         }
         if (measured) result.manifests += 1;
       } else if (measured) {
@@ -291,11 +337,13 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
   asio::ip::tcp::endpoint edge_;
   std::string dir_;
   const BroadcastOptions& o_;
+  ManifestCache* manifests_;
+  std::shared_ptr<const net::LiveManifest> applied_;  // the last manifest given to follower_
   std::atomic<bool>* measuring_;
   std::atomic<bool>* stop_;
   net::LiveFollower follower_;
   int64_t next_manifest_us_ = 0;
-  std::string request_, buf_, last_manifest_;
+  std::string request_, buf_;
   net::HttpResponseHead head_;
   uint64_t skips_at_start_ = 0, catch_ups_at_start_ = 0;
   int64_t availability_start_ = 0;
@@ -336,6 +384,11 @@ LogCounts CountLog(const std::string& path, double t0, double t1) {
 }
 
 int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
+  if (o.content == "truth" && o.codecs.rfind("g3", 0) == 0) {
+    spdlog::error("broadcast: --codecs {} needs --content fused (G3 codes the site's fused grid; the studio's "
+                  "meshes have none)", o.codecs);
+    return 2;
+  }
   if (std::system("command -v nginx > /dev/null 2>&1") != 0) {
     spdlog::error("broadcast: nginx is not installed (scripts/setup.sh installs nginx-light)");
     return 2;
@@ -353,9 +406,11 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
     if (!args.json) spdlog::info("broadcast: {}", s);
   };
   const std::string content = o.content;
+  const auto [codec_args, codec_label] = SiteCodecs(o.codecs, o.content);
   auto emit = [&](const std::string& metric, double value, const std::string& unit,
                   std::map<std::string, std::string> q = {}) {
     q["content"] = content;
+    q["codec"] = codec_label;
     q["viewers"] = std::to_string(o.viewers);
     q["edges"] = std::to_string(o.edges);
     EmitFigure("broadcast", args.workload, metric, value, unit, q);
@@ -371,8 +426,9 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   } else {
     site.insert(site.end(), {"--prerender", std::to_string(o.prerender), "-n", "-1"});
   }
+  site.insert(site.end(), codec_args.begin(), codec_args.end());
   site.insert(site.end(), o.site_args.begin(), o.site_args.end());
-  progress("site: " + o.content + " " + args.workload + " (pre-rendering " + std::to_string(o.prerender) + " frames)");
+  progress("site: " + o.content + " " + args.workload + ", " + codec_label + " (pre-rendering " + std::to_string(o.prerender) + " frames)");
   const pid_t site_pid = Spawn(site, dir + "/site.log");
   const pid_t packager_pid =
       Spawn({bin + "/holoport-record", "--live-dir", dir + "/root/show", "--connect",
@@ -436,11 +492,12 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   std::atomic<bool> measuring{false}, stop{false};
   std::vector<std::unique_ptr<asio::io_context>> ios;
   std::vector<std::shared_ptr<LightViewer>> viewers;
+  std::vector<ManifestCache> manifest_caches(static_cast<size_t>(o.threads));  // one per thread
   for (int t = 0; t < o.threads; ++t) ios.push_back(std::make_unique<asio::io_context>());
   for (int i = 0; i < o.viewers; ++i) {
     asio::ip::tcp::endpoint ep(asio::ip::make_address("127.0.0.1"), edge_ports[static_cast<size_t>(i % o.edges)]);
-    viewers.push_back(std::make_shared<LightViewer>(*ios[static_cast<size_t>(i % o.threads)], ep, "/show/", o,
-                                                    &measuring, &stop));
+    const size_t t = static_cast<size_t>(i % o.threads);
+    viewers.push_back(std::make_shared<LightViewer>(*ios[t], ep, "/show/", o, &manifest_caches[t], &measuring, &stop));
   }
   for (auto& v : viewers) v->Start();
   std::vector<std::thread> threads;
@@ -588,6 +645,10 @@ BenchFn Setup(CLI::App& app) {
   app.add_option("--in-time-ms", o->in_time_ms, "a part is in time within this of its newest frame's capture")
       ->check(CLI::Range(100.0, 60000.0));
   app.add_option("--keep", o->keep_dir, "keep logs, configs and the broadcast in this directory");
+  app.add_option("--codecs", o->codecs,
+                 "the site's geometry + colour codecs: auto (g3+v1 for fused, g1+v1 for truth), g3+v1, g1+v1, g1+c1, "
+                 "or site (holoport-server's defaults and --site-arg)")
+      ->check(CLI::IsMember({"auto", "g3+v1", "g1+v1", "g1+c1", "site"}));
   app.add_option("--site-arg", o->site_args,
                  "an extra holoport-server argument (repeatable; e.g. --site-arg=--geometry-codec --site-arg=g3)");
   return [o](const BenchArgs& args) { return RunBroadcast(args, *o); };
