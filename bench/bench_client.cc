@@ -251,14 +251,17 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
 // 640×480 (radius 2 m), PSNR and SSIM against the studio's ground-truth
 // render of the same frame, inside the true foreground ("region":"truth")
 // and inside the union of the true and the rendered foreground
-// ("region":"union": fringes and floaters count too).
+// ("region":"union": fringes and floaters count too); and inside their
+// intersection ("region":"overlap": the colour where the geometry covers the
+// person, without the pixels it misses), with the fraction of the true
+// foreground the render covers (`novel_view_coverage`).
 struct Quality {
-  double psnr = 0, ssim = 0, psnr_union = 0;
+  double psnr = 0, ssim = 0, psnr_union = 0, psnr_overlap = 0, coverage = 0;
 };
 holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::OffscreenTarget* target,
                             holo::SyntheticStudio* studio, int64_t frame, const holo::render::RenderSettings& base,
                             Quality* q) {
-  std::vector<double> psnr, ssim, psnr_union;
+  std::vector<double> psnr, ssim, psnr_union, psnr_overlap, coverage;
   for (float az : {22.5f, 112.5f, 202.5f, 292.5f}) {
     const holo::CameraModel cam = OrbitCamera(target->width(), target->height(), az, 2.0f);
     holo::ImageRgb8 truth, ours;
@@ -271,13 +274,21 @@ holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::Offs
     HOLO_RETURN_IF_ERROR(target->ReadRgb(&ours));
     HOLO_ASSIGN_OR_RETURN(double p, holo::metrics::ComputePsnr(ours, truth, &mask));
     HOLO_ASSIGN_OR_RETURN(double s, holo::metrics::ComputeSsim(ours, truth, &mask));
-    holo::ImageGray8 uni = mask;
+    holo::ImageGray8 uni = mask, both = mask;
+    size_t fg = 0, covered = 0;
     for (int y = 0; y < uni.height(); ++y)
       for (int x = 0; x < uni.width(); ++x) {
-        if (ours.at(x, y, 0) | ours.at(x, y, 1) | ours.at(x, y, 2)) uni.at(x, y) = 255;
+        const bool drawn = ours.at(x, y, 0) | ours.at(x, y, 1) | ours.at(x, y, 2);
+        fg += mask.at(x, y) != 0;
+        covered += mask.at(x, y) != 0 && drawn;
+        if (!drawn) both.at(x, y) = 0;
+        if (drawn) uni.at(x, y) = 255;
         if (uni.at(x, y) == 0) truth.at(x, y, 0) = truth.at(x, y, 1) = truth.at(x, y, 2) = 0;
       }
     HOLO_ASSIGN_OR_RETURN(double pu, holo::metrics::ComputePsnr(ours, truth, &uni));
+    HOLO_ASSIGN_OR_RETURN(double po, holo::metrics::ComputePsnr(ours, truth, &both));
+    psnr_overlap.push_back(po);
+    coverage.push_back(fg ? static_cast<double>(covered) / static_cast<double>(fg) : 0.0);
     psnr.push_back(p);
     ssim.push_back(s);
     psnr_union.push_back(pu);
@@ -285,6 +296,8 @@ holo::Status MeasureQuality(holo::render::Renderer* renderer, holo::render::Offs
   q->psnr = holo::bench::Mean(psnr);
   q->ssim = holo::bench::Mean(ssim);
   q->psnr_union = holo::bench::Mean(psnr_union);
+  q->psnr_overlap = holo::bench::Mean(psnr_overlap);
+  q->coverage = holo::bench::Mean(coverage);
   return holo::OkStatus();
 }
 
@@ -485,6 +498,10 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         EmitFigure("client", args.workload, "novel_view_ssim", qual.ssim, "", qm);
         qm["region"] = "union";
         EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr_union, "dB", qm);
+        qm["region"] = "overlap";
+        EmitFigure("client", args.workload, "novel_view_psnr_db", qual.psnr_overlap, "dB", qm);
+        qm.erase("region");
+        EmitFigure("client", args.workload, "novel_view_coverage", qual.coverage, "fraction", qm);
       }
       if (!png_dir.empty() && c.mesh_name != "fused_full") {
         if (holo::Status s = WriteSideBySide(renderer->get(), small->get(), studio->get(), studio_frame, base,
