@@ -85,7 +85,7 @@ struct BroadcastOptions {
   // G3 cannot carry) by default, "g1+c1" (the call's default), or "site"
   // (whatever holoport-server and --site-arg choose). A broadcast multiplies
   // every byte by its audience while the site encodes once: at 1,000
-  // viewers G3 + V1 (2.2–2.7 Mbit/s each) held all of them, G1 + C1 (7–9
+  // viewers G3 + V1 (2.0–2.9 Mbit/s each) held all of them, G1 + C1 (7–9
   // Mbit/s) 0–608 (docs/broadcast.md §9).
   std::string codecs = "auto";
   std::vector<std::string> site_args;  // extra holoport-server arguments
@@ -428,7 +428,8 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   }
   site.insert(site.end(), codec_args.begin(), codec_args.end());
   site.insert(site.end(), o.site_args.begin(), o.site_args.end());
-  progress("site: " + o.content + " " + args.workload + ", " + codec_label + " (pre-rendering " + std::to_string(o.prerender) + " frames)");
+  progress("site: " + o.content + " " + args.workload + ", " + codec_label + " (pre-rendering " +
+           std::to_string(o.prerender) + " frames)");
   const pid_t site_pid = Spawn(site, dir + "/site.log");
   const pid_t packager_pid =
       Spawn({bin + "/holoport-record", "--live-dir", dir + "/root/show", "--connect",
