@@ -158,8 +158,11 @@ TEST(SiteVoice, SyntheticSoundsStartAtTheCaptureTimeOfTheirEvents) {
     std::printf("onset %zu at %+.2f ms, its event at %+.2f ms\n", i, (static_cast<double>(onsets[i]) - wall0) / 1000.0,
                 i < expected.size() ? (expected[i] - wall0) / 1000.0 : -1.0);
   ASSERT_EQ(onsets.size(), expected.size());
+  // ±5 ms: Opus codes in overlapping MDCT windows, so a sharp onset's energy
+  // can cross the threshold a few ms before the sound starts, depending on
+  // where the 20 ms frames fall (seen once: 3.0 ms early; usually < 1 ms).
   for (size_t i = 0; i < expected.size(); ++i)
-    EXPECT_NEAR(static_cast<double>(onsets[i]), expected[i], 3000.0) << "event " << i;  // ±3 ms
+    EXPECT_NEAR(static_cast<double>(onsets[i]), expected[i], 5000.0) << "event " << i;
   EXPECT_GE((*v)->stats().onsets, static_cast<int64_t>(expected.size()));
 }
 

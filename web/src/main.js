@@ -30,7 +30,7 @@ const params = new URLSearchParams(location.search);
 const state = {
   status: 'starting', problem: '', framesShown: 0, frameIndex: -1, frozen: false, passEnds: [],
   latencyMs: null, bufferMs: 0, fps: 0, geometryMs: [], colorMs: [], triangles: 0,
-  bytes: 0, parts: 0, errors: 0, bufferGrowths: 0, problems: [], audioChunks: 0, mode: '',
+  bytes: 0, parts: 0, errors: 0, bufferGrowths: 0, problems: [], audioChunks: 0, mode: '', videoFlushes: 0,
 };
 window.holoport = {
   state,
@@ -317,6 +317,7 @@ async function handle(m) {
         showStatus('warn', `A colour frame could not be decoded (${err.message}); waiting for the next key frame.`);
         return;
       }
+      state.videoFlushes = [...videoStreams.values()].reduce((n, v) => n + v.flushes, 0);
       // A pod still waits for its key frame, or newer frames are queued.
       if (!rig || images.some((im) => im === null || im.skipped)) return;
       state.colorMs.push(performance.now() - t0);

@@ -196,6 +196,11 @@ export function h264CodecString(annexB) {
   return fail('v1.video: the keyframe has no sequence parameter set');
 }
 
+// How long a handed-over picture may stay inside the decoder, with nothing
+// newer after it, before the decoder is flushed (a 30 fps stream hands over
+// a picture every 33 ms; a still or a stalled edge hands over none).
+const HOLD_MS = 1000;
+
 // One pod's V1 stream, decoded in order by the browser's VideoDecoder.
 // decode(blob) must be called in the stream's order; it hands the picture to
 // the decoder at once (pictures are decoded one after another while the
@@ -214,6 +219,7 @@ export class VideoColorStream {
     this.size = '';     // the stream's image and picture sizes (a delta frame must keep them)
     this.waiting = [];  // {ts, decoder, resolve, reject} of the pictures handed over, in order
     this.handed = 0;    // pictures handed to the decoder so far
+    this.flushes = 0;   // pictures flushed out after HOLD_MS (see decode)
   }
 
   close() {
@@ -260,6 +266,19 @@ export class VideoColorStream {
     this.synced = true;
     this.lastFrame = info.frameNumber;
     this.size = size;
+    // A decoder may keep the newest picture until more input comes (seen
+    // now and then on a loaded machine: the picture of a still, or the one a
+    // caller awaits before handing over the next, never came out). When
+    // nothing newer has been handed over after HOLD_MS, flush it out; a
+    // flushed decoder needs a key frame next, so the stream waits for one.
+    const timer = setTimeout(() => {
+      if (seq !== this.handed || decoder !== this.decoder || decoder.state !== 'configured') return;
+      if (!this.waiting.some((w) => w.ts === seq)) return;
+      this.synced = false;
+      this.flushes++;
+      decoder.flush().catch(() => {}).finally(() => this._settle(decoder, null));
+    }, HOLD_MS);
+    picture.finally(() => clearTimeout(timer)).catch(() => {});
     return picture.then(async (frame) => {
       if (!frame) return { skipped: true };  // the decoder returned no picture for it
       try {

@@ -211,7 +211,7 @@ try {
       psnr_person_db: psnr.psnr_person, person_pixels: psnr.person_pixels, first_frame_ms: firstShownMs,
       latency_ms: s1.latencyMs, geometry_decode_ms_median: geoMs[geoMs.length >> 1] ?? null,
       color_decode_ms_median: colMs[colMs.length >> 1] ?? null, triangles: s2.triangles, page_bytes: pageBytes,
-      received_bytes: s2.bytes, parts: s2.parts,
+      received_bytes: s2.bytes, parts: s2.parts, video_flushes: s2.videoFlushes ?? 0,
     }));
     // Decode time in this browser, rendering stopped: the parts of segment 0.
     const base = urls.broadcast.replace(/live\.json$/, '');

@@ -20,7 +20,7 @@ import { parseRecording, parseRecords, parseMeshFrame, parseColorFrame, parseRig
 import { decodeGeometry } from '../src/geometry.js';
 import { mcCases } from '../src/marching_cubes.js';
 import { decodeColor } from '../src/color.js';
-import { parseVideoBlob, decodeVideoMask, h264CodecString } from '../src/video.js';
+import { parseVideoBlob, decodeVideoMask, h264CodecString, VideoColorStream } from '../src/video.js';
 
 const [recordingPath, goldenDir] = process.argv.slice(2);
 if (!recordingPath || !goldenDir) {
@@ -386,6 +386,64 @@ console.log(`records: ${recRefused} truncated runs refused`);
   }
   console.log(`lean audio_pose: ${leanRefused} truncated prefixes refused; ${lean.length * 8} bit flips: ` +
     `${lean.length * 8 - leanFlipsOk} refused, ${leanFlipsOk} decoded to valid frames`);
+}
+
+// A decoder that keeps its newest picture until more input comes (as the
+// browser's did now and then on a loaded machine: a still's colour never
+// showed). A fake VideoDecoder that outputs a picture only when the next
+// chunk or a flush arrives: a picture with nothing after it comes out
+// through a flush after the stream's hold time, and the stream then waits
+// for a key frame; pictures followed by newer ones are never flushed.
+{
+  const key = new Uint8Array(readFileSync(join(goldenDir, 'v1_0_blocks.bin')));
+  const delta = new Uint8Array(readFileSync(join(goldenDir, 'v1_1_blocks.bin')));
+  const win = parseVideoBlob(key).window;
+  const fakeFrame = (timestamp) => ({
+    timestamp, format: 'I444', allocationSize: () => win.w * win.h * 3, close() {},
+    copyTo: async () => [0, 1, 2].map((p) => ({ offset: p * win.w * win.h, stride: win.w })),
+  });
+  let flushCalls = 0;
+  globalThis.EncodedVideoChunk = class { constructor(init) { Object.assign(this, init); } };
+  globalThis.VideoDecoder = class {
+    constructor({ output }) { this.output = output; this.state = 'unconfigured'; this.decodeQueueSize = 0; this.held = null; }
+    configure() { this.state = 'configured'; }
+    decode(chunk) {
+      if (this.held !== null) this.output(fakeFrame(this.held));
+      this.held = chunk.timestamp;
+    }
+    async flush() {
+      flushCalls++;
+      if (this.held !== null) this.output(fakeFrame(this.held));
+      this.held = null;
+    }
+    close() { this.state = 'closed'; }
+  };
+  const within = (promise, ms) => Promise.race([promise, new Promise((r) => setTimeout(() => r('timed out'), ms))]);
+  // Alone: the picture comes out through a flush.
+  const alone = new VideoColorStream();
+  const t0 = Date.now();
+  const picture = await within(alone.decode(key), 5000);
+  check(picture && picture.rgba && picture.width === parseVideoBlob(key).width,
+    `a picture with nothing after it comes out (got ${picture === 'timed out' ? 'nothing in 5 s' : JSON.stringify(picture)})`);
+  check(alone.flushes === 1 && flushCalls === 1, `it came out through one flush (${alone.flushes}, ${flushCalls})`);
+  const waited = Date.now() - t0;
+  check(waited >= 900 && waited < 3000, `after the hold time (${waited} ms)`);
+  check((await within(alone.decode(delta), 3000)) === null, 'after a flush the stream waits for a key frame');
+  alone.close();
+  // In a stream: each picture comes out when the next is handed over; no flush.
+  const streaming = new VideoColorStream();
+  const first = streaming.decode(key);
+  const second = streaming.decode(delta);
+  const r1 = await within(first, 3000);
+  check(r1 && r1.skipped === true, `a picture superseded before it came out is skipped (${JSON.stringify(r1)})`);
+  await new Promise((r) => setTimeout(r, 1200));
+  check(streaming.flushes === 1, `the newest picture, alone after the hold time, is flushed (${streaming.flushes})`);
+  const r2 = await within(second, 3000);
+  check(r2 && r2.rgba, 'and comes out');
+  streaming.close();
+  delete globalThis.VideoDecoder;
+  delete globalThis.EncodedVideoChunk;
+  console.log(`v1 stream: a held picture flushed out after ${waited} ms`);
 }
 
 const ms = (a) => (a.length ? Number(median(a).toFixed(2)) : null);
