@@ -38,6 +38,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <memory>
@@ -622,7 +623,15 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   emit("site_cpu_pct", site_cpu / (window_s * 10.0), "% of one core");
   emit("viewers_cpu_pct", self_cpu / (window_s * 10.0), "% of one core", {{"threads", std::to_string(o.threads)}});
   emit("segments_published", segments, "count", {{"seconds", std::to_string(window_s)}});
-  if (!args.json) spdlog::info("broadcast: logs in {}", dir);
+  // A run's directory (the broadcast's segments, nginx's cache and logs:
+  // 30–70 MB) is kept only when asked for (--keep); a failed run keeps it
+  // for its logs (the returns above).
+  if (o.keep_dir.empty()) {
+    std::error_code ignore;
+    std::filesystem::remove_all(dir, ignore);
+  } else if (!args.json) {
+    spdlog::info("broadcast: logs in {}", dir);
+  }
   return 0;
 }
 
