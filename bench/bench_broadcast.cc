@@ -281,7 +281,6 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
         auto m = manifests_->Get(body);
         if (m && m != applied_) {
           follower_.OnManifest(*m);
-          availability_start_ = m->availability_start_unix_us;
           applied_ = std::move(m);
         }
         if (measured) result.manifests += 1;
@@ -296,8 +295,9 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
         result.parts += 1;
         result.bytes += head_.content_length;
         const bool have = PartCaptureTimes(bytes, 0, &first, &last, &record_time);
-        if (availability_start_ > 0)
-          result.latency_tier_ms.push_back(static_cast<double>(now - availability_start_ - record_time) * 1e-3);
+        if (applied_ && applied_->availability_start_unix_us > 0)
+          result.latency_tier_ms.push_back(
+              static_cast<double>(now - applied_->availability_start_unix_us - record_time) * 1e-3);
         if (have) {
           const double newest = static_cast<double>(now - last) * 1e-3;
           result.latency_newest_ms.push_back(newest);
@@ -347,7 +347,6 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
   std::string request_, buf_;
   net::HttpResponseHead head_;
   uint64_t skips_at_start_ = 0, catch_ups_at_start_ = 0;
-  int64_t availability_start_ = 0;
 };
 
 struct LogCounts {
@@ -385,7 +384,8 @@ LogCounts CountLog(const std::string& path, double t0, double t1) {
 }
 
 int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
-  if (o.content == "truth" && o.codecs.rfind("g3", 0) == 0) {
+  const auto [codec_args, codec_label] = SiteCodecs(o.codecs, o.content);
+  if (o.content == "truth" && codec_label.rfind("G3", 0) == 0) {
     spdlog::error("broadcast: --codecs {} needs --content fused (G3 codes the site's fused grid; the studio's "
                   "meshes have none)", o.codecs);
     return 2;
@@ -407,7 +407,6 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
     if (!args.json) spdlog::info("broadcast: {}", s);
   };
   const std::string content = o.content;
-  const auto [codec_args, codec_label] = SiteCodecs(o.codecs, o.content);
   auto emit = [&](const std::string& metric, double value, const std::string& unit,
                   std::map<std::string, std::string> q = {}) {
     q["content"] = content;

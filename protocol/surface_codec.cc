@@ -600,10 +600,11 @@ Status EncodeSurface(const SdfGrid& g, const SurfaceEncodeOptions& o, std::vecto
     ++p[axis];
     const double v0 = g.sdf[g.Index(x, y, z)], v1 = g.sdf[g.Index(p[0], p[1], p[2])];
     // In [0, 1] for finite samples of opposite signs; an infinite one gives
-    // NaN or ±1, kept in range before the conversion to int.
-    const double t = std::clamp(v0 / (v0 - v1), 0.0, 1.0);
+    // NaN (the edge's middle) or ±1, kept in range before the conversion to int.
+    const double q = v0 / (v0 - v1);
+    const double t = q == q ? std::clamp(q, 0.0, 1.0) : 0.5;
     const int le = EdgeLevels(f, x, y, z, axis, level_of);
-    const int k = std::clamp(static_cast<int>(std::floor((t == t ? t : 0.5) * le)), 0, le - 1);
+    const int k = std::clamp(static_cast<int>(std::floor(t * le)), 0, le - 1);
     if (le > 1) crossings.PutValue(static_cast<uint32_t>(std::min(le, static_cast<int>(kCrossingContexts)) - 1), static_cast<uint32_t>(k));
     f.cross[e] = static_cast<int16_t>(k);
     f.cross_levels[e] = static_cast<uint8_t>(le);
