@@ -68,6 +68,7 @@ struct ClientBenchOptions {
   int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
   std::string gpu_visibility;                    // 0 | 1: ProjectiveOptions::gpu_visibility (default: the renderer's)
   float behind_band = -1;                        // the site's TsdfOptions::behind_band (fused; -1: the default)
+  float behind_sigmas = -1;                      // the site's TsdfOptions::behind_noise_sigmas (fused; -1: the default)
   int bake_texels = -1;                          // ProjectiveOptions::bake_texels_per_edge (-1: the renderer's)
   float bake_density = -1;                       // ProjectiveOptions::bake_texels_per_pod_pixel (-1: the renderer's)
   double reduced_step_scale = -1;                // stream part: the reduced layer's (-1: SitePublisher's default)
@@ -149,7 +150,8 @@ holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStu
 // budget `reduced_triangles`: what holoport-server --listen publishes),
 // both re-textured by the site's texturer.
 holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles, int stream_step,
-                              const holo::TextureOptions& texture_options, float behind_band, int sequence_frames,
+                              const holo::TextureOptions& texture_options, float behind_band, float behind_sigmas,
+                              int sequence_frames,
                               ViewerContent* full, ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
   HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
@@ -159,6 +161,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   o.masks = holo::MaskSource::kSegment;
   o.tsdf.voxel_size = workload.voxel_size_m;
   if (behind_band > 0) o.tsdf.behind_band = behind_band;
+  if (behind_sigmas >= 0) o.tsdf.behind_noise_sigmas = behind_sigmas;
   o.pipeline.serial = true;
   o.pipeline.max_frames = frame + 1;
   // What holoport-server --listen publishes: the compact stream mesh; the
@@ -385,6 +388,7 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
   const int sequence_frames =
       options.parts.find("stream") != std::string::npos || options.parts.empty() ? options.video_frames : 0;
   HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, options.stream_step, to, options.behind_band,
+                                        options.behind_sigmas,
                                         sequence_frames, &(*contents)[0], &(*contents)[1]));
   if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
   return holo::OkStatus();
@@ -924,6 +928,10 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
                  "fused content: the site's TSDF counts observations behind the surface this many truncation "
                  "distances deep (default: TsdfOptions')")
       ->check(CLI::Range(1.0, 4.0));
+  app.add_option("--behind-sigmas", o->behind_sigmas,
+                 "fused content: and this many σ of the sensor's depth noise at each pixel's depth deeper "
+                 "(default: TsdfOptions'; 0 = a fixed band)")
+      ->check(CLI::Range(0.0, 5.0));
   app.add_option("--gpu-visibility", o->gpu_visibility,
                  "1 / 0: the pods' visibility maps rendered by GL / rasterized on the CPU (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));

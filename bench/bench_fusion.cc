@@ -221,7 +221,7 @@ std::string MakeWorkDir(const std::string& keep) {
 struct ExtraArgs {
   std::string dataset, keep;
   bool peer = true;
-  double voxel_mm = 0, depth_max_m = 0, min_weight = 0, behind_band = 0;
+  double voxel_mm = 0, depth_max_m = 0, min_weight = 0, behind_band = 0, behind_sigmas = -1;
   long decimate = -1;
   // Whole-pipeline figures (our segmentation + texturing), see fusion_pipeline.h.
   bool pipeline = true, pipeline_only = false;
@@ -241,6 +241,10 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
                  "TSDF: observations behind the surface count this many truncation distances deep (default: "
                  "TsdfOptions'; 1 = the classic drop)")
       ->check(CLI::Range(1.0, 4.0));
+  app.add_option("--behind-sigmas", a->behind_sigmas,
+                 "TSDF: and this many σ of the sensor's depth noise at each pixel's depth deeper (default: "
+                 "TsdfOptions'; 0 = a fixed band)")
+      ->check(CLI::Range(0.0, 5.0));
   app.add_option("--decimate", a->decimate, "also decimate to this many triangles");
   app.add_flag("--no-pipeline{false}", a->pipeline, "skip the whole-pipeline figures");
   app.add_flag("--pipeline-only", a->pipeline_only, "only the whole-pipeline figures");
@@ -290,6 +294,7 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   cfg.tsdf.max_depth_m = extra.depth_max_m > 0 ? static_cast<float>(extra.depth_max_m) : 5.0f;
   if (extra.min_weight > 0) cfg.tsdf.min_weight = static_cast<float>(extra.min_weight);
   if (extra.behind_band > 0) cfg.tsdf.behind_band = static_cast<float>(extra.behind_band);
+  if (extra.behind_sigmas >= 0) cfg.tsdf.behind_noise_sigmas = static_cast<float>(extra.behind_sigmas);
   cfg.repeats = args.repeats;
   if (extra.decimate >= 0) cfg.decimate_to = static_cast<size_t>(extra.decimate);
   const int frames = args.frames > 0 ? args.frames : 10;
@@ -390,7 +395,8 @@ int RunWorkload(const BenchArgs& args, const ExtraArgs& extra) {
   EmitFigure("fusion", wl, "cpu_ms", Median(fuse_cpu_ms), "ms", q("fuse"));
   EmitFigure("fusion", wl, "cpu_ms", Median(mesh_cpu_ms), "ms", q("mesh"));
   EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm",
-             Q({{"voxel_mm", voxel_mm}, {"mesh", "cleaned"}, {"behind_band", fmt::format("{:g}", cfg.tsdf.behind_band)}}));
+             Q({{"voxel_mm", voxel_mm}, {"mesh", "cleaned"}, {"behind_band", fmt::format("{:g}", cfg.tsdf.behind_band)},
+                {"behind_sigmas", fmt::format("{:g}", cfg.tsdf.behind_noise_sigmas)}}));
   EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer_raw), "mm", Q({{"voxel_mm", voxel_mm}, {"mesh", "raw"}}));
   EmitFigure("fusion", wl, "completeness", Mean(completeness), "fraction", Q({{"voxel_mm", voxel_mm}, {"threshold_mm", "10"}}));
   EmitFigure("fusion", wl, "hausdorff_mm", Mean(hausdorff), "mm", Q({{"voxel_mm", voxel_mm}}));
@@ -523,6 +529,7 @@ int RunFusionBench(const BenchArgs& args, const ExtraArgs& extra) {
   if (rc != 0 || !extra.pipeline) return rc;
   PipelineBenchOptions pipeline = extra.pipeline_options;
   if (extra.behind_band > 0) pipeline.behind_band = extra.behind_band;
+  if (extra.behind_sigmas >= 0) pipeline.behind_sigmas = extra.behind_sigmas;
   return RunPipelineFigures(args, pipeline);
 }
 

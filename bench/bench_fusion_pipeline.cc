@@ -44,6 +44,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   site_options.masks = MaskSource::kSegment;
   site_options.tsdf.voxel_size = workload->voxel_size_m;
   if (options.behind_band >= 0) site_options.tsdf.behind_band = static_cast<float>(options.behind_band);
+  if (options.behind_sigmas >= 0) site_options.tsdf.behind_noise_sigmas = static_cast<float>(options.behind_sigmas);
   if (options.depth_filter >= 0) site_options.depth_filter.radius = options.depth_filter;
   site_options.smooth_full_mesh = !options.raw_full_mesh;
   site_options.pipeline.max_frames = options.frames;

@@ -27,6 +27,8 @@ struct PipelineBenchOptions {
   double seg_grid_px = -1;
   // TsdfOptions::behind_band override (< 0: the default).
   double behind_band = -1;
+  // TsdfOptions::behind_noise_sigmas override (< 0: the default).
+  double behind_sigmas = -1;
   // Frames of the serial run that measures CPU-ms per stage (0: skip it).
   int cpu_frames = 20;
   // Frames of the run that scores the stream mesh against the full mesh

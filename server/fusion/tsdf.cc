@@ -66,6 +66,10 @@ Status TsdfOptions::Check() const {
     return InvalidArgument("truncation_voxels must be >= 1, got " + Num(truncation_voxels));
   if (!(behind_band >= 1 && behind_band <= 4))
     return InvalidArgument("behind_band must be in [1, 4], got " + Num(behind_band));
+  if (!(behind_noise_sigmas >= 0 && behind_noise_sigmas <= 5))
+    return InvalidArgument("behind_noise_sigmas must be in [0, 5], got " + Num(behind_noise_sigmas));
+  if (!(depth_noise_at_1m_mm >= 0 && depth_noise_at_1m_mm <= 100))
+    return InvalidArgument("depth_noise_at_1m_mm must be in [0, 100], got " + Num(depth_noise_at_1m_mm));
   if (!(max_depth_m > 0) || !(max_depth_m <= 65.535f))
     return InvalidArgument("max_depth_m must be in (0, 65.535], got " + Num(max_depth_m));
   if (!(min_depth_m >= 0) || !(min_depth_m < max_depth_m))
@@ -544,6 +548,15 @@ const uint8_t* NonRegisteredColor(const TsdfVolume::PodView& v, const Eigen::Vec
   return v.color + 3 * (static_cast<size_t>(iw) * v.cwidth + iu);
 }
 
+// How deep behind the measured surface an observation counts (metres) at a
+// pixel of depth d (mm): base + per_mm2 · d · d (TsdfOptions::behind_band,
+// behind_noise_sigmas). Every integration path computes it in this order.
+struct BehindBand {
+  float base = 0;
+  float per_mm2 = 0;
+  float At(float d_mm) const { return base + per_mm2 * d_mm * d_mm; }
+};
+
 // A cube of voxels of a block: local voxel coordinates [i0, i0 + side) ×
 // [j0, j0 + side) × [k0, k0 + side); side is 4 or 8 (a multiple of 4).
 struct SubBox {
@@ -555,7 +568,7 @@ struct SubBox {
 // path: any camera, optional edge filter.
 template <bool kDistorted, bool kRegistered>
 void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                   float behind, const SubBox& box, BlockAccumulator* acc) {
+                   const BehindBand& behind, const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const float inv_trunc = 1.0f / trunc;
@@ -581,7 +594,7 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
         const uint16_t d = v.depth[pixel];
         if (d == 0) continue;
         const float sdf = static_cast<float>(d) * 0.001f - p.z();
-        if (sdf < -behind) continue;
+        if (sdf < -behind.At(static_cast<float>(d))) continue;
         if (sdf < 0 && v.edge && v.edge[pixel]) continue;
         const int idx = row + i;
         acc->tsdf[idx] += std::max(-1.0f, std::min(1.0f, sdf * inv_trunc));
@@ -599,7 +612,7 @@ void IntegrateView(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, 
 // time with SSE2 (part of every x86-64 CPU). Same arithmetic as the general
 // path up to float rounding order.
 void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin, float voxel, float trunc,
-                       float behind, const SubBox& box, BlockAccumulator* acc) {
+                       const BehindBand& behind, const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
   const __m128 lane = _mm_setr_ps(0, 1, 2, 3);
@@ -608,7 +621,8 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
   const __m128 cx = _mm_set1_ps(v.cx + 0.5f), cy = _mm_set1_ps(v.cy + 0.5f);
   const __m128 wf = _mm_set1_ps(static_cast<float>(v.width)), hf = _mm_set1_ps(static_cast<float>(v.height));
   const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), min_z = _mm_set1_ps(kMinProjectZ);
-  const __m128 mm = _mm_set1_ps(0.001f), neg_behind = _mm_set1_ps(-behind), pos_trunc = _mm_set1_ps(trunc);
+  const __m128 mm = _mm_set1_ps(0.001f), pos_trunc = _mm_set1_ps(trunc);
+  const __m128 band_base = _mm_set1_ps(behind.base), band_per_mm2 = _mm_set1_ps(behind.per_mm2);
   const __m128 minus_one = _mm_set1_ps(-1.0f);
   const __m128 inv_trunc = _mm_set1_ps(1.0f / trunc);
   alignas(16) int32_t pix[4];
@@ -640,7 +654,8 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
         for (int l = 0; l < 4; ++l) depth[l] = static_cast<float>(v.depth[pix[l]]);
         const __m128 d = _mm_and_ps(ok, _mm_load_ps(depth));
         const __m128 sdf = _mm_sub_ps(_mm_mul_ps(d, mm), pz);
-        const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, neg_behind));
+        const __m128 band = _mm_add_ps(band_base, _mm_mul_ps(_mm_mul_ps(band_per_mm2, d), d));
+        const __m128 upd = _mm_and_ps(_mm_cmpgt_ps(d, zero), _mm_cmpge_ps(sdf, _mm_sub_ps(zero, band)));
         const int upd_bits = _mm_movemask_ps(upd);
         if (upd_bits == 0) continue;
         const __m128 t = _mm_max_ps(minus_one, _mm_min_ps(one, _mm_mul_ps(sdf, inv_trunc)));
@@ -665,7 +680,7 @@ void IntegrateViewSse2(const TsdfVolume::PodView& v, const Eigen::Vector3f& orig
 // A 4³ sub-block is handled two rows per vector.
 template <bool kColor>
 __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView& v, const Eigen::Vector3f& origin,
-                                                       float voxel, float trunc, float behind,
+                                                       float voxel, float trunc, const BehindBand& behind,
                                                        const SubBox& box, BlockAccumulator* acc) {
   const Eigen::Vector3f p0 = v.R * origin + v.t;
   const Eigen::Vector3f dx = v.R.col(0) * voxel, dy = v.R.col(1) * voxel, dz = v.R.col(2) * voxel;
@@ -677,7 +692,8 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
   const __m256 cx = _mm256_set1_ps(v.cx + 0.5f), cy = _mm256_set1_ps(v.cy + 0.5f);
   const __m256 wf = _mm256_set1_ps(static_cast<float>(v.width)), hf = _mm256_set1_ps(static_cast<float>(v.height));
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), min_z = _mm256_set1_ps(kMinProjectZ);
-  const __m256 mm = _mm256_set1_ps(0.001f), neg_behind = _mm256_set1_ps(-behind), pos_trunc = _mm256_set1_ps(trunc);
+  const __m256 mm = _mm256_set1_ps(0.001f), pos_trunc = _mm256_set1_ps(trunc);
+  const __m256 band_base = _mm256_set1_ps(behind.base), band_per_mm2 = _mm256_set1_ps(behind.per_mm2);
   const __m256 minus_one = _mm256_set1_ps(-1.0f);
   const __m256 inv_trunc = _mm256_set1_ps(1.0f / trunc);
   const __m256i low16 = _mm256_set1_epi32(0xFFFF);
@@ -704,7 +720,9 @@ __attribute__((target("avx2"))) void IntegrateViewAvx2(const TsdfVolume::PodView
       const __m256i raw = _mm256_and_si256(_mm256_i32gather_epi32(depth_words, idx, 2), low16);
       const __m256 d = _mm256_and_ps(ok, _mm256_cvtepi32_ps(raw));
       const __m256 sdf = _mm256_sub_ps(_mm256_mul_ps(d, mm), pz);
-      const __m256 upd = _mm256_and_ps(_mm256_cmp_ps(d, zero, _CMP_GT_OQ), _mm256_cmp_ps(sdf, neg_behind, _CMP_GE_OQ));
+      const __m256 band = _mm256_add_ps(band_base, _mm256_mul_ps(_mm256_mul_ps(band_per_mm2, d), d));
+      const __m256 upd = _mm256_and_ps(_mm256_cmp_ps(d, zero, _CMP_GT_OQ),
+                                       _mm256_cmp_ps(sdf, _mm256_sub_ps(zero, band), _CMP_GE_OQ));
       const __m256 t =
           _mm256_and_ps(upd, _mm256_max_ps(minus_one, _mm256_min_ps(one, _mm256_mul_ps(sdf, inv_trunc))));
       const __m256 wt = _mm256_and_ps(upd, one);
@@ -848,7 +866,10 @@ Status TsdfVolume::Integrate(const Rig& rig, const RgbdFrameSet& frames) {
   Scratch& s = *scratch_;
   const size_t num_pods = rig.pods.size();
   const float trunc = options_.truncation_voxels * options_.voxel_size;
-  const float behind = trunc * options_.behind_band;
+  BehindBand behind;
+  behind.base = trunc * options_.behind_band;
+  // σ(d) = σ1 · d², d in metres; per mm² of depth: σ1 [mm] · 1e-3 [m/mm] · 1e-6.
+  behind.per_mm2 = options_.behind_noise_sigmas * options_.depth_noise_at_1m_mm * 1e-9f;
   const auto min_mm = static_cast<uint16_t>(std::ceil(options_.min_depth_m * 1000.0f));
   const auto max_mm = static_cast<uint16_t>(std::floor(options_.max_depth_m * 1000.0f));
   s.views.resize(num_pods);

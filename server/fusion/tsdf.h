@@ -33,17 +33,26 @@ struct TsdfOptions {
   float voxel_size = 0.005f;
   // Truncation distance, in voxels (Open3D's sdf_trunc = this · voxel_size).
   float truncation_voxels = 4.0f;
-  // Observations behind the measured surface count up to this many
-  // truncation distances deep, clamped to −1 (1 = dropped beyond one
-  // truncation distance, as KinectFusion and Open3D do). Dropping them while
-  // the ones in front are only clamped at +1 biases the average outward
-  // wherever depth noise is comparable to the truncation: on the studio
-  // (σ ≈ 19 mm at 2.5 m, 32 mm truncation at S8-QVGA) the surface sat 2.8 mm
-  // inside the person (median signed distance) with 1; with 1.5 it is
-  // −0.7 mm, Chamfer 6.59 → 5.90 mm, completeness 0.852 → 0.867
-  // (docs/fusion.md). Only voxels the truncation band's blocks reach are
-  // updated, as before.
-  float behind_band = 1.5f;
+  // Observations behind the measured surface count down to
+  //     behind(d) = behind_band · truncation + behind_noise_sigmas · σ(d),
+  //     σ(d) = depth_noise_at_1m_mm · d²   (d: the pixel's depth, metres),
+  // clamped to −1; deeper ones are dropped (behind_band 1 and no noise term:
+  // dropped beyond one truncation distance, as KinectFusion and Open3D do).
+  // Dropping them while the ones in front are only clamped at +1 biases the
+  // average outward wherever depth noise is comparable to the truncation:
+  // on the studio (σ ≈ 19 mm at 2.5 m, 32 mm truncation at S8-QVGA) the
+  // surface sat 2.8 mm inside the person with band 1. A band that follows the
+  // sensor's noise at each pixel's depth removes that bias where the noise is
+  // large and adds nothing where it is small (exact depth: σ = 0), which a
+  // fixed multiple of the truncation cannot do: a deep fixed band grows
+  // flaps at sharp corners of clean depth (docs/fusion.md has the figures).
+  // Only voxels the truncation band's blocks reach are updated.
+  float behind_band = 1.25f;
+  float behind_noise_sigmas = 1.25f;
+  // The depth sensor's axial noise at 1 m, millimetres, growing with z²
+  // (the site's sensor model, as SegmenterOptions::depth_noise_at_1m_m and
+  // DepthFilterOptions::sigma_at_1m_mm). 0: exact depth.
+  float depth_noise_at_1m_mm = 3.0f;
   // Depth beyond this is ignored, metres.
   float max_depth_m = 5.0f;
   // Depth nearer than this is ignored, metres.

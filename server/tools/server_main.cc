@@ -144,6 +144,13 @@ int main(int argc, char** argv) {
                  "edges (0: off; server/fusion/depth_filter.h)")
       ->capture_default_str()
       ->check(CLI::Range(0, 4));
+  double depth_noise_mm = holo::TsdfOptions{}.depth_noise_at_1m_mm;
+  app.add_option("--depth-noise-mm", depth_noise_mm,
+                 "the depth sensor's axial noise at 1 m, mm, growing with z² (the studio's: 3): sets the "
+                 "segmenter's noise floor, the depth filter's range and how deep behind the measured surface "
+                 "fusion counts an observation (1.25 truncations + 1.25 σ)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 50.0));
   bool raw_full_mesh = false;
   app.add_flag("--raw-full-mesh", raw_full_mesh,
                "extract full-resolution meshes (--export, --stream-step 1) from the fused volume as it is, not "
@@ -469,6 +476,9 @@ int main(int argc, char** argv) {
   if (options.stream_field && geometry_codec == "g3") options.stream.max_triangles = 0;
   options.full_mesh = !export_dir.empty();
   options.depth_filter.radius = depth_filter_radius;
+  options.depth_filter.sigma_at_1m_mm = static_cast<float>(depth_noise_mm);
+  options.segment.depth_noise_at_1m_m = static_cast<float>(depth_noise_mm * 1e-3);
+  options.tsdf.depth_noise_at_1m_mm = static_cast<float>(depth_noise_mm);
   options.smooth_full_mesh = !raw_full_mesh;
 
   // Sources. The studio is both the frame source and (empty room) the background.

@@ -66,9 +66,11 @@ TsdfOptions Options(float voxel) {
   o.voxel_size = voxel;
   o.truncation_voxels = 4;
   // The scenes here have exact depth: observations behind the surface end at
-  // one truncation distance (the default band is for noisy depth; exact
-  // grazing rays reaching deeper move a few vertices by up to a voxel).
+  // one truncation distance (the default band's noise term is for noisy
+  // depth; exact grazing rays reaching deeper move a few vertices by up to a
+  // voxel).
   o.behind_band = 1.0f;
+  o.depth_noise_at_1m_mm = 0;
   o.threads = 2;
   return o;
 }
