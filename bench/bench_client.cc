@@ -151,7 +151,7 @@ holo::Status MakeTruthContent(const holo::Workload& workload, holo::SyntheticStu
 // both re-textured by the site's texturer.
 holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, size_t reduced_triangles, int stream_step,
                               const holo::TextureOptions& texture_options, float behind_band, float behind_sigmas,
-                              int sequence_frames,
+                              int sequence_frames, bool temporal,
                               ViewerContent* full, ViewerContent* reduced) {
   holo::StudioOptions so = workload.studio;
   HOLO_ASSIGN_OR_RETURN(auto studio, holo::SyntheticStudio::Create(workload.rig, so));
@@ -164,6 +164,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   if (behind_sigmas >= 0) o.tsdf.behind_noise_sigmas = behind_sigmas;
   o.pipeline.serial = true;
   o.pipeline.max_frames = frame + 1;
+  o.temporal = temporal;  // holoport-server --temporal: tracked, temporally fused
   // What holoport-server --listen publishes: the compact stream mesh; the
   // full-resolution mesh beside it.
   o.stream_mesh = true;
@@ -198,7 +199,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   });
   HOLO_RETURN_IF_ERROR(stats.status());
   if (!got) return holo::Internal("the capture site did not deliver frame " + std::to_string(frame));
-  full->content = "fused";
+  full->content = temporal ? "temporal" : "fused";
   full->mesh_name = "fused_full";
   for (const auto& f : kept.frames) {
     full->raw_images.push_back(f.color);
@@ -389,7 +390,8 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
       options.parts.find("stream") != std::string::npos || options.parts.empty() ? options.video_frames : 0;
   HOLO_RETURN_IF_ERROR(MakeFusedContent(workload, options.frame, options.reduce, options.stream_step, to, options.behind_band,
                                         options.behind_sigmas,
-                                        sequence_frames, &(*contents)[0], &(*contents)[1]));
+                                        sequence_frames, options.content == "temporal", &(*contents)[0],
+                                        &(*contents)[1]));
   if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
   return holo::OkStatus();
 }
@@ -735,7 +737,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         }
       }
     }
-  } else if (c.content == "fused" && options.video_frames > 0) {
+  } else if (c.content != "truth" && options.video_frames > 0) {
     spdlog::warn("client: no frame sequence for V1 (stream part)");
   }
   double reference_psnr = 0, reference_ssim = 0;
@@ -895,8 +897,10 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   auto o = std::make_shared<ClientBenchOptions>();
   app.add_option("--parts", o->parts, "run only these parts, comma-separated (render, stream); default all");
   app.add_option("--resolutions", o->resolutions, "render sizes WxH[,WxH...], sides 16..8192")->capture_default_str();
-  app.add_option("--content", o->content, "fused (the capture site's mesh and images) or truth (the studio's)")
-      ->check(CLI::IsMember({"fused", "truth"}))
+  app.add_option("--content", o->content,
+                 "fused (the capture site's mesh and images), temporal (the same with the site's temporal fusion, "
+                 "holoport-server --temporal) or truth (the studio's)")
+      ->check(CLI::IsMember({"fused", "temporal", "truth"}))
       ->capture_default_str();
   app.add_option("--png-dir", o->png_dir, "write the novel views as PNGs to this directory");
   app.add_option("--legacy", o->legacy, "1: the renderer's legacy settings, no mask-edge texturing")
