@@ -86,7 +86,11 @@ StatusOr<std::unique_ptr<StereoStudioSource>> StereoStudioSource::Create(Synthet
   StereoRoiOptions roi = options.roi;
   roi.fps = studio->options().fps;
   HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
-  for (const auto& pod : s->renderer_->rig().pods) s->roi_.emplace_back(pod, roi);
+  const auto& pods = s->renderer_->rig().pods;
+  for (size_t i = 0; i < pods.size(); ++i) {
+    roi.full_phase = static_cast<int>(i) * roi.full_every / static_cast<int>(pods.size());  // pods take turns
+    s->roi_.emplace_back(pods[i], roi);
+  }
   return s;
 }
 

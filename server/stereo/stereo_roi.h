@@ -24,13 +24,14 @@
 // after a gap longer than `max_gap_s` or a step back in time, when the
 // previous result had no foreground, and when its foreground touched an edge
 // of its region that is not the image's edge (the person may go on beyond
-// it). So a person who enters the view is found on the next frame when the
+// it). Pods take turns for the periodic full match (full_phase). So a person who enters the view is found on the next frame when the
 // view was empty or when they enter touching the current region, and
 // otherwise (a second person entering away from the first) at the next
 // periodic full match: at most `full_every` − 1 frames late.
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "common/image.h"
 #include "common/rig.h"
@@ -58,18 +59,29 @@ struct StereoRoiOptions {
   int margin_px = 4;
   // Frame rate of the frame indices (elapsed time = index difference / fps).
   double fps = 30.0;
-  // The whole image at least every this many frames (1 = always).
+  // The whole image on frames where (frame index + full_phase) % full_every
+  // == 0, and at least every full_every frames (1 = always). Sources give
+  // each pod its own phase, so the pods' periodic full matches fall on
+  // different frames (a frame set then costs about the same every frame).
   int full_every = 15;
+  int full_phase = 0;
   // A gap longer than this since the previous frame: the whole image.
   double max_gap_s = 0.5;
-  // Foreground pixels are sampled every `sample_step` pixels; a column or row
-  // counts towards the box only with at least `min_line_samples` of them
-  // (stray mismatches inside the volume do not stretch the box).
+  // Foreground pixels are sampled every `sample_step` pixels; a sample
+  // counts with at least `min_neighbours` of its 8 grid neighbours in the
+  // volume too, and a column or row counts towards the box with at least
+  // `min_line_samples` such samples (mismatches inside the volume, thin
+  // streaks on the floor, do not stretch the box).
   int sample_step = 2;
-  int min_line_samples = 3;
+  int min_neighbours = 5;
+  int min_vertical_run = 4;
+  int min_group_samples = 24;
+  int min_line_samples = 2;
   // The foreground within this many pixels of a region edge (that is not
-  // the image's) touches it.
+  // the image's) touches it: the box, or any sample in a vertical run of at
+  // least `touch_min_run` samples (a person entering across the edge).
   int touch_px = 2;
+  int touch_min_run = 8;
   Status Check() const;
 };
 
@@ -102,6 +114,11 @@ class StereoRoiPolicy {
   int64_t previous_frame_ = 0, last_full_frame_ = 0;
   ImageRect box_;
   float nearest_fg_m_ = 0;  // nearest foreground depth of the last Update
+  std::vector<uint8_t> fg_;  // scratch: foreground samples
+  std::vector<float> zs_;    // ... and their depth
+  std::vector<uint16_t> run_;  // ... and the length of their vertical run
+  std::vector<uint8_t> core_;  // ... and which are core samples (2: grouped)
+  std::vector<size_t> stack_, group_;
 };
 
 }  // namespace holo

@@ -317,6 +317,29 @@ TEST(StereoRoiPolicyTest, PersonAtTheImageBorderKeepsTheRegion) {
   EXPECT_FALSE(policy.full_due());  // the image's own edges do not count as touching
 }
 
+// Mismatches that land in the capture volume (thin streaks along rows, a
+// small blob) do not stretch the person's box; a ball-sized blob does.
+TEST(StereoRoiPolicyTest, MismatchStreaksDoNotStretchTheBox) {
+  const Rig rig = SmallStereoRig();
+  PolicyScene scene(rig);
+  StereoRoiPolicy policy(scene.pod, StereoRoiOptions{});
+  const ImageRect full = ImageRect::Full(320, 240);
+  const ImageRect person{150, 60, 190, 180};
+  std::vector<ImageRect> scene_parts = {person};
+  for (int y = 160; y < 176; y += 5) scene_parts.push_back(ImageRect{40, y, 110, y + 2});  // streaks 2 px tall
+  scene_parts.push_back(ImageRect{230, 100, 238, 108});                                    // an 8x8 px blob
+  policy.Update(0, full, scene.Truth(scene_parts));
+  const ImageRect box = policy.foreground_box();
+  EXPECT_GE(box.x0, person.x0 - 2);
+  EXPECT_LE(box.x1, person.x1 + 2);
+  EXPECT_GE(box.y0, person.y0 - 2);
+  EXPECT_LE(box.y1, person.y1 + 2);
+  // A 20 px ball beside the person is kept.
+  scene_parts.push_back(ImageRect{220, 150, 240, 170});
+  policy.Update(1, full, scene.Truth(scene_parts));
+  EXPECT_GE(policy.foreground_box().x1, 238);
+}
+
 // A person entering the view while another is matched: found on the next
 // frame when they enter touching the region, and at the latest
 // full_every − 1 frames after they appear anywhere else.
