@@ -273,7 +273,8 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       roi_full_pairs += region == ImageRect::Full(sp.left.width(), sp.left.height());
       for (int r = 0; r < std::max(1, args.repeats); ++r) {
         Timer v;
-        if (Status s = pm.Compute(sp.left, sp.right, region, &d_roi); !s.ok()) return Fail(s.ToString());
+        if (Status s = pm.Compute(sp.left, sp.right, region, policy.max_disparity(), &d_roi); !s.ok())
+          return Fail(s.ToString());
         roi_run.ms.push_back(v.Ms());
         roi_run.cpu_ms.push_back(v.CpuMs());
         if (r == 0) set_roi += roi_run.ms.back();

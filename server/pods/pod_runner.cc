@@ -91,7 +91,8 @@ class StudioFrames final : public PodFrames {
     // slots making a gap the region's margin grows with): the previous
     // frame's foreground gives the region.
     const ImageRect region = stereo_.roi->Next(frame_index);
-    HOLO_RETURN_IF_ERROR(stereo_.matcher->Compute(pair_.left, pair_.right, region, &disparity_));
+    HOLO_RETURN_IF_ERROR(
+        stereo_.matcher->Compute(pair_.left, pair_.right, region, stereo_.roi->max_disparity(), &disparity_));
     stereo_.roi->Update(frame_index, region, disparity_);
     return DisparityToDepth(stereo_.renderer->rig().pods[static_cast<size_t>(pod_index_)], disparity_, stereo_.far_m,
                             &out->depth);

@@ -338,12 +338,14 @@ StatusOr<std::unique_ptr<PatchMatchStereo>> PatchMatchStereo::Create(PatchMatchO
 const ImageFloat& PatchMatchStereo::right_disparity() const { return impl_->right_disparity; }
 bool PatchMatchStereo::uses_avx2() const { return impl_->avx2; }
 
-ImageRect PatchMatchStereo::RightRegion(const ImageRect& left_region, int width, int height) const {
+ImageRect PatchMatchStereo::RightRegion(const ImageRect& left_region, int width, int height,
+                                        float max_disparity) const {
+  if (max_disparity < 0.0f) max_disparity = options_.max_disparity;
   const ImageRect l = left_region.Clipped(width, height);
   if (l.empty()) return l;
   // Not narrowed on the right by min_disparity (a few pixels): the whole
   // image then gives the full run's right region, and its result bit for bit.
-  return ImageRect{l.x0 - static_cast<int>(std::ceil(options_.max_disparity)), l.y0, l.x1, l.y1}.Clipped(width, height);
+  return ImageRect{l.x0 - static_cast<int>(std::ceil(max_disparity)), l.y0, l.x1, l.y1}.Clipped(width, height);
 }
 
 Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity) {
@@ -352,6 +354,12 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
 
 Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region,
                                  ImageFloat* disparity) {
+  return Compute(left, right, region, options_.max_disparity, disparity);
+}
+
+Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region,
+                                 float max_disparity, ImageFloat* disparity) {
+  if (std::isnan(max_disparity)) return InvalidArgument("max_disparity is NaN");
   if (left.width() != right.width() || left.height() != right.height())
     return InvalidArgument("stereo pair sizes differ: left " + std::to_string(left.width()) + "x" +
                            std::to_string(left.height()) + ", right " + std::to_string(right.width()) + "x" +
@@ -375,7 +383,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   L.Load(left, -1.0f);
   R.Load(right, +1.0f);
   L.region = lreg;
-  R.region = RightRegion(lreg, W, H);
+  // This call's search range: [min_disparity, dmax].
+  const float dmax = std::clamp(max_disparity, std::min(o.min_disparity + 2.0f, o.max_disparity), o.max_disparity);
+  R.region = RightRegion(lreg, W, H, dmax);
   CostParams cp;
   cp.rows = o.window_rows;
   cp.step = o.window_step;
@@ -403,7 +413,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return CostScalar(self, other, x, y, p, cp, bound);
   };
   constexpr float kNoBound = 3.0e38f;
-  const float dmin = o.min_disparity, dmax = o.max_disparity, range = dmax - dmin;
+  const float dmin = o.min_disparity, range = dmax - dmin;
   const float min_nz = o.min_normal_z;
   // Plane through disparity `d` at (x, y) with unit normal n (nz ≥ min_nz).
   auto make_plane = [&](float x, float y, float d, float nx, float ny, float nz) {
@@ -506,7 +516,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     const int cw = im.coarse_left.width(), ch = im.coarse_left.height();
     const ImageRect creg =
         ImageRect{lreg.x0 / 2 - 1, lreg.y0 / 2 - 1, (lreg.x1 + 1) / 2 + 1, (lreg.y1 + 1) / 2 + 1}.Clipped(cw, ch);
-    HOLO_RETURN_IF_ERROR(im.coarse->Compute(im.coarse_left, im.coarse_right, creg, &im.coarse_disparity));
+    const PatchMatchOptions& co = im.coarse->options();
+    const float cmax = dmax >= o.max_disparity ? co.max_disparity : std::max(dmax * 0.5f, co.min_disparity + 2.0f);
+    HOLO_RETURN_IF_ERROR(im.coarse->Compute(im.coarse_left, im.coarse_right, creg, cmax, &im.coarse_disparity));
     init_from_coarse(L, R, im.coarse->impl_->left);
     init_from_coarse(R, L, im.coarse->impl_->right);
     iterations = o.fine_iterations;

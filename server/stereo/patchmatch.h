@@ -121,9 +121,18 @@ class PatchMatchStereo {
   // to the image; 0 outside it). An empty region gives 0 everywhere and
   // does no matching. The full image as `region` equals Compute above.
   Status Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region, ImageFloat* disparity);
+  // The same with the search range's upper end lowered to `max_disparity`
+  // for this call (clamped to [min_disparity + 2, options().max_disparity]):
+  // the right view's region narrows with it. Where nothing in the region can
+  // be nearer than a known depth (the region policy: the previous frame's
+  // nearest foreground and the motion since), the right view need not reach
+  // as far. Pixels whose true disparity is larger get none or a wrong one.
+  Status Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region, float max_disparity,
+                 ImageFloat* disparity);
   // The right view's region for a left region: widened to the left by the
-  // largest disparity, [x0 − ⌈max_disparity⌉, x1), clipped to the image.
-  ImageRect RightRegion(const ImageRect& left_region, int width, int height) const;
+  // largest disparity, [x0 − ⌈max_disparity⌉, x1), clipped to the image
+  // (max_disparity < 0: the options').
+  ImageRect RightRegion(const ImageRect& left_region, int width, int height, float max_disparity = -1.0f) const;
   // The right view's disparity of the last Compute (x_left − x_right, at
   // right pixels, 0 outside the right view's region), unfiltered.
   const ImageFloat& right_disparity() const;

@@ -104,7 +104,7 @@ Status StereoStudioSource::RenderFrame(int64_t frame_index, RgbdFrameSet* out, s
   int64_t matched = 0, total = 0;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
     const ImageRect region = roi_[i].Next(frame_index);
-    HOLO_RETURN_IF_ERROR(matcher_->Compute(p[i].left, p[i].right, region, &disparity_));
+    HOLO_RETURN_IF_ERROR(matcher_->Compute(p[i].left, p[i].right, region, roi_[i].max_disparity(), &disparity_));
     roi_[i].Update(frame_index, region, disparity_);
     last_full_pods_ += region == ImageRect::Full(p[i].left.width(), p[i].left.height());
     matched += region.area();

@@ -29,6 +29,7 @@ Status StereoRoiOptions::Check() const {
   if (min_group_samples < 1) return InvalidArgument("min_group_samples must be >= 1, got " + FormatNumber(min_group_samples));
   if (min_line_samples < 1) return InvalidArgument("min_line_samples must be >= 1, got " + FormatNumber(min_line_samples));
   if (touch_min_run < 1) return InvalidArgument("touch_min_run must be >= 1, got " + FormatNumber(touch_min_run));
+  if (std::isnan(disparity_margin_px)) return InvalidArgument("disparity_margin_px is NaN");
   if (touch_px < 0) return InvalidArgument("touch_px must be >= 0, got " + FormatNumber(touch_px));
   return OkStatus();
 }
@@ -42,6 +43,7 @@ StereoRoiPolicy::StereoRoiPolicy(const PodCalibration& pod, StereoRoiOptions opt
 
 ImageRect StereoRoiPolicy::Next(int64_t frame_index) {
   const ImageRect full = ImageRect::Full(width_, height_);
+  max_disparity_ = 3.0e38f;
   if (!options_.enabled || !have_previous_ || full_due_ || box_.empty()) return full;
   if (frame_index <= previous_frame_) return full;  // a step back (seek): the previous frame says nothing
   const double dt = static_cast<double>(frame_index - previous_frame_) / options_.fps;
@@ -53,6 +55,9 @@ ImageRect StereoRoiPolicy::Next(int64_t frame_index) {
   const double z = std::max(0.05, static_cast<double>(nearest_fg_m_));
   const int mx = options_.margin_px + static_cast<int>(std::ceil(pod_.stereo.ir.fx * move_m / z));
   const int my = options_.margin_px + static_cast<int>(std::ceil(pod_.stereo.ir.fy * move_m / z));
+  if (options_.disparity_margin_px >= 0.0f)
+    max_disparity_ = static_cast<float>(pod_.stereo.ir.fx * pod_.stereo.baseline_m / std::max(0.05, z - move_m)) +
+                     options_.disparity_margin_px;
   return ImageRect{box_.x0 - mx, box_.y0 - my, box_.x1 + mx, box_.y1 + my}.Clipped(width_, height_);
 }
 

@@ -82,6 +82,8 @@ struct StereoRoiOptions {
   // least `touch_min_run` samples (a person entering across the edge).
   int touch_px = 2;
   int touch_min_run = 8;
+  // See StereoRoiPolicy::max_disparity; < 0: no limit in regions either.
+  float disparity_margin_px = 2.0f;
   Status Check() const;
 };
 
@@ -95,6 +97,13 @@ class StereoRoiPolicy {
   // The region of the left IR image to match for frame `frame_index`
   // (the whole image when a full match is due, see above).
   ImageRect Next(int64_t frame_index);
+  // The largest disparity the last Next's region can hold, to pass to
+  // PatchMatchStereo::Compute: the previous frame's nearest foreground
+  // brought nearer by the motion since (max_speed_mps × elapsed time) and
+  // `disparity_margin_px` more; 3.0e38 (no limit) for the whole image. Only
+  // the capture volume's content can be nearer than the person, and it is
+  // the foreground (walls and floor behind the person are farther).
+  float max_disparity() const { return max_disparity_; }
   // The disparity (left IR pixels, 0 = none) matched for `frame_index` in
   // `region`: its foreground becomes the next frame's region.
   void Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity);
@@ -114,6 +123,7 @@ class StereoRoiPolicy {
   int64_t previous_frame_ = 0, last_full_frame_ = 0;
   ImageRect box_;
   float nearest_fg_m_ = 0;  // nearest foreground depth of the last Update
+  float max_disparity_ = 3.0e38f;
   std::vector<uint8_t> fg_;  // scratch: foreground samples
   std::vector<float> zs_;    // ... and their depth
   std::vector<uint16_t> run_;  // ... and the length of their vertical run

@@ -170,10 +170,12 @@ ImageRect MaskBox(const ImageGray8& mask) {
 
 // The person's box widened by 16 px (the policy's margin at 30 fps is
 // 4 + 8..12 px here): over the person's pixels (truth mask) the region's
-// disparities agree with the full run's (measured on pods 0 and 2, frame 6:
-// 0.08 and 0.45 % of the person's pixels more than 1 px apart or valid in
-// one run only; bad-2px against the truth 0.51 / 0.51 % and 1.06 / 1.02 %,
-// region / full). Bounds: 2 % apart, bad-2px at most 1 point worse.
+// disparities agree with the full run's, also with the search range capped
+// (measured on pods 0 and 2, frame 6: 0.08 and 0.45 % of the person's
+// pixels more than 1 px apart or valid in one run only, capped 0.38 and
+// 0.95 %; bad-2px against the truth: full 0.51 and 1.02 %, region 0.51 and
+// 1.06 %, capped 0.45 and 0.95 %). Bounds: 2 % apart, bad-2px at most 1
+// point worse.
 TEST(PatchMatchRegionTest, StudioPersonRegionMatchesFullRun) {
   const Rig rig = SmallStereoRig();
   StudioOptions so;
@@ -192,27 +194,42 @@ TEST(PatchMatchRegionTest, StudioPersonRegionMatchesFullRun) {
     const ImageRect box = MaskBox(pair.mask);
     ASSERT_FALSE(box.empty());
     const ImageRect region = ImageRect{box.x0 - 16, box.y0 - 16, box.x1 + 16, box.y1 + 16}.Clipped(320, 240);
-    ImageFloat full, roi;
+    // The search range capped as the policy does: the person's largest
+    // disparity + 3 px (10 cm nearer at 2 m is +1.1 px; margin 2 px).
+    float d_person = 0;
+    for (size_t i = 0; i < pair.mask.num_pixels(); ++i)
+      if (pair.mask.data()[i]) d_person = std::max(d_person, pair.disparity.data()[i]);
+    ImageFloat full, roi, capped;
     ASSERT_TRUE(pm.Compute(pair.left, pair.right, &full).ok());
     ASSERT_TRUE(pm.Compute(pair.left, pair.right, region, &roi).ok());
+    ASSERT_TRUE(pm.Compute(pair.left, pair.right, region, d_person + 3.0f, &capped).ok());
     EXPECT_EQ(CountNonZeroOutside(roi, region), 0);
-    int person = 0, differ = 0, bad_full = 0, bad_roi = 0;
+    EXPECT_EQ(CountNonZeroOutside(capped, region), 0);
+    EXPECT_EQ(CountNonZeroOutside(pm.right_disparity(), pm.RightRegion(region, 320, 240, d_person + 3.0f)), 0);
+    int person = 0, differ = 0, differ_c = 0, bad_full = 0, bad_roi = 0, bad_c = 0;
     for (int y = 0; y < 240; ++y)
       for (int x = 0; x < 320; ++x) {
         if (!pair.mask.at(x, y) || !(pair.disparity.at(x, y) > 0.0f)) continue;
         ++person;
-        const float a = full.at(x, y), b = roi.at(x, y), t = pair.disparity.at(x, y);
+        const float a = full.at(x, y), b = roi.at(x, y), c = capped.at(x, y), t = pair.disparity.at(x, y);
         differ += (a > 0.0f) != (b > 0.0f) || std::abs(a - b) > 1.0f;
+        differ_c += (a > 0.0f) != (c > 0.0f) || std::abs(a - c) > 1.0f;
         bad_full += !(a > 0.0f) || std::abs(a - t) > 2.0f;
         bad_roi += !(b > 0.0f) || std::abs(b - t) > 2.0f;
+        bad_c += !(c > 0.0f) || std::abs(c - t) > 2.0f;
       }
     ASSERT_GT(person, 1000);
-    const double differ_pct = 100.0 * differ / person;
+    const double differ_pct = 100.0 * differ / person, differ_c_pct = 100.0 * differ_c / person;
     const double bad_full_pct = 100.0 * bad_full / person, bad_roi_pct = 100.0 * bad_roi / person;
-    std::printf("pod %d: region %dx%d, person %d px, differ %.2f %%, bad2 full %.2f %% roi %.2f %%\n", pod,
-                region.width(), region.height(), person, differ_pct, bad_full_pct, bad_roi_pct);
+    const double bad_c_pct = 100.0 * bad_c / person;
+    std::printf("pod %d: region %dx%d, person %d px, differ %.2f %% (capped %.2f %%), bad2 full %.2f %% roi %.2f %% "
+                "capped %.2f %%\n",
+                pod, region.width(), region.height(), person, differ_pct, differ_c_pct, bad_full_pct, bad_roi_pct,
+                bad_c_pct);
     EXPECT_LT(differ_pct, 2.0) << "pod " << pod;
+    EXPECT_LT(differ_c_pct, 2.0) << "pod " << pod;
     EXPECT_LT(bad_roi_pct, bad_full_pct + 1.0) << "pod " << pod;
+    EXPECT_LT(bad_c_pct, bad_full_pct + 1.0) << "pod " << pod;
   }
 }
 
@@ -271,6 +288,13 @@ TEST(StereoRoiPolicyTest, FollowsThePersonAndMatchesWholeWhenDue) {
     const ImageRect person{120 + 2 * f, 60, 160 + 2 * f, 180};
     const ImageRect region = policy.Next(f);
     if (region == full) ++full_frames;
+    // The capped search range holds the person's disparity (nothing nearer moved in).
+    if (region == full) {
+      EXPECT_GT(policy.max_disparity(), 1e30f);
+    } else {
+      EXPECT_GT(policy.max_disparity(), scene.person_disparity + 1.0f) << "frame " << f;
+      EXPECT_LT(policy.max_disparity(), scene.person_disparity + 6.0f) << "frame " << f;
+    }
     EXPECT_TRUE(Covers(region, person)) << "frame " << f;
     if (f > 0 && f % 15 != 0) {
       EXPECT_LT(region.area(), full.area() / 2) << "frame " << f;
