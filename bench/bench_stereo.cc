@@ -13,7 +13,8 @@
 // patchmatch_roi: PatchMatch in the region the site's policy gives
 // (server/stereo/stereo_roi.h) in steady state: the policy sees the
 // previous frame matched whole, then the measured frame is matched in its
-// region (matched_pct: the region's share of the image; full_pairs: pairs
+// region with its capped search range (matched_pct: the region's share of
+// the image; full_pairs: pairs
 // the policy matched whole anyway). ms_per_frame_set_amortized adds the
 // policy's periodic full match: (full + (full_every − 1) · region) /
 // full_every, from this run's medians. The studio's frames are 10·k + 1

@@ -233,6 +233,56 @@ TEST(PatchMatchRegionTest, StudioPersonRegionMatchesFullRun) {
   }
 }
 
+// The site's stereo source with regions (the default): after a first frame
+// matched whole, the next is matched around the person; the person's depth
+// is as good as in StereoDepthTest.StudioSourceGivesDepthCloseToTruth, the
+// walls get none.
+TEST(StereoRoiSourceTest, StudioSourceMatchesAroundThePerson) {
+  auto base = LoadRig(ShippedRigPath("studio-4"));
+  ASSERT_TRUE(base.ok());
+  StudioOptions so;
+  so.threads = 2;
+  auto studio = SyntheticStudio::Create(base->Scaled(0.5), so);
+  ASSERT_TRUE(studio.ok());
+  StereoDepthOptions o;
+  o.patchmatch.threads = 2;
+  ASSERT_TRUE(o.roi.enabled);
+  auto src = StereoStudioSource::Create(studio->get(), o);
+  ASSERT_TRUE(src.ok()) << src.status().ToString();
+  RgbdFrameSet frames;
+  std::vector<StereoPair> pairs;
+  ASSERT_TRUE((*src)->RenderFrame(4, &frames, &pairs).ok());
+  EXPECT_EQ((*src)->last_full_pods(), 4);
+  ASSERT_TRUE((*src)->RenderFrame(5, &frames, &pairs).ok());
+  EXPECT_EQ((*src)->last_full_pods(), 0);  // no pod's turn (phases 0, 3, 7, 11 of 15)
+  EXPECT_LT((*src)->last_matched_fraction(), 0.6);
+  for (size_t i = 0; i < frames.frames.size(); ++i) {
+    const ImageDepth16& d = frames.frames[i].depth;
+    const StereoPair& p = pairs[i];
+    const double fb_mm = p.fx * p.baseline_m * 1000.0;
+    std::vector<double> rel;
+    int fg = 0, bg_with_depth = 0, bg = 0;
+    for (int y = 0; y < d.height(); ++y)
+      for (int x = 0; x < d.width(); ++x) {
+        if (!(p.disparity.at(x, y) > 0)) continue;
+        if (p.mask.at(x, y) == 0) {
+          ++bg;
+          bg_with_depth += d.at(x, y) != 0;
+          continue;
+        }
+        ++fg;
+        if (d.at(x, y) == 0) continue;
+        const double z = fb_mm / p.disparity.at(x, y);
+        rel.push_back(std::abs(d.at(x, y) - z) / z);
+      }
+    ASSERT_GT(fg, 0);
+    EXPECT_GT(static_cast<double>(rel.size()) / fg, 0.8) << "pod " << i << ": foreground with stereo depth";
+    std::sort(rel.begin(), rel.end());
+    EXPECT_LT(rel[rel.size() / 2], 0.02) << "pod " << i << ": median relative depth error";
+    EXPECT_LT(bg_with_depth, bg / 2) << "pod " << i << ": background outside the region has no depth";
+  }
+}
+
 // ---- The region policy -----------------------------------------------------
 
 // A synthetic pod view: disparity where "people" (pixel rectangles at a
