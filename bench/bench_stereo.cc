@@ -8,6 +8,17 @@
 // more than 1 / 2 px or missing), depth_err_mm (mean |z − z_true| where the
 // method gives a disparity), density_pct, ms and cpu_ms per stereo pair
 // (median of --repeats), and on the studio ms per frame set (all pods).
+// On the studio the same figures over the person's pixels alone
+// ("pixels":"person", the truth's foreground mask) for patchmatch, sgbm and
+// patchmatch_roi: PatchMatch in the region the site's policy gives
+// (server/stereo/stereo_roi.h) in steady state: the policy sees the
+// previous frame matched whole, then the measured frame is matched in its
+// region with its capped search range (matched_pct: the region's share of
+// the image; full_pairs: pairs
+// the policy matched whole anyway). ms_per_frame_set_amortized adds the
+// policy's periodic full match: (full + (full_every − 1) · region) /
+// full_every, from this run's medians. The studio's frames are 10·k + 1
+// (frame 10·k is the region's previous frame).
 //
 // Options: --middlebury DIR (default ../shared/data/stereo next to the
 // repository: a folder holding aloeL.jpg, aloeR.jpg, aloeGT.png, or a parent
@@ -36,6 +47,7 @@
 #include "server/fusion/tsdf.h"
 #include "server/stereo/patchmatch.h"
 #include "server/stereo/stereo_depth.h"
+#include "server/stereo/stereo_roi.h"
 #include "studio/stereo_render.h"
 #include "studio/workloads.h"
 
@@ -103,17 +115,34 @@ class Sgbm {
 
 struct MethodRun {
   Scores scores;
+  Scores person;  // over the truth's foreground pixels
   std::vector<double> ms, cpu_ms;  // per pair
   std::vector<double> set_ms;      // per frame set (studio)
 };
 
 void EmitMethod(const std::string& wl, const std::string& method, const std::string& data, MethodRun& r,
-                const std::map<std::string, std::string>& extra) {
+                const std::map<std::string, std::string>& extra, bool all_pixels = true) {
   r.scores.Finish();
+  r.person.Finish();
   auto q = extra;
   q["method"] = method;
   q["data"] = data;
   q["content"] = "truth";
+  if (r.person.n > 0) {
+    auto pq = q;
+    pq["pixels"] = "person";
+    EmitFigure("stereo", wl, "bad2_pct", r.person.bad2, "%", pq);
+    EmitFigure("stereo", wl, "bad1_pct", r.person.bad1, "%", pq);
+    EmitFigure("stereo", wl, "depth_err_mm", r.person.depth_err_mm, "mm", pq);
+    EmitFigure("stereo", wl, "density_pct", r.person.density, "%", pq);
+  }
+  if (!all_pixels) {
+    EmitFigure("stereo", wl, "ms", Median(r.ms), "ms", q);
+    EmitFigure("stereo", wl, "cpu_ms", Median(r.cpu_ms), "ms", q);
+    if (!r.set_ms.empty()) EmitFigure("stereo", wl, "ms_per_frame_set", Median(r.set_ms), "ms", q);
+    return;
+  }
+  q["pixels"] = "all";
   EmitFigure("stereo", wl, "bad2_pct", r.scores.bad2, "%", q);
   EmitFigure("stereo", wl, "bad1_pct", r.scores.bad1, "%", q);
   EmitFigure("stereo", wl, "depth_err_mm", r.scores.depth_err_mm, "mm", q);
@@ -187,12 +216,16 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   auto studio = SyntheticStudio::Create(rig, so);
   if (!studio.ok()) return Fail(studio.status().ToString());
   StereoDepthOptions sdo;
+  sdo.roi.enabled = false;  // the full run; sdo_roi below
   sdo.patchmatch.threads = threads;
   if (iterations > 0) sdo.patchmatch.iterations = iterations;
   if (o.coarse_levels >= 0) sdo.patchmatch.coarse_levels = o.coarse_levels;
   if (o.fine_iterations > 0) sdo.patchmatch.fine_iterations = o.fine_iterations;
   auto source = StereoStudioSource::Create(studio->get(), sdo);
   if (!source.ok()) return Fail(source.status().ToString());
+  StereoDepthOptions sdo_roi = sdo;
+  sdo_roi.roi.enabled = true;
+  sdo_roi.roi.fps = (*studio)->options().fps;
   auto renderer = StereoStudioRenderer::Create(studio->get(), rig, sdo.render);
   if (!renderer.ok()) return Fail(renderer.status().ToString());
   PatchMatchOptions pmo = sdo.patchmatch;
@@ -215,18 +248,37 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (!args.json)
     spdlog::info("studio: {}, {} stereo pods, baseline {:.3f} m, disparity [{:g}, {:g}], {} frames", wl,
                  rig.pods.size(), baseline, pmo.min_disparity, pmo.max_disparity, frames);
-  MethodRun pm_run, sgbm_run;
-  std::vector<StereoPair> pairs;
-  ImageFloat d_pm, d_sgbm;
+  MethodRun pm_run, sgbm_run, roi_run;
+  std::vector<StereoPair> pairs, previous;
+  ImageFloat d_pm, d_sgbm, d_roi;
   std::vector<ImageRgb8> sheet;
+  int64_t roi_area = 0, image_area = 0;
+  int roi_full_pairs = 0;
   for (int f = 0; f < frames; ++f) {
-    const int64_t frame = static_cast<int64_t>(f) * 10;
+    const int64_t frame = static_cast<int64_t>(f) * 10 + 1;
+    (*renderer)->Render(frame - 1, &previous);
     (*renderer)->Render(frame, &pairs);
-    double set_pm = 0, set_sgbm = 0;
+    double set_pm = 0, set_sgbm = 0, set_roi = 0;
     for (size_t p = 0; p < pairs.size(); ++p) {
       const StereoPair& sp = pairs[p];
       const double fb_mm = sp.fx * sp.baseline_m * 1000.0;
+      // The region policy in steady state: the previous frame matched whole.
+      StereoRoiPolicy policy(rig.pods[p], sdo_roi.roi);
+      const ImageRect prev_region = policy.Next(frame - 1);
+      if (Status s = pm.Compute(previous[p].left, previous[p].right, prev_region, &d_roi); !s.ok())
+        return Fail(s.ToString());
+      policy.Update(frame - 1, prev_region, d_roi);
+      const ImageRect region = policy.Next(frame);
+      roi_area += region.area();
+      image_area += static_cast<int64_t>(sp.left.width()) * sp.left.height();
+      roi_full_pairs += region == ImageRect::Full(sp.left.width(), sp.left.height());
       for (int r = 0; r < std::max(1, args.repeats); ++r) {
+        Timer v;
+        if (Status s = pm.Compute(sp.left, sp.right, region, policy.max_disparity(), &d_roi); !s.ok())
+          return Fail(s.ToString());
+        roi_run.ms.push_back(v.Ms());
+        roi_run.cpu_ms.push_back(v.CpuMs());
+        if (r == 0) set_roi += roi_run.ms.back();
         Timer t;
         if (Status s = pm.Compute(sp.left, sp.right, &d_pm); !s.ok()) return Fail(s.ToString());
         pm_run.ms.push_back(t.Ms());
@@ -241,6 +293,10 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       for (size_t i = 0; i < sp.disparity.num_pixels(); ++i) {
         pm_run.scores.Add(d_pm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
         sgbm_run.scores.Add(d_sgbm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        if (sp.mask.data()[i] == 0) continue;
+        pm_run.person.Add(d_pm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        sgbm_run.person.Add(d_sgbm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        roi_run.person.Add(d_roi.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
       }
       if (!sheet_path.empty() && f == 0 && p < 4) {
         const uint16_t near_mm = 1000, far_mm = 6000;
@@ -254,9 +310,24 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     }
     pm_run.set_ms.push_back(set_pm);
     sgbm_run.set_ms.push_back(set_sgbm);
+    roi_run.set_ms.push_back(set_roi);
   }
   EmitMethod(wl, "patchmatch", "studio", pm_run, studio_q);
   EmitMethod(wl, "sgbm", "studio", sgbm_run, studio_q);
+  {
+    auto q = studio_q;
+    q["full_every"] = std::to_string(sdo_roi.roi.full_every);
+    const double roi_set = Median(roi_run.set_ms), full_set = Median(pm_run.set_ms);
+    EmitMethod(wl, "patchmatch_roi", "studio", roi_run, q, /*all_pixels=*/false);
+    q["method"] = "patchmatch_roi";
+    q["data"] = "studio";
+    q["content"] = "truth";
+    EmitFigure("stereo", wl, "matched_pct", 100.0 * static_cast<double>(roi_area) / std::max<int64_t>(1, image_area),
+               "%", q);
+    EmitFigure("stereo", wl, "full_pairs", roi_full_pairs, "1", q);
+    const int n = sdo_roi.roi.full_every;
+    EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * roi_set) / n, "ms", q);
+  }
   if (!sheet_path.empty()) {
     std::vector<const ImageRgb8*> tiles;
     for (const auto& t : sheet) tiles.push_back(&t);
@@ -329,15 +400,22 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     auto vol = TsdfVolume::Create(to);
     if (!vol.ok()) return Fail(vol.status().ToString());
     std::vector<double> chamfer_vs_direct, chamfer_stereo_truth, chamfer_direct_truth;
-    RgbdFrameSet direct, stereo;
+    std::vector<double> chamfer_roi_vs_direct, chamfer_roi_truth;
+    RgbdFrameSet direct, stereo, stereo_roi;
     StudioGroundTruth gt;
     for (int f = 0; f < fuse_frames; ++f) {
       const int64_t frame = static_cast<int64_t>(f) * 10 + 5;
       (*studio)->RenderFrame(frame, &direct, &gt);
       if (Status s = (*source)->RenderFrame(frame, &stereo, nullptr); !s.ok()) return Fail(s.ToString());
+      // The region policy in steady state: a fresh source matches frame − 1 whole, then `frame` in the regions.
+      auto roi_source = StereoStudioSource::Create(studio->get(), sdo_roi);
+      if (!roi_source.ok()) return Fail(roi_source.status().ToString());
+      if (Status s = (*roi_source)->RenderFrame(frame - 1, &stereo_roi, nullptr); !s.ok()) return Fail(s.ToString());
+      if (Status s = (*roi_source)->RenderFrame(frame, &stereo_roi, nullptr); !s.ok()) return Fail(s.ToString());
       for (size_t p = 0; p < direct.frames.size(); ++p) {
         direct.frames[p].mask = gt.mask[p];
         stereo.frames[p].mask = gt.mask[p];
+        stereo_roi.frames[p].mask = gt.mask[p];
       }
       Mesh m_direct, m_stereo;
       (*vol)->Reset();
@@ -346,21 +424,38 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       (*vol)->Reset();
       if (Status s = (*vol)->Integrate(rig, stereo); !s.ok()) return Fail(s.ToString());
       (*vol)->ExtractMesh(&m_stereo);
+      Mesh m_roi;
+      (*vol)->Reset();
+      if (Status s = (*vol)->Integrate(rig, stereo_roi); !s.ok()) return Fail(s.ToString());
+      (*vol)->ExtractMesh(&m_roi);
       metrics::MeshDistanceOptions mo;
       mo.num_threads = threads;
       auto vs = metrics::ComputeMeshDistance(m_stereo, m_direct, mo);
       auto st = metrics::ComputeMeshDistance(m_stereo, gt.foreground_mesh, mo);
       auto dt = metrics::ComputeMeshDistance(m_direct, gt.foreground_mesh, mo);
-      if (!vs.ok() || !st.ok() || !dt.ok()) return Fail("mesh distance failed (empty fused mesh?)");
+      auto rv = metrics::ComputeMeshDistance(m_roi, m_direct, mo);
+      auto rt = metrics::ComputeMeshDistance(m_roi, gt.foreground_mesh, mo);
+      if (!vs.ok() || !st.ok() || !dt.ok() || !rv.ok() || !rt.ok())
+        return Fail("mesh distance failed (empty fused mesh?)");
+      chamfer_roi_vs_direct.push_back(rv->chamfer_mm);
+      chamfer_roi_truth.push_back(rt->chamfer_mm);
       chamfer_vs_direct.push_back(vs->chamfer_mm);
       chamfer_stereo_truth.push_back(st->chamfer_mm);
       chamfer_direct_truth.push_back(dt->chamfer_mm);
     }
     const std::string n = std::to_string(fuse_frames);
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_vs_direct), "mm",
-               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"}});
+               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch"}});
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_stereo_truth), "mm",
-               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"}});
+               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_roi_vs_direct), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch_roi"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_roi_truth), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch_roi"}});
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_direct_truth), "mm",
                {{"content", "fused"}, {"compare", "direct_vs_truth"}, {"frames", n}, {"masks", "truth"}});
   }

@@ -40,6 +40,8 @@ Status PodRunOptions::Check() const {
     return InvalidArgument("--depth stereo needs the synthetic studio (its IR pairs); a --dataset already has depth: "
                            "drop one of the two");
   if (stereo_threads < 0 || stereo_threads > 256) return InvalidArgument("--stereo-threads must be in 0..256");
+  if (stereo_roi != "on" && stereo_roi != "off")
+    return InvalidArgument("--stereo-roi must be on or off, got '" + stereo_roi + "'");
   if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
   std::string host;
   uint16_t port = 0;
@@ -58,6 +60,7 @@ class StudioFrames final : public PodFrames {
   struct Stereo {
     std::unique_ptr<StereoStudioRenderer> renderer;  // renders this pod's pair only
     std::unique_ptr<PatchMatchStereo> matcher;
+    std::unique_ptr<StereoRoiPolicy> roi;  // where to match (disabled: the whole pair)
     float far_m = 0;  // depth beyond is dropped (the server's StereoDepthOptions)
   };
   StudioFrames(std::unique_ptr<SyntheticStudio> studio, int pod_index, const PodCalibration& calibration, Stereo stereo)
@@ -84,7 +87,13 @@ class StudioFrames final : public PodFrames {
     studio_->RenderPod(frame_index, pod_index_, out);
     if (!stereo_.renderer) return OkStatus();
     stereo_.renderer->RenderPod(frame_index, pod_index_, &pair_);
-    HOLO_RETURN_IF_ERROR(stereo_.matcher->Compute(pair_.left, pair_.right, &disparity_));
+    // Frames come in order (pre-rendered 0, 1, ...; live by slot, skipped
+    // slots making a gap the region's margin grows with): the previous
+    // frame's foreground gives the region.
+    const ImageRect region = stereo_.roi->Next(frame_index);
+    HOLO_RETURN_IF_ERROR(
+        stereo_.matcher->Compute(pair_.left, pair_.right, region, stereo_.roi->max_disparity(), &disparity_));
+    stereo_.roi->Update(frame_index, region, disparity_);
     return DisparityToDepth(stereo_.renderer->rig().pods[static_cast<size_t>(pod_index_)], disparity_, stereo_.far_m,
                             &out->depth);
   }
@@ -166,6 +175,13 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
     pm.threads = o.stereo_threads;
     HOLO_ASSIGN_OR_RETURN(stereo.matcher, PatchMatchStereo::Create(pm));
     stereo.far_m = sd.far_m;
+    StereoRoiOptions roi = sd.roi;
+    roi.enabled = o.stereo_roi == "on";
+    roi.fps = so.fps;
+    // The rig's pods take turns for their periodic full match (as in the site's stereo source).
+    roi.full_phase = static_cast<int>(index) * roi.full_every / static_cast<int>(rig.pods.size());
+    HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
+    stereo.roi = std::make_unique<StereoRoiPolicy>(stereo.renderer->rig().pods[index], roi);
   }
   auto frames = std::make_unique<StudioFrames>(std::move(studio), static_cast<int>(index), rig.pods[index],
                                                std::move(stereo));

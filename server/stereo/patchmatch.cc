@@ -45,6 +45,12 @@ Status PatchMatchOptions::Check() const {
   return OkStatus();
 }
 
+ImageRect ImageRect::Clipped(int width, int height) const {
+  ImageRect r{std::max(x0, 0), std::max(y0, 0), std::min(x1, width), std::min(y1, height)};
+  if (r.empty()) r = ImageRect{};
+  return r;
+}
+
 namespace {
 
 struct Plane {
@@ -71,6 +77,7 @@ constexpr int kPad = 16;
 struct View {
   int W = 0, H = 0, stride = 0;
   float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
+  ImageRect region;         // the pixels whose planes this Compute works on
   std::vector<float> I, G;  // intensity and x gradient, padded rows
   // The same padded rows packed for the AVX2 path's gathers of the other
   // view: per position x, int16 {I(x), I(x+1)} in the low 32 bits and
@@ -331,7 +338,28 @@ StatusOr<std::unique_ptr<PatchMatchStereo>> PatchMatchStereo::Create(PatchMatchO
 const ImageFloat& PatchMatchStereo::right_disparity() const { return impl_->right_disparity; }
 bool PatchMatchStereo::uses_avx2() const { return impl_->avx2; }
 
+ImageRect PatchMatchStereo::RightRegion(const ImageRect& left_region, int width, int height,
+                                        float max_disparity) const {
+  if (max_disparity < 0.0f) max_disparity = options_.max_disparity;
+  const ImageRect l = left_region.Clipped(width, height);
+  if (l.empty()) return l;
+  // Not narrowed on the right by min_disparity (a few pixels): the whole
+  // image then gives the full run's right region, and its result bit for bit.
+  return ImageRect{l.x0 - static_cast<int>(std::ceil(max_disparity)), l.y0, l.x1, l.y1}.Clipped(width, height);
+}
+
 Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity) {
+  return Compute(left, right, ImageRect::Full(left.width(), left.height()), disparity);
+}
+
+Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region,
+                                 ImageFloat* disparity) {
+  return Compute(left, right, region, options_.max_disparity, disparity);
+}
+
+Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region,
+                                 float max_disparity, ImageFloat* disparity) {
+  if (std::isnan(max_disparity)) return InvalidArgument("max_disparity is NaN");
   if (left.width() != right.width() || left.height() != right.height())
     return InvalidArgument("stereo pair sizes differ: left " + std::to_string(left.width()) + "x" +
                            std::to_string(left.height()) + ", right " + std::to_string(right.width()) + "x" +
@@ -343,9 +371,21 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   Impl& im = *impl_;
   View& L = im.left;
   View& R = im.right;
+  const int W = left.width(), H = left.height();
+  const ImageRect lreg = region.Clipped(W, H);
+  if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
+  if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
+  if (lreg.empty()) {
+    disparity->Fill(0.0f);
+    im.right_disparity.Fill(0.0f);
+    return OkStatus();
+  }
   L.Load(left, -1.0f);
   R.Load(right, +1.0f);
-  const int W = L.W, H = L.H;
+  L.region = lreg;
+  // This call's search range: [min_disparity, dmax].
+  const float dmax = std::clamp(max_disparity, std::min(o.min_disparity + 2.0f, o.max_disparity), o.max_disparity);
+  R.region = RightRegion(lreg, W, H, dmax);
   CostParams cp;
   cp.rows = o.window_rows;
   cp.step = o.window_step;
@@ -373,7 +413,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return CostScalar(self, other, x, y, p, cp, bound);
   };
   constexpr float kNoBound = 3.0e38f;
-  const float dmin = o.min_disparity, dmax = o.max_disparity, range = dmax - dmin;
+  const float dmin = o.min_disparity, range = dmax - dmin;
   const float min_nz = o.min_normal_z;
   // Plane through disparity `d` at (x, y) with unit normal n (nz ≥ min_nz).
   auto make_plane = [&](float x, float y, float d, float nx, float ny, float nz) {
@@ -401,9 +441,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
 
   // Random initialisation.
   auto init = [&](View& v, const View& other, uint64_t tag) {
-    im.pool.Run(H, [&](int y, int) {
+    const ImageRect& g = v.region;
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = 0; x < W; ++x) {
+      for (int x = g.x0; x < g.x1; ++x) {
         const uint64_t h = rng(tag, x, y, 0);
         const float d = dmin + range * 0.5f * (Sym(h, 0) + 1.0f);
         float nx = 0.5f * Sym(h, 21), ny = 0.5f * Sym(h, 42);
@@ -433,14 +475,17 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   // bad-2px by < 0.1 point on the studio pairs for 10 % more time.)
   const bool from_coarse = o.coarse_levels > 0 && W / 2 >= 16 && H / 2 >= 8;
   auto init_from_coarse = [&](View& v, const View& other, const View& cv) {
-    const int cw = cv.W, ch = cv.H;
+    const int cw = cv.W;
+    const ImageRect& g = v.region;
+    const ImageRect& cg = cv.region;  // contains every (x / 2, y / 2) of g (the coarse region is one pixel wider)
     auto upsample = [&](const Plane& q) { return Plane{q.a, q.b, 2.0f * q.c - 0.5f * (q.a + q.b)}; };
-    im.pool.Run(H, [&](int y, int) {
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
       SelfWindow sw;
-      const int cy = std::min(y / 2, ch - 1);
-      for (int x = 0; x < W; ++x) {
+      const int cy = std::clamp(y / 2, cg.y0, cg.y1 - 1);
+      for (int x = g.x0; x < g.x1; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
-        const int cx = std::min(x / 2, cw - 1);
+        const int cx = std::clamp(x / 2, cg.x0, cg.x1 - 1);
         v.wtot[i] = WindowWeight(v, x, y, cp);
         prepare(v, x, y, &sw);
         v.plane[i] = upsample(cv.plane[static_cast<size_t>(cy) * cw + cx]);
@@ -465,7 +510,15 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     }
     HalveImage(left, &im.coarse_left);
     HalveImage(right, &im.coarse_right);
-    HOLO_RETURN_IF_ERROR(im.coarse->Compute(im.coarse_left, im.coarse_right, &im.coarse_disparity));
+    // The halved region, one coarse pixel wider on each side, so that every
+    // full-resolution pixel of both views finds its coarse pixel inside the
+    // coarse views' regions.
+    const int cw = im.coarse_left.width(), ch = im.coarse_left.height();
+    const ImageRect creg =
+        ImageRect{lreg.x0 / 2 - 1, lreg.y0 / 2 - 1, (lreg.x1 + 1) / 2 + 1, (lreg.y1 + 1) / 2 + 1}.Clipped(cw, ch);
+    const PatchMatchOptions& co = im.coarse->options();
+    const float cmax = dmax >= o.max_disparity ? co.max_disparity : std::max(dmax * 0.5f, co.min_disparity + 2.0f);
+    HOLO_RETURN_IF_ERROR(im.coarse->Compute(im.coarse_left, im.coarse_right, creg, cmax, &im.coarse_disparity));
     init_from_coarse(L, R, im.coarse->impl_->left);
     init_from_coarse(R, L, im.coarse->impl_->right);
     iterations = o.fine_iterations;
@@ -495,14 +548,17 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   // The other view's planes, converted and offered to the pixels they land on
   // (rows are independent in a rectified pair: parallel over rows).
   auto scatter = [&](View& v, const View& other) {
-    im.pool.Run(H, [&](int y, int) {
+    const ImageRect& g = v.region;
+    const ImageRect& og = other.region;  // the same rows
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
       const size_t ro = static_cast<size_t>(y) * W;
-      std::fill(v.has_proposal.begin() + ro, v.has_proposal.begin() + ro + W, 0);
-      for (int x = 0; x < W; ++x) {
+      std::fill(v.has_proposal.begin() + ro + g.x0, v.has_proposal.begin() + ro + g.x1, 0);
+      for (int x = og.x0; x < og.x1; ++x) {
         const Plane& p = other.plane[ro + x];
         const float d = p.At(static_cast<float>(x), static_cast<float>(y));
         const int tx = static_cast<int>(std::lround(static_cast<float>(x) + other.sign * d));
-        if (tx < 0 || tx >= W) continue;
+        if (tx < g.x0 || tx >= g.x1) continue;
         const float den = 1.0f + other.sign * p.a;
         if (std::abs(den) < 1e-3f) continue;
         const Plane q{p.a / den, p.b / den, p.c / den};
@@ -517,23 +573,26 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   };
 
   constexpr int kColumnBlock = 16;
-  const int column_blocks = (W + kColumnBlock - 1) / kColumnBlock;
   for (int it = 0; it < iterations; ++it) {
     const bool forward = it % 2 == 0;
     for (int vi = 0; vi < 2; ++vi) {
       View& v = vi == 0 ? L : R;
       const View& other = vi == 0 ? R : L;
+      const ImageRect& g = v.region;
+      const int gw = g.width(), gh = g.height();
+      const int column_blocks = (gw + kColumnBlock - 1) / kColumnBlock;
       const uint64_t pass = static_cast<uint64_t>(it) * 8 + static_cast<uint64_t>(vi) * 4 + 16;
       scatter(v, other);
       const int per_sweep = std::max(1, o.refine_per_sweep);
       const float scale_h = std::ldexp(1.0f, -step_index);
       const float scale_v = std::ldexp(1.0f, -(step_index + per_sweep));
       // Horizontal sweep: view proposal, left (or right) neighbour, refinement.
-      im.pool.Run(H, [&](int y, int) {
+      im.pool.Run(gh, [&](int row, int) {
+        const int y = g.y0 + row;
         const size_t ro = static_cast<size_t>(y) * W;
         SelfWindow sw;
-        for (int k = 0; k < W; ++k) {
-          const int x = forward ? k : W - 1 - k;
+        for (int k = 0; k < gw; ++k) {
+          const int x = forward ? g.x0 + k : g.x1 - 1 - k;
           prepare(v, x, y, &sw);
           if (v.has_proposal[ro + x]) try_plane(v, other, x, y, v.proposal[ro + x], sw);
           if (k > 0) try_plane(v, other, x, y, v.plane[ro + (forward ? x - 1 : x + 1)], sw);
@@ -542,10 +601,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       });
       // Vertical sweep over blocks of columns.
       im.pool.Run(column_blocks, [&](int blk, int) {
-        const int x0 = blk * kColumnBlock, x1 = std::min(W, x0 + kColumnBlock);
+        const int x0 = g.x0 + blk * kColumnBlock, x1 = std::min(g.x1, x0 + kColumnBlock);
         SelfWindow sw;
-        for (int k = 1; k < H; ++k) {
-          const int y = forward ? k : H - 1 - k;
+        for (int k = 1; k < gh; ++k) {
+          const int y = forward ? g.y0 + k : g.y1 - 1 - k;
           const int yn = forward ? y - 1 : y + 1;
           for (int x = x0; x < x1; ++x) {
             prepare(v, x, y, &sw);
@@ -558,20 +617,22 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     step_index += 2 * std::max(1, o.refine_per_sweep);
   }
 
-  // Disparities and the left-right check.
-  if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
-  if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
+  // Disparities and the left-right check (0 outside the regions).
+  const ImageRect& rreg = R.region;
   im.pool.Run(H, [&](int y, int) {
     const size_t ro = static_cast<size_t>(y) * W;
     float* rd = im.right_disparity.row(y);
-    for (int x = 0; x < W; ++x) rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
     float* out = disparity->row(y);
-    for (int x = 0; x < W; ++x) {
+    std::fill(rd, rd + W, 0.0f);
+    std::fill(out, out + W, 0.0f);
+    if (y < lreg.y0 || y >= lreg.y1) return;
+    for (int x = rreg.x0; x < rreg.x1; ++x) rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
+    for (int x = lreg.x0; x < lreg.x1; ++x) {
       const float d = L.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
       bool ok = d >= dmin && d <= dmax && d > 0.0f;
       if (ok && o.lr_max_diff >= 0.0f) {
         const int xr = static_cast<int>(std::lround(static_cast<float>(x) - d));
-        ok = xr >= 0 && xr < W && std::abs(rd[xr] - d) <= o.lr_max_diff;
+        ok = xr >= rreg.x0 && xr < rreg.x1 && std::abs(rd[xr] - d) <= o.lr_max_diff;
       }
       out[x] = ok ? d : 0.0f;
     }

@@ -19,6 +19,20 @@
 // The 8 columns are one AVX2 vector (runtime dispatch; a scalar path runs the
 // same arithmetic elsewhere). Random numbers come from a counter-based hash
 // of (seed, pixel, pass): results do not depend on the thread count.
+//
+// Region of interest: Compute can be restricted to a rectangle of the left
+// image (the site needs depth only where the person is; server/stereo/
+// stereo_roi.h chooses the rectangle). Every step then runs inside it: the
+// left view's planes, sweeps and refinement only in the rectangle, the right
+// view's in the rectangle widened to the left by the disparity range (where
+// the rectangle's pixels can match), view propagation between the two, the
+// coarse level in the halved rectangle (one coarse pixel wider), and the
+// left-right check. Costs still read the whole images (a window at the
+// rectangle's edge samples the pixels beyond it), so a pixel's cost for a
+// given plane is the full run's; the results differ from a full run's only
+// because propagation starts at the rectangle's edges instead of the
+// image's (figures in docs/stereo.md). The whole image as the rectangle
+// gives the full run's result bit for bit.
 #pragma once
 
 #include <cstdint>
@@ -75,6 +89,20 @@ struct PatchMatchOptions {
   Status Check() const;
 };
 
+// A rectangle of pixels [x0, x1) × [y0, y1).
+struct ImageRect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  static ImageRect Full(int width, int height) { return {0, 0, width, height}; }
+  bool empty() const { return x1 <= x0 || y1 <= y0; }
+  int width() const { return empty() ? 0 : x1 - x0; }
+  int height() const { return empty() ? 0 : y1 - y0; }
+  int64_t area() const { return static_cast<int64_t>(width()) * height(); }
+  bool Contains(int x, int y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
+  // This rectangle clipped to a width × height image.
+  ImageRect Clipped(int width, int height) const;
+  bool operator==(const ImageRect& o) const { return x0 == o.x0 && y0 == o.y0 && x1 == o.x1 && y1 == o.y1; }
+};
+
 class PatchMatchStereo {
  public:
   // `options` must pass Check() (HOLO_CHECK otherwise; use Create for untrusted values).
@@ -89,7 +117,24 @@ class PatchMatchStereo {
   // between calls. InvalidArgument if the images differ in size or are
   // smaller than 16×8.
   Status Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity);
-  // The right view's disparity of the last Compute (x_left − x_right, at right pixels), unfiltered.
+  // The same, disparities only inside `region` of the left image (clipped
+  // to the image; 0 outside it). An empty region gives 0 everywhere and
+  // does no matching. The full image as `region` equals Compute above.
+  Status Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region, ImageFloat* disparity);
+  // The same with the search range's upper end lowered to `max_disparity`
+  // for this call (clamped to [min_disparity + 2, options().max_disparity]):
+  // the right view's region narrows with it. Where nothing in the region can
+  // be nearer than a known depth (the region policy: the previous frame's
+  // nearest foreground and the motion since), the right view need not reach
+  // as far. Pixels whose true disparity is larger get none or a wrong one.
+  Status Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region, float max_disparity,
+                 ImageFloat* disparity);
+  // The right view's region for a left region: widened to the left by the
+  // largest disparity, [x0 − ⌈max_disparity⌉, x1), clipped to the image
+  // (max_disparity < 0: the options').
+  ImageRect RightRegion(const ImageRect& left_region, int width, int height, float max_disparity = -1.0f) const;
+  // The right view's disparity of the last Compute (x_left − x_right, at
+  // right pixels, 0 outside the right view's region), unfiltered.
   const ImageFloat& right_disparity() const;
   // True when the AVX2 cost path runs.
   bool uses_avx2() const;

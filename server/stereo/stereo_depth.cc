@@ -52,6 +52,7 @@ void StereoSearchRange(const PodCalibration& pod, float near_m, float far_m, Pat
 
 Status StereoDepthOptions::Check() const {
   HOLO_RETURN_IF_ERROR(render.Check().WithContext("render"));
+  HOLO_RETURN_IF_ERROR(roi.Check().WithContext("roi"));
   if (!(near_m > 0.05f && far_m > near_m && far_m <= 65.0f))
     return InvalidArgument("need 0.05 < near_m < far_m <= 65, got near_m " + FormatNumber(near_m) + ", far_m " +
                            FormatNumber(far_m));
@@ -82,6 +83,14 @@ StatusOr<std::unique_ptr<StereoStudioSource>> StereoStudioSource::Create(Synthet
   s->options_.patchmatch = pm;
   s->renderer_ = std::move(renderer);
   s->matcher_ = std::move(matcher);
+  StereoRoiOptions roi = options.roi;
+  roi.fps = studio->options().fps;
+  HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
+  const auto& pods = s->renderer_->rig().pods;
+  for (size_t i = 0; i < pods.size(); ++i) {
+    roi.full_phase = static_cast<int>(i) * roi.full_every / static_cast<int>(pods.size());  // pods take turns
+    s->roi_.emplace_back(pods[i], roi);
+  }
   return s;
 }
 
@@ -91,10 +100,18 @@ Status StereoStudioSource::RenderFrame(int64_t frame_index, RgbdFrameSet* out, s
   renderer_->Render(frame_index, &p);
   const auto t0 = std::chrono::steady_clock::now();
   const Rig& rig = renderer_->rig();
+  last_full_pods_ = 0;
+  int64_t matched = 0, total = 0;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
-    HOLO_RETURN_IF_ERROR(matcher_->Compute(p[i].left, p[i].right, &disparity_));
+    const ImageRect region = roi_[i].Next(frame_index);
+    HOLO_RETURN_IF_ERROR(matcher_->Compute(p[i].left, p[i].right, region, roi_[i].max_disparity(), &disparity_));
+    roi_[i].Update(frame_index, region, disparity_);
+    last_full_pods_ += region == ImageRect::Full(p[i].left.width(), p[i].left.height());
+    matched += region.area();
+    total += static_cast<int64_t>(p[i].left.width()) * p[i].left.height();
     HOLO_RETURN_IF_ERROR(DisparityToDepth(rig.pods[i], disparity_, options_.far_m, &out->frames[i].depth));
   }
+  last_matched_fraction_ = total > 0 ? static_cast<double>(matched) / static_cast<double>(total) : 1.0;
   last_match_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return OkStatus();
 }

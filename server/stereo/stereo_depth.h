@@ -12,6 +12,7 @@
 #include "common/rig.h"
 #include "common/status.h"
 #include "server/stereo/patchmatch.h"
+#include "server/stereo/stereo_roi.h"
 #include "studio/stereo_render.h"
 #include "studio/studio.h"
 
@@ -34,13 +35,18 @@ struct StereoDepthOptions {
   StereoRenderOptions render;
   PatchMatchOptions patchmatch;  // its disparity range is set per rig from near_m / far_m
   float near_m = 0.5f, far_m = 6.0f;
+  // Match only around the person (stereo_roi.h); roi.fps is set from the
+  // studio's. roi.enabled = false: every pair whole.
+  StereoRoiOptions roi;
   Status Check() const;
 };
 
 // The synthetic studio with stereo depth: Next() renders the studio's frame
 // (colour, as before), every pod's IR pair, runs PatchMatch on each pair and
 // replaces the pod's depth with the stereo depth. Pods of the studio's rig
-// without a stereo block get the default one (WithStereoPods).
+// without a stereo block get the default one (WithStereoPods). With
+// options.roi enabled each pod's pair is matched in the region its
+// StereoRoiPolicy gives (frames in order: the previous frame's foreground).
 class StereoStudioSource final : public FrameSource {
  public:
   // `studio` is borrowed for the source's lifetime.
@@ -56,6 +62,10 @@ class StereoStudioSource final : public FrameSource {
   Status RenderFrame(int64_t frame_index, RgbdFrameSet* out, std::vector<StereoPair>* pairs);
   // Wall time of the stereo matching of the last frame (all pods), ms.
   double last_match_ms() const { return last_match_ms_; }
+  // Pods matched whole in the last frame, and the share of the left images
+  // matched (1 = all of every pod's).
+  int last_full_pods() const { return last_full_pods_; }
+  double last_matched_fraction() const { return last_matched_fraction_; }
 
  private:
   StereoStudioSource() = default;
@@ -63,10 +73,13 @@ class StereoStudioSource final : public FrameSource {
   StereoDepthOptions options_;
   std::unique_ptr<StereoStudioRenderer> renderer_;
   std::unique_ptr<PatchMatchStereo> matcher_;
+  std::vector<StereoRoiPolicy> roi_;  // per pod
   std::vector<StereoPair> pairs_;
   ImageFloat disparity_;
   int64_t next_frame_ = 0;
   double last_match_ms_ = 0;
+  int last_full_pods_ = 0;
+  double last_matched_fraction_ = 1;
 };
 
 }  // namespace holo

@@ -42,6 +42,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--stereo-threads", o.stereo_threads, "--depth stereo: PatchMatch threads (0: every core)")
       ->capture_default_str();
+  app.add_option("--stereo-roi", o.stereo_roi,
+                 "--depth stereo: on (match the IR pair only around the person, from the previous frame's stereo "
+                 "depth, the whole pair every 15 frames and when the person reaches the region's edge; "
+                 "docs/stereo.md) or off (every pair whole)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
   app.add_option("--clock-offset-ms", o.clock_offset_ms, "simulate a pod clock offset from the system clock, ms")
       ->capture_default_str();
   app.add_option("--clock-drift-ppm", o.clock_drift_ppm, "simulate a pod clock drift, parts per million")

@@ -111,6 +111,13 @@ int main(int argc, char** argv) {
                  "(PatchMatch on each pod's IR pair, docs/stereo.md); not with --pods, where each pod makes its "
                  "depth (holoport-pod --depth stereo)")->check(CLI::IsMember({"direct", "stereo"}))
       ->capture_default_str();
+  std::string stereo_roi = "on";
+  app.add_option("--stereo-roi", stereo_roi,
+                 "--depth stereo: on (match each pod's pair only around the person, from the previous frame's "
+                 "stereo depth, the whole pair every 15 frames and when the person reaches the region's edge; "
+                 "docs/stereo.md) or off (every pair whole)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
   std::string reconstruct = "tsdf";
   app.add_option("--reconstruct", reconstruct,
                  "tsdf (fuse the pods' depth) or hull (the visual hull of the pods' masks alone, as colour-only "
@@ -551,7 +558,9 @@ int main(int argc, char** argv) {
           "--depth stereo is the local synthetic source's; with --pods each pod makes its depth: start the pods "
           "with holoport-pod --depth stereo (a --pods site takes stereo and direct pods alike)"));
     if (!studio) return Fail(holo::InvalidArgument("--depth stereo needs --source synthetic"));
-    auto st = holo::StereoStudioSource::Create(studio.get(), holo::StereoDepthOptions{});
+    holo::StereoDepthOptions sdo;
+    sdo.roi.enabled = stereo_roi == "on";
+    auto st = holo::StereoStudioSource::Create(studio.get(), sdo);
     if (!st.ok()) return Fail(st.status());
     stereo_source = std::move(*st);
     source = stereo_source.get();

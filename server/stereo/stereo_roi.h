@@ -1,0 +1,134 @@
+// Where a stereo pod matches: a rectangle around the person, from the
+// previous frame's stereo depth, so PatchMatch (server/stereo/patchmatch.h)
+// works on a fraction of the pair (docs/stereo.md, "Matching around the
+// person").
+//
+// The site needs depth only where the person is, but segmentation
+// (server/segment) needs depth, so the current frame's mask does not exist
+// before stereo. The region therefore comes from the previous frame, and from
+// the pod's own previous stereo depth rather than the site's mask of that
+// pod, because:
+//  * a network pod (holoport-pod --depth stereo) never sees the site's masks
+//    (nothing flows from the site to a pod but refusals), and in the site
+//    the masks are made stages downstream of the frame source, a pipeline
+//    depth later; the pod's own depth is there in both, one frame old;
+//  * the foreground test needs only the pod's calibration: a pixel is
+//    foreground when its 3-D point (world frame, z up) lies in the capture
+//    volume, a vertical cylinder around the world's z axis above the floor
+//    (the floor, the walls and the ceiling are outside it). No background
+//    model, no colour.
+// The region is the foreground's bounding box widened by a margin that
+// covers the motion since that frame (max_speed_mps × elapsed time, in
+// pixels at the nearest foreground depth) plus a fixed margin. The whole
+// image is matched instead on the first frame, every `full_every` frames,
+// after a gap longer than `max_gap_s` or a step back in time, when the
+// previous result had no foreground, and when its foreground touched an edge
+// of its region that is not the image's edge (the person may go on beyond
+// it). Pods take turns for the periodic full match (full_phase). So a person who enters the view is found on the next frame when the
+// view was empty or when they enter touching the current region, and
+// otherwise (a second person entering away from the first) at the next
+// periodic full match: at most `full_every` − 1 frames late.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "common/image.h"
+#include "common/rig.h"
+#include "common/status.h"
+#include "server/stereo/patchmatch.h"
+
+namespace holo {
+
+struct StereoRoiOptions {
+  // Off: every frame is matched whole.
+  bool enabled = true;
+  // The capture volume (world frame, metres): a vertical cylinder of
+  // `volume_radius_m` around the z axis, from `volume_min_z_m` above the
+  // floor (z = 0; the floor's own stereo noise, ~2 cm at 3 m, stays below)
+  // to `volume_max_z_m`. The defaults cover the studio's capture area (the
+  // person at the centre, props within 1 m; walls at 3.3 m).
+  float volume_radius_m = 1.6f;
+  float volume_min_z_m = 0.08f;
+  float volume_max_z_m = 2.5f;
+  // Margin around the previous foreground: the distance a body part moves at
+  // `max_speed_mps` in the time since that frame (3 m/s: a brisk arm;
+  // 10 cm per frame at 30 fps), as pixels at the nearest foreground depth,
+  // plus `margin_px`.
+  float max_speed_mps = 3.0f;
+  int margin_px = 4;
+  // Frame rate of the frame indices (elapsed time = index difference / fps).
+  double fps = 30.0;
+  // The whole image on frames where (frame index + full_phase) % full_every
+  // == 0, and at least every full_every frames (1 = always). Sources give
+  // each pod its own phase, so the pods' periodic full matches fall on
+  // different frames (a frame set then costs about the same every frame).
+  int full_every = 15;
+  int full_phase = 0;
+  // A gap longer than this since the previous frame: the whole image.
+  double max_gap_s = 0.5;
+  // Foreground pixels are sampled every `sample_step` pixels; a sample
+  // counts with at least `min_neighbours` of its 8 grid neighbours in the
+  // volume too, and a column or row counts towards the box with at least
+  // `min_line_samples` such samples (mismatches inside the volume, thin
+  // streaks on the floor, do not stretch the box).
+  int sample_step = 2;
+  int min_neighbours = 5;
+  int min_vertical_run = 4;
+  int min_group_samples = 24;
+  int min_line_samples = 2;
+  // The foreground within this many pixels of a region edge (that is not
+  // the image's) touches it: the box, or any sample in a vertical run of at
+  // least `touch_min_run` samples (a person entering across the edge).
+  int touch_px = 2;
+  int touch_min_run = 8;
+  // See StereoRoiPolicy::max_disparity; < 0: no limit in regions either.
+  float disparity_margin_px = 2.0f;
+  Status Check() const;
+};
+
+// One pod's region policy: Next() before matching a frame, Update() after.
+class StereoRoiPolicy {
+ public:
+  // `pod` must be a stereo pod (its IR intrinsics, baseline and pose are
+  // used); `options` must pass Check() (HOLO_CHECK otherwise).
+  StereoRoiPolicy(const PodCalibration& pod, StereoRoiOptions options);
+
+  // The region of the left IR image to match for frame `frame_index`
+  // (the whole image when a full match is due, see above).
+  ImageRect Next(int64_t frame_index);
+  // The largest disparity the last Next's region can hold, to pass to
+  // PatchMatchStereo::Compute: the previous frame's nearest foreground
+  // brought nearer by the motion since (max_speed_mps × elapsed time) and
+  // `disparity_margin_px` more; 3.0e38 (no limit) for the whole image. Only
+  // the capture volume's content can be nearer than the person, and it is
+  // the foreground (walls and floor behind the person are farther).
+  float max_disparity() const { return max_disparity_; }
+  // The disparity (left IR pixels, 0 = none) matched for `frame_index` in
+  // `region`: its foreground becomes the next frame's region.
+  void Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity);
+
+  // The last Update's foreground box (empty if none) and whether it asked
+  // for a full match (empty, touching, ...).
+  const ImageRect& foreground_box() const { return box_; }
+  bool full_due() const { return full_due_; }
+  const StereoRoiOptions& options() const { return options_; }
+
+ private:
+  PodCalibration pod_;
+  StereoRoiOptions options_;
+  int width_ = 0, height_ = 0;
+  bool have_previous_ = false;
+  bool full_due_ = true;
+  int64_t previous_frame_ = 0, last_full_frame_ = 0;
+  ImageRect box_;
+  float nearest_fg_m_ = 0;  // nearest foreground depth of the last Update
+  float max_disparity_ = 3.0e38f;
+  std::vector<uint8_t> fg_;  // scratch: foreground samples
+  std::vector<float> zs_;    // ... and their depth
+  std::vector<uint16_t> run_;  // ... and the length of their vertical run
+  std::vector<uint8_t> core_;  // ... and which are core samples (2: grouped)
+  std::vector<size_t> stack_, group_;
+};
+
+}  // namespace holo
