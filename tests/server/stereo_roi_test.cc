@@ -4,6 +4,7 @@
 // and a person entering the view found within the stated number of frames.
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -14,37 +15,17 @@
 #include "server/stereo/stereo_roi.h"
 #include "studio/stereo_render.h"
 #include "studio/studio.h"
+#include "slanted_plane_pair.h"
 
 namespace holo {
 namespace {
 
-// A textured, slightly slanted plane pair (as in stereo_test.cc): left
-// disparity a·x + b·y + c; the texture is hashed lattice noise.
-float Texture(float u, float v) {
-  const float fu = u / 1.3f + 1000.0f, fv = v / 1.3f + 1000.0f;
-  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
-  const float au = fu - iu, av = fv - iv;
-  auto lattice = [](int x, int y) {
-    uint64_t h = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ULL ^ static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4FULL;
-    h ^= h >> 29;
-    h *= 0xBF58476D1CE4E5B9ULL;
-    h ^= h >> 32;
-    return static_cast<float>(h & 0xff);
-  };
-  return (lattice(iu, iv) * (1 - au) + lattice(iu + 1, iv) * au) * (1 - av) +
-         (lattice(iu, iv + 1) * (1 - au) + lattice(iu + 1, iv + 1) * au) * av;
-}
-
+// The slanted-plane pair of slanted_plane_pair.h, into separate images.
 void SlantedPlane(int W, int H, float a, float b, float c, ImageGray8* left, ImageGray8* right, ImageFloat* truth) {
-  left->Resize(W, H);
-  right->Resize(W, H);
-  truth->Resize(W, H);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      left->at(x, y) = static_cast<uint8_t>(std::lround(Texture(x, y)));
-      truth->at(x, y) = a * x + b * y + c;
-      right->at(x, y) = static_cast<uint8_t>(std::lround(Texture(x + (a * x + b * y + c) / (1.0f - a), y)));
-    }
+  SyntheticPair p = holo::SlantedPlane(W, H, a, b, c);
+  *left = std::move(p.left);
+  *right = std::move(p.right);
+  *truth = std::move(p.truth);
 }
 
 int CountNonZeroOutside(const ImageFloat& d, const ImageRect& r) {

@@ -11,49 +11,10 @@
 #include "server/stereo/stereo_depth.h"
 #include "studio/stereo_render.h"
 #include "studio/studio.h"
+#include "slanted_plane_pair.h"
 
 namespace holo {
 namespace {
-
-// A continuous random texture: bilinear interpolation of a hashed lattice
-// with spacing 1.3 px, so it can be sampled at any sub-pixel position.
-float Texture(float u, float v) {
-  const float s = 1.0f / 1.3f;
-  const float fu = u * s + 1000.0f, fv = v * s + 1000.0f;
-  const int iu = static_cast<int>(fu), iv = static_cast<int>(fv);
-  const float au = fu - iu, av = fv - iv;
-  auto lattice = [](int x, int y) {
-    uint64_t h = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ULL ^ static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4FULL;
-    h ^= h >> 29;
-    h *= 0xBF58476D1CE4E5B9ULL;
-    h ^= h >> 32;
-    return static_cast<float>(h & 0xff);
-  };
-  return (lattice(iu, iv) * (1 - au) + lattice(iu + 1, iv) * au) * (1 - av) +
-         (lattice(iu, iv + 1) * (1 - au) + lattice(iu + 1, iv + 1) * au) * av;
-}
-
-struct SyntheticPair {
-  ImageGray8 left, right;
-  ImageFloat truth;  // left-view disparity
-};
-
-// A textured slanted plane: left-view disparity d = a·x + b·y + c. The right
-// image at (xr, y) shows the texture point x_left = xr + d_right(xr, y).
-SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
-  SyntheticPair p;
-  p.left.Resize(W, H);
-  p.right.Resize(W, H);
-  p.truth.Resize(W, H);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      p.left.at(x, y) = static_cast<uint8_t>(std::lround(Texture(x, y)));
-      p.truth.at(x, y) = a * x + b * y + c;
-      const float dr = (a * x + b * y + c) / (1.0f - a);
-      p.right.at(x, y) = static_cast<uint8_t>(std::lround(Texture(x + dr, y)));
-    }
-  return p;
-}
 
 void ExpectRecoversPlane(bool force_scalar, int coarse_levels) {
   const int W = 160, H = 120;
