@@ -5,12 +5,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <iterator>
 #include <numbers>
 #include <thread>
 
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -75,6 +77,13 @@ Status ProbeInChild(const std::string& path, const std::string& bytes) {
   const pid_t pid = fork();
   if (pid < 0) return Internal(path + ": fork failed for the SOFA parse probe");
   if (pid == 0) {
+    // The probe's own crash reports (glibc's "stack smashing detected", a
+    // sanitizer's) would reach the user's terminal as if the program had
+    // crashed; the parent reports the malformed file instead. glibc writes
+    // its fatal messages to the terminal unless told to use stderr.
+    setenv("LIBC_FATAL_STDERR_", "1", 1);
+    const int devnull = open("/dev/null", O_WRONLY);
+    if (devnull >= 0) dup2(devnull, STDERR_FILENO);
     int err = 0;
     MYSOFA_HRTF* h = mysofa_load_data(bytes.data(), bytes.size(), &err);
     if (h != nullptr) {
