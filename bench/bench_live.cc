@@ -231,7 +231,17 @@ int Run(const BenchArgs& args, LiveOptions o) {
     return 2;
   }
   const std::string& wl = workload->name;
-  const std::string content = o.content;
+  // The figures' content says what the site made: --temporal given through
+  // --site-arg is temporal content (the figures would say "fused" otherwise).
+  const bool temporal_arg = o.content != "temporal" &&
+                            std::find(o.site_args.begin(), o.site_args.end(), "--temporal") != o.site_args.end();
+  if (temporal_arg && o.content == "truth") {
+    spdlog::error("live: --site-arg=--temporal with --content truth: the site streams the studio's meshes, nothing "
+                  "is fused");
+    return 2;
+  }
+  if (temporal_arg) spdlog::warn("live: --site-arg=--temporal: the figures say content temporal (--content temporal)");
+  const std::string content = temporal_arg ? "temporal" : o.content;
   auto progress = [&](const std::string& s) {
     if (!args.json) spdlog::info("live: {}", s);
   };
