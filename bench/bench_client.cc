@@ -65,6 +65,7 @@ struct ClientBenchOptions {
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
+  float visibility_mm = -1;                      // ProjectiveOptions::visibility_tolerance_m, mm (-1: the renderer's)
   int max_pods_per_triangle = -1;                // ProjectiveOptions::max_pods_per_triangle (-1: the renderer's)
   std::string gpu_visibility;                    // 0 | 1: ProjectiveOptions::gpu_visibility (default: the renderer's)
   float behind_band = -1;                        // the site's TsdfOptions::behind_band (fused; -1: the default)
@@ -471,6 +472,10 @@ int RunClientRenderPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
       q["depth_prepass"] = base.depth_prepass ? "true" : "false";
     }
     if (options.pods_per_vertex >= 0) base.projective.pods_per_vertex = options.pods_per_vertex;
+    if (options.visibility_mm > 0) {
+      base.projective.visibility_tolerance_m = options.visibility_mm * 1e-3f;
+      q["visibility_mm"] = fmt::format("{:g}", options.visibility_mm);
+    }
     if (options.bake_texels > 0) base.projective.bake_texels_per_edge = options.bake_texels;
     if (options.bake_density >= 0) base.projective.bake_texels_per_pod_pixel = options.bake_density;
     if (options.max_pods_per_triangle >= 0) base.projective.max_pods_per_triangle = options.max_pods_per_triangle;
@@ -916,6 +921,10 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--cull", o->cull, "0: no back-face culling")->check(CLI::IsMember({"0", "1"}))->capture_default_str();
   app.add_option("--prepass", o->prepass, "1 / 0: depth pre-pass on / off (default: the renderer's)")
       ->check(CLI::IsMember({"0", "1"}));
+  app.add_option("--visibility-mm", o->visibility_mm,
+                 "projective: a point is visible from a pod when at most this far behind its depth map, mm "
+                 "(default: the renderer's)")
+      ->check(CLI::Range(1.0, 200.0));
   app.add_option("--pods-per-vertex", o->pods_per_vertex,
                  "pods each vertex keeps for projective texturing, 0 = all (default: the renderer's)")
       ->check(CLI::Range(0, holo::render::Renderer::kMaxPods));
