@@ -90,10 +90,8 @@ class StudioFrames final : public PodFrames {
     // Frames come in order (pre-rendered 0, 1, ...; live by slot, skipped
     // slots making a gap the region's margin grows with): the previous
     // frame's foreground gives the region.
-    const ImageRect region = stereo_.roi->Next(frame_index);
     HOLO_RETURN_IF_ERROR(
-        stereo_.matcher->Compute(pair_.left, pair_.right, region, stereo_.roi->max_disparity(), &disparity_));
-    stereo_.roi->Update(frame_index, region, disparity_);
+        stereo_.roi->Match(stereo_.matcher.get(), frame_index, pair_.left, pair_.right, &disparity_).status());
     return DisparityToDepth(stereo_.renderer->rig().pods[static_cast<size_t>(pod_index_)], disparity_, stereo_.far_m,
                             &out->depth);
   }
@@ -179,7 +177,7 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
     roi.enabled = o.stereo_roi == "on";
     roi.fps = so.fps;
     // The rig's pods take turns for their periodic full match (as in the site's stereo source).
-    roi.full_phase = static_cast<int>(index) * roi.full_every / static_cast<int>(rig.pods.size());
+    roi.full_phase = StereoRoiPolicy::FullPhase(index, rig.pods.size(), roi.full_every);
     HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
     stereo.roi = std::make_unique<StereoRoiPolicy>(stereo.renderer->rig().pods[index], roi);
   }

@@ -88,7 +88,7 @@ StatusOr<std::unique_ptr<StereoStudioSource>> StereoStudioSource::Create(Synthet
   HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
   const auto& pods = s->renderer_->rig().pods;
   for (size_t i = 0; i < pods.size(); ++i) {
-    roi.full_phase = static_cast<int>(i) * roi.full_every / static_cast<int>(pods.size());  // pods take turns
+    roi.full_phase = StereoRoiPolicy::FullPhase(i, pods.size(), roi.full_every);  // pods take turns
     s->roi_.emplace_back(pods[i], roi);
   }
   return s;
@@ -103,9 +103,8 @@ Status StereoStudioSource::RenderFrame(int64_t frame_index, RgbdFrameSet* out, s
   last_full_pods_ = 0;
   int64_t matched = 0, total = 0;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
-    const ImageRect region = roi_[i].Next(frame_index);
-    HOLO_RETURN_IF_ERROR(matcher_->Compute(p[i].left, p[i].right, region, roi_[i].max_disparity(), &disparity_));
-    roi_[i].Update(frame_index, region, disparity_);
+    HOLO_ASSIGN_OR_RETURN(const ImageRect region, roi_[i].Match(matcher_.get(), frame_index, p[i].left, p[i].right,
+                                                                &disparity_));
     last_full_pods_ += region == ImageRect::Full(p[i].left.width(), p[i].left.height());
     matched += region.area();
     total += static_cast<int64_t>(p[i].left.width()) * p[i].left.height();

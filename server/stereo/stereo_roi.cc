@@ -196,4 +196,12 @@ void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const
   full_due_ = touch;
 }
 
+StatusOr<ImageRect> StereoRoiPolicy::Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
+                                           const ImageGray8& right, ImageFloat* disparity) {
+  const ImageRect region = Next(frame_index);
+  HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
+  Update(frame_index, region, *disparity);
+  return region;
+}
+
 }  // namespace holo

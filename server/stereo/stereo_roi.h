@@ -107,6 +107,15 @@ class StereoRoiPolicy {
   // The disparity (left IR pixels, 0 = none) matched for `frame_index` in
   // `region`: its foreground becomes the next frame's region.
   void Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity);
+  // Next, then `matcher` on that region with max_disparity(), then Update:
+  // frame `frame_index`'s disparity in `disparity`; returns the region.
+  StatusOr<ImageRect> Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
+                            const ImageGray8& right, ImageFloat* disparity);
+  // The full_phase of pod `pod` of `num_pods`: the rig's pods take turns for
+  // their periodic full match.
+  static int FullPhase(size_t pod, size_t num_pods, int full_every) {
+    return num_pods == 0 ? 0 : static_cast<int>(pod * static_cast<size_t>(full_every) / num_pods);
+  }
 
   // The last Update's foreground box (empty if none) and whether it asked
   // for a full match (empty, touching, ...).
