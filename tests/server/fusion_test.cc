@@ -410,17 +410,24 @@ TEST(TsdfFusion, NonRegisteredColourCamera) {
   for (const auto& c : m.colors) EXPECT_EQ((std::array<int, 3>{c[0], c[1], c[2]}), (std::array<int, 3>{10, 250, 90}));
 }
 
+// Frame `frame` of the studio on `rig` (noisy or exact depth) with the
+// truth's masks.
+void RenderWithTrueMasks(const Rig& rig, int64_t frame, bool noisy, RgbdFrameSet* set, StudioGroundTruth* gt) {
+  StudioOptions so;
+  so.threads = 2;
+  so.depth_noise = noisy;
+  SyntheticStudio studio(rig, so);
+  studio.RenderFrame(frame, set, gt);
+  for (size_t k = 0; k < set->frames.size(); ++k) set->frames[k].mask = gt->mask[k];
+}
+
 TEST(TsdfFusion, StudioFrameWithGroundTruthMasks) {
   auto rig = LoadRig(ShippedRigPath("studio-8"));
   ASSERT_TRUE(rig.ok());
   const Rig small = rig->Scaled(0.5);  // 320x240, the S8-QVGA rig
-  StudioOptions so;
-  so.threads = 2;
-  SyntheticStudio studio(small, so);
   RgbdFrameSet set;
   StudioGroundTruth gt;
-  studio.RenderFrame(10, &set, &gt);
-  for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
+  RenderWithTrueMasks(small, 10, true, &set, &gt);
   TsdfOptions o;
   o.voxel_size = 0.008f;
   o.threads = 2;
@@ -447,15 +454,12 @@ TEST(TsdfFusion, StudioDepthNoiseNeitherThinsNorFattensThePerson) {
   auto rig = LoadRig(ShippedRigPath("studio-8"));
   ASSERT_TRUE(rig.ok());
   const Rig small = rig->Scaled(0.5);  // 320x240, the S8-QVGA rig
+  RgbdFrameSet noisy_set, exact_set;
+  StudioGroundTruth gt;  // the same frame: one truth
+  RenderWithTrueMasks(small, 40, true, &noisy_set, &gt);
+  RenderWithTrueMasks(small, 40, false, &exact_set, &gt);
   auto median_signed_mm = [&](bool noisy, float band, float sigmas, float noise_mm) {
-    StudioOptions so;
-    so.threads = 2;
-    so.depth_noise = noisy;
-    SyntheticStudio studio(small, so);
-    RgbdFrameSet set;
-    StudioGroundTruth gt;
-    studio.RenderFrame(40, &set, &gt);
-    for (size_t k = 0; k < set.frames.size(); ++k) set.frames[k].mask = gt.mask[k];
+    const RgbdFrameSet& set = noisy ? noisy_set : exact_set;
     TsdfOptions o;
     o.voxel_size = 0.008f;
     o.threads = 2;
