@@ -157,6 +157,11 @@ StatusOr<LiveManifest> ParseLiveManifest(std::string_view text) {
   int64_t interval = 0;
   HOLO_RETURN_IF_ERROR(get_int(j, "update_interval_ms", 1, 60000, &interval));
   m.update_interval_ms = static_cast<int>(interval);
+  if (j.contains("cache_bucket_ms")) {
+    int64_t bucket = 0;
+    HOLO_RETURN_IF_ERROR(get_int(j, "cache_bucket_ms", 0, 60000, &bucket));
+    m.cache_bucket_ms = static_cast<int>(bucket);
+  }
   if (!j.contains("ended") || !j["ended"].is_boolean()) return bad("ended missing or not a boolean");
   m.ended = j["ended"].get<bool>();
   if (!j.contains("segments") || !j["segments"].is_array()) return bad("segments missing or not an array");
@@ -194,6 +199,14 @@ StatusOr<LiveManifest> ParseLiveManifest(std::string_view text) {
     m.segments.push_back(std::move(seg));
   }
   return m;
+}
+
+std::string ManifestTarget(const BroadcastUrl& url, int cache_bucket_ms, int64_t unix_ms) {
+  std::string target = url.dir + "live.json" + url.query;
+  if (cache_bucket_ms <= 0 || unix_ms < 0) return target;
+  target += url.query.empty() ? '?' : '&';
+  target += "b=" + std::to_string(unix_ms / cache_bucket_ms);
+  return target;
 }
 
 // ---------------------------------------------------------------- follower
@@ -444,6 +457,7 @@ void BroadcastPlayer::Run() {
   LiveFollower follower(options_.follower);
   int64_t next_manifest_ms = 0;
   int64_t interval_ms = 250;
+  int bucket_ms = 0;  // the first poll carries no bucket: the manifest names it
   auto sleep_ms = [&](int64_t ms) {
     const int64_t until = SteadyMs() + ms;
     while (!stop_ && SteadyMs() < until) std::this_thread::sleep_for(std::chrono::milliseconds(std::min<int64_t>(10, ms)));
@@ -455,7 +469,10 @@ void BroadcastPlayer::Run() {
   };
   while (!stop_) {
     if (SteadyMs() >= next_manifest_ms) {
-      auto r = http.Get(url_.dir + "live.json" + url_.query, 16u << 20);
+      const int64_t unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                                  std::chrono::system_clock::now().time_since_epoch())
+                                  .count();
+      auto r = http.Get(ManifestTarget(url_, bucket_ms, unix_ms), 16u << 20);
       next_manifest_ms = SteadyMs() + interval_ms;
       if (!r.ok()) {
         error(r.status().message(), &BroadcastPlayerStats::http_errors);
@@ -479,6 +496,7 @@ void BroadcastPlayer::Run() {
         continue;
       }
       interval_ms = std::clamp<int64_t>(m->update_interval_ms, 50, 2000);
+      bucket_ms = m->cache_bucket_ms;
       follower.OnManifest(*m);
       std::lock_guard<std::mutex> l(mu_);
       stats_.manifests += 1;

@@ -75,6 +75,7 @@ struct LiveManifest {
   int64_t published_unix_us = 0;
   int64_t target_part_us = 0;
   int update_interval_ms = 0;
+  int cache_bucket_ms = 0;  // 0 (or absent): no bucket in manifest requests
   bool ended = false;
   std::vector<LiveSegmentRef> segments;  // numbers strictly increasing
 };
@@ -83,6 +84,12 @@ struct LiveManifest {
 // segments and ≤ 100,000 parts). DataLoss naming the field. Safe on untrusted
 // input.
 StatusOr<LiveManifest> ParseLiveManifest(std::string_view text);
+
+// The request target of a manifest poll: the broadcast's live.json with the
+// URL's query (a signature), plus `b=floor(unix_ms / cache_bucket_ms)` when
+// the manifest names a bucket length (docs/broadcast.md §4): an edge keeps
+// one copy per bucket, so viewers polling in the same bucket share it.
+std::string ManifestTarget(const BroadcastUrl& url, int cache_bucket_ms, int64_t unix_ms);
 
 struct LiveFollowerOptions {
   // Jump to the newest segment when this many segments (or more) are listed

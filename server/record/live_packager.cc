@@ -95,6 +95,8 @@ Status LivePackagerOptions::Check() const {
     return InvalidArgument("live packager: keep_extra_segments must be 0..10000, got " +
                            std::to_string(keep_extra_segments));
   if (max_age_ms < 0) return InvalidArgument("live packager: max_age_ms must be ≥ 0");
+  if (cache_bucket_ms < 0 || cache_bucket_ms > 60000)
+    return InvalidArgument("live packager: cache_bucket_ms must be 0..60000, got " + std::to_string(cache_bucket_ms));
   return OkStatus();
 }
 
@@ -366,7 +368,8 @@ Status LivePackager::WriteManifest(int64_t now_unix_us, bool ended) {
   j["target_segment_us"] = options_.segment_us;
   j["target_part_us"] = options_.part_us;
   j["update_interval_ms"] = options_.part_us / 1000;
-  j["max_age_ms"] = options_.max_age_ms;
+  j["max_age_ms"] = std::max(options_.max_age_ms, options_.cache_bucket_ms);
+  j["cache_bucket_ms"] = options_.cache_bucket_ms;
   j["window_segments"] = options_.window_segments;
   j["keep_extra_segments"] = options_.keep_extra_segments;
   j["ended"] = ended;

@@ -45,9 +45,16 @@ struct LivePackagerOptions {
   // Segments whose files stay on disk after leaving the list (players a little
   // behind still find them).
   int keep_extra_segments = 3;
-  // How long an edge may serve a cached live.json, ms (written into it). The
-  // shipped edges do not cache it (nginx caches in whole seconds, longer than
-  // a part).
+  // Players key their live.json requests by time buckets of this length
+  // (`?b=floor(unix_ms / cache_bucket_ms)`, docs/broadcast.md §4): the shipped
+  // edges cache one copy per bucket, so the origin sees about one manifest
+  // request per bucket per edge instead of one per viewer poll, and a copy is
+  // never older than about a bucket (nginx itself caches in whole seconds,
+  // longer than a part). 0: players send no bucket and every poll reaches the
+  // origin. Written into live.json; below the part length.
+  int cache_bucket_ms = 100;
+  // How long an edge may serve a cached live.json, ms (written into it as
+  // max(max_age_ms, cache_bucket_ms)).
   int max_age_ms = 0;
   // Stored in the segment files' header and live.json ("site:HOST:PORT").
   std::string source = "live";

@@ -511,12 +511,17 @@ int main(int argc, char** argv) {
   std::string live_dir;
   double part_ms = 250;
   int window = 10;
+  int cache_bucket_ms = 100;
   app.add_option("--live-dir", live_dir,
                  "package a live stream for HTTP caches into DIR (docs/broadcast.md): seg_NNNNN.pK parts, "
                  "seg_NNNNN.hrec segments and live.json, from --connect HOST:PORT or --source synthetic (paced in "
                  "real time); --segment-seconds, --part-ms, --window; runs until --duration or Ctrl-C");
   app.add_option("--part-ms", part_ms, "--live-dir: target part length, ms")->capture_default_str();
   app.add_option("--window", window, "--live-dir: segments listed in live.json")->capture_default_str();
+  app.add_option("--cache-bucket-ms", cache_bucket_ms,
+                 "--live-dir: players key their live.json polls by time buckets this long, so an edge asks the "
+                 "origin about once per bucket (0: every poll reaches the origin)")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "no progress output");
   out_opt->excludes(info_opt)->excludes(cut_opt);
   info_opt->excludes(cut_opt);
@@ -536,6 +541,7 @@ int main(int argc, char** argv) {
     lo.segment_us = static_cast<int64_t>(segment_s * 1e6);
     lo.part_us = static_cast<int64_t>(part_ms * 1e3);
     lo.window_segments = window;
+    lo.cache_bucket_ms = cache_bucket_ms;
     return PackageLive(lo, connect, source, token, duration, tls, ca_file, connect_timeout_s, quiet);
   }
   if (out.empty()) return Fail(holo::InvalidArgument("nothing to do: pass --out FILE, --info FILE or --cut FILE (see --help)"));

@@ -114,6 +114,7 @@ TEST(LiveManifest, ParsesThePackagersManifestAndRefusesDamage) {
   EXPECT_FALSE(m->segments[2].complete);
   EXPECT_EQ(m->segments[1].parts[0].name, "seg_00001.p0");
   EXPECT_EQ(m->update_interval_ms, 100);
+  EXPECT_EQ(m->cache_bucket_ms, 100);  // the packager's default
   for (size_t n = 0; n < text.size(); n += 3) {
     auto r = ParseLiveManifest(text.substr(0, n));
     if (r.ok()) ADD_FAILURE() << "prefix " << n << " parsed";
@@ -133,6 +134,29 @@ TEST(LiveManifest, ParsesThePackagersManifestAndRefusesDamage) {
   EXPECT_TRUE(damaged("\"number\": 1", "\"number\": 0"));  // not increasing
   EXPECT_TRUE(damaged("\"update_interval_ms\": 100", "\"update_interval_ms\": \"100\""));
   EXPECT_TRUE(damaged("\"ended\": false", "\"ended\": 0"));
+  EXPECT_TRUE(damaged("\"cache_bucket_ms\": 100", "\"cache_bucket_ms\": -1"));
+  EXPECT_TRUE(damaged("\"cache_bucket_ms\": 100", "\"cache_bucket_ms\": 60001"));
+  EXPECT_TRUE(damaged("\"cache_bucket_ms\": 100", "\"cache_bucket_ms\": 0.5"));
+  // Absent (an older packager): no bucket.
+  std::string older = text;
+  const size_t at = older.find("\"cache_bucket_ms\": 100,");
+  ASSERT_NE(at, std::string::npos);
+  older.erase(at, std::string("\"cache_bucket_ms\": 100,").size());
+  auto o = ParseLiveManifest(older);
+  ASSERT_TRUE(o.ok()) << o.status().ToString();
+  EXPECT_EQ(o->cache_bucket_ms, 0);
+}
+
+TEST(LiveManifest, PollsCarryTheCacheBucketAndKeepTheSignature) {
+  auto u = ParseBroadcastUrl("http://edge:8080/show/live.json?md5=abc_-&expires=17");
+  ASSERT_TRUE(u.ok());
+  EXPECT_EQ(ManifestTarget(*u, 0, 1700000000123), "/show/live.json?md5=abc_-&expires=17");
+  EXPECT_EQ(ManifestTarget(*u, 100, 1700000000123), "/show/live.json?md5=abc_-&expires=17&b=17000000001");
+  EXPECT_EQ(ManifestTarget(*u, 100, 1700000000199), ManifestTarget(*u, 100, 1700000000100));  // one bucket
+  EXPECT_NE(ManifestTarget(*u, 100, 1700000000200), ManifestTarget(*u, 100, 1700000000199));  // the next
+  auto plain = ParseBroadcastUrl("http://edge/show/");
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(ManifestTarget(*plain, 250, 1000), "/show/live.json?b=4");
 }
 
 LiveManifest MakeManifest(std::vector<std::pair<uint64_t, int>> segs, bool last_open, int64_t published) {

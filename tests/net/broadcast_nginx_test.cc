@@ -1,7 +1,8 @@
 // The shipped nginx origin + edge configuration (config/nginx/, started by
 // scripts/broadcast.sh; docs/broadcast.md §5–6) on free loopback ports:
 // concurrent misses make one origin request, content types, cache headers
-// and CORS for browsers, the manifest is never served stale, and a private
+// and CORS for browsers, the manifest is never served older than a player's
+// cache bucket (one origin request per bucket, not per poll), and a private
 // broadcast answers 403 to a missing, wrong or expired signature without
 // asking the origin.
 #include <arpa/inet.h>
@@ -208,6 +209,40 @@ TEST_F(Broadcast, TheManifestIsNeverServedStale) {
   EXPECT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 3}\n");
 }
 
+TEST_F(Broadcast, TheManifestIsCachedOncePerBucketAndNoLonger) {
+  Start("");
+  if (IsSkipped()) return;
+  // Players in one bucket share one origin request.
+  const Response a = Request(edge_, "/show/live.json?b=100");
+  ASSERT_EQ(a.status, 200);
+  EXPECT_EQ(a.body, "{\"n\": 1}\n");
+  EXPECT_EQ(a.Header("cache-control"), "no-cache");  // browsers still never keep it
+  EXPECT_EQ(a.Header("content-type"), "application/json");
+  EXPECT_EQ(a.Header("access-control-allow-origin"), "*");
+  ASSERT_TRUE(WriteStringToFile(dir_ + "/root/show/live.json", "{\"n\": 2}\n").ok());
+  for (int i = 0; i < 5; ++i) {
+    const Response again = Request(edge_, "/show/live.json?b=100");
+    EXPECT_EQ(again.body, "{\"n\": 1}\n");
+    EXPECT_EQ(again.Header("x-cache-status"), "HIT");
+  }
+  EXPECT_EQ(OriginRequests(OriginLog(), "/show/live.json"), 1);
+  // The next bucket asks the origin again and sees the new manifest.
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=101").body, "{\"n\": 2}\n");
+  EXPECT_EQ(OriginRequests(OriginLog(), "/show/live.json"), 2);
+  // A poll without a bucket, or with anything but digits, passes through
+  // and is not cached for later bucket-less polls.
+  ASSERT_TRUE(WriteStringToFile(dir_ + "/root/show/live.json", "{\"n\": 3}\n").ok());
+  EXPECT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 3}\n");
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=x1").body, "{\"n\": 3}\n");
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=" + std::string(17, '9')).body, "{\"n\": 3}\n");
+  ASSERT_TRUE(WriteStringToFile(dir_ + "/root/show/live.json", "{\"n\": 4}\n").ok());
+  EXPECT_EQ(Request(edge_, "/show/live.json").body, "{\"n\": 4}\n");
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=x1").body, "{\"n\": 4}\n");
+  EXPECT_EQ(OriginRequests(OriginLog(), "/show/live.json"), 7);
+  // The bucket's copy stays as it was (the key is the bucket, not the poll).
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=101").body, "{\"n\": 2}\n");
+}
+
 TEST_F(Broadcast, PrivateBroadcastServesOnlySignedUnexpiredUrls) {
   Start("s3cret-viewer-token");
   if (IsSkipped()) return;
@@ -232,6 +267,11 @@ TEST_F(Broadcast, PrivateBroadcastServesOnlySignedUnexpiredUrls) {
   ASSERT_EQ(ok.status, 200);
   EXPECT_TRUE(ok.body == part_);
   EXPECT_EQ(Request(edge_, "/show/live.json" + good).status, 200);
+  // A bucketed poll is checked the same way: no signature, no copy.
+  EXPECT_EQ(Request(edge_, "/show/live.json?b=5").status, 403);
+  EXPECT_EQ(Request(edge_, "/show/live.json" + wrong + "&b=5").status, 403);
+  EXPECT_EQ(Request(edge_, "/show/live.json" + good + "&b=5").status, 200);
+  EXPECT_EQ(Request(edge_, "/show/live.json" + good + "&b=5").Header("x-cache-status"), "HIT");
   // Another viewer's signature shares the cached copy.
   const Response again = Request(edge_, "/show/seg_00000.p0" + Sign("show", "--ttl 900"));
   EXPECT_EQ(again.status, 200);

@@ -330,6 +330,9 @@ TEST(LivePackager, RefusesBadOptionsAndABadManifest) {
   LivePackagerOptions o = Options(dir);
   o.part_us = o.segment_us + 1;
   EXPECT_EQ(LivePackager::Open(o, kBase).status().code(), StatusCode::kInvalidArgument);
+  o = Options(dir);
+  o.cache_bucket_ms = -1;
+  EXPECT_EQ(LivePackager::Open(o, kBase).status().code(), StatusCode::kInvalidArgument);
   ASSERT_TRUE(WriteStringToFile(dir + "/live.json", "{\"format\": \"something else\"}").ok());
   auto p = LivePackager::Open(Options(dir), kBase);
   ASSERT_FALSE(p.ok());

@@ -44,8 +44,19 @@ export class LiveSource {
     this.onStatus(text ? { level, text } : { level: 'ok', text: '' });
   }
 
+  // The manifest's URL: once a manifest names its cache bucket, polls carry
+  // b = floor(Unix ms / cache_bucket_ms), so an edge keeps one copy per
+  // bucket for all its viewers (docs/broadcast.md §4).
+  manifestUrl(nowMs = Date.now()) {
+    const bucket = this.manifest && this.manifest.cache_bucket_ms;
+    if (!Number.isInteger(bucket) || bucket <= 0 || bucket > 60000) return this.url.href;
+    const u = new URL(this.url.href);
+    u.searchParams.set('b', String(Math.floor(nowMs / bucket)));
+    return u.href;
+  }
+
   async fetchManifest() {
-    const res = await this.fetchWithTimeout(this.url.href, 4000, { cache: 'no-store' });
+    const res = await this.fetchWithTimeout(this.manifestUrl(), 4000, { cache: 'no-store' });
     if (!res.ok) throw new Error(`live.json: HTTP ${res.status}`);
     const m = JSON.parse(new TextDecoder().decode(res.body));
     if (m.format !== 'holoport-live') throw new Error('live.json: not a holoport-live manifest');

@@ -38,11 +38,12 @@ function record(type, timeUs) {
 
 // The scripted edge: segments {number, parts: count, complete}; parts named
 // in `missing` answer 404, in `damaged` a corrupt record.
-const edge = { segments: [], missing: new Set(), damaged: new Set(), requests: [], frozen: false };
+const edge = { segments: [], missing: new Set(), damaged: new Set(), requests: [], urls: [], frozen: false, bucketMs: undefined };
 const name = (n, p) => `seg_${String(n).padStart(5, '0')}.p${p}`;
 function manifest() {
   return {
     format: 'holoport-live', version: 1, availability_start_unix_us: 0, update_interval_ms: 100, ended: false,
+    cache_bucket_ms: edge.bucketMs,
     segments: edge.segments.map((s) => ({
       number: s.number, complete: s.complete, discontinuity: false,
       parts: Array.from({ length: s.parts }, (_, p) => ({ name: name(s.number, p) })),
@@ -52,6 +53,7 @@ function manifest() {
 async function fakeFetch(url) {
   const path = new URL(url).pathname.split('/').pop();
   edge.requests.push(path);
+  edge.urls.push(url);
   const reply = (status, bytes) => ({ ok: status === 200, status, arrayBuffer: async () => bytes.buffer });
   if (path === 'live.json') return reply(200, new TextEncoder().encode(JSON.stringify(manifest())));
   const m = /^seg_(\d+)\.p(\d+)$/.exec(path);
@@ -99,6 +101,29 @@ check(got[got.length - 1] === 'seg_00008.p1' && statuses[statuses.length - 1] ==
 const order = got.map((g) => g.slice(4)).join(' ');
 console.log(`fetched in order: ${order}`);
 live.stop();
+
+// The manifest's cache bucket: the first poll carries none (the manifest names
+// it), later polls b = floor(now / bucket), the signature kept; a bucket out of
+// range is ignored.
+edge.bucketMs = 100;
+edge.urls.length = 0;
+const signed = new LiveSource('http://edge.test/b/live.json?md5=aB-_9&expires=17', {
+  fetchImpl: fakeFetch, onMessages: () => {}, onStatus: () => {},
+});
+await signed.fetchManifest();
+const before = Date.now();
+await signed.fetchManifest();
+const after = Date.now();
+const first = new URL(edge.urls[0]), second = new URL(edge.urls[1]);
+check(!first.searchParams.has('b') && first.searchParams.get('md5') === 'aB-_9', `first poll without a bucket (${edge.urls[0]})`);
+const b = Number(second.searchParams.get('b'));
+check(b >= Math.floor(before / 100) && b <= Math.floor(after / 100), `later polls carry the bucket (${edge.urls[1]})`);
+check(second.searchParams.get('md5') === 'aB-_9' && second.searchParams.get('expires') === '17', 'the signature is kept');
+check(second.pathname === '/b/live.json', 'same manifest path');
+signed.manifest.cache_bucket_ms = 0;
+check(!new URL(signed.manifestUrl()).searchParams.has('b'), 'no bucket when the manifest names none');
+signed.manifest.cache_bucket_ms = 1e9;
+check(!new URL(signed.manifestUrl()).searchParams.has('b'), 'a bucket out of range is ignored');
 if (failures) {
   console.log(`${failures} failure(s)`);
   process.exit(1);
