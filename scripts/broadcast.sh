@@ -111,7 +111,9 @@ case "$cmd" in
     for _ in $(seq 50); do
       alive=0
       for d in "$run"/origin "$run"/edge*; do
-        [[ -f "$d/nginx.pid" ]] && kill -0 "$(cat "$d/nginx.pid")" 2> /dev/null && alive=1
+        # (a master removes its pid file as it leaves: read it once, quietly)
+        pid="$(cat "$d/nginx.pid" 2> /dev/null || true)"
+        [[ -n "$pid" ]] && kill -0 "$pid" 2> /dev/null && alive=1
       done
       ((alive)) || break
       sleep 0.1
