@@ -1,5 +1,9 @@
 // The browser viewer in a real browser (headless Chromium through
-// puppeteer-core), against a local live broadcast (live_server.mjs).
+// puppeteer-core), against a local live broadcast: live_server.mjs as the
+// origin and an nginx edge with the shipped configuration in front of it
+// (scripts/broadcast.sh start --no-origin), so the page gets what a viewer
+// gets from an edge: its caching (live.json per cache bucket), CORS headers
+// and lock behaviour.
 //
 //   playback: plays ≥ 5 s from the live edge, freezes a frame, screenshots it
 //             from a fixed camera and compares with the native renderer's
@@ -13,7 +17,9 @@
 // Exit 0 pass, 1 fail, 77 Chromium cannot start (the reason printed).
 
 import { spawn, execFileSync } from 'node:child_process';
-import { readFileSync, writeFileSync, mkdirSync, statSync } from 'node:fs';
+import { readFileSync, writeFileSync, mkdirSync, mkdtempSync, rmSync, statSync } from 'node:fs';
+import { createServer } from 'node:net';
+import { tmpdir } from 'node:os';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import puppeteer from 'puppeteer-core';
@@ -76,7 +82,37 @@ const urls = await new Promise((resolve, reject) => {
   });
   server.on('exit', (code) => reject(new Error(`live_server exited ${code}`)));
 });
-console.log(`broadcast ${urls.broadcast}, page ${urls.page}`);
+
+// ---- an nginx edge in front of it
+const broadcastSh = join(here, '..', '..', 'scripts', 'broadcast.sh');
+const edgeRun = mkdtempSync(join(tmpdir(), 'holoport-web-edge-'));
+function stopEdge() {
+  try {
+    execFileSync(broadcastSh, ['stop', '--run', edgeRun], { stdio: 'ignore' });
+  } catch { /* already gone */ }
+  rmSync(edgeRun, { recursive: true, force: true });
+}
+const freePort = () => new Promise((resolve, reject) => {
+  const s = createServer();
+  s.on('error', reject);
+  s.listen(0, '127.0.0.1', () => {
+    const { port } = s.address();
+    s.close(() => resolve(port));
+  });
+});
+let edgeUrl;
+try {
+  const edgePort = await freePort();
+  execFileSync(broadcastSh, ['start', '--no-origin', '--run', edgeRun, '--root', edgeRun, '--origin-port',
+    new URL(urls.broadcast).port, '--edges', '1', '--edge-port', String(edgePort)], { stdio: ['ignore', 'inherit', 'inherit'] });
+  edgeUrl = `http://127.0.0.1:${edgePort}/live/live.json`;
+} catch (e) {
+  console.log(`FAIL: the nginx edge did not start (scripts/setup.sh installs nginx-light): ${e.message.split('\n')[0]}`);
+  server.kill();
+  stopEdge();
+  process.exit(1);
+}
+console.log(`broadcast ${urls.broadcast} (origin) through the edge ${edgeUrl}, page ${urls.page}`);
 
 let browser;
 try {
@@ -91,6 +127,7 @@ try {
 } catch (e) {
   console.log(`SKIP: Chromium cannot start (${chromium}): ${e.message.split('\n')[0]}`);
   server.kill();
+  stopEdge();
   process.exit(77);
 }
 
@@ -102,7 +139,7 @@ try {
   page.on('pageerror', (e) => { console.log(`page error: ${e.message}`); failures++; });
   page.on('request', (r) => requests.push(r.url()));
   const q = new URLSearchParams({
-    src: urls.broadcast, color, hfov: String(HFOV), cam: [...EYE, ...TARGET].join(','),
+    src: edgeUrl, color, hfov: String(HFOV), cam: [...EYE, ...TARGET].join(','),
     overlay: mode === 'playback' ? '0' : '1', stall_ms: mode === 'playback' ? '5000' : '1500', voice: '1',
   });
   const t0 = Date.now();
@@ -214,7 +251,7 @@ try {
       received_bytes: s2.bytes, parts: s2.parts, video_flushes: s2.videoFlushes ?? 0,
     }));
     // Decode time in this browser, rendering stopped: the parts of segment 0.
-    const base = urls.broadcast.replace(/live\.json$/, '');
+    const base = edgeUrl.replace(/live\.json$/, '');
     const bench = await page.evaluate((b) => window.holoport.benchmark([0, 1, 2, 3].map((k) => `${b}seg_00000.p${k}`)), base);
     console.log(JSON.stringify({ figure: 'web_decode_browser', content: 'truth', ...bench }));
     check(psnr.psnr >= 30, `PSNR vs native ${psnr.psnr?.toFixed(2)} dB (person pixels: ${psnr.psnr_person?.toFixed(2)} dB) ≥ 30 dB`);
@@ -245,8 +282,15 @@ try {
   }
   // Only the page's origin and the broadcast's edge were contacted.
   const origins = new Set(requests.filter((u) => u.startsWith('http')).map((u) => new URL(u).origin));
-  const allowed = new Set([new URL(urls.page).origin, new URL(urls.broadcast).origin]);
+  const allowed = new Set([new URL(urls.page).origin, new URL(edgeUrl).origin]);
   check([...origins].every((o) => allowed.has(o)), `requests only to the page and the edge (${[...origins].join(', ')})`);
+  // The manifest went through the edge's cache: polls carried a bucket, and
+  // the edge answered some of them from its copy.
+  const edgeLog = readFileSync(join(edgeRun, 'edge0', 'access.log'), 'utf8').split('\n');
+  const bucketed = edgeLog.filter((l) => /GET \/live\/live\.json\?b=\d+ /.test(l));
+  check(bucketed.length > 0, `manifest polls carry a cache bucket (${bucketed.length} at the edge)`);
+  const partHits = edgeLog.filter((l) => /GET \/live\/seg_\d+\.p\d+ .* 200 .* (MISS|HIT)$/.test(l)).length;
+  check(partHits > 0, `parts came through the edge's cache (${partHits})`);
   exitCode = failures ? 1 : 0;
 } catch (e) {
   console.log(`FAIL: ${e.stack || e}`);
@@ -254,6 +298,7 @@ try {
 } finally {
   await browser.close();
   server.kill();
+  stopEdge();
 }
 console.log(exitCode ? `${mode}: FAILED` : `${mode}: passed`);
 writeFileSync(join(outDir, `${mode}.done`), String(exitCode));

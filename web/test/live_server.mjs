@@ -177,7 +177,8 @@ function manifest() {
   return {
     format: 'holoport-live', version: 1, source: `recording:${recordingPath}`,
     availability_start_unix_us: availabilityStartUs, published_unix_us: Date.now() * 1000,
-    target_segment_us: segmentUs, target_part_us: partUs, update_interval_ms: partUs / 1000, max_age_ms: 1000,
+    target_segment_us: segmentUs, target_part_us: partUs, update_interval_ms: partUs / 1000, max_age_ms: 100,
+    cache_bucket_ms: 100,
     window_segments: 10, keep_extra_segments: 3, ended: false,
     next_segment: numbers.length ? numbers[numbers.length - 1] + 1 : 0, segments,
   };
