@@ -34,12 +34,25 @@ const state = {
 };
 window.holoport = {
   state,
-  // Stop at frame k (the first frame ≥ k) and keep showing it.
+  // Stop at frame k (the first frame ≥ k whose colour can be decoded) and
+  // keep showing it.
   freezeAt(k) {
     freezeAt = k;
+    keepEveryPicture();
   },
 };
 let freezeAt = params.get('freeze') === null ? null : Number(params.get('freeze'));
+// A still needs its frame's colour: its V1 streams never leave pictures
+// undecoded to catch up (VideoColorStream's maxInDecoderMs), and the still
+// waits for a frame every stream can decode (after a key frame, where one
+// had caught up).
+function keepEveryPicture() {
+  for (const v of videoStreams.values()) v.maxInDecoderMs = Infinity;
+}
+function videoColourDecodable() {
+  for (const v of videoStreams.values()) if (!v.synced) return false;
+  return true;
+}
 
 const overlayEl = document.getElementById('overlay');
 const statusEl = document.getElementById('status');
@@ -130,7 +143,9 @@ const decodeJpegWebCodecs = async (bytes) => {
 // (pod id → VideoColorStream, made on first use).
 function decodeVideoFrame(streams, cf) {
   return Promise.all(cf.images.map((im) => {
-    if (!streams.has(im.podId)) streams.set(im.podId, new VideoColorStream());
+    if (!streams.has(im.podId)) {
+      streams.set(im.podId, new VideoColorStream(freezeAt !== null ? { maxInDecoderMs: Infinity } : {}));
+    }
     return streams.get(im.podId).decode(im.data);
   }));
 }
@@ -197,6 +212,12 @@ window.holoport.benchmark = async (urls) => {
 const decodeJpeg = globalThis.ImageDecoder ? decodeJpegWebCodecs : decodeJpegBitmap;
 
 let rig = null;
+let rigPayload = null;  // the bytes of the rig in effect
+function sameBytes(a, b) {
+  if (a.length !== b.length) return false;
+  for (let i = 0; i < a.length; ++i) if (a[i] !== b[i]) return false;
+  return true;
+}
 const pending = [];      // messages not yet due: {timeUs, header, payload}
 let delayUs = null;      // playhead = (now − availability start) − delayUs
 let availStartUs = 0;
@@ -271,7 +292,12 @@ async function handle(m) {
     // A still keeps its rig: each segment starts with the Rig again, and
     // setting it drops the pods' images until the next colour frame.
     if (state.frozen) return;
+    // The same rig again (every segment repeats it): nothing changes. Setting
+    // it would drop the pods' images every 2 s, and a person whose colour
+    // comes less often than that was drawn uncoloured most of the time.
+    if (rig && rigPayload && sameBytes(rigPayload, m.payload)) return;
     rig = parseRig(m.payload);
+    rigPayload = m.payload.slice();
     person.setRig(rig);
   } else if (t === MSG.MESH) {
     if (state.frozen) return;
@@ -284,7 +310,7 @@ async function handle(m) {
     newestShownUs = m.timeUs;
     state.mediaUs = m.timeUs;
     frameTimes.push(performance.now());
-    if (freezeAt !== null && mf.frameIndex >= freezeAt) {
+    if (freezeAt !== null && mf.frameIndex >= freezeAt && videoColourDecodable()) {
       state.frozen = true;
       state.frozenFrame = mf.frameIndex;
       // A still: nothing more is fetched (its colour frame is already due).

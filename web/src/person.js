@@ -246,6 +246,21 @@ function maskWeighted(img, out, o = OPTIONS) {
   }
 }
 
+// What to do with the pods' colour images of frame `imagesFrame` when the
+// mesh shown is `meshFrame` and the images shown (if any) are of
+// `shownFrame` (-1: none): 'apply' them to the mesh shown, 'hold' them for
+// their own mesh (they came first), or 'drop' them (older than what is shown).
+// Colour of an older mesh is applied: a live stream's video colour decodes
+// slower than its geometry (8 pods of V1: ~110 ms a frame in Chromium here),
+// so a rule of exact frames only would never colour a person who gets a new
+// mesh every frame; the newest colour there is beats none, as the native
+// viewer keeps its last images for a mesh whose colour has not come.
+export function colourAction(meshFrame, imagesFrame, shownFrame) {
+  if (imagesFrame === meshFrame) return 'apply';
+  if (imagesFrame > meshFrame) return 'hold';
+  return imagesFrame > shownFrame ? 'apply' : 'drop';
+}
+
 export class PersonRenderer {
   constructor(parent, mode) {
     this.mode = mode === 'vertex' ? 'vertex' : 'projective';
@@ -380,24 +395,30 @@ export class PersonRenderer {
     this.mesh.visible = true;
     this.visibilityDirty = true;
     this.onChange();
-    // Colour images of this frame that came first.
-    if (this.pendingImages && this.pendingImages.frameIndex === frameIndex) this.applyImages(this.pendingImages);
-    else if (this.pendingImages && this.pendingImages.frameIndex < frameIndex) this.pendingImages = null;
+    // Colour images of this frame (or of a frame this mesh replaced) that came first.
+    if (this.pendingImages) {
+      const action = colourAction(frameIndex, this.pendingImages.frameIndex, this.shownImagesFrame());
+      if (action === 'apply') this.applyImages(this.pendingImages);
+      else if (action === 'drop') this.pendingImages = null;
+    }
   }
 
   // Decoded colour images of frame `frameIndex` (one per pod id).
   setPodImages(frameIndex, podIds, images) {
     if (this.mode !== 'projective' || !this.pods) return;
     const set = { frameIndex, podIds, images };
-    // Images belong to their mesh: hold them until that frame is shown.
-    if (frameIndex !== this.frameIndex) {
-      if (frameIndex > this.frameIndex) this.pendingImages = set;
-      return;
-    }
-    this.applyImages(set);
+    // Images belong to their mesh: held until that frame is shown, or shown
+    // on a newer mesh when theirs has already been replaced (colourAction).
+    const action = colourAction(this.frameIndex, frameIndex, this.shownImagesFrame());
+    if (action === 'hold') this.pendingImages = set;
+    else if (action === 'apply') this.applyImages(set);
   }
 
-  applyImages({ podIds, images }) {
+  shownImagesFrame() {
+    return this.haveImages ? this.imagesFrame : -1;
+  }
+
+  applyImages({ frameIndex, podIds, images }) {
     const n = this.pods.length, w = this.arrayW, h = this.arrayH;
     for (let i = 0; i < n; ++i) {
       const k = podIds.indexOf(this.pods[i].id);
@@ -418,9 +439,9 @@ export class PersonRenderer {
     }
     this.colorTex.needsUpdate = true;
     this.haveImages = true;
-    this.imagesFrame = this.frameIndex;
+    this.imagesFrame = frameIndex;
     this.onChange();
-    this.pendingImages = null;
+    if (this.pendingImages && this.pendingImages.frameIndex <= frameIndex) this.pendingImages = null;
   }
 
   // The pods' depth maps and discontinuity flags for the current mesh.

@@ -196,6 +196,26 @@ export function h264CodecString(annexB) {
   return fail('v1.video: the keyframe has no sequence parameter set');
 }
 
+// A picture is read back unless more than this many newer blobs of its
+// stream were handed over before it came out: the viewer is then behind and
+// catches up. (The rule was "any newer blob": a live stream hands over a blob
+// every 33 ms while eight pods' pictures take longer to come out, so nearly
+// every picture was skipped and a live G3 + V1 broadcast showed a grey
+// person; a still or a test that waits for each picture never saw it.)
+export const SKIP_BEHIND = 2;
+
+// How long a picture may stay inside the decoder: a delta frame that finds
+// an older one still inside is not decoded, nor are the next ones up to a
+// key frame (they need it), and the decoder is flushed so that the pictures
+// inside come out at once. (Age, not a count: a join or a catch-up hands a
+// burst of pictures over at once, which a count would take for falling
+// behind, leaving a still without its colour.) A machine that decodes slower than the stream comes thus shows
+// colour a few frames late, refreshed after every key frame, instead of
+// queueing without end (measured: headless Chromium rendering on 2 cores
+// decoded ~37 pictures a second, eight pods at 30 fps hand over 240; the
+// colour was 4.4 s behind the geometry and growing).
+export const MAX_IN_DECODER_MS = 1000;
+
 // How long a handed-over picture may stay inside the decoder, with nothing
 // newer after it, before the decoder is flushed (a 30 fps stream hands over
 // a picture every 33 ms; a still or a stalled edge hands over none).
@@ -207,11 +227,14 @@ const HOLD_MS = 1000;
 // caller waits) and resolves to {width, height, rgba, box} as decodeColor
 // does (alpha = the mask, background 0); to null while the stream waits for
 // a keyframe (joined mid-stream, a gap, or an error); or to {skipped: true}
-// when a newer blob of the stream was handed over before this one's
-// picture came out: it is decoded (the next one needs it) but not read
-// back, so a viewer that falls behind catches up instead of queueing more.
+// when more than SKIP_BEHIND newer blobs of the stream were handed over
+// before this one's picture came out: it is decoded (the next one needs it)
+// but not read back, so a viewer that falls behind catches up instead of
+// queueing more.
 export class VideoColorStream {
-  constructor() {
+  constructor({ skipBehind = SKIP_BEHIND, maxInDecoderMs = MAX_IN_DECODER_MS } = {}) {
+    this.skipBehind = skipBehind;
+    this.maxInDecoderMs = maxInDecoderMs;
     this.decoder = null;
     this.config = '';
     this.synced = false;
@@ -220,6 +243,7 @@ export class VideoColorStream {
     this.waiting = [];  // {ts, decoder, resolve, reject} of the pictures handed over, in order
     this.handed = 0;    // pictures handed to the decoder so far
     this.flushes = 0;   // pictures flushed out after HOLD_MS (see decode)
+    this.dropped = 0;   // delta frames not decoded because the decoder was behind (MAX_IN_DECODER_MS)
   }
 
   close() {
@@ -249,12 +273,22 @@ export class VideoColorStream {
       this.synced = false;
       return Promise.resolve(null);
     }
+    const now = performance.now();
+    // Behind: a picture handed over long ago still inside with newer ones
+    // after it (one picture alone may simply wait for more input, see below).
+    if (!info.keyframe && this.waiting.length > 1 && now - this.waiting[0].t > this.maxInDecoderMs) {
+      this.synced = false;
+      this.dropped++;
+      const behind = this.decoder;
+      behind.flush().catch(() => {}).finally(() => this._settle(behind, null));
+      return Promise.resolve(null);
+    }
     // Pictures are matched to their blobs by timestamp (the count of
     // pictures handed over), not by order: a picture the decoder never
     // returns must not shift every later one onto the wrong frame.
     const seq = ++this.handed;
     const decoder = this.decoder;
-    const picture = new Promise((resolve, reject) => this.waiting.push({ ts: seq, decoder, resolve, reject }));
+    const picture = new Promise((resolve, reject) => this.waiting.push({ ts: seq, t: now, decoder, resolve, reject }));
     try {
       this.decoder.decode(new EncodedVideoChunk({ type: info.keyframe ? 'key' : 'delta', timestamp: seq,
         data: info.video }));
@@ -282,7 +316,7 @@ export class VideoColorStream {
     return picture.then(async (frame) => {
       if (!frame) return { skipped: true };  // the decoder returned no picture for it
       try {
-        if (seq !== this.handed) return { skipped: true };
+        if (this.handed - seq > this.skipBehind) return { skipped: true };
         const W = info.width, H = info.height;
         return { width: W, height: H, rgba: await frameToRgba(frame, W, H, info.window, mask), box: { ...info.window } };
       } finally {

@@ -7,6 +7,7 @@
 
 import { LiveSource } from '../src/live.js';
 import { crc32c } from '../src/bytes.js';
+import { colourAction } from '../src/person.js';
 
 let failures = 0;
 function check(cond, what) {
@@ -124,6 +125,23 @@ signed.manifest.cache_bucket_ms = 0;
 check(!new URL(signed.manifestUrl()).searchParams.has('b'), 'no bucket when the manifest names none');
 signed.manifest.cache_bucket_ms = 1e9;
 check(!new URL(signed.manifestUrl()).searchParams.has('b'), 'a bucket out of range is ignored');
+
+// Colour paired with meshes (person.js): exact frames are applied, colour
+// ahead of its mesh is held, colour of a replaced mesh is applied when newer
+// than what is shown — a live V1 stream decodes colour a few frames behind
+// its geometry, and the person must not stay uncoloured (it did: a G3 + V1
+// broadcast showed a grey person in Chromium).
+check(colourAction(10, 10, -1) === 'apply' && colourAction(10, 10, 9) === 'apply', 'exact frame applied');
+check(colourAction(10, 12, 9) === 'hold', 'colour ahead of its mesh is held');
+check(colourAction(13, 10, -1) === 'apply', 'lagging colour applied when nothing is shown');
+check(colourAction(13, 11, 10) === 'apply', 'lagging colour applied when newer than the shown');
+check(colourAction(13, 9, 10) === 'drop', 'colour older than the shown is dropped');
+let shown = -1, applied = 0;
+for (let mesh = 0; mesh < 30; ++mesh) {  // colour 3 frames behind the geometry
+  const img = mesh - 3;
+  if (img >= 0 && colourAction(mesh, img, shown) === 'apply') { shown = img; applied++; }
+}
+check(applied === 27 && shown === 26, `a person whose colour lags 3 frames is coloured every frame (${applied} of 27)`);
 if (failures) {
   console.log(`${failures} failure(s)`);
   process.exit(1);
