@@ -205,15 +205,16 @@ export function h264CodecString(annexB) {
 export const SKIP_BEHIND = 2;
 
 // How long a picture may stay inside the decoder: a delta frame that finds
-// an older one still inside is not decoded, nor are the next ones up to a
-// key frame (they need it), and the decoder is flushed so that the pictures
-// inside come out at once. (Age, not a count: a join or a catch-up hands a
-// burst of pictures over at once, which a count would take for falling
-// behind, leaving a still without its colour.) A machine that decodes slower than the stream comes thus shows
-// colour a few frames late, refreshed after every key frame, instead of
-// queueing without end (measured: headless Chromium rendering on 2 cores
-// decoded ~37 pictures a second, eight pods at 30 fps hand over 240; the
-// colour was 4.4 s behind the geometry and growing).
+// an older one still inside (with newer ones after it) is not decoded, nor
+// are the next ones up to a key frame (they need it), and the decoder is
+// flushed so that the pictures inside come out at once. A machine that
+// decodes slower than the stream comes thus shows colour at most about this
+// long plus a key-frame interval late, refreshed after every key frame,
+// instead of queueing without end (measured: headless Chromium rendering on
+// 2 cores decoded ~37 pictures a second where eight pods at 30 fps hand over
+// 240; the colour was 4.4 s behind the geometry and growing). Age, not a
+// count: a join or a catch-up hands a burst of pictures over at once, which
+// a count took for falling behind (a still then lost its colour).
 export const MAX_IN_DECODER_MS = 1000;
 
 // How long a handed-over picture may stay inside the decoder, with nothing
@@ -240,7 +241,7 @@ export class VideoColorStream {
     this.synced = false;
     this.lastFrame = 0;
     this.size = '';     // the stream's image and picture sizes (a delta frame must keep them)
-    this.waiting = [];  // {ts, decoder, resolve, reject} of the pictures handed over, in order
+    this.waiting = [];  // {ts, t (handed at, ms), decoder, resolve, reject} of the pictures handed over, in order
     this.handed = 0;    // pictures handed to the decoder so far
     this.flushes = 0;   // pictures flushed out after HOLD_MS (see decode)
     this.dropped = 0;   // delta frames not decoded because the decoder was behind (MAX_IN_DECODER_MS)
