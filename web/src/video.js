@@ -280,8 +280,11 @@ export class VideoColorStream {
     if (!info.keyframe && this.waiting.length > 1 && now - this.waiting[0].t > this.maxInDecoderMs) {
       this.synced = false;
       this.dropped++;
-      const behind = this.decoder;
-      behind.flush().catch(() => {}).finally(() => this._settle(behind, null));
+      // Only the pictures inside now: a key frame may be handed to the same
+      // decoder before the flush returns, and its pictures must not be
+      // settled as lost with these (they were: a still lost its colour).
+      const behind = this.decoder, upTo = this.handed + 1;
+      behind.flush().catch(() => {}).finally(() => this._settle(behind, upTo));
       return Promise.resolve(null);
     }
     // Pictures are matched to their blobs by timestamp (the count of
@@ -311,7 +314,7 @@ export class VideoColorStream {
       if (!this.waiting.some((w) => w.ts === seq)) return;
       this.synced = false;
       this.flushes++;
-      decoder.flush().catch(() => {}).finally(() => this._settle(decoder, null));
+      decoder.flush().catch(() => {}).finally(() => this._settle(decoder, seq + 1));
     }, HOLD_MS);
     picture.finally(() => clearTimeout(timer)).catch(() => {});
     return picture.then(async (frame) => {
