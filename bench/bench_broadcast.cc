@@ -361,7 +361,6 @@ class LightViewer : public std::enable_shared_from_this<LightViewer> {
 
 struct LogCounts {
   std::map<std::string, int> by_kind;  // "part", "manifest", "segment", "other"
-  std::set<std::string> parts;         // distinct part names
   int hits = 0, total = 0;                  // parts
   int manifest_hits = 0, manifest_total = 0;  // live.json
 };
@@ -384,7 +383,6 @@ LogCounts CountLog(const std::string& path, double t0, double t1) {
     else if (req.find(".hrec") != std::string::npos) kind = "segment";
     else if (req.find("/seg_") != std::string::npos) kind = "part";
     c.by_kind[kind] += 1;
-    if (kind == "part") c.parts.insert(req);
     const std::string status = line.substr(line.rfind(' ') + 1);
     if (kind == "part") {
       c.total += 1;
@@ -539,7 +537,7 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
   // The packager's manifest, read every 250 ms through the window: which
   // parts it published when (name → available_unix_us).
   std::map<std::string, int64_t> published;
-  auto segments_now = [&]() -> int64_t {
+  auto read_manifest = [&]() -> int64_t {  // records its parts in `published`; the newest segment's number
     auto text = std::ifstream(dir + "/root/show/live.json");
     std::stringstream ss;
     ss << text.rdbuf();
@@ -549,16 +547,16 @@ int RunBroadcast(const BenchArgs& args, const BroadcastOptions& o) {
       for (const auto& p : seg.parts) published.emplace(p.name, p.available_unix_us);
     return static_cast<int64_t>(m->segments.back().number);
   };
-  const int64_t seg0 = segments_now();
+  const int64_t seg0 = read_manifest();
   const double t0 = WallS();
   measuring = true;
   while (WallS() < t0 + o.seconds) {
     std::this_thread::sleep_for(std::chrono::milliseconds(250));
-    segments_now();
+    read_manifest();
   }
   measuring = false;
   const double t1 = WallS();
-  const int64_t seg1 = segments_now();
+  const int64_t seg1 = read_manifest();
   std::vector<double> edge_cpu;
   for (size_t i = 0; i < edge_masters.size(); ++i) edge_cpu.push_back(NginxCpuMs(edge_masters[i]) - edge_cpu0[i]);
   const double origin_cpu = NginxCpuMs(origin_master) - origin_cpu0, site_cpu = CpuMsOf(site_pid) - site_cpu0,

@@ -295,7 +295,7 @@ async function handle(m) {
     // The same rig again (every segment repeats it): nothing changes. Setting
     // it would drop the pods' images every 2 s, and a person whose colour
     // comes less often than that was drawn uncoloured most of the time.
-    if (rig && rigPayload && sameBytes(rigPayload, m.payload)) return;
+    if (rigPayload && sameBytes(rigPayload, m.payload)) return;
     rig = parseRig(m.payload);
     rigPayload = m.payload.slice();
     person.setRig(rig);
