@@ -469,10 +469,7 @@ void BroadcastPlayer::Run() {
   };
   while (!stop_) {
     if (SteadyMs() >= next_manifest_ms) {
-      const int64_t unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                                  std::chrono::system_clock::now().time_since_epoch())
-                                  .count();
-      auto r = http.Get(ManifestTarget(url_, bucket_ms, unix_ms), 16u << 20);
+      auto r = http.Get(ManifestTarget(url_, bucket_ms, WallUs() / 1000), 16u << 20);
       next_manifest_ms = SteadyMs() + interval_ms;
       if (!r.ok()) {
         error(r.status().message(), &BroadcastPlayerStats::http_errors);
