@@ -78,6 +78,7 @@ struct ClientBenchOptions {
   int video_frames = 30;                         // stream part, fused: frames of V1 video before the measured one (0: no V1)
   std::string video_crfs = "24,30";              // stream part: the full layer's V1 CRFs to measure
   std::string video_preset;                      // stream part: V1's encoder preset ("": SitePublisher's)
+  std::string video_chroma;                      // stream part: V1's chroma, 444 or 420 ("": SitePublisher's)
 };
 
 holo::CameraModel OrbitCamera(int width, int height, float azimuth_deg, float radius) {
@@ -729,6 +730,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
         return 2;
       }
       if (!options.video_preset.empty()) vp.video.preset = options.video_preset;
+      if (!options.video_chroma.empty()) vp.video.chroma_444 = options.video_chroma == "444";
       if (holo::Status s = vp.video.Check(); !s.ok()) return Fail(s);
       for (int layer = 0; layer < 2; ++layer) {
         const holo::net::LayerEncodeOptions lo = holo::net::EncodeOptionsOfLayer(vp, layer);
@@ -963,6 +965,8 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--video-preset", o->video_preset,
                  "stream part: V1's encoder preset (x264: ultrafast..veryslow; default: the live server's)");
+  app.add_option("--video-chroma", o->video_chroma, "stream part: V1's chroma, 444 or 420 (default: the live server's)")
+      ->check(CLI::IsMember({"444", "420"}));
   return [o](const holo::bench::BenchArgs& args) { return RunClientBench(args, *o); };
 }
 

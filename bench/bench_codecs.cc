@@ -34,7 +34,8 @@
 // `repeat_crossing_fraction`, `crossing_shift_mm` p50/p90 and
 // `crossing_within_step_fraction`.
 //
-// (--hash prints a hash of every geometry blob of the first repeat to stderr;
+// (--hash prints a hash of every geometry blob, and of every V1 blob and its
+// decoded picture, of the first repeat to stderr;
 // --peer-jpeg-quality sets the jpeg-box peer's TurboJPEG quality, default 90.)
 //
 // Times are medians over frames × repeats, wall (`encode_ms`) and thread CPU
@@ -1241,6 +1242,17 @@ int RunCodecs(const BenchArgs& args, const CodecsOptions& co) {
           dec += t2 - t1;
           enc_cpu += c1 - c0;
           dec_cpu += c2 - c1;
+          if (print_hash && rep == 0) {  // the blob and the decoded picture: a speed-up must leave both identical
+            uint64_t hb = 1469598103934665603ull, hi = hb;
+            for (uint8_t b : blob) hb = (hb ^ b) * 1099511628211ull;
+            const ImageRgb8& im = decoders[p]->image();
+            for (int y = 0; y < im.height(); ++y) {
+              const uint8_t* r = im.row(y);
+              for (int x = 0; x < im.width() * 3; ++x) hi = (hi ^ r[x]) * 1099511628211ull;
+            }
+            std::fprintf(stderr, "HASH %s pod %zu %zu %016llx %016llx\n", run.label.c_str(), p, blob.size(),
+                         static_cast<unsigned long long>(hb), static_cast<unsigned long long>(hi));
+          }
           if (rep == 0) {
             psnr += ForegroundPsnr(pod, decoders[p]->image()) / static_cast<double>(in.pods.size());
             auto info = protocol::ParseVideoBlob(blob);
@@ -1407,7 +1419,9 @@ BenchFn SetupCodecs(CLI::App& app) {
       ->capture_default_str();
   app.add_flag("--synthetic", co->synthetic, "workload synthetic-sphere (a noisy blob) instead of the studio");
   app.add_option("--only", co->only, "only these codecs, comma-separated (e.g. G1,C1)");
-  app.add_flag("--hash", co->hash, "print a hash of every geometry blob of the first repeat to stderr");
+  app.add_flag("--hash", co->hash,
+               "print a hash of every geometry blob, and of every V1 blob and its decoded picture, of the first "
+               "repeat to stderr");
   app.add_option("--chroma-shift", co->chroma_shift, "G1 vertex colour quantization shift");
   app.add_option("--jpeg-quality", co->jpeg_quality, "C1 JPEG quality 1..100")->check(CLI::Range(1, 100));
   app.add_flag("--chroma444", co->chroma444, "C1 4:4:4 chroma");

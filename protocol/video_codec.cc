@@ -17,6 +17,7 @@ extern "C" {
 }
 
 #include "protocol/byte_io.h"
+#include "protocol/ycc.h"
 
 namespace holo::protocol {
 namespace {
@@ -302,6 +303,35 @@ void CodeBlockTypes(int bw, int bh, std::vector<uint8_t>* types, Coder&& code) {
   }
 }
 
+// One row of a block: whether it holds any foreground and whether it is all
+// foreground, eight mask bytes at a time where the row is a whole block.
+inline uint64_t Load8(const uint8_t* p) {
+  uint64_t v;
+  std::memcpy(&v, p, 8);
+  return v;
+}
+inline bool HasZeroByte(uint64_t v) { return ((v - 0x0101010101010101ull) & ~v & 0x8080808080808080ull) != 0; }
+inline void ScanBlockRow(const uint8_t* m, int n, bool* any, bool* all) {
+  if (n == kMaskBlock) {
+    const uint64_t a = Load8(m), b = Load8(m + 8);
+    *any = *any || (a | b) != 0;
+    *all = *all && !HasZeroByte(a) && !HasZeroByte(b);
+    return;
+  }
+  for (int x = 0; x < n; ++x) {
+    *any = *any || m[x] != 0;
+    *all = *all && m[x] != 0;
+  }
+}
+
+// The type of the block of `mask` with corner (x0, y0) and size bw × bh:
+// 0 no foreground, 1 all foreground, 2 both.
+inline uint8_t BlockType(const ImageGray8& mask, int x0, int y0, int bw, int bh) {
+  bool any = false, all = true;
+  for (int y = y0; y < y0 + bh && (all || !any); ++y) ScanBlockRow(mask.row(y) + x0, bw, &any, &all);
+  return !any ? 0 : (all ? 1 : 2);
+}
+
 // The type of every 16×16 block of the image in raster order: 0 no
 // foreground, 1 all foreground (every block when there is no mask), 2 both.
 // The encoder classifies once per image: the mask coder and the window's
@@ -312,13 +342,9 @@ void ClassifyMaskBlocks(const ImageGray8& mask, int w, int h, std::vector<uint8_
   if (mask.empty()) return;
   for (int by = 0; by < bh; ++by) {
     for (int bx = 0; bx < bw; ++bx) {
-      int ones = 0, all = 0;
-      for (int y = by * kMaskBlock; y < std::min(h, (by + 1) * kMaskBlock); ++y) {
-        const uint8_t* m = mask.row(y);
-        for (int x = bx * kMaskBlock; x < std::min(w, (bx + 1) * kMaskBlock); ++x) ones += m[x] != 0;
-        all += std::min(w, (bx + 1) * kMaskBlock) - bx * kMaskBlock;
-      }
-      (*types)[size_t(by) * bw + bx] = ones == 0 ? 0 : (ones == all ? 1 : 2);
+      (*types)[size_t(by) * bw + bx] =
+          BlockType(mask, bx * kMaskBlock, by * kMaskBlock, std::min(kMaskBlock, w - bx * kMaskBlock),
+                    std::min(kMaskBlock, h - by * kMaskBlock));
     }
   }
 }
@@ -385,25 +411,8 @@ Status DecodeMaskBlocks(std::span<const uint8_t> data, int w, int h, std::vector
 }
 
 // ------------------------------------------------------------ colour
-// Full-range BT.601 (JPEG) YCbCr, 16-bit fixed point. Both ends are ours, so
-// the range flag in the bitstream is informative only.
-
-inline uint8_t Clamp8(int v) { return static_cast<uint8_t>(v < 0 ? 0 : (v > 255 ? 255 : v)); }
-
-inline void RgbToYcc(const uint8_t* p, uint8_t* y, uint8_t* cb, uint8_t* cr) {
-  const int r = p[0], g = p[1], b = p[2];
-  *y = Clamp8((19595 * r + 38470 * g + 7471 * b + 32768) >> 16);
-  *cb = Clamp8(((-11059 * r - 21709 * g + 32768 * b + 32768) >> 16) + 128);
-  *cr = Clamp8(((32768 * r - 27439 * g - 5329 * b + 32768) >> 16) + 128);
-}
-
-inline void YccToRgb(int y, int cb, int cr, uint8_t* p) {
-  cb -= 128;
-  cr -= 128;
-  p[0] = Clamp8(y + ((91881 * cr + 32768) >> 16));
-  p[1] = Clamp8(y - ((22554 * cb + 46802 * cr - 32768) >> 16));
-  p[2] = Clamp8(y + ((116130 * cb + 32768) >> 16));
-}
+// Full-range BT.601 (JPEG) YCbCr, 16-bit fixed point (protocol/ycc.h). Both
+// ends are ours, so the range flag in the bitstream is informative only.
 
 constexpr int kBlock = 16;
 constexpr uint8_t kFlat = 128;
@@ -420,18 +429,17 @@ void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, const VideoW
     const int bh = std::min(kBlock, h - by);
     for (int bx = 0; bx < w; bx += kBlock) {
       const int bw = std::min(kBlock, w - bx);
-      int fg = 0;
-      if (mask.empty()) {
-        fg = bw * bh;
-      } else {
-        for (int y = by; y < by + bh; ++y) {
-          const uint8_t* m = mask.row(win.y + y) + win.x + bx;
-          for (int x = 0; x < bw; ++x) fg += m[x] != 0;
-        }
-      }
-      if (fg == 0) {
+      const uint8_t type = mask.empty() ? 1 : BlockType(mask, win.x + bx, win.y + by, bw, bh);
+      if (type == 0) {
         for (int c = 0; c < 3; ++c) {
           for (int y = by; y < by + bh; ++y) std::memset(planes[c] + size_t(y) * strides[c] + bx, kFlat, bw);
+        }
+        continue;
+      }
+      if (type == 1) {
+        for (int y = by; y < by + bh; ++y) {
+          RgbToYccRow(image.row(win.y + y) + size_t(win.x + bx) * 3, bw, planes[0] + size_t(y) * strides[0] + bx,
+                      planes[1] + size_t(y) * strides[1] + bx, planes[2] + size_t(y) * strides[2] + bx);
         }
         continue;
       }
@@ -442,10 +450,11 @@ void ConvertAndFill(const ImageRgb8& image, const ImageGray8& mask, const VideoW
         uint8_t* py = planes[0] + size_t(y) * strides[0] + bx;
         uint8_t* pu = planes[1] + size_t(y) * strides[1] + bx;
         uint8_t* pv = planes[2] + size_t(y) * strides[2] + bx;
+        // The whole row converted, then its background overwritten.
+        RgbToYccRow(src, bw, py, pu, pv);
         int first = -1, last = -1;
         for (int x = 0; x < bw; ++x) {
           if (!m || m[x]) {
-            RgbToYcc(src + x * 3, py + x, pu + x, pv + x);
             if (first < 0) first = x;
             last = x;
           } else if (last >= 0) {
@@ -899,6 +908,7 @@ struct VideoDecoder::Impl {
   uint32_t width = 0, height = 0;  // the stream's images
   uint32_t pic_w = 0, pic_h = 0;   // its pictures (the window's size)
   uint32_t last_frame = 0;
+  VideoWindow drawn;  // the window of the picture in image_ (the only part of it that may be non-zero)
   std::vector<uint8_t> rle;
   std::vector<uint8_t> padded;
 };
@@ -1038,7 +1048,26 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
     s.ctx.reset();
     return bad;
   }
-  image_.Resize(static_cast<int>(info.width), static_cast<int>(info.height), 0);
+  // The image keeps its background at 0 without clearing it whole: only the
+  // last picture's window can hold colour, so what of it lies outside this
+  // window is cleared, and this window is written in full (foreground runs
+  // converted, background runs cleared).
+  const int iw = static_cast<int>(info.width), ih = static_cast<int>(info.height);
+  if (image_.width() != iw || image_.height() != ih) {
+    image_.Resize(iw, ih, 0);
+  } else {
+    const VideoWindow& old = s.drawn;
+    for (int y = old.y; y < old.y + old.h; ++y) {
+      uint8_t* row = image_.row(y);
+      if (y < win.y || y >= win.y + win.h) {
+        std::memset(row + size_t(old.x) * 3, 0, size_t(old.w) * 3);
+        continue;
+      }
+      const int left_end = std::min(old.x + old.w, win.x), right_start = std::max(old.x, win.x + win.w);
+      if (left_end > old.x) std::memset(row + size_t(old.x) * 3, 0, size_t(left_end - old.x) * 3);
+      if (old.x + old.w > right_start) std::memset(row + size_t(right_start) * 3, 0, size_t(old.x + old.w - right_start) * 3);
+    }
+  }
   const int shift = chroma ? 0 : 1;
   for (int y = 0; y < win.h; ++y) {
     const uint8_t* m = mask_.row(win.y + y) + win.x;
@@ -1046,10 +1075,16 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
     const uint8_t* pu = f->data[1] + size_t(y >> shift) * f->linesize[1];
     const uint8_t* pv = f->data[2] + size_t(y >> shift) * f->linesize[2];
     uint8_t* dst = image_.row(win.y + y) + size_t(win.x) * 3;
-    for (int x = 0; x < win.w; ++x) {
-      if (m[x]) YccToRgb(py[x], pu[x >> shift], pv[x >> shift], dst + size_t(x) * 3);
+    for (int x = 0; x < win.w;) {
+      const int a = x;
+      while (x < win.w && !m[x]) ++x;
+      std::memset(dst + size_t(a) * 3, 0, size_t(x - a) * 3);
+      const int b = x;
+      while (x < win.w && m[x]) ++x;
+      YccToRgbRow(py, pu, pv, shift, b, x, dst);
     }
   }
+  s.drawn = win;
   av_frame_unref(f);
   s.last_frame = info.frame_number;
   synced_ = true;

@@ -3,7 +3,9 @@
 // after loss), and refusal of malformed, truncated and bit-flipped blobs.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -11,6 +13,7 @@
 #include "protocol/byte_io.h"
 #include "protocol/fuzz_video.h"
 #include "protocol/video_codec.h"
+#include "protocol/ycc.h"
 
 namespace holo::protocol {
 namespace {
@@ -353,6 +356,13 @@ bool Inside(const VideoWindow& win, int x, int y, int side) {
   return x >= win.x && y >= win.y && x + side <= win.x + win.w && y + side <= win.y + win.h;
 }
 
+bool BackgroundIsZero(const ImageRgb8& im, const ImageGray8& mask) {
+  for (int y = 0; y < im.height(); ++y)
+    for (int x = 0; x < im.width(); ++x)
+      if (!mask.at(x, y) && (im.at(x, y, 0) || im.at(x, y, 1) || im.at(x, y, 2))) return false;
+  return true;
+}
+
 TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
   const int w = 320, h = 240;
   auto enc = MakeEncoder({});
@@ -360,11 +370,12 @@ TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
   ImageRgb8 im;
   ImageGray8 mask;
   std::vector<uint8_t> blob;
-  // A 40-pixel square drifts right by 6 pixels a frame: the window holds it,
-  // is much smaller than the image, and moves without keyframes.
+  // A 40-pixel square drifts right by 6 pixels and down by 3 a frame: the
+  // window holds it, is much smaller than the image, and moves without
+  // keyframes.
   std::vector<int> xs;
   for (int t = 0; t < 30; ++t) {
-    const int x = 20 + 6 * t, y = 100;
+    const int x = 20 + 6 * t, y = 60 + 3 * t;
     Square(w, h, x, y, 40, &im, &mask);
     blob.clear();
     ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
@@ -380,10 +391,21 @@ TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
     ASSERT_TRUE(dec.Decode(blob).ok()) << "frame " << t;
     EXPECT_TRUE(dec.mask() == mask);
     EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 35) << "frame " << t;
-    // Nothing outside the mask: the decoded image is 0 there.
-    EXPECT_EQ(dec.image().at(0, 0, 0), 0);
+    // Nothing outside the mask: the decoded image is 0 there, also where
+    // the last window was.
+    EXPECT_TRUE(BackgroundIsZero(dec.image(), mask)) << "frame " << t;
   }
   EXPECT_GT(xs.back(), xs.front() + 100);  // it moved with the square
+  // The square jumps to the other corner: the window jumps with it (a delta
+  // frame), and nothing of the last window's picture stays behind.
+  Square(w, h, 10, 8, 40, &im, &mask);
+  blob.clear();
+  ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
+  ASSERT_TRUE(dec.Decode(blob).ok());
+  EXPECT_FALSE(ParseVideoBlob(blob)->keyframe());
+  EXPECT_TRUE(Inside(enc->window(), 10, 8, 40));
+  EXPECT_TRUE(BackgroundIsZero(dec.image(), mask));
+  EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 30);
   EXPECT_EQ(enc->window_resizes(), 0);
   // The square grows past the window: the encoder starts a keyframe with a
   // larger window, and the decoder follows.
@@ -397,6 +419,7 @@ TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
   EXPECT_TRUE(Inside(info->window, 200, 60, 110));
   ASSERT_TRUE(dec.Decode(blob).ok());
   EXPECT_GT(ForegroundPsnr(dec.image(), im, mask), 35);
+  EXPECT_TRUE(BackgroundIsZero(dec.image(), mask));
   // The foreground vanishes: the window stays, the picture is empty.
   im.Resize(w, h, 0);
   mask.Resize(w, h, 0);
@@ -404,6 +427,7 @@ TEST(VideoCodec, ThePictureIsAWindowThatFollowsTheForeground) {
   ASSERT_TRUE(enc->Encode(im, mask, &blob).ok());
   ASSERT_TRUE(dec.Decode(blob).ok());
   EXPECT_EQ(ParseVideoBlob(blob)->window, info->window);
+  EXPECT_TRUE(BackgroundIsZero(dec.image(), mask));
 }
 
 TEST(VideoCodec, TheWindowCodesTheSameForegroundAsTheWholeImage) {
@@ -430,6 +454,49 @@ TEST(VideoCodec, TheWindowCodesTheSameForegroundAsTheWholeImage) {
     EXPECT_GT(ForegroundPsnr(da.image(), im, mask), 33) << "frame " << t;
     EXPECT_GT(ForegroundPsnr(db.image(), im, mask), 33) << "frame " << t;
   }
+}
+
+// The row conversions (AVX2 where the CPU has it) give the one-pixel
+// formulas' integers for every colour, at every run length and start.
+TEST(VideoCodec, RowConversionsEqualTheOnePixelFormulasForEveryColour) {
+  std::vector<uint8_t> rgb(256 * 3), y(256), cb(256), cr(256), out(256 * 3);
+  for (int r = 0; r < 256; ++r) {
+    for (int g = 0; g < 256; ++g) {
+      for (int b = 0; b < 256; ++b) {
+        rgb[3 * b] = static_cast<uint8_t>(r);
+        rgb[3 * b + 1] = static_cast<uint8_t>(g);
+        rgb[3 * b + 2] = static_cast<uint8_t>(b);
+      }
+      const int start = (r + g) % 9, n = 256 - start - (r % 5);  // runs with odd starts and tails
+      RgbToYccRow(rgb.data() + 3 * start, n, y.data(), cb.data(), cr.data());
+      for (int i = 0; i < n; ++i) {
+        uint8_t ey, ecb, ecr;
+        RgbToYccPixel(rgb.data() + 3 * (start + i), &ey, &ecb, &ecr);
+        ASSERT_TRUE(y[i] == ey && cb[i] == ecb && cr[i] == ecr) << "rgb " << r << " " << g << " " << start + i;
+      }
+    }
+  }
+  // Every (Y, Cb, Cr): Y and Cb fixed along a row, Cr its position; 4:2:0
+  // reads chroma at x >> 1.
+  std::vector<uint8_t> yy(256), uu(256), vv(256);
+  for (int i = 0; i < 256; ++i) vv[i] = static_cast<uint8_t>(i);
+  for (int shift = 0; shift <= 1; ++shift) {
+    for (int a = 0; a < 256; ++a) {
+      for (int c = 0; c < 256; ++c) {
+        std::fill(yy.begin(), yy.end(), static_cast<uint8_t>(a));
+        std::fill(uu.begin(), uu.end(), static_cast<uint8_t>(c));
+        const int x0 = (a + c) % 11, x1 = 256 - (c % 7);
+        YccToRgbRow(yy.data(), uu.data(), vv.data(), shift, x0, x1, out.data());
+        for (int x = x0; x < x1; ++x) {
+          uint8_t e[3];
+          YccToRgbPixel(yy[x], uu[x >> shift], vv[x >> shift], e);
+          ASSERT_TRUE(out[3 * x] == e[0] && out[3 * x + 1] == e[1] && out[3 * x + 2] == e[2])
+              << "ycc " << a << " " << c << " " << int(vv[x >> shift]) << " shift " << shift << " x " << x;
+        }
+      }
+    }
+  }
+  std::printf("row conversions: %s\n", YccRowsUseAvx2() ? "AVX2" : "scalar");
 }
 
 // Rewrites the window fields of a windowed blob.
