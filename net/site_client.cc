@@ -683,7 +683,10 @@ struct SiteClient::Impl : std::enable_shared_from_this<SiteClient::Impl> {
     pending.reset();
     {
       std::lock_guard<std::mutex> l(mu);
-      f.latency_ms = static_cast<double>(f.received_us + stats.clock_offset_us - f.capture_time_us) * 1e-3;
+      const int64_t latency_us = f.received_us + stats.clock_offset_us - f.capture_time_us;
+      constexpr int64_t kDayUs = int64_t{86400} * 1000000;
+      f.latency_known = f.capture_time_us > 0 && latency_us > -kDayUs && latency_us < kDayUs;
+      f.latency_ms = f.latency_known ? static_cast<double>(latency_us) * 1e-3 : 0.0;
       ++stats.frames_received;
       stats.last_frame_index = f.frame_index;
       // Without a callback the queue holds the only copy (a frame is a

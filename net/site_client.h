@@ -102,6 +102,10 @@ struct ReceivedFrame {
   int64_t capture_time_us = 0;   // site clock
   int64_t received_us = 0;       // this machine's wall clock (net::WallUs)
   double latency_ms = 0;         // capture → received, corrected by the ping clock offset
+  // False when the capture time cannot be on a wall clock (0, or more than a
+  // day from this machine's: a synthetic recording's stream time played
+  // over HTTP); latency_ms then means nothing and is left 0.
+  bool latency_known = true;
   size_t wire_bytes = 0;         // payload bytes of its messages
   bool has_mesh = false;
   bool has_color = false;

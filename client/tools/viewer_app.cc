@@ -641,11 +641,16 @@ class Viewer {
     net_rig_ = std::move(rig);
   }
 
+  // The last frame's capture → display latency, or "n/a" while no frame had
+  // a capture time on the wall clock.
+  std::string LatencyText() const {
+    return stats_.latency_ms.empty() ? "n/a" : fmt::format("{:.0f} ms", stats_.latency_ms.back());
+  }
+
   void NoteNetDisplayed(const net::ReceivedFrame& f, double loop_ms) {
     // capture (site clock) → display: the client's latency to reception is
     // already corrected by its clock-offset estimate; add the time since.
-    const double lat = f.latency_ms + (net::WallUs() - f.received_us) / 1000.0;
-    stats_.latency_ms.push_back(lat);
+    if (f.latency_known) stats_.latency_ms.push_back(f.latency_ms + (net::WallUs() - f.received_us) / 1000.0);
     // A reduced quality layer carries every n-th frame only: those gaps are
     // the layer's rate, not drops.
     const int64_t step = client_ ? std::max(1, client_->stats().layer_step) : 1;
@@ -770,6 +775,7 @@ class Viewer {
         keep_times.capture_time_us = rf.capture_time_us;
         keep_times.received_us = rf.received_us;
         keep_times.latency_ms = rf.latency_ms;
+        keep_times.latency_known = rf.latency_known;
         keep_times.wire_bytes = rf.wire_bytes;
         keep_times.has_mesh = rf.has_mesh;
         keep_times.has_color = rf.has_color;
@@ -841,9 +847,8 @@ class Viewer {
       }
       if (static_cast<int>(t) / 5 != last_progress_s) {
         last_progress_s = static_cast<int>(t) / 5;
-        spdlog::info("{:.0f} s: {} frames shown ({} new), {:.1f} fps, latency {:.0f} ms, {:.2f} Mbit/s, drops {}", t,
-                     stats_.frames, displayed_new, recent_fps_,
-                     stats_.latency_ms.empty() ? 0.0 : stats_.latency_ms.back(), recent_mbps_, stats_.drops);
+        spdlog::info("{:.0f} s: {} frames shown ({} new), {:.1f} fps, latency {}, {:.2f} Mbit/s, drops {}", t,
+                     stats_.frames, displayed_new, recent_fps_, LatencyText(), recent_mbps_, stats_.drops);
       }
     }
     net_elapsed_s_ = (net::WallUs() - start) / 1e6;
@@ -1133,9 +1138,11 @@ class Viewer {
     std::ofstream f(path);
     f << j.dump(2) << "\n";
     if (!f) return Fail(Unavailable(path + ": cannot write"));
-    spdlog::info("{} frames, {:.1f} fps, render {:.1f} ms (median), latency {:.1f} ms (median), drops {}; stats in {}",
+    spdlog::info("{} frames, {:.1f} fps, render {:.1f} ms (median), latency {}, drops {}; stats in {}",
                  stats_.frames, j["fps"].get<double>(), j["render_ms_median"].get<double>(),
-                 j["latency_ms_median"].get<double>(), stats_.drops, path);
+                 stats_.latency_ms.empty() ? std::string("n/a")
+                                            : fmt::format("{:.1f} ms (median)", Quantile(stats_.latency_ms, 0.5)),
+                 stats_.drops, path);
     return 0;
   }
 

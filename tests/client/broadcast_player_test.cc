@@ -343,6 +343,42 @@ TEST(FedSiteClient, DecodesFedMessagesLikeASiteConnection) {
   (*client)->Stop();
 }
 
+// A broadcast of the synthetic studio carries the stream's own time as its
+// capture time (from 0): no latency is made up from it. Capture times on the
+// wall clock give the latency.
+TEST(FedSiteClient, LatencyOnlyFromCaptureTimesOnTheWallClock) {
+  const auto stream = test::MakeTestStream(3, 30, 4);
+  for (const bool wall : {false, true}) {
+    ClientOptions co;
+    co.fed = true;
+    co.subscribe = kSubscribeGeometry;
+    auto client = SiteClient::Start(co);
+    ASSERT_TRUE(client.ok()) << client.status().ToString();
+    ASSERT_TRUE((*client)->WaitConnected(2.0));
+    const int64_t base = wall ? WallUs() - 40000 : 0;  // captured 40 ms before the first message arrives
+    for (const auto& msg : stream) {
+      auto h = protocol::DecodeHeader(msg.frame.data(), msg.frame.size());
+      HOLO_CHECK(h.ok());
+      RawMessage m;
+      m.header = *h;
+      m.header.capture_time_us += base;
+      m.payload.assign(msg.frame.begin() + protocol::kHeaderSize, msg.frame.end());
+      m.received_us = WallUs();
+      (*client)->Feed(std::move(m));
+    }
+    ReceivedFrame f;
+    ASSERT_TRUE((*client)->WaitFrame(&f, 2.0));
+    EXPECT_EQ(f.latency_known, wall);
+    if (wall) {
+      EXPECT_GE(f.latency_ms, 40.0);
+      EXPECT_LT(f.latency_ms, 5000.0);
+    } else {
+      EXPECT_EQ(f.latency_ms, 0.0);
+    }
+    (*client)->Stop();
+  }
+}
+
 TEST(BroadcastPlayer, SurvivesA404AStalledEdgeAndASiteRestart) {
   const std::string dir = test::MakeTempDir("bp_live");
   record::LivePackagerOptions o;
