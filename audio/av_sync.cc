@@ -49,19 +49,21 @@ int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
   int64_t show = ready_us;
   const double render_ms = Quantile(std::vector<double>(render_ms_.begin(), render_ms_.end()), 0.5);
   last_picture_us_ = std::max(last_picture_us_, ready_us);
-  if (options_.hold_pictures) {
+  if (options_.hold_pictures || options_.pace_pictures)
     natural_delays_.emplace_back(ready_us, static_cast<double>(ready_us - capture_us) / 1000.0 + render_ms);
-    UpdateVoiceTargetLocked(ready_us);
-  }
+  if (options_.hold_pictures) UpdateVoiceTargetLocked(ready_us);
   // Held until the voice of the same instant plays: its actual delay (sync
   // included) with a picture jitter buffer, else only its own delay.
   const double voice =
       !options_.enabled ? -1.0
                         : VoiceMaxLocked(options_.hold_pictures ? &Voice::delay_ms : &Voice::natural_ms, ready_us);
-  if (voice >= 0) {
+  // Without a voice, paced pictures keep the delay most of them have (their
+  // natural delays' quantile over the window).
+  const double target = voice >= 0 ? voice : (options_.pace_pictures ? PaceDelayLocked(ready_us) : -1.0);
+  if (target >= 0) {
     // Rendering takes time: start it so that the picture is visible when
     // its voice plays.
-    const auto want = capture_us + static_cast<int64_t>(std::llround((voice - render_ms) * 1000.0));
+    const auto want = capture_us + static_cast<int64_t>(std::llround((target - render_ms) * 1000.0));
     if (want > ready_us) {
       const auto limit = ready_us + static_cast<int64_t>(std::llround(options_.max_picture_delay_ms * 1000.0));
       if (want > limit) ++n_.pictures_hold_capped;
@@ -72,6 +74,18 @@ int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
   // Pictures never displayed (dropped for a newer one) leave their entry: keep 10 s.
   while (!holds_.empty() && holds_.begin()->first < capture_us - 10000000) holds_.erase(holds_.begin());
   return show;
+}
+
+double AvSync::PaceDelayLocked(int64_t now_us) {
+  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
+  while (!natural_delays_.empty() && natural_delays_.front().first < now_us - window_us) natural_delays_.pop_front();
+  if (natural_delays_.empty()) return -1.0;
+  std::vector<double> d;
+  d.reserve(natural_delays_.size());
+  for (const auto& [t, ms] : natural_delays_) d.push_back(ms);
+  const auto k = static_cast<size_t>(std::ceil(options_.picture_quantile * static_cast<double>(d.size() - 1)));
+  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(std::min(d.size() - 1, k)), d.end());
+  return d[std::min(d.size() - 1, k)];
 }
 
 void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64_t display_us) {

@@ -70,6 +70,16 @@ struct AvSyncOptions {
   //    No latency added to pictures; offsets spread as their delays do.
   bool hold_pictures = true;
   double picture_quantile = 0.9;
+  // Pictures that arrive in bursts are shown at the rhythm they were
+  // captured in, voice or not: while no voice plays, each picture waits
+  // until `picture_quantile` of the pictures' natural delays over the window
+  // has passed since its capture (at most max_picture_delay_ms). A broadcast
+  // needs it: its player receives a part's quarter second of frames at once,
+  // and without pacing the viewer shows the newest of each and skips the
+  // rest. Only differences of capture times count, so a stream whose capture
+  // clock is not this machine's is paced as well. Off by default (a call's
+  // pictures arrive as they are made); holoport-client --http turns it on.
+  bool pace_pictures = false;
   // Pictures' delays the voice follows: this window, seconds. Short enough
   // to follow a site whose latency swings (a loaded site catching up);
   // each move of the voice costs a resampled stretch, a dropped or a
@@ -103,7 +113,7 @@ struct AvSyncTracePoint {
 
 struct AvSyncStats {
   int64_t pictures = 0;             // pictures displayed
-  int64_t pictures_held = 0;        // of them, held back for a later voice
+  int64_t pictures_held = 0;        // of them, held back for a later voice (or paced: pace_pictures)
   int64_t pictures_hold_capped = 0; // the voice was later than max_picture_delay_ms allowed
   int64_t voice_delay_capped = 0;   // voice target updates limited by max_voice_delay_ms
   int64_t offsets = 0;              // av offsets measured (a picture displayed while a voice played)
@@ -163,6 +173,9 @@ class AvSync {
   // Largest `delay` (&Voice::natural_ms or &Voice::delay_ms) of the voices
   // playing at `now_us`; < 0: none.
   double VoiceMaxLocked(double Voice::*delay, int64_t now_us) const;
+  // pace_pictures: the natural delays' picture_quantile over the window
+  // ending at now_us, ms (−1 without pictures).
+  double PaceDelayLocked(int64_t now_us);
   void UpdateVoiceTargetLocked(int64_t now_us);
 
   AvSyncOptions options_;

@@ -296,8 +296,11 @@ class Viewer {
       call_local_from_remote_ = call.room.local_from_remote.matrix();
     } else if (!o_.http.empty()) {
       // The broadcast's messages go through the same decode and delivery path
-      // as a site connection (SiteClient fed by the HTTP player).
+      // as a site connection (SiteClient fed by the HTTP player). A part's
+      // frames arrive at once: the pull queue holds them (a 250 ms part is
+      // 8 frames) and SyncOptions() paces them at their capture rhythm.
       co.fed = true;
+      co.max_pending_frames = std::max<size_t>(co.max_pending_frames, 16);
       HOLO_ASSIGN_OR_RETURN(own_client_, net::SiteClient::Start(co, cb));
       client_ = own_client_.get();
       net::BroadcastPlayerOptions bo;
@@ -373,7 +376,11 @@ class Viewer {
     return OkStatus();
   }
 
-  audio::AvSyncOptions SyncOptions() const { return o_.sync; }
+  audio::AvSyncOptions SyncOptions() const {
+    audio::AvSyncOptions s = o_.sync;
+    s.pace_pictures = s.pace_pictures || !o_.http.empty();
+    return s;
+  }
 
   // world_from_camera of the centre view at time t (seconds from start).
   Pose ViewPose(double t) const {

@@ -20,12 +20,17 @@ struct Scenario {
   double seconds = 10;
   bool voice = true;
   bool pictures_stop_at_half = false;
+  // > 0: pictures arrive in bursts, all those captured in one burst_ms
+  // at the next boundary (a broadcast's parts), jitter ignored.
+  double burst_ms = 0;
 };
 
 struct Outcome {
   AvSyncStats stats;
   double max_hold_ms = 0;
   double final_voice_target_ms = 0;
+  int shown = 0, skipped = 0;  // pictures displayed, and passed over for a newer one
+  double max_gap_ms = 0;       // longest time between two displayed pictures
 };
 
 // 30 fps pictures and a 20 ms voice step; measured over the second half.
@@ -42,6 +47,7 @@ Outcome Simulate(const Scenario& sc, AvSyncOptions o = {}) {
   };
   std::vector<Pending> queue;
   Outcome out;
+  int64_t last_shown = 0;
   bool reset = false;
   for (int64_t t = t0; t < end; t += 1000) {
     if (!reset && t >= t0 + static_cast<int64_t>(sc.seconds * 5e5)) {
@@ -57,7 +63,11 @@ Outcome Simulate(const Scenario& sc, AvSyncOptions o = {}) {
     // Pictures become ready base + jitter after capture.
     const bool pictures_on = !sc.pictures_stop_at_half || t < t0 + static_cast<int64_t>(sc.seconds * 5e5);
     while (pictures_on && next_picture_capture + static_cast<int64_t>(sc.picture_base_ms * 1000) <= t) {
-      const int64_t ready = t + static_cast<int64_t>(u(rng) * sc.picture_jitter_ms * 1000);
+      int64_t ready = t + static_cast<int64_t>(u(rng) * sc.picture_jitter_ms * 1000);
+      if (sc.burst_ms > 0) {
+        const auto burst = static_cast<int64_t>(sc.burst_ms * 1000);
+        ready = (t - t0) / burst * burst + burst + t0;
+      }
       const int64_t show = sync.PictureReady(next_picture_capture, ready);
       out.max_hold_ms = std::max(out.max_hold_ms, (show - ready) / 1000.0);
       EXPECT_GE(show, ready);
@@ -73,6 +83,12 @@ Outcome Simulate(const Scenario& sc, AvSyncOptions o = {}) {
       if (due >= 0) {
         const int64_t shown = t + static_cast<int64_t>(sc.render_ms * 1000);
         sync.PictureDisplayed(queue[due].capture, t, shown);
+        if (reset) {
+          out.skipped += due;
+          ++out.shown;
+          if (last_shown > 0) out.max_gap_ms = std::max(out.max_gap_ms, (shown - last_shown) / 1000.0);
+        }
+        last_shown = shown;
         busy_until = shown;
         queue.erase(queue.begin(), queue.begin() + due + 1);
       }
@@ -190,6 +206,30 @@ TEST(AvSync, NoVoiceNoHoldAndNoPicturesNoVoiceDelay) {
   stop.pictures_stop_at_half = true;
   const Outcome b = Simulate(stop);
   EXPECT_EQ(b.final_voice_target_ms, 0.0);
+}
+
+// A broadcast's pictures arrive a quarter second at a time. Unpaced, the
+// viewer shows the newest of each burst; paced, every picture at its
+// capture rhythm (no voice, and with a voice as well).
+TEST(AvSync, PicturesInBurstsArePacedAtTheirCaptureRhythm) {
+  Scenario sc;
+  sc.voice = false;
+  sc.burst_ms = 250;
+  sc.picture_base_ms = 150;
+  const Outcome unpaced = Simulate(sc);
+  EXPECT_GT(unpaced.skipped, 3 * unpaced.shown);
+  EXPECT_GT(unpaced.max_gap_ms, 200.0);
+  AvSyncOptions pace;
+  pace.pace_pictures = true;
+  const Outcome paced = Simulate(sc, pace);
+  EXPECT_LT(paced.skipped, paced.shown / 20);
+  EXPECT_GT(paced.shown, 140);  // 5 s at 30 fps: 150
+  EXPECT_LT(paced.max_gap_ms, 80.0);
+  EXPECT_LE(paced.max_hold_ms, pace.max_picture_delay_ms);
+  sc.voice = true;
+  const Outcome with_voice = Simulate(sc, pace);
+  EXPECT_LT(with_voice.skipped, with_voice.shown / 20);
+  EXPECT_LT(with_voice.max_gap_ms, 80.0);
 }
 
 TEST(AvSync, WithoutHoldsSpreadPicturesLeanTheVoiceLate) {

@@ -127,12 +127,18 @@ struct Case {
   double extra_voice_ms = 0;    // on the voice path
   double extra_picture_ms = 0;  // on the picture path
   bool sync = true;
+  // > 0: a broadcast's parts: everything captured within one part arrives
+  // at once, 100 ms after the part ends (the network delays above ignored).
+  double part_ms = 0;
+  bool voice = true;   // the voice's messages are fed
+  bool pace = false;   // AvSyncOptions::pace_pictures
 };
 
 struct Result {
   audio::AvSyncStats stats;
   std::vector<double> content_offsets_ms;  // syllable heard − its picture shown, after kMeasureFrom
   int64_t displayed = 0;
+  int64_t displayed_measured = 0;  // of them, after kMeasureFrom
 };
 
 // Voice: a frame leaves when complete (20 ms), network 2 ms + U(0, 8 ms).
@@ -153,6 +159,12 @@ Result Simulate(const Case& k) {
     const RawMessage& m = cap.messages[i];
     const int64_t c = m.header.capture_time_us;
     int64_t t = 0;
+    if (m.header.type == protocol::MessageType::kAudioPose && !k.voice) continue;
+    if (k.part_ms > 0) {
+      const auto part = static_cast<int64_t>(k.part_ms * 1000);
+      arrivals.push_back({(c - kT0) / part * part + part + 100000 + kT0, i});
+      continue;
+    }
     if (m.header.type == protocol::MessageType::kAudioPose) {
       t = c + audio::kFrameUs + 2000 + static_cast<int64_t>(u(rng) * 8000 + k.extra_voice_ms * 1000);
     } else {
@@ -185,6 +197,7 @@ Result Simulate(const Case& k) {
   so.clock = &clock;
   so.voice_thread = false;
   so.sync.enabled = k.sync;
+  so.sync.pace_pictures = k.pace;
   so.on_voice = [&](const RemoteVoices::Block& b) {
     if (b.playing) played.push_back({b.playout_us, b.capture_us, b.pcm});
   };
@@ -233,6 +246,7 @@ Result Simulate(const Case& k) {
       rendering = false;
     }
     if (!rendering && (*av)->NextFrame(&shown)) {
+      if (reset) ++r.displayed_measured;
       render_start = t;
       busy_until = t + 20000;
       rendering = true;
@@ -259,6 +273,9 @@ Result Simulate(const Case& k) {
       quiet = a > 0.05f ? 0 : quiet + 1;
     }
   }
+  if (k.part_ms > 0)
+    std::printf("parts of %.0f ms, %s, pace %s: %lld pictures shown after the first 3 s; ", k.part_ms,
+                k.voice ? "voice" : "no voice", k.pace ? "on" : "off", static_cast<long long>(r.displayed_measured));
   std::printf("voice +%.0f ms, picture +%.0f ms, sync %s: av offset p1 %.1f p50 %.1f p99 %.1f ms (%lld offsets); "
               "content: median %.1f ms over %zu syllables; voice sync delay %.0f ms, picture hold %.0f ms, %lld of %lld "
               "pictures held\n",
@@ -312,6 +329,24 @@ TEST(LipSync, PictureDelayed200MsDelaysTheVoice) {
   const Result off = Simulate({0, 200, false});
   EXPECT_LT(off.stats.av_offset_ms_p50, -150.0);
   EXPECT_LT(Quantile(off.content_offsets_ms, 0.5), -150.0);
+}
+
+// A broadcast: the player hands over a quarter second of messages at once.
+// Paced, the viewer shows nearly every picture (at its capture rhythm), with
+// or without a voice, and stays in sync with the voice; unpaced and without
+// a voice it showed the newest picture of each part.
+TEST(LipSync, ABroadcastsPartsArePacedAtTheirCaptureRhythm) {
+  ASSERT_FALSE(Stream().messages.empty());
+  const int64_t measured = static_cast<int64_t>((kSeconds - 3.0) * 30);  // pictures captured after kMeasureFrom
+  Case silent{0, 0, true, 250, false, false};
+  const Result unpaced = Simulate(silent);
+  EXPECT_LT(unpaced.displayed_measured, measured / 3);
+  silent.pace = true;
+  const Result paced = Simulate(silent);
+  EXPECT_GT(paced.displayed_measured, measured * 9 / 10);
+  const Result with_voice = Simulate({0, 0, true, 250, true, true});
+  EXPECT_GT(with_voice.displayed_measured, measured * 9 / 10);
+  ExpectInSync(with_voice);
 }
 
 }  // namespace
