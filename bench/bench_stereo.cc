@@ -17,13 +17,19 @@
 // the image; full_pairs: pairs
 // the policy matched whole anyway). ms_per_frame_set_amortized adds the
 // policy's periodic full match: (full + (full_every − 1) · region) /
-// full_every, from this run's medians. The studio's frames are 10·k + 1
-// (frame 10·k is the region's previous frame).
+// full_every, from this run's medians. patchmatch_temporal: the same
+// region, one matcher per pod started from its own planes of the previous
+// frame (PatchMatchOptions::temporal; the previous frame matched untimed
+// before each timed run). The studio's frames are 10·k + 1 (frame 10·k is
+// the region's previous frame).
 //
 // Options: --middlebury DIR (default ../shared/data/stereo next to the
 // repository: a folder holding aloeL.jpg, aloeR.jpg, aloeGT.png, or a parent
 // of one), --threads N (2), --baseline M (0.15), --iterations N,
-// --coarse-levels N and --fine-iterations N (PatchMatch), --fuse-frames N (2; 0 skips the fused-mesh comparison), --contact-sheet PNG.
+// --coarse-levels N and --fine-iterations N (PatchMatch), --temporal-iterations N,
+// --temporal-refine-start N and --temporal-refine-per-sweep N (patchmatch_temporal),
+// --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
+// fused mesh comes after a run of 10 frames), --contact-sheet PNG.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -194,9 +200,19 @@ struct StereoBenchOptions {
   int threads = 2;
   int iterations = -1;  // PatchMatch iterations (-1: its default)
   int coarse_levels = -1, fine_iterations = -1;  // PatchMatch coarse to fine (-1: its defaults)
+  // patchmatch_temporal's PatchMatchOptions (-1: their defaults)
+  int temporal_iterations = -1, temporal_refine_start = -1, temporal_refine_per_sweep = -1;
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   double baseline = kDefaultStereoBaselineM;
 };
+
+// patchmatch_temporal's settings from the options (on a temporal matcher's options).
+void SetTemporal(const StereoBenchOptions& o, PatchMatchOptions* pm) {
+  pm->temporal = true;
+  if (o.temporal_iterations > 0) pm->temporal_iterations = o.temporal_iterations;
+  if (o.temporal_refine_start >= 0) pm->temporal_refine_start = o.temporal_refine_start;
+  if (o.temporal_refine_per_sweep >= 0) pm->temporal_refine_per_sweep = o.temporal_refine_per_sweep;
+}
 
 int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   const std::string& middlebury = o.middlebury;
@@ -248,7 +264,16 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (!args.json)
     spdlog::info("studio: {}, {} stereo pods, baseline {:.3f} m, disparity [{:g}, {:g}], {} frames", wl,
                  rig.pods.size(), baseline, pmo.min_disparity, pmo.max_disparity, frames);
-  MethodRun pm_run, sgbm_run, roi_run;
+  MethodRun pm_run, sgbm_run, roi_run, tmp_run;
+  // patchmatch_temporal: one matcher per pod (PatchMatchOptions::temporal),
+  // in the same region as patchmatch_roi, started from its planes of the
+  // previous frame (matched untimed before every timed run).
+  PatchMatchOptions pmo_t = pmo;
+  pmo_t.temporal = true;
+  SetTemporal(o, &pmo_t);
+  std::vector<std::unique_ptr<PatchMatchStereo>> pm_t;
+  for (size_t p = 0; p < rig.pods.size(); ++p) pm_t.push_back(std::make_unique<PatchMatchStereo>(pmo_t));
+  ImageFloat d_tmp;
   std::vector<StereoPair> pairs, previous;
   ImageFloat d_pm, d_sgbm, d_roi;
   std::vector<ImageRgb8> sheet;
@@ -258,7 +283,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     const int64_t frame = static_cast<int64_t>(f) * 10 + 1;
     (*renderer)->Render(frame - 1, &previous);
     (*renderer)->Render(frame, &pairs);
-    double set_pm = 0, set_sgbm = 0, set_roi = 0;
+    double set_pm = 0, set_sgbm = 0, set_roi = 0, set_tmp = 0;
     for (size_t p = 0; p < pairs.size(); ++p) {
       const StereoPair& sp = pairs[p];
       const double fb_mm = sp.fx * sp.baseline_m * 1000.0;
@@ -279,6 +304,14 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         roi_run.ms.push_back(v.Ms());
         roi_run.cpu_ms.push_back(v.CpuMs());
         if (r == 0) set_roi += roi_run.ms.back();
+        if (Status s = pm_t[p]->Compute(previous[p].left, previous[p].right, prev_region, &d_tmp); !s.ok())
+          return Fail(s.ToString());
+        Timer w;
+        if (Status s = pm_t[p]->Compute(sp.left, sp.right, region, policy.max_disparity(), &d_tmp); !s.ok())
+          return Fail(s.ToString());
+        tmp_run.ms.push_back(w.Ms());
+        tmp_run.cpu_ms.push_back(w.CpuMs());
+        if (r == 0) set_tmp += tmp_run.ms.back();
         Timer t;
         if (Status s = pm.Compute(sp.left, sp.right, &d_pm); !s.ok()) return Fail(s.ToString());
         pm_run.ms.push_back(t.Ms());
@@ -297,6 +330,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         pm_run.person.Add(d_pm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
         sgbm_run.person.Add(d_sgbm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
         roi_run.person.Add(d_roi.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        tmp_run.person.Add(d_tmp.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
       }
       if (!sheet_path.empty() && f == 0 && p < 4) {
         const uint16_t near_mm = 1000, far_mm = 6000;
@@ -311,6 +345,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     pm_run.set_ms.push_back(set_pm);
     sgbm_run.set_ms.push_back(set_sgbm);
     roi_run.set_ms.push_back(set_roi);
+    tmp_run.set_ms.push_back(set_tmp);
   }
   EmitMethod(wl, "patchmatch", "studio", pm_run, studio_q);
   EmitMethod(wl, "sgbm", "studio", sgbm_run, studio_q);
@@ -327,6 +362,14 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     EmitFigure("stereo", wl, "full_pairs", roi_full_pairs, "1", q);
     const int n = sdo_roi.roi.full_every;
     EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * roi_set) / n, "ms", q);
+    auto qt = studio_q;
+    qt["full_every"] = q["full_every"];
+    EmitMethod(wl, "patchmatch_temporal", "studio", tmp_run, qt, /*all_pixels=*/false);
+    qt["method"] = "patchmatch_temporal";
+    qt["data"] = "studio";
+    qt["content"] = "truth";
+    EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * Median(tmp_run.set_ms)) / n, "ms",
+               qt);
   }
   if (!sheet_path.empty()) {
     std::vector<const ImageRgb8*> tiles;
@@ -400,8 +443,15 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     auto vol = TsdfVolume::Create(to);
     if (!vol.ok()) return Fail(vol.status().ToString());
     std::vector<double> chamfer_vs_direct, chamfer_stereo_truth, chamfer_direct_truth;
-    std::vector<double> chamfer_roi_vs_direct, chamfer_roi_truth;
-    RgbdFrameSet direct, stereo, stereo_roi;
+    std::vector<double> chamfer_roi_vs_direct, chamfer_roi_truth, chamfer_tmp_vs_direct, chamfer_tmp_truth;
+    RgbdFrameSet direct, stereo, stereo_roi, stereo_tmp;
+    // patchmatch_temporal: regions started from the last planes, over a run
+    // of kChain consecutive frames ending at the fused one (the errors of a
+    // chain of temporal starts, with the policy's whole pairs in between).
+    constexpr int kChain = 10;
+    StereoDepthOptions sdo_tmp = sdo_roi;
+    sdo_tmp.patchmatch.temporal = true;
+    SetTemporal(o, &sdo_tmp.patchmatch);
     StudioGroundTruth gt;
     for (int f = 0; f < fuse_frames; ++f) {
       const int64_t frame = static_cast<int64_t>(f) * 10 + 5;
@@ -412,10 +462,15 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       if (!roi_source.ok()) return Fail(roi_source.status().ToString());
       if (Status s = (*roi_source)->RenderFrame(frame - 1, &stereo_roi, nullptr); !s.ok()) return Fail(s.ToString());
       if (Status s = (*roi_source)->RenderFrame(frame, &stereo_roi, nullptr); !s.ok()) return Fail(s.ToString());
+      auto tmp_source = StereoStudioSource::Create(studio->get(), sdo_tmp);
+      if (!tmp_source.ok()) return Fail(tmp_source.status().ToString());
+      for (int64_t k = frame - kChain + 1; k <= frame; ++k)
+        if (Status s = (*tmp_source)->RenderFrame(k, &stereo_tmp, nullptr); !s.ok()) return Fail(s.ToString());
       for (size_t p = 0; p < direct.frames.size(); ++p) {
         direct.frames[p].mask = gt.mask[p];
         stereo.frames[p].mask = gt.mask[p];
         stereo_roi.frames[p].mask = gt.mask[p];
+        stereo_tmp.frames[p].mask = gt.mask[p];
       }
       Mesh m_direct, m_stereo;
       (*vol)->Reset();
@@ -428,6 +483,10 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       (*vol)->Reset();
       if (Status s = (*vol)->Integrate(rig, stereo_roi); !s.ok()) return Fail(s.ToString());
       (*vol)->ExtractMesh(&m_roi);
+      Mesh m_tmp;
+      (*vol)->Reset();
+      if (Status s = (*vol)->Integrate(rig, stereo_tmp); !s.ok()) return Fail(s.ToString());
+      (*vol)->ExtractMesh(&m_tmp);
       metrics::MeshDistanceOptions mo;
       mo.num_threads = threads;
       auto vs = metrics::ComputeMeshDistance(m_stereo, m_direct, mo);
@@ -435,8 +494,12 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       auto dt = metrics::ComputeMeshDistance(m_direct, gt.foreground_mesh, mo);
       auto rv = metrics::ComputeMeshDistance(m_roi, m_direct, mo);
       auto rt = metrics::ComputeMeshDistance(m_roi, gt.foreground_mesh, mo);
-      if (!vs.ok() || !st.ok() || !dt.ok() || !rv.ok() || !rt.ok())
+      auto tv = metrics::ComputeMeshDistance(m_tmp, m_direct, mo);
+      auto tt = metrics::ComputeMeshDistance(m_tmp, gt.foreground_mesh, mo);
+      if (!vs.ok() || !st.ok() || !dt.ok() || !rv.ok() || !rt.ok() || !tv.ok() || !tt.ok())
         return Fail("mesh distance failed (empty fused mesh?)");
+      chamfer_tmp_vs_direct.push_back(tv->chamfer_mm);
+      chamfer_tmp_truth.push_back(tt->chamfer_mm);
       chamfer_roi_vs_direct.push_back(rv->chamfer_mm);
       chamfer_roi_truth.push_back(rt->chamfer_mm);
       chamfer_vs_direct.push_back(vs->chamfer_mm);
@@ -456,6 +519,12 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_roi_truth), "mm",
                {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
                 {"method", "patchmatch_roi"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_tmp_vs_direct), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch_temporal"}, {"chain", std::to_string(kChain)}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_tmp_truth), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
+                {"method", "patchmatch_temporal"}, {"chain", std::to_string(kChain)}});
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_direct_truth), "mm",
                {{"content", "fused"}, {"compare", "direct_vs_truth"}, {"frames", n}, {"masks", "truth"}});
   }
@@ -474,6 +543,15 @@ BenchFn SetupStereo(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--fine-iterations", o->fine_iterations,
                  "PatchMatch iterations at full resolution after the coarse levels (-1: its default)")
+      ->capture_default_str();
+  app.add_option("--temporal-iterations", o->temporal_iterations,
+                 "patchmatch_temporal: iterations from the last planes (-1: its default)")
+      ->capture_default_str();
+  app.add_option("--temporal-refine-start", o->temporal_refine_start,
+                 "patchmatch_temporal: the refinement's range starts at 2^-N (-1: its default)")
+      ->capture_default_str();
+  app.add_option("--temporal-refine-per-sweep", o->temporal_refine_per_sweep,
+                 "patchmatch_temporal: refinement candidates per sweep (-1: its default)")
       ->capture_default_str();
   app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
       ->check(CLI::Range(0, 100))

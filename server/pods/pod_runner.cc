@@ -42,6 +42,8 @@ Status PodRunOptions::Check() const {
   if (stereo_threads < 0 || stereo_threads > 256) return InvalidArgument("--stereo-threads must be in 0..256");
   if (stereo_roi != "on" && stereo_roi != "off")
     return InvalidArgument("--stereo-roi must be on or off, got '" + stereo_roi + "'");
+  if (stereo_temporal != "on" && stereo_temporal != "off")
+    return InvalidArgument("--stereo-temporal must be on or off, got '" + stereo_temporal + "'");
   if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
   std::string host;
   uint16_t port = 0;
@@ -171,6 +173,7 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
     PatchMatchOptions pm = sd.patchmatch;
     StereoSearchRange(stereo.renderer->rig().pods[index], sd.near_m, sd.far_m, &pm);
     pm.threads = o.stereo_threads;
+    pm.temporal = o.stereo_temporal == "on";
     HOLO_ASSIGN_OR_RETURN(stereo.matcher, PatchMatchStereo::Create(pm));
     stereo.far_m = sd.far_m;
     StereoRoiOptions roi = sd.roi;

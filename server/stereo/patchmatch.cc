@@ -42,6 +42,14 @@ Status PatchMatchOptions::Check() const {
     return InvalidArgument("min_normal_z must be in (0.05, 1], got " + FormatNumber(min_normal_z));
   if (!std::isfinite(lr_max_diff)) return InvalidArgument("lr_max_diff must be finite");
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256], got " + FormatNumber(threads));
+  if (temporal_iterations < 1 || temporal_iterations > 16)
+    return InvalidArgument("temporal_iterations must be in [1, 16], got " + FormatNumber(temporal_iterations));
+  if (temporal_refine_start < 0 || temporal_refine_start > 20)
+    return InvalidArgument("temporal_refine_start must be in [0, 20], got " + FormatNumber(temporal_refine_start));
+  if (temporal_refine_per_sweep < 0 || temporal_refine_per_sweep > 8)
+    return InvalidArgument("temporal_refine_per_sweep must be in [0, 8], got " + FormatNumber(temporal_refine_per_sweep));
+  if (!(temporal_min_overlap > 0.0f && temporal_min_overlap <= 1.0f))
+    return InvalidArgument("temporal_min_overlap must be in (0, 1], got " + FormatNumber(temporal_min_overlap));
   return OkStatus();
 }
 
@@ -305,6 +313,13 @@ struct PatchMatchStereo::Impl {
   std::unique_ptr<PatchMatchStereo> coarse;
   ImageGray8 coarse_left, coarse_right;
   ImageFloat coarse_disparity;
+  // The last Compute's regions and image size (its planes stay in left and
+  // right: PatchMatchOptions::temporal starts from them).
+  bool have_last = false;
+  int last_w = 0, last_h = 0;
+  ImageRect last_left, last_right;
+  uint64_t temporal_calls = 0;  // varies the refinement's random numbers from frame to frame
+  bool last_temporal = false;
 };
 
 namespace {
@@ -337,6 +352,7 @@ StatusOr<std::unique_ptr<PatchMatchStereo>> PatchMatchStereo::Create(PatchMatchO
 
 const ImageFloat& PatchMatchStereo::right_disparity() const { return impl_->right_disparity; }
 bool PatchMatchStereo::uses_avx2() const { return impl_->avx2; }
+bool PatchMatchStereo::last_was_temporal() const { return impl_->last_temporal; }
 
 ImageRect PatchMatchStereo::RightRegion(const ImageRect& left_region, int width, int height,
                                         float max_disparity) const {
@@ -376,6 +392,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
   if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
   if (lreg.empty()) {
+    im.last_temporal = false;
     disparity->Fill(0.0f);
     im.right_disparity.Fill(0.0f);
     return OkStatus();
@@ -434,7 +451,18 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     const float d = p.At(x, y);
     return d >= dmin && d <= dmax;
   };
-  const uint64_t seed = Mix(o.seed + 0x7f4a7c15ULL);
+  // Start from the last Compute's planes (PatchMatchOptions::temporal)?
+  const auto overlap = [](const ImageRect& a, const ImageRect& b) {
+    const ImageRect c{std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
+    return c.area();
+  };
+  const bool temporal = o.temporal && im.have_last && im.last_w == W && im.last_h == H && !(lreg == ImageRect::Full(W, H)) &&
+                        static_cast<double>(overlap(im.last_left, lreg)) >=
+                            o.temporal_min_overlap * static_cast<double>(lreg.area());
+  // A temporal start varies the refinement's random numbers from call to
+  // call (the same perturbations every frame would retry the same planes);
+  // any other call gives a fresh matcher's result bit for bit.
+  const uint64_t seed = Mix(o.seed + 0x7f4a7c15ULL + (temporal ? Mix(++im.temporal_calls) : 0));
   auto rng = [&](uint64_t pass, int x, int y, uint64_t k) {
     return Mix(seed ^ Mix((pass << 40) ^ (k << 32) ^ (static_cast<uint64_t>(y) << 16) ^ static_cast<uint64_t>(x)));
   };
@@ -497,15 +525,54 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       }
     });
   };
+  // The last Compute's planes (PatchMatchOptions::temporal): kept where the
+  // last region had them, else the nearest pixel's of it. Two passes, so
+  // that no row reads a plane another row is changing.
+  auto init_from_last = [&](View& v, const View& other, const ImageRect& last) {
+    const ImageRect& g = v.region;
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
+      const int ly = std::clamp(y, last.y0, last.y1 - 1);
+      for (int x = g.x0; x < g.x1; ++x) {
+        if (!last.Contains(x, y))
+          v.plane[static_cast<size_t>(y) * W + x] = v.plane[static_cast<size_t>(ly) * W + std::clamp(x, last.x0, last.x1 - 1)];
+      }
+    });
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
+      SelfWindow sw;
+      for (int x = g.x0; x < g.x1; ++x) {
+        const size_t i = static_cast<size_t>(y) * W + x;
+        if (!valid_at(v.plane[i], static_cast<float>(x), static_cast<float>(y))) {
+          const float d = std::clamp(v.plane[i].At(static_cast<float>(x), static_cast<float>(y)), dmin, dmax);
+          v.plane[i] = Plane{0.0f, 0.0f, d};
+        }
+        v.wtot[i] = WindowWeight(v, x, y, cp);
+        prepare(v, x, y, &sw);
+        v.cost[i] = cost(v, other, x, y, v.plane[i], sw, kNoBound);
+      }
+    });
+  };
   int iterations = o.iterations;
   int step_index = 0;
-  if (from_coarse) {
+  const int refine_per_sweep = temporal ? o.temporal_refine_per_sweep : o.refine_per_sweep;
+  if (temporal) {
+    init_from_last(L, R, im.last_left);
+    if (!im.last_right.empty()) {
+      init_from_last(R, L, im.last_right);
+    } else {
+      init(R, L, 2);
+    }
+    iterations = o.temporal_iterations;
+    step_index = o.temporal_refine_start;
+  } else if (from_coarse) {
     if (!im.coarse) {
       PatchMatchOptions co = o;
       co.coarse_levels = o.coarse_levels - 1;
       co.min_disparity = o.min_disparity * 0.5f;
       co.max_disparity = std::max(o.max_disparity * 0.5f, co.min_disparity + 2.0f);
       co.lr_max_diff = -1.0f;  // the full-resolution level checks
+      co.temporal = false;     // it runs only when the full resolution does not start from its last planes
       HOLO_ASSIGN_OR_RETURN(im.coarse, PatchMatchStereo::Create(co));
     }
     HalveImage(left, &im.coarse_left);
@@ -530,7 +597,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
 
   auto refine = [&](View& v, const View& other, int x, int y, uint64_t pass, float scale, const SelfWindow& sw) {
     const size_t i = static_cast<size_t>(y) * W + x;
-    for (int k = 0; k < o.refine_per_sweep; ++k) {
+    for (int k = 0; k < refine_per_sweep; ++k) {
       const uint64_t h = rng(pass, x, y, static_cast<uint64_t>(k) + 1);
       const float s = scale * std::ldexp(1.0f, -k);
       const Plane& cur = v.plane[i];
@@ -583,7 +650,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int column_blocks = (gw + kColumnBlock - 1) / kColumnBlock;
       const uint64_t pass = static_cast<uint64_t>(it) * 8 + static_cast<uint64_t>(vi) * 4 + 16;
       scatter(v, other);
-      const int per_sweep = std::max(1, o.refine_per_sweep);
+      const int per_sweep = std::max(1, refine_per_sweep);
       const float scale_h = std::ldexp(1.0f, -step_index);
       const float scale_v = std::ldexp(1.0f, -(step_index + per_sweep));
       // Horizontal sweep: view proposal, left (or right) neighbour, refinement.
@@ -614,7 +681,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         }
       });
     }
-    step_index += 2 * std::max(1, o.refine_per_sweep);
+    step_index += 2 * std::max(1, refine_per_sweep);
   }
 
   // Disparities and the left-right check (0 outside the regions).
@@ -637,6 +704,12 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       out[x] = ok ? d : 0.0f;
     }
   });
+  im.have_last = true;
+  im.last_temporal = temporal;
+  im.last_w = W;
+  im.last_h = H;
+  im.last_left = lreg;
+  im.last_right = R.region;
   return OkStatus();
 }
 

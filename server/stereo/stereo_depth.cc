@@ -76,13 +76,18 @@ StatusOr<std::unique_ptr<StereoStudioSource>> StereoStudioSource::Create(Synthet
   }
   pm.min_disparity = lo;
   pm.max_disparity = hi;
-  HOLO_ASSIGN_OR_RETURN(auto matcher, PatchMatchStereo::Create(pm));
   std::unique_ptr<StereoStudioSource> s(new StereoStudioSource());
+  // One matcher for all pods, or one per pod when each starts from its own
+  // last planes (PatchMatchOptions::temporal).
+  const size_t matchers = pm.temporal ? renderer->rig().pods.size() : 1;
+  for (size_t i = 0; i < matchers; ++i) {
+    HOLO_ASSIGN_OR_RETURN(auto matcher, PatchMatchStereo::Create(pm));
+    s->matchers_.push_back(std::move(matcher));
+  }
   s->studio_ = studio;
   s->options_ = options;
   s->options_.patchmatch = pm;
   s->renderer_ = std::move(renderer);
-  s->matcher_ = std::move(matcher);
   StereoRoiOptions roi = options.roi;
   roi.fps = studio->options().fps;
   HOLO_RETURN_IF_ERROR(roi.Check().WithContext("stereo region options"));
@@ -103,8 +108,9 @@ Status StereoStudioSource::RenderFrame(int64_t frame_index, RgbdFrameSet* out, s
   last_full_pods_ = 0;
   int64_t matched = 0, total = 0;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
-    HOLO_ASSIGN_OR_RETURN(const ImageRect region, roi_[i].Match(matcher_.get(), frame_index, p[i].left, p[i].right,
-                                                                &disparity_));
+    PatchMatchStereo* matcher = matchers_[std::min(i, matchers_.size() - 1)].get();
+    HOLO_ASSIGN_OR_RETURN(const ImageRect region,
+                          roi_[i].Match(matcher, frame_index, p[i].left, p[i].right, &disparity_));
     last_full_pods_ += region == ImageRect::Full(p[i].left.width(), p[i].left.height());
     matched += region.area();
     total += static_cast<int64_t>(p[i].left.width()) * p[i].left.height();

@@ -72,7 +72,7 @@ class StereoStudioSource final : public FrameSource {
   SyntheticStudio* studio_ = nullptr;
   StereoDepthOptions options_;
   std::unique_ptr<StereoStudioRenderer> renderer_;
-  std::unique_ptr<PatchMatchStereo> matcher_;
+  std::vector<std::unique_ptr<PatchMatchStereo>> matchers_;  // one, or one per pod (temporal)
   std::vector<StereoRoiPolicy> roi_;  // per pod
   std::vector<StereoPair> pairs_;
   ImageFloat disparity_;

@@ -118,6 +118,13 @@ int main(int argc, char** argv) {
                  "docs/stereo.md) or off (every pair whole)")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
+  std::string stereo_temporal = "on";
+  app.add_option("--stereo-temporal", stereo_temporal,
+                 "--depth stereo: on (each pod's matcher starts a region from its planes of the previous frame instead "
+                 "of a half-resolution pass: ~0.77x the CPU and a closer fused mesh; whole pairs still run the full "
+                 "algorithm; docs/stereo.md) or off")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
   std::string reconstruct = "tsdf";
   app.add_option("--reconstruct", reconstruct,
                  "tsdf (fuse the pods' depth) or hull (the visual hull of the pods' masks alone, as colour-only "
@@ -560,6 +567,7 @@ int main(int argc, char** argv) {
     if (!studio) return Fail(holo::InvalidArgument("--depth stereo needs --source synthetic"));
     holo::StereoDepthOptions sdo;
     sdo.roi.enabled = stereo_roi == "on";
+    sdo.patchmatch.temporal = stereo_temporal == "on";
     auto st = holo::StereoStudioSource::Create(studio.get(), sdo);
     if (!st.ok()) return Fail(st.status());
     stereo_source = std::move(*st);

@@ -88,6 +88,74 @@ void ExpectRegionRecoversPlane(bool force_scalar) {
 TEST(PatchMatchRegionTest, RegionRecoversSlantedPlane) { ExpectRegionRecoversPlane(false); }
 TEST(PatchMatchRegionTest, ScalarPathRegionRecoversSlantedPlane) { ExpectRegionRecoversPlane(true); }
 
+// PatchMatchOptions::temporal: a region of the next frame starts from the
+// last frame's planes and one lighter iteration recovers the moved plane as
+// well as the full algorithm; the whole image and a region that left the
+// last one run the full algorithm (a fresh matcher's result, bit for bit).
+TEST(PatchMatchTemporalTest, ARegionStartsFromTheLastPlanesAndFollowsTheMotion) {
+  const int W = 160, H = 120;
+  PatchMatchOptions o;
+  o.min_disparity = 0;
+  o.max_disparity = 40;
+  o.threads = 2;
+  PatchMatchOptions t = o;
+  t.temporal = true;
+  PatchMatchStereo pm(t);
+  const ImageRect region{50, 20, 130, 100};
+  ImageGray8 l, r;
+  ImageFloat truth, d;
+  // The plane tilts and comes nearer frame by frame: ten frames in the
+  // region, each from the last one's planes.
+  for (int f = 0; f < 10; ++f) {
+    SlantedPlane(W, H, 0.06f + 0.002f * f, -0.04f, 14.0f + 0.3f * f, &l, &r, &truth);
+    ASSERT_TRUE(pm.Compute(l, r, f == 0 ? ImageRect::Full(W, H) : region, &d).ok());
+    EXPECT_EQ(pm.last_was_temporal(), f > 0) << "frame " << f;
+  }
+  EXPECT_EQ(CountNonZeroOutside(d, region), 0);
+  std::vector<float> err;
+  int total = 0;
+  for (int y = region.y0; y < region.y1; ++y)
+    for (int x = region.x0; x < region.x1; ++x) {
+      ++total;
+      if (d.at(x, y) > 0.0f) err.push_back(std::abs(d.at(x, y) - truth.at(x, y)));
+    }
+  ASSERT_GT(static_cast<int>(err.size()), total * 9 / 10);
+  std::sort(err.begin(), err.end());
+  EXPECT_LT(err[err.size() / 2], 0.1f);
+  EXPECT_LT(err[err.size() * 9 / 10], 0.3f);
+
+  // The whole image, and a region mostly outside the last one: the full
+  // algorithm, as a fresh matcher gives it.
+  PatchMatchStereo fresh(o);
+  ImageFloat a, b;
+  ASSERT_TRUE(pm.Compute(l, r, ImageRect::Full(W, H), &a).ok());
+  EXPECT_FALSE(pm.last_was_temporal());
+  ASSERT_TRUE(fresh.Compute(l, r, ImageRect::Full(W, H), &b).ok());
+  EXPECT_TRUE(a == b);
+  ASSERT_TRUE(pm.Compute(l, r, region, &a).ok());  // from the whole image's planes
+  EXPECT_TRUE(pm.last_was_temporal());
+  const ImageRect elsewhere{0, 0, 60, 50};         // overlaps the last region by 10×30 of 60×50
+  ASSERT_TRUE(pm.Compute(l, r, elsewhere, &a).ok());
+  EXPECT_FALSE(pm.last_was_temporal());
+  ASSERT_TRUE(fresh.Compute(l, r, elsewhere, &b).ok());
+  EXPECT_TRUE(a == b);
+}
+
+TEST(PatchMatchTemporalTest, OptionsAreChecked) {
+  PatchMatchOptions o;
+  o.temporal_min_overlap = 0.0f;
+  EXPECT_NE(o.Check().message().find("temporal_min_overlap"), std::string::npos);
+  o = PatchMatchOptions{};
+  o.temporal_iterations = 0;
+  EXPECT_NE(o.Check().message().find("temporal_iterations"), std::string::npos);
+  o = PatchMatchOptions{};
+  o.temporal_refine_start = 21;
+  EXPECT_NE(o.Check().message().find("temporal_refine_start"), std::string::npos);
+  o = PatchMatchOptions{};
+  o.temporal_refine_per_sweep = 9;
+  EXPECT_NE(o.Check().message().find("temporal_refine_per_sweep"), std::string::npos);
+}
+
 TEST(PatchMatchRegionTest, RegionResultDoesNotDependOnThreadCount) {
   ImageGray8 l, r;
   ImageFloat truth, a, b;
