@@ -1065,7 +1065,8 @@ Status VideoDecoder::Decode(std::span<const uint8_t> blob, const Limits& limits)
       }
       const int left_end = std::min(old.x + old.w, win.x), right_start = std::max(old.x, win.x + win.w);
       if (left_end > old.x) std::memset(row + size_t(old.x) * 3, 0, size_t(left_end - old.x) * 3);
-      if (old.x + old.w > right_start) std::memset(row + size_t(right_start) * 3, 0, size_t(old.x + old.w - right_start) * 3);
+      if (old.x + old.w > right_start)
+        std::memset(row + size_t(right_start) * 3, 0, size_t(old.x + old.w - right_start) * 3);
     }
   }
   const int shift = chroma ? 0 : 1;

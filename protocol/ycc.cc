@@ -105,7 +105,8 @@ __attribute__((target("avx2"))) void YccToRgbRowAvx2(const uint8_t* y, const uin
     const __m128i rg = _mm_unpacklo_epi64(Narrow(r), Narrow(g));
     const __m128i b8 = Narrow(b);
     uint8_t* d = rgb + 3 * x;
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(d), _mm_or_si128(_mm_shuffle_epi8(rg, o0rg), _mm_shuffle_epi8(b8, o0b)));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(d),
+                     _mm_or_si128(_mm_shuffle_epi8(rg, o0rg), _mm_shuffle_epi8(b8, o0b)));
     _mm_storel_epi64(reinterpret_cast<__m128i*>(d + 16),
                      _mm_or_si128(_mm_shuffle_epi8(rg, o1rg), _mm_shuffle_epi8(b8, o1b)));
   }

@@ -47,7 +47,8 @@ Status PatchMatchOptions::Check() const {
   if (temporal_refine_start < 0 || temporal_refine_start > 20)
     return InvalidArgument("temporal_refine_start must be in [0, 20], got " + FormatNumber(temporal_refine_start));
   if (temporal_refine_per_sweep < 0 || temporal_refine_per_sweep > 8)
-    return InvalidArgument("temporal_refine_per_sweep must be in [0, 8], got " + FormatNumber(temporal_refine_per_sweep));
+    return InvalidArgument("temporal_refine_per_sweep must be in [0, 8], got " +
+                           FormatNumber(temporal_refine_per_sweep));
   if (!(temporal_min_overlap > 0.0f && temporal_min_overlap <= 1.0f))
     return InvalidArgument("temporal_min_overlap must be in (0, 1], got " + FormatNumber(temporal_min_overlap));
   return OkStatus();
@@ -456,7 +457,8 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     const ImageRect c{std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
     return c.area();
   };
-  const bool temporal = o.temporal && im.have_last && im.last_w == W && im.last_h == H && !(lreg == ImageRect::Full(W, H)) &&
+  const bool temporal = o.temporal && im.have_last && im.last_w == W && im.last_h == H &&
+                        !(lreg == ImageRect::Full(W, H)) &&
                         static_cast<double>(overlap(im.last_left, lreg)) >=
                             o.temporal_min_overlap * static_cast<double>(lreg.area());
   // A temporal start varies the refinement's random numbers from call to
@@ -533,9 +535,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       const int ly = std::clamp(y, last.y0, last.y1 - 1);
+      const Plane* from = v.plane.data() + static_cast<size_t>(ly) * W;
       for (int x = g.x0; x < g.x1; ++x) {
-        if (!last.Contains(x, y))
-          v.plane[static_cast<size_t>(y) * W + x] = v.plane[static_cast<size_t>(ly) * W + std::clamp(x, last.x0, last.x1 - 1)];
+        if (!last.Contains(x, y)) v.plane[static_cast<size_t>(y) * W + x] = from[std::clamp(x, last.x0, last.x1 - 1)];
       }
     });
     im.pool.Run(g.height(), [&](int row, int) {
