@@ -1,6 +1,7 @@
 #include "audio/av_sync.h"
 
 #include <algorithm>
+#include <deque>
 #include <cmath>
 #include <string>
 
@@ -15,6 +16,22 @@ constexpr size_t kMaxSamples = 1000000;
 
 void Keep(std::vector<float>* v, double x) {
   if (v->size() < kMaxSamples) v->push_back(static_cast<float>(x));
+}
+
+// The delays (ms) of a window of (time, delay) samples, sorted.
+std::vector<double> SortedDelays(const std::deque<std::pair<int64_t, double>>& window) {
+  std::vector<double> d;
+  d.reserve(window.size());
+  for (const auto& [t, ms] : window) d.push_back(ms);
+  std::sort(d.begin(), d.end());
+  return d;
+}
+
+// Quantile q of sorted, non-empty delays, rounded up: as late as that share
+// of them at least.
+double UpperQuantile(const std::vector<double>& sorted, double q) {
+  const auto k = static_cast<size_t>(std::ceil(q * static_cast<double>(sorted.size() - 1)));
+  return sorted[std::min(sorted.size() - 1, k)];
 }
 
 }  // namespace
@@ -77,15 +94,15 @@ int64_t AvSync::PictureReady(int64_t capture_us, int64_t ready_us) {
 }
 
 double AvSync::PaceDelayLocked(int64_t now_us) {
-  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
-  while (!natural_delays_.empty() && natural_delays_.front().first < now_us - window_us) natural_delays_.pop_front();
+  TrimWindowsLocked(now_us);
   if (natural_delays_.empty()) return -1.0;
-  std::vector<double> d;
-  d.reserve(natural_delays_.size());
-  for (const auto& [t, ms] : natural_delays_) d.push_back(ms);
-  const auto k = static_cast<size_t>(std::ceil(options_.picture_quantile * static_cast<double>(d.size() - 1)));
-  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(std::min(d.size() - 1, k)), d.end());
-  return d[std::min(d.size() - 1, k)];
+  return UpperQuantile(SortedDelays(natural_delays_), options_.picture_quantile);
+}
+
+void AvSync::TrimWindowsLocked(int64_t now_us) {
+  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
+  while (!picture_delays_.empty() && picture_delays_.front().first < now_us - window_us) picture_delays_.pop_front();
+  while (!natural_delays_.empty() && natural_delays_.front().first < now_us - window_us) natural_delays_.pop_front();
 }
 
 void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64_t display_us) {
@@ -122,9 +139,7 @@ void AvSync::PictureDisplayed(int64_t capture_us, int64_t render_start_us, int64
 }
 
 void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
-  const auto window_us = static_cast<int64_t>(options_.window_s * 1e6);
-  while (!picture_delays_.empty() && picture_delays_.front().first < now_us - window_us) picture_delays_.pop_front();
-  while (!natural_delays_.empty() && natural_delays_.front().first < now_us - window_us) natural_delays_.pop_front();
+  TrimWindowsLocked(now_us);
   const auto& window = options_.hold_pictures ? natural_delays_ : picture_delays_;
   if (!options_.enabled || window.empty()) {
     voice_target_ms_ = 0;
@@ -134,9 +149,7 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   if (updated_ && now_us - last_update_us_ < static_cast<int64_t>(options_.update_interval_ms * 1000.0)) return;
   updated_ = true;
   last_update_us_ = now_us;
-  std::vector<double> d;
-  d.reserve(window.size());
-  for (const auto& [t, ms] : window) d.push_back(ms);
+  const std::vector<double> d = SortedDelays(window);
   // Pictures held for their voice: the voice as late as most pictures'
   // natural delays. Else the voice delay that puts the most displayed
   // pictures within the detectability window (voice at most early_limit_ms
@@ -144,14 +157,12 @@ void AvSync::UpdateVoiceTargetLocked(int64_t now_us) {
   // so that the median offset stays small; ties go to the delay nearest the
   // median (with spread delays this leans the voice late: voice ahead of the
   // lips is noticed sooner than voice behind them).
-  std::sort(d.begin(), d.end());
   const double median = d[d.size() / 2];
   double want = median;
   size_t best = 0;
   if (options_.hold_pictures) {
     // Late enough for most pictures; the earlier ones wait for their voice.
-    const auto k = static_cast<size_t>(std::ceil(options_.picture_quantile * static_cast<double>(d.size() - 1)));
-    want = d[std::min(d.size() - 1, k)];
+    want = UpperQuantile(d, options_.picture_quantile);
   }
   for (double bias = -35.0; bias <= 35.0 && !options_.hold_pictures; bias += 5.0) {
     const double v = median + bias;

@@ -176,6 +176,8 @@ class AvSync {
   // pace_pictures: the natural delays' picture_quantile over the window
   // ending at now_us, ms (−1 without pictures).
   double PaceDelayLocked(int64_t now_us);
+  // Drops the delay samples older than the window ending at now_us.
+  void TrimWindowsLocked(int64_t now_us);
   void UpdateVoiceTargetLocked(int64_t now_us);
 
   AvSyncOptions options_;

@@ -269,7 +269,6 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   // in the same region as patchmatch_roi, started from its planes of the
   // previous frame (matched untimed before every timed run).
   PatchMatchOptions pmo_t = pmo;
-  pmo_t.temporal = true;
   SetTemporal(o, &pmo_t);
   std::vector<std::unique_ptr<PatchMatchStereo>> pm_t;
   for (size_t p = 0; p < rig.pods.size(); ++p) pm_t.push_back(std::make_unique<PatchMatchStereo>(pmo_t));
@@ -450,7 +449,6 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     // chain of temporal starts, with the policy's whole pairs in between).
     constexpr int kChain = 10;
     StereoDepthOptions sdo_tmp = sdo_roi;
-    sdo_tmp.patchmatch.temporal = true;
     SetTemporal(o, &sdo_tmp.patchmatch);
     StudioGroundTruth gt;
     for (int f = 0; f < fuse_frames; ++f) {
@@ -472,21 +470,17 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         stereo_roi.frames[p].mask = gt.mask[p];
         stereo_tmp.frames[p].mask = gt.mask[p];
       }
-      Mesh m_direct, m_stereo;
-      (*vol)->Reset();
-      if (Status s = (*vol)->Integrate(rig, direct); !s.ok()) return Fail(s.ToString());
-      (*vol)->ExtractMesh(&m_direct);
-      (*vol)->Reset();
-      if (Status s = (*vol)->Integrate(rig, stereo); !s.ok()) return Fail(s.ToString());
-      (*vol)->ExtractMesh(&m_stereo);
-      Mesh m_roi;
-      (*vol)->Reset();
-      if (Status s = (*vol)->Integrate(rig, stereo_roi); !s.ok()) return Fail(s.ToString());
-      (*vol)->ExtractMesh(&m_roi);
-      Mesh m_tmp;
-      (*vol)->Reset();
-      if (Status s = (*vol)->Integrate(rig, stereo_tmp); !s.ok()) return Fail(s.ToString());
-      (*vol)->ExtractMesh(&m_tmp);
+      // Each frame set fused alone.
+      auto fuse = [&](const RgbdFrameSet& set, Mesh* mesh) {
+        (*vol)->Reset();
+        HOLO_RETURN_IF_ERROR((*vol)->Integrate(rig, set));
+        (*vol)->ExtractMesh(mesh);
+        return OkStatus();
+      };
+      Mesh m_direct, m_stereo, m_roi, m_tmp;
+      for (auto [set, mesh] : {std::pair{&direct, &m_direct}, std::pair{&stereo, &m_stereo},
+                               std::pair{&stereo_roi, &m_roi}, std::pair{&stereo_tmp, &m_tmp}})
+        if (Status s = fuse(*set, mesh); !s.ok()) return Fail(s.ToString());
       metrics::MeshDistanceOptions mo;
       mo.num_threads = threads;
       auto vs = metrics::ComputeMeshDistance(m_stereo, m_direct, mo);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "common/cpu_features.h"
+
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
 #define HOLO_YCC_AVX2 1
@@ -133,8 +135,7 @@ void YccToRgbPixel(int y, int cb, int cr, uint8_t* p) {
 
 bool YccRowsUseAvx2() {
 #ifdef HOLO_YCC_AVX2
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  return avx2;
+  return CpuHasAvx2();
 #else
   return false;
 #endif

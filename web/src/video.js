@@ -386,7 +386,7 @@ const clamp8 = (v) => (v < 0 ? 0 : v > 255 ? 255 : v);
 
 // The decoded planes (the window `win` of the W×H image) to RGBA of the
 // whole image with the C++ decoder's full-range BT.601 arithmetic
-// (protocol/video_codec.cc, YccToRgb), so that the page shows the colours the
+// (protocol/ycc.h, YccToRgbPixel), so that the page shows the colours the
 // native viewer shows; background pixels 0, alpha = mask. Frames in another
 // layout (a GPU frame) go through a canvas instead.
 async function frameToRgba(frame, W, H, win, mask) {
