@@ -66,6 +66,7 @@ struct Plane {
   float a = 0, b = 0, c = 0;
   float At(float x, float y) const { return a * x + b * y + c; }
 };
+inline bool SamePlane(const Plane& p, const Plane& q) { return p.a == q.a && p.b == q.b && p.c == q.c; }
 
 inline uint64_t Mix(uint64_t x) {
   x ^= x >> 30;
@@ -83,16 +84,19 @@ inline float Sym(uint64_t h, int shift) {
 // One view's images and state. Image rows are padded by kPad replicated
 // pixels on each side, so a window's columns can be loaded without clamping.
 constexpr int kPad = 16;
+constexpr int kTail = 32;
 struct View {
   int W = 0, H = 0, stride = 0;
   float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
   ImageRect region;         // the pixels whose planes this Compute works on
   std::vector<float> I, G;  // intensity and x gradient, padded rows
-  // The same padded rows packed for the AVX2 path's gathers of the other
-  // view: per position x, int16 {I(x), I(x+1)} in the low 32 bits and
-  // {2·G(x), 2·G(x+1)} in the high 32 (both exact: I is 8-bit, G a half
-  // integer), so one gather of 8 lanes fetches both interpolation ends.
-  std::vector<uint64_t> packed;
+  // The same padded rows packed for the AVX2 path's reads of the other
+  // view: per position x, int16 {I(x), I(x+1)} in `pair_i` and
+  // {2·G(x), 2·G(x+1)} in `pair_g` (both exact: I is 8-bit, G a half
+  // integer), so one 32-bit element holds both interpolation ends. Each
+  // array has kTail elements after the last row (whole vectors are loaded
+  // there; lanes never select them).
+  std::vector<uint32_t> pair_i, pair_g;
   std::vector<float> wtot;  // per pixel: total support weight of its window
   std::vector<Plane> plane;
   std::vector<float> cost;
@@ -101,7 +105,8 @@ struct View {
 
   const float* IRow(int y) const { return I.data() + static_cast<size_t>(y) * stride + kPad; }
   const float* GRow(int y) const { return G.data() + static_cast<size_t>(y) * stride + kPad; }
-  const uint64_t* PackedRow(int y) const { return packed.data() + static_cast<size_t>(y) * stride + kPad; }
+  const uint32_t* PairIRow(int y) const { return pair_i.data() + static_cast<size_t>(y) * stride + kPad; }
+  const uint32_t* PairGRow(int y) const { return pair_g.data() + static_cast<size_t>(y) * stride + kPad; }
 
   void Load(const ImageGray8& img, float s) {
     W = img.width();
@@ -111,7 +116,8 @@ struct View {
     const size_t n = static_cast<size_t>(W) * H;
     I.resize(static_cast<size_t>(stride) * H + 8);
     G.resize(I.size());
-    packed.resize(I.size());
+    pair_i.resize(I.size() + kTail);
+    pair_g.resize(I.size() + kTail);
     for (int y = 0; y < H; ++y) {
       const uint8_t* src = img.row(y);
       float* r = I.data() + static_cast<size_t>(y) * stride;
@@ -121,11 +127,13 @@ struct View {
         const int xc = std::clamp(x, 0, W - 1);
         g[x + kPad] = 0.5f * (r[std::min(xc + 1, W - 1) + kPad] - r[std::max(xc - 1, 0) + kPad]);
       }
-      uint64_t* q = packed.data() + static_cast<size_t>(y) * stride;
+      uint32_t* qi = pair_i.data() + static_cast<size_t>(y) * stride;
+      uint32_t* qg = pair_g.data() + static_cast<size_t>(y) * stride;
       for (int j = 0; j < stride; ++j) {
         const int j1 = std::min(j + 1, stride - 1);
-        const auto i16 = [](float v) { return static_cast<uint64_t>(static_cast<uint16_t>(static_cast<int16_t>(v))); };
-        q[j] = i16(r[j]) | i16(r[j1]) << 16 | i16(2.0f * g[j]) << 32 | i16(2.0f * g[j1]) << 48;
+        const auto i16 = [](float v) { return static_cast<uint32_t>(static_cast<uint16_t>(static_cast<int16_t>(v))); };
+        qi[j] = i16(r[j]) | i16(r[j1]) << 16;
+        qg[j] = i16(2.0f * g[j]) | i16(2.0f * g[j1]) << 16;
       }
     }
     wtot.resize(n);
@@ -245,6 +253,21 @@ __attribute__((target("avx2,fma"))) void PrepareWindowAvx2(const View& self, int
   }
 }
 
+// Lanes idx (0 ≤ idx < 8·regs) of the 8·regs consecutive elements at `p`:
+// `regs` loads and in-register permutes (cheaper than a gather).
+__attribute__((target("avx2,fma"))) inline __m256i SelectLanes(const uint32_t* p, __m256i idx, int regs) {
+  __m256i r = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)), idx);
+  if (regs > 1) {
+    const __m256i r1 = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 8)), idx);
+    r = _mm256_blendv_epi8(r, r1, _mm256_cmpgt_epi32(idx, _mm256_set1_epi32(7)));
+  }
+  if (regs > 2) {
+    const __m256i r2 = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16)), idx);
+    r = _mm256_blendv_epi8(r, r2, _mm256_cmpgt_epi32(idx, _mm256_set1_epi32(15)));
+  }
+  return r;
+}
+
 template <bool kGradient>
 __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View& other, int x, int y, const Plane& p,
                                                     const CostParams& cp, const SelfWindow& sw, float bound) {
@@ -265,6 +288,17 @@ __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View&
   const float limit = bound * wt;
   // x + sign·a·x: the part of the sample position that does not change with the row.
   const __m256 xs_base = _mm256_fmadd_ps(sign, _mm256_mul_ps(a, xf), xf);
+  // The window's samples of a row of the other view lie within
+  // |x_7 − x_0| + 1 pixels, one to four vectors for the usual planes: up to
+  // three, the row's elements are loaded and permuted into the lanes (lane
+  // index relative to `base`, a pixel left of the lowest lane's; a check
+  // falls back to gathers if rounding ever put a lane outside).
+  alignas(32) float xb[8];
+  _mm256_store_ps(xb, xs_base);
+  const float lo_base = std::min(xb[0], xb[7]);
+  const int regs = (static_cast<int>(std::abs(xb[7] - xb[0]) + 0.51f) + 9) / 8;
+  const __m256i max_idx = _mm256_set1_epi32(8 * regs - 1);
+  const float max_xs = static_cast<float>(W - 1) - 1e-3f;
   __m256 sum = zero;
   for (int r = 0; r < cp.rows; ++r) {
     const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
@@ -274,16 +308,33 @@ __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View&
     xs = _mm256_min_ps(_mm256_max_ps(xs, zero), max_x);
     const __m256i i0 = _mm256_cvttps_epi32(xs);
     const __m256 f = _mm256_sub_ps(xs, _mm256_cvtepi32_ps(i0));
-    // Both interpolation ends (and their gradients) from one packed gather each.
-    const int* prow = reinterpret_cast<const int*>(other.PackedRow(yy));
-    const __m256i ip = _mm256_i32gather_epi32(prow, i0, 8);
+    // Both interpolation ends (and their gradients) from one 32-bit element each.
+    const uint32_t* irow = other.PairIRow(yy);
+    const uint32_t* grow = other.PairGRow(yy);
+    __m256i ip, gp;
+    bool selected = false;
+    if (regs <= 3) {
+      const int base = static_cast<int>(std::clamp(lo_base + self.sign * (p.b * static_cast<float>(yy) + p.c) - 0.5f,
+                                                   0.0f, max_xs));
+      const __m256i idx = _mm256_sub_epi32(i0, _mm256_set1_epi32(base));
+      const __m256i out = _mm256_or_si256(_mm256_cmpgt_epi32(idx, max_idx),
+                                          _mm256_cmpgt_epi32(_mm256_setzero_si256(), idx));
+      if (_mm256_testz_si256(out, out)) {
+        ip = SelectLanes(irow + base, idx, regs);
+        if constexpr (kGradient) gp = SelectLanes(grow + base, idx, regs);
+        selected = true;
+      }
+    }
+    if (!selected) {
+      ip = _mm256_i32gather_epi32(reinterpret_cast<const int*>(irow), i0, 4);
+      if constexpr (kGradient) gp = _mm256_i32gather_epi32(reinterpret_cast<const int*>(grow), i0, 4);
+    }
     const __m256 o0 = _mm256_cvtepi32_ps(_mm256_and_si256(ip, lo16));
     const __m256 o1 = _mm256_cvtepi32_ps(_mm256_srli_epi32(ip, 16));
     const __m256 sv = _mm256_load_ps(sw.sv + 8 * r);
     const __m256 ov = _mm256_fmadd_ps(f, _mm256_sub_ps(o1, o0), o0);
     __m256 rho = _mm256_mul_ps(wc, _mm256_min_ps(_mm256_and_ps(_mm256_sub_ps(sv, ov), abs_mask), tau_c));
     if constexpr (kGradient) {
-      const __m256i gp = _mm256_i32gather_epi32(prow + 1, i0, 8);
       const __m256 g0 = _mm256_mul_ps(half, _mm256_cvtepi32_ps(_mm256_srai_epi32(_mm256_slli_epi32(gp, 16), 16)));
       const __m256 g1 = _mm256_mul_ps(half, _mm256_cvtepi32_ps(_mm256_srai_epi32(gp, 16)));
       const __m256 sgv = _mm256_load_ps(sw.sg + 8 * r);
@@ -490,8 +541,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   };
 
   auto try_plane = [&](View& v, const View& other, int x, int y, const Plane& p, const SelfWindow& sw) {
-    if (!valid_at(p, static_cast<float>(x), static_cast<float>(y))) return;
     const size_t i = static_cast<size_t>(y) * W + x;
+    // Propagation copies planes exactly, so a neighbour's (or the other
+    // view's) plane is often the pixel's own: its cost is the one stored.
+    if (SamePlane(p, v.plane[i])) return;
+    if (!valid_at(p, static_cast<float>(x), static_cast<float>(y))) return;
     const float c = cost(v, other, x, y, p, sw, v.cost[i]);
     if (c < v.cost[i]) {
       v.cost[i] = c;
