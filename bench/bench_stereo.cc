@@ -28,6 +28,7 @@
 // of one), --threads N (2), --baseline M (0.15), --iterations N,
 // --coarse-levels N and --fine-iterations N (PatchMatch), --temporal-iterations N,
 // --temporal-refine-start N and --temporal-refine-per-sweep N (patchmatch_temporal),
+// --light-right-view on|off (PatchMatchOptions::light_right_view, on),
 // --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
 // fused mesh comes after a run of 10 frames), --contact-sheet PNG.
 #include <algorithm>
@@ -203,6 +204,7 @@ struct StereoBenchOptions {
   // patchmatch_temporal's PatchMatchOptions (-1: their defaults)
   int temporal_iterations = -1, temporal_refine_start = -1, temporal_refine_per_sweep = -1;
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
+  bool light_right_view = true;  // PatchMatchOptions::light_right_view
   double baseline = kDefaultStereoBaselineM;
 };
 
@@ -237,6 +239,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (iterations > 0) sdo.patchmatch.iterations = iterations;
   if (o.coarse_levels >= 0) sdo.patchmatch.coarse_levels = o.coarse_levels;
   if (o.fine_iterations > 0) sdo.patchmatch.fine_iterations = o.fine_iterations;
+  sdo.patchmatch.light_right_view = o.light_right_view;
   auto source = StereoStudioSource::Create(studio->get(), sdo);
   if (!source.ok()) return Fail(source.status().ToString());
   StereoDepthOptions sdo_roi = sdo;
@@ -546,6 +549,11 @@ BenchFn SetupStereo(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--temporal-refine-per-sweep", o->temporal_refine_per_sweep,
                  "patchmatch_temporal: refinement candidates per sweep (-1: its default)")
+      ->capture_default_str();
+  app.add_option("--light-right-view", o->light_right_view,
+                 "PatchMatch: the right view without refinement or vertical sweeps where planes start from the "
+                 "coarse level or the last frame (on|off)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"on", true}, {"off", false}}))
       ->capture_default_str();
   app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
       ->check(CLI::Range(0, 100))

@@ -612,6 +612,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   int iterations = o.iterations;
   int step_index = 0;
   const int refine_per_sweep = temporal ? o.temporal_refine_per_sweep : o.refine_per_sweep;
+  // PatchMatchOptions::light_right_view: set below where the planes start
+  // from the coarse level's or the last Compute's.
+  bool light_right = false;
   if (temporal) {
     init_from_last(L, R, im.last_left);
     if (!im.last_right.empty()) {
@@ -621,6 +624,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     }
     iterations = o.temporal_iterations;
     step_index = o.temporal_refine_start;
+    light_right = o.light_right_view;
   } else if (from_coarse) {
     if (!im.coarse) {
       PatchMatchOptions co = o;
@@ -646,6 +650,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     init_from_coarse(R, L, im.coarse->impl_->right);
     iterations = o.fine_iterations;
     step_index = o.fine_refine_start;
+    light_right = o.light_right_view;
   } else {
     init(L, R, 1);
     init(R, L, 2);
@@ -709,7 +714,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int per_sweep = std::max(1, refine_per_sweep);
       const float scale_h = std::ldexp(1.0f, -step_index);
       const float scale_v = std::ldexp(1.0f, -(step_index + per_sweep));
-      // Horizontal sweep: view proposal, left (or right) neighbour, refinement.
+      // Horizontal sweep: view proposal, left (or right) neighbour, refinement
+      // (none in a light right view).
+      const bool light = light_right && vi == 1;
       im.pool.Run(gh, [&](int row, int) {
         const int y = g.y0 + row;
         const size_t ro = static_cast<size_t>(y) * W;
@@ -719,9 +726,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
           prepare(v, x, y, &sw);
           if (v.has_proposal[ro + x]) try_plane(v, other, x, y, v.proposal[ro + x], sw);
           if (k > 0) try_plane(v, other, x, y, v.plane[ro + (forward ? x - 1 : x + 1)], sw);
-          refine(v, other, x, y, pass, scale_h, sw);
+          if (!light) refine(v, other, x, y, pass, scale_h, sw);
         }
       });
+      if (light) continue;
       // Vertical sweep over blocks of columns.
       im.pool.Run(column_blocks, [&](int blk, int) {
         const int x0 = g.x0 + blk * kColumnBlock, x1 = std::min(g.x1, x0 + kColumnBlock);

@@ -8,8 +8,11 @@
 // of the pixel before it in the row; rows run in parallel), a vertical sweep
 // (the pixel above or below; blocks of columns in parallel), each followed by
 // random refinement of the pixel's disparity and normal with a shrinking
-// range. Sweep directions alternate between iterations. Last, a left-right
-// consistency check drops pixels whose two views disagree.
+// range. Sweep directions alternate between iterations (where the planes
+// start from a coarse level or the last frame, the right view only takes view
+// propagation and the horizontal sweep without refinement:
+// PatchMatchOptions::light_right_view). Last, a left-right consistency check
+// drops pixels whose two views disagree.
 //
 // Matching cost of a plane: a sparse window (8 columns × window_rows rows,
 // `window_step` pixels apart) of truncated absolute differences of intensity
@@ -17,7 +20,9 @@
 // centre pixel (1 / (1 + (ΔI/γ)²), an adaptive support weight), the other
 // view sampled with linear interpolation at the plane's sub-pixel disparity.
 // The 8 columns are one AVX2 vector (runtime dispatch; a scalar path runs the
-// same arithmetic elsewhere). Random numbers come from a counter-based hash
+// same arithmetic elsewhere); the other view's samples of a window row come
+// from loads and in-register permutes when they span at most 24 pixels (the
+// usual planes), from gathers otherwise. Random numbers come from a counter-based hash
 // of (seed, pixel, pass): results do not depend on the thread count.
 //
 // Region of interest: Compute can be restricted to a rectangle of the left
@@ -87,6 +92,17 @@ struct PatchMatchOptions {
   int temporal_iterations = 2;
   int temporal_refine_start = 2;
   int temporal_refine_per_sweep = 1;
+  // Where the planes start from the coarse level's or the last Compute's (not
+  // random ones), the right view takes only the left's planes (view
+  // propagation) and its row neighbour's: no random refinement, no vertical
+  // sweep. The right view is there for the left's view propagation and the
+  // left-right check, and the left view's planes it receives are already
+  // refined. On the studio's S8-QVGA pairs this cut a region's pair from the
+  // last planes by about a third (65 → 44 CPU-ms) and a whole pair by a
+  // sixth, with bad-2px and the fused mesh unchanged or slightly better (the
+  // whole Middlebury Aloe pair: 23.6 → 23.0 %, 5.0 → 4.1 CPU-s);
+  // docs/stereo.md. false: both views alike (as before 2026-12-07).
+  bool light_right_view = true;
   // Random refinement candidates after each sweep, each with half the
   // perturbation range of the one before; the range keeps halving from
   // sweep to sweep (disparity ±range/4 at first, normal ±1).

@@ -48,4 +48,30 @@ inline SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
   return p;
 }
 
+// A fronto-parallel box at disparity `d_box` over the left view's
+// [x0, x1) × [y0, y1) in front of a fronto-parallel wall at `d_wall` (a
+// different texture). In the left view the wall's pixels in
+// [x0 − (d_box − d_wall), x0) of the box's rows are hidden from the right
+// camera (behind the box): no right pixel shows them.
+inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1, float d_box, float d_wall) {
+  SyntheticPair p;
+  p.left.Resize(W, H);
+  p.right.Resize(W, H);
+  p.truth.Resize(W, H);
+  auto box_texture = [](float u, float v) { return SlantedPlaneTexture(u + 517.3f, v + 211.9f); };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const bool in_rows = y >= y0 && y < y1;
+      const bool box = in_rows && x >= x0 && x < x1;
+      p.left.at(x, y) = static_cast<uint8_t>(std::lround(box ? box_texture(x, y) : SlantedPlaneTexture(x, y)));
+      p.truth.at(x, y) = box ? d_box : d_wall;
+      // Right pixel x shows the box where the box lands on it, else the wall.
+      const float xb = static_cast<float>(x) + d_box;
+      const bool right_box = in_rows && xb >= x0 && xb < x1;
+      p.right.at(x, y) = static_cast<uint8_t>(
+          std::lround(right_box ? box_texture(xb, y) : SlantedPlaneTexture(static_cast<float>(x) + d_wall, y)));
+    }
+  return p;
+}
+
 }  // namespace holo

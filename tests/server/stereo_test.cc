@@ -57,6 +57,50 @@ TEST(PatchMatchTest, ScalarPathRecoversSlantedPlane) { ExpectRecoversPlane(true,
 TEST(PatchMatchTest, OneLevelRecoversSlantedPlane) { ExpectRecoversPlane(false, 0); }
 TEST(PatchMatchTest, TwoCoarseLevelsRecoverSlantedPlane) { ExpectRecoversPlane(false, 2); }
 
+// The left-right check on a box before a wall: the wall's pixels that the
+// right camera cannot see (left of the box) are dropped, the rest keep
+// sub-pixel depth, with both views alike or the right one light
+// (PatchMatchOptions::light_right_view), and on a region from the last
+// frame's planes (temporal).
+void ExpectOcclusionDropped(bool light_right, bool temporal) {
+  const int W = 160, H = 120, x0 = 70, y0 = 30, x1 = 120, y1 = 95;
+  const float d_box = 24.0f, d_wall = 10.0f;
+  const SyntheticPair pair = BoxBeforeWall(W, H, x0, y0, x1, y1, d_box, d_wall);
+  PatchMatchOptions o;
+  o.max_disparity = 40;
+  o.threads = 2;
+  o.light_right_view = light_right;
+  o.temporal = temporal;
+  PatchMatchStereo pm(o);
+  ImageFloat disp;
+  const ImageRect region{44, 10, 150, 115};
+  ASSERT_TRUE(pm.Compute(pair.left, pair.right, region, &disp).ok());
+  if (temporal) {
+    ASSERT_TRUE(pm.Compute(pair.left, pair.right, region, &disp).ok());
+    ASSERT_TRUE(pm.last_was_temporal());
+  }
+  const int band0 = x0 - static_cast<int>(d_box - d_wall);
+  int band = 0, band_dropped = 0, seen = 0, seen_good = 0;
+  for (int y = y0 + 4; y < y1 - 4; ++y)
+    for (int x = region.x0 + 4; x < region.x1 - 4; ++x) {
+      const float d = disp.at(x, y);
+      if (x >= band0 + 2 && x < x0 - 2) {
+        ++band;
+        band_dropped += d == 0.0f;
+      } else if (x < band0 - 4 || (x >= x0 + 4 && x < x1 - 4) || x >= x1 + 4) {
+        ++seen;
+        seen_good += d > 0.0f && std::abs(d - pair.truth.at(x, y)) < 1.0f;
+      }
+    }
+  ASSERT_GT(band, 0);
+  EXPECT_GT(static_cast<double>(band_dropped) / band, 0.8) << "occluded wall pixels kept";
+  EXPECT_GT(static_cast<double>(seen_good) / seen, 0.95) << "visible pixels within 1 px";
+}
+
+TEST(PatchMatchTest, LeftRightCheckDropsOccludedPixels) { ExpectOcclusionDropped(false, false); }
+TEST(PatchMatchTest, LightRightViewDropsOccludedPixels) { ExpectOcclusionDropped(true, false); }
+TEST(PatchMatchTest, LightRightViewFromLastPlanesDropsOccludedPixels) { ExpectOcclusionDropped(true, true); }
+
 TEST(PatchMatchTest, ResultDoesNotDependOnThreadCount) {
   const SyntheticPair pair = SlantedPlane(96, 64, 0.0f, 0.05f, 10.0f);
   PatchMatchOptions o;
