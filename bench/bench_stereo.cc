@@ -29,6 +29,7 @@
 // --coarse-levels N and --fine-iterations N (PatchMatch), --temporal-iterations N,
 // --temporal-refine-start N and --temporal-refine-per-sweep N (patchmatch_temporal),
 // --light-right-view on|off (PatchMatchOptions::light_right_view, on),
+// --final-window-step N (PatchMatchOptions::final_window_step; 0: no dense last pass),
 // --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
 // fused mesh comes after a run of 10 frames), --contact-sheet PNG.
 #include <algorithm>
@@ -205,6 +206,7 @@ struct StereoBenchOptions {
   int temporal_iterations = -1, temporal_refine_start = -1, temporal_refine_per_sweep = -1;
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   bool light_right_view = true;  // PatchMatchOptions::light_right_view
+  int final_window_step = -1;    // PatchMatchOptions::final_window_step (-1: its default)
   double baseline = kDefaultStereoBaselineM;
 };
 
@@ -240,6 +242,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (o.coarse_levels >= 0) sdo.patchmatch.coarse_levels = o.coarse_levels;
   if (o.fine_iterations > 0) sdo.patchmatch.fine_iterations = o.fine_iterations;
   sdo.patchmatch.light_right_view = o.light_right_view;
+  if (o.final_window_step >= 0) sdo.patchmatch.final_window_step = o.final_window_step;
   auto source = StereoStudioSource::Create(studio->get(), sdo);
   if (!source.ok()) return Fail(source.status().ToString());
   StereoDepthOptions sdo_roi = sdo;
@@ -554,6 +557,10 @@ BenchFn SetupStereo(CLI::App& app) {
                  "PatchMatch: the right view without refinement or vertical sweeps where planes start from the "
                  "coarse level or the last frame (on|off)")
       ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"on", true}, {"off", false}}))
+      ->capture_default_str();
+  app.add_option("--final-window-step", o->final_window_step,
+                 "PatchMatch: the dense last pass's window step (0: none; -1: its default)")
+      ->check(CLI::Range(-1, 4))
       ->capture_default_str();
   app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
       ->check(CLI::Range(0, 100))

@@ -41,6 +41,10 @@ Status PatchMatchOptions::Check() const {
   if (!(min_normal_z > 0.05f && min_normal_z <= 1.0f))
     return InvalidArgument("min_normal_z must be in (0.05, 1], got " + FormatNumber(min_normal_z));
   if (!std::isfinite(lr_max_diff)) return InvalidArgument("lr_max_diff must be finite");
+  if (final_window_step < 0 || final_window_step > 4)
+    return InvalidArgument("final_window_step must be in [0, 4], got " + FormatNumber(final_window_step));
+  if (!(final_step_px >= 1.0f / 32.0f && final_step_px <= 4.0f))
+    return InvalidArgument("final_step_px must be in [1/32, 4], got " + FormatNumber(final_step_px));
   if (threads < 0 || threads > 256) return InvalidArgument("threads must be in [0, 256], got " + FormatNumber(threads));
   if (temporal_iterations < 1 || temporal_iterations > 16)
     return InvalidArgument("temporal_iterations must be in [1, 16], got " + FormatNumber(temporal_iterations));
@@ -633,6 +637,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       co.max_disparity = std::max(o.max_disparity * 0.5f, co.min_disparity + 2.0f);
       co.lr_max_diff = -1.0f;  // the full-resolution level checks
       co.temporal = false;     // it runs only when the full resolution does not start from its last planes
+      co.final_window_step = 0;  // the full resolution's last pass follows
       HOLO_ASSIGN_OR_RETURN(im.coarse, PatchMatchStereo::Create(co));
     }
     HalveImage(left, &im.coarse_left);
@@ -746,6 +751,69 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       });
     }
     step_index += 2 * std::max(1, refine_per_sweep);
+  }
+
+  // The dense last pass (PatchMatchOptions::final_window_step): each left
+  // pixel's plane moved along d only, to the minimum of a V through its costs
+  // in the denser window at d and d ± final_step_px; the best of the four
+  // planes is kept.
+  if (o.final_window_step > 0) {
+    CostParams fcp = cp;
+    fcp.step = o.final_window_step;
+    const ImageRect& g = L.region;
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
+      SelfWindow sw;
+      for (int x = g.x0; x < g.x1; ++x) {
+        const size_t i = static_cast<size_t>(y) * W + x;
+        L.wtot[i] = WindowWeight(L, x, y, fcp);  // the next Compute recomputes it for its window
+        auto fcost = [&](const Plane& p, float bound) {
+#ifdef HOLO_PM_X86
+          if (avx2) return gradient ? CostAvx2<true>(L, R, x, y, p, fcp, sw, bound)
+                                    : CostAvx2<false>(L, R, x, y, p, fcp, sw, bound);
+#endif
+          return CostScalar(L, R, x, y, p, fcp, bound);
+        };
+#ifdef HOLO_PM_X86
+        if (avx2) PrepareWindowAvx2(L, x, y, fcp, &sw);
+#endif
+        const float xf = static_cast<float>(x), yf = static_cast<float>(y);
+        const float h = o.final_step_px;
+        const Plane centre = L.plane[i];
+        Plane best = centre;
+        const float centre_cost = fcost(centre, kNoBound);
+        float best_cost = centre_cost;
+        // Costs at d − h and d + h (an invalid side: no parabola).
+        float side[2] = {kNoBound, kNoBound};
+        for (int k = 0; k < 2; ++k) {
+          Plane q = centre;
+          q.c += k == 0 ? -h : h;
+          if (!valid_at(q, xf, yf)) continue;
+          side[k] = fcost(q, kNoBound);
+          if (side[k] < best_cost) {
+            best_cost = side[k];
+            best = q;
+          }
+        }
+        // The minimum of a V through the three costs (equiangular fit: exact
+        // for a cost linear in |d − d*| near the minimum, as absolute
+        // differences are; a parabola's vertex would move half as far).
+        const float rise = std::max(side[0], side[1]) - centre_cost;
+        if (side[0] < kNoBound && side[1] < kNoBound && centre_cost <= std::min(side[0], side[1]) && rise > 1e-6f) {
+          Plane q = centre;
+          q.c += std::clamp(0.5f * h * (side[0] - side[1]) / rise, -h, h);
+          if (valid_at(q, xf, yf)) {
+            const float c = fcost(q, best_cost);
+            if (c < best_cost) {
+              best_cost = c;
+              best = q;
+            }
+          }
+        }
+        L.plane[i] = best;
+        L.cost[i] = best_cost;
+      }
+    });
   }
 
   // Disparities and the left-right check (0 outside the regions).

@@ -74,4 +74,29 @@ inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1,
   return p;
 }
 
+// A surface d(x, y) of the left view (any function whose x slope stays
+// below 1, so that x − d(x, y) grows along a row), textured like the plane:
+// the right pixel xr shows the texture point x_left with x_left − d(x_left,
+// y) = xr, found by bisection in [xr, xr + max_d].
+template <typename DisparityFn>
+SyntheticPair CurvedSurface(int W, int H, float max_d, DisparityFn d) {
+  SyntheticPair p;
+  p.left.Resize(W, H);
+  p.right.Resize(W, H);
+  p.truth.Resize(W, H);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float fx = static_cast<float>(x), fy = static_cast<float>(y);
+      p.left.at(x, y) = static_cast<uint8_t>(std::lround(SlantedPlaneTexture(fx, fy)));
+      p.truth.at(x, y) = d(fx, fy);
+      float lo = fx, hi = fx + max_d;
+      for (int k = 0; k < 40; ++k) {
+        const float mid = 0.5f * (lo + hi);
+        (mid - d(mid, fy) < fx ? lo : hi) = mid;
+      }
+      p.right.at(x, y) = static_cast<uint8_t>(std::lround(SlantedPlaneTexture(0.5f * (lo + hi), fy)));
+    }
+  return p;
+}
+
 }  // namespace holo
