@@ -30,14 +30,16 @@ inline float SlantedPlaneTexture(float u, float v) {
 struct SyntheticPair {
   ImageGray8 left, right;
   ImageFloat truth;  // left-view disparity
+  SyntheticPair(int W, int H) {
+    left.Resize(W, H);
+    right.Resize(W, H);
+    truth.Resize(W, H);
+  }
 };
 
 // The right image at (xr, y) shows the texture point x_left = xr + d_right(xr, y).
 inline SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
-  SyntheticPair p;
-  p.left.Resize(W, H);
-  p.right.Resize(W, H);
-  p.truth.Resize(W, H);
+  SyntheticPair p(W, H);
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       p.left.at(x, y) = static_cast<uint8_t>(std::lround(SlantedPlaneTexture(x, y)));
@@ -54,10 +56,7 @@ inline SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
 // [x0 − (d_box − d_wall), x0) of the box's rows are hidden from the right
 // camera (behind the box): no right pixel shows them.
 inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1, float d_box, float d_wall) {
-  SyntheticPair p;
-  p.left.Resize(W, H);
-  p.right.Resize(W, H);
-  p.truth.Resize(W, H);
+  SyntheticPair p(W, H);
   auto box_texture = [](float u, float v) { return SlantedPlaneTexture(u + 517.3f, v + 211.9f); };
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -80,10 +79,7 @@ inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1,
 // y) = xr, found by bisection in [xr, xr + max_d].
 template <typename DisparityFn>
 SyntheticPair CurvedSurface(int W, int H, float max_d, DisparityFn d) {
-  SyntheticPair p;
-  p.left.Resize(W, H);
-  p.right.Resize(W, H);
-  p.truth.Resize(W, H);
+  SyntheticPair p(W, H);
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const float fx = static_cast<float>(x), fy = static_cast<float>(y);
