@@ -208,6 +208,12 @@ Status SyntheticStudio::Next(RgbdFrameSet* out) {
   return OkStatus();
 }
 
+Status SyntheticStudio::Skip(int64_t n) {
+  if (n < 0) return InvalidArgument("skip of " + std::to_string(n) + " frames");
+  next_frame_ += n;
+  return OkStatus();
+}
+
 Status SyntheticStudio::Seek(int64_t index) {
   if (index < 0) return OutOfRange("seek to frame " + std::to_string(index) + " before the start");
   next_frame_ = index;

@@ -131,6 +131,9 @@ class SyntheticStudio final : public FrameSource {
   Status Next(RgbdFrameSet* out) override;
   int64_t num_frames() const override { return -1; }
   Status Seek(int64_t index) override;
+  // Passes over `n` frames without rendering them (a camera's skipped frames
+  // cost nothing).
+  Status Skip(int64_t n) override;
 
   const StudioOptions& options() const { return options_; }
 

@@ -57,6 +57,11 @@ class StereoStudioSource final : public FrameSource {
   Status Next(RgbdFrameSet* out) override;
   int64_t num_frames() const override { return -1; }
   Status Seek(int64_t index) override;
+  // Passes over `n` frames without rendering or matching them (a paced site
+  // that fell behind takes the camera's current frame: reading the skipped
+  // ones, at ~0.4 s each, left it ever further behind and it sent nothing).
+  // The region policy sees the gap and matches the next pairs whole.
+  Status Skip(int64_t n) override;
 
   // Renders frame `frame_index` with stereo depth; `pairs` (optional) gets the IR pairs and their truth.
   Status RenderFrame(int64_t frame_index, RgbdFrameSet* out, std::vector<StereoPair>* pairs);

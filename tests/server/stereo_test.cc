@@ -342,6 +342,30 @@ TEST(StereoDepthTest, StudioSourceGivesDepthCloseToTruth) {
   }
 }
 
+// A paced site that fell behind skips to the camera's current frame: the
+// skipped frames must not be rendered and matched (that took ~0.4 s each
+// and the site never caught up), and the next one is the right frame.
+TEST(StereoDepthTest, SkipPassesOverFramesWithoutMatchingThem) {
+  auto base = LoadRig(ShippedRigPath("studio-4"));
+  ASSERT_TRUE(base.ok());
+  auto studio = MakeStudio(base->Scaled(0.25));
+  StereoDepthOptions o;
+  o.patchmatch.threads = 1;
+  auto src = StereoStudioSource::Create(studio.get(), o);
+  ASSERT_TRUE(src.ok()) << src.status().ToString();
+  ASSERT_TRUE((*src)->Skip(3).ok());
+  EXPECT_EQ((*src)->last_match_ms(), 0.0) << "Skip matched the frames it passed over";
+  RgbdFrameSet frames;
+  ASSERT_TRUE((*src)->Next(&frames).ok());
+  EXPECT_EQ(frames.frame_index, 3);
+  EXPECT_GT((*src)->last_match_ms(), 0.0);
+  EXPECT_FALSE((*src)->Skip(-1).ok());
+  // The studio itself likewise.
+  ASSERT_TRUE(studio->Skip(5).ok());
+  ASSERT_TRUE(studio->Next(&frames).ok());
+  EXPECT_EQ(frames.frame_index, 5);
+}
+
 TEST(StereoDepthTest, DisparityToDepth) {
   auto rig = LoadRig(ShippedRigPath("studio-4"));
   ASSERT_TRUE(rig.ok());
