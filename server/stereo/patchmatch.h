@@ -100,9 +100,9 @@ struct PatchMatchOptions {
   // sweep. The right view is there for the left's view propagation and the
   // left-right check, and the left view's planes it receives are already
   // refined. On the studio's S8-QVGA pairs this cut a region's pair from the
-  // last planes by about a third (65 → 44 CPU-ms) and a whole pair by a
+  // last planes by about a quarter (64 → 49 CPU-ms) and a whole pair by a
   // sixth, with bad-2px and the fused mesh unchanged or slightly better (the
-  // whole Middlebury Aloe pair: 23.6 → 23.0 %, 5.0 → 4.1 CPU-s);
+  // whole Middlebury Aloe pair: 23.6 → 23.0 %, 5.0 → 4.2 CPU-s);
   // docs/stereo.md. false: both views alike (as before 2026-12-07).
   bool light_right_view = true;
   // A last pass over the left view with a denser window: samples
@@ -117,7 +117,7 @@ struct PatchMatchOptions {
   // "A dense last pass") the fused person came 8.8 → 7.0 mm from the
   // direct-depth one for about a fifth more CPU per pair (a binary search
   // down to 1/32 px instead of the V: 7.3 mm for half more CPU; a parabola:
-  // 7.4 mm), and Middlebury Aloe's bad-2px rose 23.0 → 24.5 % (SGBM 32.3).
+  // 7.4 mm), and Middlebury Aloe's bad-2px rose 23.0 → 23.5 % (SGBM 32.3).
   int final_window_step = 1;
   float final_step_px = 0.5f;
   // Random refinement candidates after each sweep, each with half the
