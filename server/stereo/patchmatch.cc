@@ -470,21 +470,25 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   const bool avx2 = im.avx2;
   const bool gradient = o.alpha > 0.0f;
   // Call before the costs of a pixel: fills `sw` where the AVX2 path reads it.
-  auto prepare = [&](const View& self, int x, int y, SelfWindow* sw) {
+  // Both with the window `w` (the sweeps' `cp`, or the dense last pass's).
+  auto prepare_with = [&](const CostParams& w, const View& self, int x, int y, SelfWindow* sw) {
 #ifdef HOLO_PM_X86
-    if (avx2) PrepareWindowAvx2(self, x, y, cp, sw);
+    if (avx2) PrepareWindowAvx2(self, x, y, w, sw);
 #endif
-    (void)self, (void)x, (void)y, (void)sw;
+    (void)w, (void)self, (void)x, (void)y, (void)sw;
   };
-  auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, const SelfWindow& sw,
-                  float bound) {
+  auto cost_with = [&](const CostParams& w, const View& self, const View& other, int x, int y, const Plane& p,
+                       const SelfWindow& sw, float bound) {
 #ifdef HOLO_PM_X86
-    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, cp, sw, bound)
-                              : CostAvx2<false>(self, other, x, y, p, cp, sw, bound);
+    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, w, sw, bound)
+                              : CostAvx2<false>(self, other, x, y, p, w, sw, bound);
 #endif
     (void)sw;
-    return CostScalar(self, other, x, y, p, cp, bound);
+    return CostScalar(self, other, x, y, p, w, bound);
   };
+  auto prepare = [&](const View& self, int x, int y, SelfWindow* sw) { prepare_with(cp, self, x, y, sw); };
+  auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, const SelfWindow& sw,
+                  float bound) { return cost_with(cp, self, other, x, y, p, sw, bound); };
   constexpr float kNoBound = 3.0e38f;
   const float dmin = o.min_disparity, range = dmax - dmin;
   const float min_nz = o.min_normal_z;
@@ -767,16 +771,8 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       for (int x = g.x0; x < g.x1; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         L.wtot[i] = WindowWeight(L, x, y, fcp);  // the next Compute recomputes it for its window
-        auto fcost = [&](const Plane& p, float bound) {
-#ifdef HOLO_PM_X86
-          if (avx2) return gradient ? CostAvx2<true>(L, R, x, y, p, fcp, sw, bound)
-                                    : CostAvx2<false>(L, R, x, y, p, fcp, sw, bound);
-#endif
-          return CostScalar(L, R, x, y, p, fcp, bound);
-        };
-#ifdef HOLO_PM_X86
-        if (avx2) PrepareWindowAvx2(L, x, y, fcp, &sw);
-#endif
+        prepare_with(fcp, L, x, y, &sw);
+        auto fcost = [&](const Plane& p, float bound) { return cost_with(fcp, L, R, x, y, p, sw, bound); };
         const float xf = static_cast<float>(x), yf = static_cast<float>(y);
         const float h = o.final_step_px;
         const Plane centre = L.plane[i];
