@@ -255,8 +255,16 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
   app.add_option("--seg-iterations", p.seg_iterations, "segmentation CRF iterations");
   app.add_option("--seg-downsample", p.seg_downsample, "segmentation downsampling");
   app.add_option("--seg-grid-px", p.seg_grid_px, "segmentation grid, px");
+  app.add_option("--seg-edge-band", p.seg_edge_band,
+                 "segmentation: pixels beside a depth edge where colour decides (default: 3 with --pipeline-source "
+                 "stereo, else 0)")
+      ->check(CLI::Range(0, 32));
   app.add_option("--eval-every", p.eval_every, "evaluate every N frames")->check(CLI::PositiveNumber);
-  app.add_option("--pipeline-source", p.source, "pipeline source");
+  app.add_option("--pipeline-source", p.source,
+                 "pipeline source: synthetic (the studio renders during the run), prerendered, stereo (PatchMatch "
+                 "depth from the studio's IR pairs, as holoport-server --depth stereo; also runs the same frames on "
+                 "direct depth and compares the meshes) or dataset:DIR")
+      ->capture_default_str();
   app.add_option("--cpu-frames", p.cpu_frames, "frames timed for CPU figures")->check(CLI::NonNegativeNumber);
   app.add_option("--depth-filter", p.depth_filter,
                  "pipeline: depth filter radius (default: the capture site's, 0: off)")

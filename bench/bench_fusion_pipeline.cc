@@ -5,13 +5,16 @@
 #include <vector>
 
 #include "common/file_util.h"
+#include "common/image_io.h"
 #include "common/log.h"
 #include "common/metrics/image_metrics.h"
 #include "common/metrics/mesh_distance.h"
+#include "common/visualize.h"
 #include "fusion_pipeline.h"
 #include "server/capture/dataset.h"
 #include "server/capture/prerendered.h"
 #include "server/pipeline/capture_site.h"
+#include "server/stereo/stereo_depth.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
 #include "texture/novel_view.h"
@@ -23,7 +26,23 @@ struct Kept {
   int64_t frame = 0;
   Mesh mesh;
   std::vector<ImageGray8> masks;
+  std::vector<ImageDepth16> depth;  // kept only when pictures are written
 };
+
+// Our mask against the truth's: white both, red ours only, blue the truth's only.
+ImageRgb8 MaskErrors(const ImageGray8& ours, const ImageGray8& truth) {
+  ImageRgb8 out(ours.width(), ours.height());
+  for (int y = 0; y < ours.height(); ++y)
+    for (int x = 0; x < ours.width(); ++x) {
+      const bool a = ours.at(x, y) != 0, b = truth.width() == ours.width() && truth.height() == ours.height() &&
+                                              truth.at(x, y) != 0;
+      uint8_t* px = &out.at(x, y);
+      px[0] = a ? 255 : 0;
+      px[1] = a && b ? 255 : 0;
+      px[2] = b ? 255 : 0;
+    }
+  return out;
+}
 
 void Progress(const BenchArgs& args, const char* what) {
   if (!args.json) spdlog::info("fusion pipeline: {}", what);
@@ -56,10 +75,25 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   if (options.texture_transfer >= 0) site_options.texture_options.cluster_transfer = options.texture_transfer;
 
   const std::string& src = options.source;
-  if (src != "synthetic" && src != "prerendered" && src.rfind("dataset:", 0) != 0) {
-    spdlog::error("fusion: --pipeline-source must be synthetic, prerendered or dataset:DIR, got '{}'", src);
+  if (src != "synthetic" && src != "prerendered" && src != "stereo" && src.rfind("dataset:", 0) != 0) {
+    spdlog::error("fusion: --pipeline-source must be synthetic, prerendered, stereo or dataset:DIR, got '{}'", src);
     return 2;
   }
+  // Stereo depth as holoport-server --depth stereo makes it: regions around
+  // the person, each pod starting from its last planes, the dense last pass,
+  // and no depth filter unless one is asked for (docs/stereo.md).
+  const bool stereo = src == "stereo";
+  const int direct_filter_radius = site_options.depth_filter.radius;
+  if (stereo && options.depth_filter < 0) site_options.depth_filter.radius = 0;
+  // ... and segmentation's depth-edge band (SegmenterOptions::depth_edge_band_px).
+  const int direct_edge_band = site_options.segment.depth_edge_band_px;
+  if (options.seg_edge_band >= 0)
+    site_options.segment.depth_edge_band_px = options.seg_edge_band;
+  else if (stereo)
+    site_options.segment.depth_edge_band_px = kStereoSegmentEdgeBandPx;
+  StereoDepthOptions stereo_options;
+  stereo_options.roi.enabled = true;
+  stereo_options.patchmatch.temporal = true;
   // Frames for the prerendered source, rendered once (untimed).
   auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();
   if (src == "prerendered") {
@@ -79,16 +113,22 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   // One site: `studio` is the scoring truth (and the source when synthetic).
   struct Site {
     std::unique_ptr<SyntheticStudio> studio, empty;
-    std::unique_ptr<FrameSource> source;  // prerendered or dataset
+    std::unique_ptr<FrameSource> source;  // prerendered, stereo or dataset
     std::unique_ptr<CaptureSite> site;
   };
-  auto make_site = [&](Site* out) -> Status {
+  // `direct`: the studio's own depth whatever the source (the stereo run's peer).
+  auto make_site = [&](Site* out, bool direct = false) -> Status {
     StudioOptions studio_options = workload->studio;
     HOLO_ASSIGN_OR_RETURN(out->studio, SyntheticStudio::Create(workload->rig, studio_options));
     studio_options.empty_room = true;
     HOLO_ASSIGN_OR_RETURN(out->empty, SyntheticStudio::Create(workload->rig, studio_options));
     FrameSource* source = out->studio.get();
-    if (src == "prerendered") {
+    if (direct) {
+      // the studio renders, as with --pipeline-source synthetic
+    } else if (stereo) {
+      HOLO_ASSIGN_OR_RETURN(out->source, StereoStudioSource::Create(out->studio.get(), stereo_options));
+      source = out->source.get();
+    } else if (src == "prerendered") {
       out->source = std::make_unique<PrerenderedSource>(workload->rig, prerendered, /*loop=*/false);
       source = out->source.get();
     } else if (src.rfind("dataset:", 0) == 0) {
@@ -99,7 +139,12 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
       out->source = std::move(reader);
       source = out->source.get();
     }
-    HOLO_ASSIGN_OR_RETURN(out->site, CaptureSite::Create(source, out->empty.get(), nullptr, site_options));
+    CaptureSiteOptions so = site_options;
+    if (direct) {
+      so.depth_filter.radius = direct_filter_radius;
+      so.segment.depth_edge_band_px = direct_edge_band;
+    }
+    HOLO_ASSIGN_OR_RETURN(out->site, CaptureSite::Create(source, out->empty.get(), nullptr, so));
     return OkStatus();
   };
 
@@ -114,12 +159,16 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     return 1;
   }
   std::vector<Kept> kept;
+  auto keep = [&](const FrameWork& w) { return w.sequence % options.eval_every == options.eval_every / 2; };
   auto stats = (*site)->Run([&](const FrameWork& w) -> Status {
-    if (w.sequence % options.eval_every == options.eval_every / 2) {
+    if (keep(w)) {
       Kept k;
       k.frame = w.frames.frame_index;
       k.mesh = w.mesh;
-      for (const auto& f : w.frames.frames) k.masks.push_back(f.mask);
+      for (const auto& f : w.frames.frames) {
+        k.masks.push_back(f.mask);
+        if (!options.png_dir.empty()) k.depth.push_back(f.depth);
+      }
       kept.push_back(std::move(k));
     }
     return OkStatus();
@@ -272,7 +321,35 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     site_options.texture = true;
   }
 
-  // 5. Quality of the kept frames against ground truth.
+  // 5. Stereo only: the same frames through the site on the studio's direct
+  // depth (its peer: --pipeline-source synthetic), kept by frame index.
+  std::map<int64_t, Kept> direct_kept;  // by frame index
+  std::vector<double> direct_iou;
+  if (stereo) {
+    Progress(args, "the same frames on the studio's direct depth (the stereo run's peer)");
+    Site ds;
+    site_options.pipeline.pace_fps = 0;
+    site_options.pipeline.max_frames = options.frames;
+    Status made_ds = make_site(&ds, /*direct=*/true);
+    if (made_ds.ok()) {
+      // (The sink runs while the studio renders the next frames: scored later.)
+      auto st = ds.site->Run([&](const FrameWork& w) -> Status {
+        if (!keep(w)) return OkStatus();
+        Kept& k = direct_kept[w.frames.frame_index];
+        k.frame = w.frames.frame_index;
+        k.mesh = w.mesh;
+        for (const auto& f : w.frames.frames) k.masks.push_back(f.mask);
+        return OkStatus();
+      });
+      if (!st.ok()) made_ds = st.status();
+    }
+    if (!made_ds.ok()) {
+      spdlog::error("fusion: direct-depth peer run: {}", made_ds.message());
+      return 1;
+    }
+  }
+
+  // 6. Quality of the kept frames against ground truth.
   if (!options.png_dir.empty()) {
     if (Status s = MakeDirs(options.png_dir); !s.ok()) {
       spdlog::error("fusion: {}", s.message());
@@ -281,6 +358,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   }
   Progress(args, "scoring kept frames against ground truth");
   std::vector<double> iou, chamfer, completeness, psnr, ssim;
+  std::vector<double> vs_direct, vs_direct_acc, vs_direct_comp, direct_chamfer;
   RgbdFrameSet truth_frames;
   StudioGroundTruth gt;
   const auto views = MakeNovelViews(NovelViewOptions{});
@@ -290,10 +368,39 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
       auto m = metrics::CompareMasks(k.masks[p], gt.mask[p]);
       if (m.ok()) iou.push_back(m->iou);
     }
+    if (!options.png_dir.empty()) {
+      // Per pod: the depth the site fused, and its mask against the truth's.
+      std::vector<ImageRgb8> cells;
+      for (size_t p = 0; p < k.masks.size() && p < gt.mask.size() && p < k.depth.size(); ++p) {
+        cells.push_back(ColorizeDepth(k.depth[p], 1000, 6000));
+        cells.push_back(MaskErrors(k.masks[p], gt.mask[p]));
+      }
+      std::vector<const ImageRgb8*> tiles;
+      for (const auto& c : cells) tiles.push_back(&c);
+      const std::string path =
+          options.png_dir + "/" + wl + "_" + SourceName(src) + "_f" + std::to_string(k.frame) + "_masks.png";
+      if (!tiles.empty())
+        if (Status s = WriteImageRgb8(path, TileImages(tiles, 4)); !s.ok())
+          spdlog::warn("fusion: {}", s.message());
+    }
     auto d = metrics::ComputeMeshDistance(k.mesh, gt.foreground_mesh);
     if (d.ok()) {
       chamfer.push_back(d->chamfer_mm);
       completeness.push_back(d->completeness);
+    }
+    if (auto it = direct_kept.find(k.frame); it != direct_kept.end()) {
+      for (size_t p = 0; p < it->second.masks.size() && p < gt.mask.size(); ++p) {
+        auto m = metrics::CompareMasks(it->second.masks[p], gt.mask[p]);
+        if (m.ok()) direct_iou.push_back(m->iou);
+      }
+      auto sd = metrics::ComputeMeshDistance(k.mesh, it->second.mesh);
+      auto dt = metrics::ComputeMeshDistance(it->second.mesh, gt.foreground_mesh);
+      if (sd.ok() && dt.ok()) {
+        vs_direct.push_back(sd->chamfer_mm);
+        vs_direct_acc.push_back(sd->accuracy_mm);
+        vs_direct_comp.push_back(sd->completeness_distance_mm);
+        direct_chamfer.push_back(dt->chamfer_mm);
+      }
     }
     if (options.novel_views) {
       for (size_t v = 0; v < views.size(); ++v) {
@@ -309,13 +416,44 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
       }
     }
   }
-  const std::map<std::string, std::string> pq = {{"mode", "pipeline"}, {"frames_scored", std::to_string(kept.size())}};
+  const std::map<std::string, std::string> pq = {{"mode", "pipeline"},
+                                                 {"source", SourceName(src)},
+                                                 {"content", "fused"},
+                                                 {"frames_scored", std::to_string(kept.size())}};
   EmitFigure("fusion", wl, "mask_iou", Mean(iou), "fraction", pq);
   EmitFigure("fusion", wl, "chamfer_mm", Mean(chamfer), "mm", pq);
   EmitFigure("fusion", wl, "completeness", Mean(completeness), "fraction", pq);
   if (options.novel_views) {
-    EmitFigure("fusion", wl, "novel_view_psnr_db", Mean(psnr), "dB", {{"mode", "pipeline"}, {"views", "4"}});
-    EmitFigure("fusion", wl, "novel_view_ssim", Mean(ssim), "fraction", {{"mode", "pipeline"}, {"views", "4"}});
+    auto vq = pq;
+    vq["views"] = "4";
+    EmitFigure("fusion", wl, "novel_view_psnr_db", Mean(psnr), "dB", vq);
+    EmitFigure("fusion", wl, "novel_view_ssim", Mean(ssim), "fraction", vq);
+  }
+  if (!vs_direct.empty()) {
+    // The site's mesh from stereo depth against its mesh from direct depth,
+    // each with the site's own masks (issue figure: the fused mesh from
+    // stereo within X mm Chamfer of the one from direct depth).
+    auto cq = pq;
+    cq["frames_scored"] = std::to_string(vs_direct.size());
+    cq["compare"] = "stereo_vs_direct";
+    cq["masks"] = "site";
+    EmitFigure("fusion", wl, "chamfer_mm", Mean(vs_direct), "mm", cq);
+    cq["direction"] = "stereo_to_direct";
+    EmitFigure("fusion", wl, "mean_distance_mm", Mean(vs_direct_acc), "mm", cq);
+    cq["direction"] = "direct_to_stereo";
+    EmitFigure("fusion", wl, "mean_distance_mm", Mean(vs_direct_comp), "mm", cq);
+    cq.erase("direction");
+    cq["compare"] = "direct_vs_truth";
+    cq["source"] = "synthetic";
+    EmitFigure("fusion", wl, "chamfer_mm", Mean(direct_chamfer), "mm", cq);
+    cq.erase("compare");
+    EmitFigure("fusion", wl, "mask_iou", Mean(direct_iou), "fraction", cq);
+    if (!args.json)
+      spdlog::info(
+          "fusion pipeline: stereo mesh {:.2f} mm Chamfer from the direct-depth mesh ({:.2f} / {:.2f} mm each way); "
+          "to the truth: stereo {:.2f} mm, direct {:.2f} mm; mask IoU stereo {:.3f}, direct {:.3f}",
+          Mean(vs_direct), Mean(vs_direct_acc), Mean(vs_direct_comp), Mean(chamfer), Mean(direct_chamfer), Mean(iou),
+          Mean(direct_iou));
   }
   return 0;
 }

@@ -16,14 +16,20 @@ struct PipelineBenchOptions {
   // pipeline runs: its CPU counts as acquire), "prerendered" (the same frames
   // rendered into memory before the run: acquire is a copy, as with cameras
   // that deliver frames), or "dataset:DIR" (a studio export of the same
-  // workload on disk: acquire decodes PNGs). The background is always the
+  // workload on disk: acquire decodes PNGs), or "stereo" (depth from
+  // PatchMatch on the studio's IR pairs as holoport-server --depth stereo
+  // makes it, depth filter off unless depth_filter is set; the same frames
+  // are also run on the studio's direct depth and the two sites' meshes
+  // compared: "compare":"stereo_vs_direct"). The background is always the
   // studio's empty room; scoring always uses the studio's ground truth.
   std::string source = "synthetic";
   // Texturer clustering cell, mm (< 0: the capture site's default) and transfer mode.
   double texture_cluster_mm = -1;
   int texture_transfer = -1;
-  // Segmenter overrides (< 0: the capture site's defaults).
-  int seg_iterations = -1, seg_downsample = -1;
+  // Segmenter overrides (< 0: the capture site's defaults; seg_edge_band:
+  // SegmenterOptions::depth_edge_band_px, by default
+  // kStereoSegmentEdgeBandPx with stereo depth and 0 otherwise).
+  int seg_iterations = -1, seg_downsample = -1, seg_edge_band = -1;
   double seg_grid_px = -1;
   // TsdfOptions::behind_band override (< 0: the default).
   double behind_band = -1;

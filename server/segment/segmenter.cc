@@ -90,6 +90,8 @@ Status SegmenterOptions::Check() const {
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_max_logodds", depth_max_logodds));
   HOLO_RETURN_IF_ERROR(CheckPositive("depth_edge_m", depth_edge_m));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_edge_max_logodds", depth_edge_max_logodds));
+  if (depth_edge_band_px < 0 || depth_edge_band_px > 32)
+    return InvalidArgument("depth_edge_band_px must be in [0, 32], got " + std::to_string(depth_edge_band_px));
   HOLO_RETURN_IF_ERROR(CheckNonNegative("depth_noise_at_1m_m", depth_noise_at_1m_m));
   HOLO_RETURN_IF_ERROR(CheckPositive("chroma_sigma", chroma_sigma));
   HOLO_RETURN_IF_ERROR(CheckPositive("value_sigma", value_sigma));
@@ -139,6 +141,7 @@ struct PodState {
 
   // Per frame buffers.
   ImageFloat unary;
+  std::vector<uint8_t> band, band_tmp;  // SegmenterOptions::depth_edge_band_px
   std::vector<uint8_t> luma;
   // CRF at the downsampled resolution.
   int dw = 0, dh = 0;
@@ -470,7 +473,7 @@ struct UnaryParams {
 // at a depth edge (a neighbour more than depth_edge_m away) the depth term
 // is capped, since mixed pixels there lie between the two surfaces.
 inline void UnaryAt(const UnaryParams& p, const BgModel& m, const uint8_t* rgb, const uint16_t* depth, int W, int H,
-                    const float* inv_table, size_t i, float* L, uint8_t* luma) {
+                    const float* inv_table, size_t i, float* L, uint8_t* luma, bool force_cap = false) {
   const int r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
   luma[i] = Luma(r, g, b);
   const Hsv c = ToHsv(r, g, b, inv_table);
@@ -481,7 +484,9 @@ inline void UnaryAt(const UnaryParams& p, const BgModel& m, const uint8_t* rgb, 
   if (depth[i] > 0) {
     const float off = m.depth_offset_m[i];
     ld = off < 0 ? p.appeared : std::clamp((off - depth[i] * 0.001f) * p.inv_sd, -p.dmax, p.dmax);
-    if (ld > p.edge_cap) {
+    if (ld > p.edge_cap && force_cap) {
+      ld = p.edge_cap;
+    } else if (ld > p.edge_cap) {
       const int x = static_cast<int>(i % W), y = static_cast<int>(i / W);
       const int d = depth[i];
       auto edge = [&](size_t j) { return depth[j] > 0 && std::abs(depth[j] - d) > p.edge_mm; };
@@ -576,6 +581,63 @@ __attribute__((target("avx2"))) size_t UnaryAvx2(const UnaryParams& p, const BgM
 }
 #endif
 
+// SegmenterOptions::depth_edge_band_px: pixels within `r` of a depth edge
+// (a 4-neighbour more than edge_mm away, or valid next to invalid) get the
+// unary again with the depth term capped at edge_cap.
+void CapDepthInEdgeBand(const UnaryParams& p, PodState* s, const uint8_t* rgb, const uint16_t* depth, int r,
+                        const float* inv_table, float* L, uint8_t* luma) {
+  const int W = s->w, H = s->h;
+  const size_t n = static_cast<size_t>(W) * H;
+  std::vector<uint8_t>& edge = s->band_tmp;
+  std::vector<uint8_t>& band = s->band;
+  edge.assign(n, 0);
+  band.assign(n, 0);
+  auto differs = [&](size_t i, size_t j) {
+    const int a = depth[i], b = depth[j];
+    if ((a > 0) != (b > 0)) return true;
+    return a > 0 && std::abs(a - b) > p.edge_mm;
+  };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const size_t i = static_cast<size_t>(y) * W + x;
+      if ((x + 1 < W && differs(i, i + 1)) || (y + 1 < H && differs(i, i + W))) {
+        edge[i] = 1;
+        if (x + 1 < W) edge[i + 1] = 1;
+        if (y + 1 < H) edge[i + W] = 1;
+      }
+    }
+  // Dilate by r: rows, then columns (a square of 2r + 1).
+  for (int y = 0; y < H; ++y) {
+    const uint8_t* e = edge.data() + static_cast<size_t>(y) * W;
+    uint8_t* b = band.data() + static_cast<size_t>(y) * W;
+    int last = -1000000;
+    for (int x = 0; x < W; ++x) {
+      if (e[x]) last = x;
+      if (x - last <= r) b[x] = 1;
+    }
+    last = 1000000;
+    for (int x = W - 1; x >= 0; --x) {
+      if (e[x]) last = x;
+      if (last - x <= r) b[x] = 1;
+    }
+  }
+  for (int x = 0; x < W; ++x) {
+    int last = -1000000;
+    for (int y = 0; y < H; ++y) {
+      if (band[static_cast<size_t>(y) * W + x] & 1) last = y;
+      if (y - last <= r) band[static_cast<size_t>(y) * W + x] |= 2;
+    }
+    last = 1000000;
+    for (int y = H - 1; y >= 0; --y) {
+      if (band[static_cast<size_t>(y) * W + x] & 1) last = y;
+      if (last - y <= r) band[static_cast<size_t>(y) * W + x] |= 2;
+    }
+  }
+  for (size_t i = 0; i < n; ++i)
+    if ((band[i] & 2) && depth[i] > 0)
+      UnaryAt(p, s->model, rgb, depth, W, H, inv_table, i, L, luma, /*force_cap=*/true);
+}
+
 }  // namespace
 
 void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptions& o, SegmentDebug* dbg) {
@@ -596,6 +658,7 @@ void Segmenter::Impl::SegmentPod(PodState* s, RgbdFrame* f, const SegmenterOptio
   if (o.simd && CpuHasAvx2()) done = UnaryAvx2(up, s->model, rgb, depth, W, H, inv_table.data(), L, luma);
 #endif
   for (size_t i = done; i < n; ++i) UnaryAt(up, s->model, rgb, depth, W, H, inv_table.data(), i, L, luma);
+  if (o.depth_edge_band_px > 0) CapDepthInEdgeBand(up, s, rgb, depth, o.depth_edge_band_px, inv_table.data(), L, luma);
   uint8_t* mask = f->mask.data();
   if (dbg) {
     dbg->unary_logodds = s->unary;

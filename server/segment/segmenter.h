@@ -43,6 +43,13 @@ struct SegmenterOptions {
   // pixels is capped at `depth_edge_max_logodds`, so colour decides.
   float depth_edge_m = 0.06f;
   float depth_edge_max_logodds = 2.0f;
+  // The cap also holds within this many pixels of a depth edge, where the
+  // edge is a 4-neighbour more than depth_edge_m away or with no depth
+  // (0: only at the edge itself). For stereo depth: a window-based matcher
+  // spreads the nearer surface's depth a few pixels past its edge (over the
+  // background, or into the strip the other camera cannot see), so there
+  // colour must decide (docs/stereo.md, "Stereo depth at the site").
+  int depth_edge_band_px = 0;
 
   // --- Colour term on HSV: hue and saturation as the chroma vector
   // S·(cos H, sin H) of the hexcone, value V separately; L_c = colour_scale ·

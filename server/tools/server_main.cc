@@ -165,6 +165,14 @@ int main(int argc, char** argv) {
                  "edges (0: off; server/fusion/depth_filter.h; with --depth stereo 0 unless given)")
       ->capture_default_str()
       ->check(CLI::Range(0, 4));
+  int segment_edge_band = 0;
+  app.add_option("--segment-edge-band", segment_edge_band,
+                 "segmentation: within this many pixels of a depth edge colour decides, not depth (stereo depth "
+                 "spreads a surface's depth past its edge; docs/stereo.md; with --depth stereo " +
+                     std::to_string(holo::kStereoSegmentEdgeBandPx) +
+                     " unless given; give it for a --pods site of stereo pods)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 32));
   double depth_noise_mm = holo::TsdfOptions{}.depth_noise_at_1m_mm;
   app.add_option("--depth-noise-mm", depth_noise_mm,
                  "the depth sensor's axial noise at 1 m, mm, growing with z² (the studio's: 3): sets the "
@@ -502,6 +510,9 @@ int main(int argc, char** argv) {
   // 0.5 mm farther from the truth (docs/stereo.md, "A dense last pass"), so
   // --depth stereo leaves it off unless asked for.
   if (depth_mode == "stereo" && app.count("--depth-filter") == 0) options.depth_filter.radius = 0;
+  options.segment.depth_edge_band_px = segment_edge_band;
+  if (depth_mode == "stereo" && app.count("--segment-edge-band") == 0)
+    options.segment.depth_edge_band_px = holo::kStereoSegmentEdgeBandPx;
   options.depth_filter.sigma_at_1m_mm = static_cast<float>(depth_noise_mm);
   options.segment.depth_noise_at_1m_m = static_cast<float>(depth_noise_mm * 1e-3);
   options.tsdf.depth_noise_at_1m_mm = static_cast<float>(depth_noise_mm);

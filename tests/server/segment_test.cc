@@ -234,6 +234,55 @@ TEST(SegmenterTest, GreyBoardOnGreyWallFoundByDepth) {
   EXPECT_EQ(fg, 0u);
 }
 
+// Stereo depth at a person's edge (docs/stereo.md, "Stereo depth at the
+// site"): left of a red board 2.5 m away, an empty strip (the wall the other
+// camera cannot see) and then 3 pixels of wall carrying the board's depth
+// (the matcher spread it past the edge). The wall's colour says background
+// there; only with depth_edge_band_px does colour get to decide.
+TEST(SegmenterTest, EdgeBandLetsColourDecideBesideStereoEdges) {
+  const Rig rig = GreyWallRig();
+  auto run = [&](int band_px, double* spread_fg, double* board_iou) {
+    SegmenterOptions o;
+    o.depth_edge_band_px = band_px;
+    Segmenter seg(rig, o);
+    for (int k = 0; k < 10; ++k) ASSERT_TRUE(seg.AddBackgroundFrame(GreyWallFrame(3000, k)).ok());
+    ASSERT_TRUE(seg.FinishBackground().ok());
+    RgbdFrameSet fs = GreyWallFrame(3000, 99);
+    RgbdFrame& f = fs.frames[0];
+    ImageGray8 truth(160, 120);
+    size_t spread = 0, spread_on = 0;
+    for (int y = 30; y < 90; ++y) {
+      for (int x = 36; x < 44; ++x) f.depth.at(x, y) = 0;  // occluded: no depth
+      for (int x = 44; x < 110; ++x) {
+        f.depth.at(x, y) = static_cast<uint16_t>(2500 + (x + y) % 7);
+        if (x < 47) continue;  // the spread band keeps the wall's grey
+        truth.at(x, y) = 255;
+        f.color.at(x, y, 0) = 200;
+        f.color.at(x, y, 1) = 40;
+        f.color.at(x, y, 2) = 40;
+      }
+    }
+    ASSERT_TRUE(seg.Segment(&fs).ok());
+    for (int y = 30; y < 90; ++y)
+      for (int x = 44; x < 47; ++x) {
+        ++spread;
+        spread_on += f.mask.at(x, y) != 0;
+      }
+    *spread_fg = static_cast<double>(spread_on) / static_cast<double>(spread);
+    auto iou = metrics::CompareMasks(f.mask, truth);
+    ASSERT_TRUE(iou.ok());
+    *board_iou = iou->iou;
+  };
+  double spread0 = 0, iou0 = 0, spread3 = 0, iou3 = 0;
+  run(0, &spread0, &iou0);
+  run(3, &spread3, &iou3);
+  std::printf("spread band foreground: %.3f without the edge band, %.3f with 3 px; board IoU %.4f / %.4f\n", spread0,
+              spread3, iou0, iou3);
+  EXPECT_GE(spread0, 0.8) << "without the band the spread depth makes the wall foreground";
+  EXPECT_LE(spread3, 0.1);
+  EXPECT_GE(iou3, 0.95);
+}
+
 // Both segmenters learn the same `frames` empty-room frame sets.
 void LearnBackground(SyntheticStudio& empty, int frames, std::initializer_list<Segmenter*> segs) {
   RgbdFrameSet fs;
