@@ -255,6 +255,9 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
   app.add_option("--seg-iterations", p.seg_iterations, "segmentation CRF iterations");
   app.add_option("--seg-downsample", p.seg_downsample, "segmentation downsampling");
   app.add_option("--seg-grid-px", p.seg_grid_px, "segmentation grid, px");
+  app.add_option("--stereo-edge-shift", p.stereo_edge_shift,
+                 "--pipeline-source stereo: PatchMatch's edge pass, window shift px (0: off; default: its default)")
+      ->check(CLI::Range(0, 8));
   app.add_option("--seg-edge-band", p.seg_edge_band,
                  "segmentation: pixels beside a depth edge where colour decides (default: 3 with --pipeline-source "
                  "stereo, else 0)")

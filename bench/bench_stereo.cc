@@ -30,6 +30,7 @@
 // --temporal-refine-start N and --temporal-refine-per-sweep N (patchmatch_temporal),
 // --light-right-view on|off (PatchMatchOptions::light_right_view, on),
 // --final-window-step N (PatchMatchOptions::final_window_step; 0: no dense last pass),
+// --edge-shift N (PatchMatchOptions::edge_shift_px; 0: no edge pass),
 // --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
 // fused mesh comes after a run of 10 frames), --contact-sheet PNG.
 #include <algorithm>
@@ -207,6 +208,7 @@ struct StereoBenchOptions {
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   bool light_right_view = true;  // PatchMatchOptions::light_right_view
   int final_window_step = -1;    // PatchMatchOptions::final_window_step (-1: its default)
+  int edge_shift = -1;           // PatchMatchOptions::edge_shift_px (-1: its default)
   double baseline = kDefaultStereoBaselineM;
 };
 
@@ -243,6 +245,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (o.fine_iterations > 0) sdo.patchmatch.fine_iterations = o.fine_iterations;
   sdo.patchmatch.light_right_view = o.light_right_view;
   if (o.final_window_step >= 0) sdo.patchmatch.final_window_step = o.final_window_step;
+  if (o.edge_shift >= 0) sdo.patchmatch.edge_shift_px = o.edge_shift;
   auto source = StereoStudioSource::Create(studio->get(), sdo);
   if (!source.ok()) return Fail(source.status().ToString());
   StereoDepthOptions sdo_roi = sdo;
@@ -561,6 +564,10 @@ BenchFn SetupStereo(CLI::App& app) {
   app.add_option("--final-window-step", o->final_window_step,
                  "PatchMatch: the dense last pass's window step (0: none; -1: its default)")
       ->check(CLI::Range(-1, 4))
+      ->capture_default_str();
+  app.add_option("--edge-shift", o->edge_shift,
+                 "PatchMatch: the edge pass's window shift, px (0: no edge pass; -1: its default)")
+      ->check(CLI::Range(-1, 8))
       ->capture_default_str();
   app.add_option("--fuse-frames", o->fuse_frames, "frames fused from stereo and from direct depth (0: skip)")
       ->check(CLI::Range(0, 100))

@@ -31,6 +31,8 @@ struct PipelineBenchOptions {
   // kStereoSegmentEdgeBandPx with stereo depth and 0 otherwise).
   int seg_iterations = -1, seg_downsample = -1, seg_edge_band = -1;
   double seg_grid_px = -1;
+  // --pipeline-source stereo: PatchMatchOptions::edge_shift_px (< 0: its default).
+  int stereo_edge_shift = -1;
   // TsdfOptions::behind_band override (< 0: the default).
   double behind_band = -1;
   // TsdfOptions::behind_noise_sigmas override (< 0: the default).

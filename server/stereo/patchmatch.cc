@@ -41,6 +41,13 @@ Status PatchMatchOptions::Check() const {
   if (!(min_normal_z > 0.05f && min_normal_z <= 1.0f))
     return InvalidArgument("min_normal_z must be in (0.05, 1], got " + FormatNumber(min_normal_z));
   if (!std::isfinite(lr_max_diff)) return InvalidArgument("lr_max_diff must be finite");
+  if (edge_shift_px < 0 || edge_shift_px > 8 || edge_probe_px < 1 || edge_probe_px > 32)
+    return InvalidArgument("edge_shift_px must be in [0, 8] and edge_probe_px in [1, 32], got " +
+                           FormatNumber(edge_shift_px) + " and " + FormatNumber(edge_probe_px));
+  if (!(edge_min_jump > 0.0f && edge_min_jump < 1.0f))
+    return InvalidArgument("edge_min_jump must be in (0, 1), got " + FormatNumber(edge_min_jump));
+  if (!(edge_margin >= 0.0f && edge_margin < 1.0f))
+    return InvalidArgument("edge_margin must be in [0, 1), got " + FormatNumber(edge_margin));
   if (final_window_step < 0 || final_window_step > 4)
     return InvalidArgument("final_window_step must be in [0, 4], got " + FormatNumber(final_window_step));
   if (!(final_step_px >= 1.0f / 32.0f && final_step_px <= 4.0f))
@@ -160,8 +167,9 @@ inline int ColumnOffset(int lane, int step) { return step * lane - (7 * step) / 
 inline float SupportWeight(float dI, float inv_gamma2) { return 1.0f / (1.0f + dI * dI * inv_gamma2); }
 
 // Total support weight of the window at (x, y) (depends on the view only).
-float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
-  const float centre = v.IRow(y)[x];
+// `centre`: the intensity the weights compare with (the edge pass's shifted
+// windows weigh by the pixel's own; otherwise the window's centre).
+float WindowWeight(const View& v, int x, int y, const CostParams& cp, float centre) {
   float w = 0;
   for (int r = 0; r < cp.rows; ++r) {
     const float* si = v.IRow(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1));
@@ -170,15 +178,19 @@ float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
   return w;
 }
 
-// Mean weighted cost of plane `p` at (x, y), or a value ≥ `bound` as soon as
-// the partial sum shows it cannot beat `bound`. Window columns beyond the
+float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
+  return WindowWeight(v, x, y, cp, v.IRow(y)[x]);
+}
+
+// Mean weighted cost of plane `p` in the window at (x, y), or a value ≥
+// `bound` as soon as the partial sum shows it cannot beat `bound`. Weights
+// compare with `centre`; `wt` is their total. Window columns beyond the
 // image read the replicated border.
-float CostScalar(const View& self, const View& other, int x, int y, const Plane& p, const CostParams& cp,
-                 float bound) {
-  const int W = self.W, H = self.H;
-  const float centre = self.IRow(y)[x];
-  const float max_x = static_cast<float>(W - 1) - 1e-3f;
-  const float limit = bound * self.wtot[static_cast<size_t>(y) * W + x];
+float CostScalar(const View& self, const View& other, int x, int y, const Plane& p, const CostParams& cp, float bound,
+                 float centre, float wt) {
+  const int H = self.H;
+  const float max_x = static_cast<float>(self.W - 1) - 1e-3f;
+  const float limit = bound * wt;
   float sum = 0;
   for (int r = 0; r < cp.rows; ++r) {
     const int yy = std::clamp(y + (r - cp.rows / 2) * cp.step, 0, H - 1);
@@ -207,7 +219,7 @@ float CostScalar(const View& self, const View& other, int x, int y, const Plane&
     }
     if (sum >= limit) return bound;
   }
-  return sum / self.wtot[static_cast<size_t>(y) * W + x];
+  return sum / wt;
 }
 
 // What a pixel's window contributes from its own view — its samples'
@@ -257,6 +269,19 @@ __attribute__((target("avx2,fma"))) void PrepareWindowAvx2(const View& self, int
   }
 }
 
+// The prepared window's weights again, comparing with `centre`; returns their total.
+__attribute__((target("avx2,fma"))) float RecentreWindowAvx2(const CostParams& cp, float centre, SelfWindow* sw) {
+  const __m256 c = _mm256_set1_ps(centre), one = _mm256_set1_ps(1.0f), inv_g2 = _mm256_set1_ps(cp.inv_gamma2);
+  __m256 total = _mm256_setzero_ps();
+  for (int r = 0; r < cp.rows; ++r) {
+    const __m256 dI = _mm256_sub_ps(_mm256_load_ps(sw->sv + 8 * r), c);
+    const __m256 w = _mm256_div_ps(one, _mm256_fmadd_ps(_mm256_mul_ps(dI, dI), inv_g2, one));
+    _mm256_store_ps(sw->w + 8 * r, w);
+    total = _mm256_add_ps(total, w);
+  }
+  return HorizontalSum(total);
+}
+
 // Lanes idx (0 ≤ idx < 8·regs) of the 8·regs consecutive elements at `p`:
 // `regs` loads and in-register permutes (cheaper than a gather).
 __attribute__((target("avx2,fma"))) inline __m256i SelectLanes(const uint32_t* p, __m256i idx, int regs) {
@@ -274,7 +299,7 @@ __attribute__((target("avx2,fma"))) inline __m256i SelectLanes(const uint32_t* p
 
 template <bool kGradient>
 __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View& other, int x, int y, const Plane& p,
-                                                    const CostParams& cp, const SelfWindow& sw, float bound) {
+                                                    const CostParams& cp, const SelfWindow& sw, float bound, float wt) {
   const int W = self.W, H = self.H;
   const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
@@ -288,7 +313,6 @@ __attribute__((target("avx2,fma"))) float CostAvx2(const View& self, const View&
   const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256i lo16 = _mm256_set1_epi32(0xffff);
   const __m256 half = _mm256_set1_ps(0.5f);
-  const float wt = self.wtot[static_cast<size_t>(y) * W + x];
   const float limit = bound * wt;
   // x + sign·a·x: the part of the sample position that does not change with the row.
   const __m256 xs_base = _mm256_fmadd_ps(sign, _mm256_mul_ps(a, xf), xf);
@@ -376,6 +400,7 @@ struct PatchMatchStereo::Impl {
   ImageRect last_left, last_right;
   uint64_t temporal_calls = 0;  // varies the refinement's random numbers from frame to frame
   bool last_temporal = false;
+  std::vector<Plane> edge_planes;  // the edge pass's copy of the left planes
 };
 
 namespace {
@@ -479,12 +504,13 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   };
   auto cost_with = [&](const CostParams& w, const View& self, const View& other, int x, int y, const Plane& p,
                        const SelfWindow& sw, float bound) {
+    const float wt = self.wtot[static_cast<size_t>(y) * W + x];
 #ifdef HOLO_PM_X86
-    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, w, sw, bound)
-                              : CostAvx2<false>(self, other, x, y, p, w, sw, bound);
+    if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, w, sw, bound, wt)
+                              : CostAvx2<false>(self, other, x, y, p, w, sw, bound, wt);
 #endif
     (void)sw;
-    return CostScalar(self, other, x, y, p, w, bound);
+    return CostScalar(self, other, x, y, p, w, bound, self.IRow(y)[x], wt);
   };
   auto prepare = [&](const View& self, int x, int y, SelfWindow* sw) { prepare_with(cp, self, x, y, sw); };
   auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, const SelfWindow& sw,
@@ -808,6 +834,85 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         }
         L.plane[i] = best;
         L.cost[i] = best_cost;
+      }
+    });
+  }
+
+  // The edge pass (PatchMatchOptions::edge_shift_px): planes read from a
+  // copy, so rows in parallel see the planes before the pass.
+  if (o.edge_shift_px > 0 && o.final_window_step > 0) {
+    CostParams fcp = cp;
+    fcp.step = o.final_window_step;
+    const ImageRect& g = L.region;
+    im.edge_planes.assign(L.plane.begin(), L.plane.end());
+    const std::vector<Plane>& before = im.edge_planes;
+    const int r = o.edge_probe_px, sh = o.edge_shift_px;
+    im.pool.Run(g.height(), [&](int row, int) {
+      const int y = g.y0 + row;
+      SelfWindow sw;
+      const float yf = static_cast<float>(y);
+      for (int x = g.x0; x < g.x1; ++x) {
+        const size_t i = static_cast<size_t>(y) * W + x;
+        const float xf = static_cast<float>(x);
+        // The probes: the planes r pixels away (inside the region).
+        Plane cand[5];
+        int nc = 0;
+        float dlo = before[i].At(xf, yf), dhi = dlo;
+        auto probe = [&](int px, int py) {
+          if (px < g.x0 || px >= g.x1 || py < g.y0 || py >= g.y1) return;
+          const Plane& q = before[static_cast<size_t>(py) * W + px];
+          const float d = q.At(static_cast<float>(px), static_cast<float>(py));
+          dlo = std::min(dlo, d);
+          dhi = std::max(dhi, d);
+          cand[nc++] = q;
+        };
+        probe(x - r, y);
+        probe(x + r, y);
+        probe(x, y - r / 2);
+        probe(x, y + r / 2);
+        if (!(dhi - dlo > o.edge_min_jump * dhi)) continue;
+        // The pixel's own plane first: another must beat it by the margin.
+        std::swap(cand[0], cand[nc]);
+        cand[0] = before[i];
+        ++nc;
+        Plane best = before[i];
+        float best_cost = kNoBound;
+        float own_cost = kNoBound;
+        Plane best_other = before[i];
+        const float keep = 1.0f - o.edge_margin;
+        const float own = L.IRow(y)[x];  // the shifted windows weigh by the pixel's own intensity
+        for (int s = -sh; s <= sh; s += sh) {
+          const int xs = std::clamp(x + s, 0, W - 1);
+          float wt = 0;
+#ifdef HOLO_PM_X86
+          if (avx2) {
+            PrepareWindowAvx2(L, xs, y, fcp, &sw);
+            wt = RecentreWindowAvx2(fcp, own, &sw);
+          }
+#endif
+          if (!avx2) wt = WindowWeight(L, xs, y, fcp, own);
+          for (int k = 0; k < nc; ++k) {
+            if (k > 0 && !valid_at(cand[k], xf, yf)) continue;
+            float c;
+#ifdef HOLO_PM_X86
+            if (avx2) {
+              const float bound = k == 0 ? kNoBound : best_cost;
+              c = gradient ? CostAvx2<true>(L, R, xs, y, cand[k], fcp, sw, bound, wt)
+                           : CostAvx2<false>(L, R, xs, y, cand[k], fcp, sw, bound, wt);
+            } else
+#endif
+            {
+              c = CostScalar(L, R, xs, y, cand[k], fcp, k == 0 ? kNoBound : best_cost, own, wt);
+            }
+            if (k == 0) {
+              own_cost = std::min(own_cost, c);
+            } else if (c < best_cost) {
+              best_cost = c;
+              best_other = cand[k];
+            }
+          }
+        }
+        L.plane[i] = best_cost < keep * own_cost ? best_other : best;
       }
     });
   }

@@ -55,20 +55,24 @@ inline SyntheticPair SlantedPlane(int W, int H, float a, float b, float c) {
 // different texture). In the left view the wall's pixels in
 // [x0 − (d_box − d_wall), x0) of the box's rows are hidden from the right
 // camera (behind the box): no right pixel shows them.
-inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1, float d_box, float d_wall) {
+// `wall_contrast` scales the wall's texture about its mid grey (below 1: a
+// wall fainter than the box, as a projector's speckle fades with distance).
+inline SyntheticPair BoxBeforeWall(int W, int H, int x0, int y0, int x1, int y1, float d_box, float d_wall,
+                                   float wall_contrast = 1.0f) {
   SyntheticPair p(W, H);
   auto box_texture = [](float u, float v) { return SlantedPlaneTexture(u + 517.3f, v + 211.9f); };
+  auto wall_texture = [&](float u, float v) { return 128.0f + wall_contrast * (SlantedPlaneTexture(u, v) - 128.0f); };
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const bool in_rows = y >= y0 && y < y1;
       const bool box = in_rows && x >= x0 && x < x1;
-      p.left.at(x, y) = static_cast<uint8_t>(std::lround(box ? box_texture(x, y) : SlantedPlaneTexture(x, y)));
+      p.left.at(x, y) = static_cast<uint8_t>(std::lround(box ? box_texture(x, y) : wall_texture(x, y)));
       p.truth.at(x, y) = box ? d_box : d_wall;
       // Right pixel x shows the box where the box lands on it, else the wall.
       const float xb = static_cast<float>(x) + d_box;
       const bool right_box = in_rows && xb >= x0 && xb < x1;
       p.right.at(x, y) = static_cast<uint8_t>(
-          std::lround(right_box ? box_texture(xb, y) : SlantedPlaneTexture(static_cast<float>(x) + d_wall, y)));
+          std::lround(right_box ? box_texture(xb, y) : wall_texture(static_cast<float>(x) + d_wall, y)));
     }
   return p;
 }

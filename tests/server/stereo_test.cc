@@ -2,6 +2,7 @@
 // PatchMatch, disparity → depth, the stereo FrameSource, and stereo rig entries.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -100,6 +101,40 @@ void ExpectOcclusionDropped(bool light_right, bool temporal) {
 TEST(PatchMatchTest, LeftRightCheckDropsOccludedPixels) { ExpectOcclusionDropped(false, false); }
 TEST(PatchMatchTest, LightRightViewDropsOccludedPixels) { ExpectOcclusionDropped(true, false); }
 TEST(PatchMatchTest, LightRightViewFromLastPlanesDropsOccludedPixels) { ExpectOcclusionDropped(true, true); }
+
+// A strongly textured box before a faint wall (the studio's person before
+// its walls: the projector's speckle fades with distance): windows that
+// straddle the box's edge are won by the box, which spreads its disparity
+// onto the wall beside it. Returns the share of the wall's pixels in the
+// `width` columns right of the box (seen by both cameras) that carry the
+// box's disparity.
+double SpreadPastEdge(int edge_shift_px, int width) {
+  const int W = 160, H = 120, x0 = 50, y0 = 30, x1 = 100, y1 = 95;
+  const float d_box = 24.0f, d_wall = 10.0f;
+  const SyntheticPair pair = BoxBeforeWall(W, H, x0, y0, x1, y1, d_box, d_wall, 0.05f);
+  PatchMatchOptions o;
+  o.max_disparity = 40;
+  o.threads = 2;
+  o.edge_shift_px = edge_shift_px;
+  PatchMatchStereo pm(o);
+  ImageFloat disp;
+  EXPECT_TRUE(pm.Compute(pair.left, pair.right, &disp).ok());
+  int n = 0, spread = 0;
+  for (int y = y0 + 4; y < y1 - 4; ++y)
+    for (int x = x1; x < x1 + width; ++x) {
+      ++n;
+      spread += std::abs(disp.at(x, y) - d_box) < 1.0f;
+    }
+  return static_cast<double>(spread) / n;
+}
+
+TEST(PatchMatchTest, EdgePassKeepsTheNearSurfaceFromSpreadingPastItsEdge) {
+  const double off = SpreadPastEdge(0, 4), on = SpreadPastEdge(2, 4);
+  std::printf("wall columns 0-3 right of the box with the box's disparity: %.3f without the edge pass, %.3f with\n",
+              off, on);
+  EXPECT_GT(off, 0.3) << "the spread the edge pass is for (without it)";
+  EXPECT_LT(on, 0.5 * off);
+}
 
 // A vertical cylinder bulging towards the cameras (disparity a parabola
 // across x): a window wider than the curvature's scale fits a plane behind
