@@ -141,7 +141,7 @@ struct PodState {
 
   // Per frame buffers.
   ImageFloat unary;
-  std::vector<uint8_t> band, band_tmp;  // SegmenterOptions::depth_edge_band_px
+  std::vector<uint8_t> band, band_tmp, band_row;  // SegmenterOptions::depth_edge_band_px
   std::vector<uint8_t> luma;
   // CRF at the downsampled resolution.
   int dw = 0, dh = 0;
@@ -592,50 +592,61 @@ void CapDepthInEdgeBand(const UnaryParams& p, PodState* s, const uint8_t* rgb, c
   std::vector<uint8_t>& band = s->band;
   edge.assign(n, 0);
   band.assign(n, 0);
-  auto differs = [&](size_t i, size_t j) {
-    const int a = depth[i], b = depth[j];
-    if ((a > 0) != (b > 0)) return true;
-    return a > 0 && std::abs(a - b) > p.edge_mm;
+  // Branch-free loops over rows (the compiler vectorises them): pixels i and
+  // j differ when one has depth and the other not, or both have and are
+  // more than edge_mm apart; both are edge pixels then.
+  const int edge_mm = p.edge_mm;
+  auto differs = [edge_mm](int a, int b) {
+    const int va = a > 0, vb = b > 0;
+    const int d = a - b;
+    return static_cast<uint8_t>((va ^ vb) | (va & vb & ((d > edge_mm) | (-d > edge_mm))));
   };
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const size_t i = static_cast<size_t>(y) * W + x;
-      if ((x + 1 < W && differs(i, i + 1)) || (y + 1 < H && differs(i, i + W))) {
-        edge[i] = 1;
-        if (x + 1 < W) edge[i + 1] = 1;
-        if (y + 1 < H) edge[i + W] = 1;
+  for (int y = 0; y < H; ++y) {
+    const uint16_t* d = depth + static_cast<size_t>(y) * W;
+    uint8_t* e = edge.data() + static_cast<size_t>(y) * W;
+    for (int x = 0; x + 1 < W; ++x) {
+      const uint8_t h = differs(d[x], d[x + 1]);
+      e[x] |= h;
+      e[x + 1] |= h;
+    }
+    if (y + 1 < H) {
+      const uint16_t* dn = d + W;
+      uint8_t* en = e + W;
+      for (int x = 0; x < W; ++x) {
+        const uint8_t v = differs(d[x], dn[x]);
+        e[x] |= v;
+        en[x] |= v;
       }
     }
-  // Dilate by r: rows, then columns (a square of 2r + 1).
+  }
+  // Dilate by r: each row OR its shifts −r..r (into band_row), then each
+  // output row the OR of rows y − r .. y + r.
+  std::vector<uint8_t>& row = s->band_row;
+  row.assign(n, 0);
   for (int y = 0; y < H; ++y) {
     const uint8_t* e = edge.data() + static_cast<size_t>(y) * W;
-    uint8_t* b = band.data() + static_cast<size_t>(y) * W;
-    int last = -1000000;
-    for (int x = 0; x < W; ++x) {
-      if (e[x]) last = x;
-      if (x - last <= r) b[x] = 1;
-    }
-    last = 1000000;
-    for (int x = W - 1; x >= 0; --x) {
-      if (e[x]) last = x;
-      if (last - x <= r) b[x] = 1;
+    uint8_t* o = row.data() + static_cast<size_t>(y) * W;
+    for (int k = -r; k <= r; ++k) {
+      const int x0 = std::max(0, -k), x1 = std::min(W, W - k);
+      for (int x = x0; x < x1; ++x) o[x] |= e[x + k];
     }
   }
-  for (int x = 0; x < W; ++x) {
-    int last = -1000000;
-    for (int y = 0; y < H; ++y) {
-      if (band[static_cast<size_t>(y) * W + x] & 1) last = y;
-      if (y - last <= r) band[static_cast<size_t>(y) * W + x] |= 2;
-    }
-    last = 1000000;
-    for (int y = H - 1; y >= 0; --y) {
-      if (band[static_cast<size_t>(y) * W + x] & 1) last = y;
-      if (last - y <= r) band[static_cast<size_t>(y) * W + x] |= 2;
+  for (int y = 0; y < H; ++y) {
+    uint8_t* o = band.data() + static_cast<size_t>(y) * W;
+    for (int k = std::max(0, y - r); k <= std::min(H - 1, y + r); ++k) {
+      const uint8_t* e = row.data() + static_cast<size_t>(k) * W;
+      for (int x = 0; x < W; ++x) o[x] |= e[x];
     }
   }
-  for (size_t i = 0; i < n; ++i)
-    if ((band[i] & 2) && depth[i] > 0)
-      UnaryAt(p, s->model, rgb, depth, W, H, inv_table, i, L, luma, /*force_cap=*/true);
+  // Only where the depth term can exceed the cap: depth nearer than the
+  // background by more than cap·σ (or where the background had none).
+  const BgModel& m = s->model;
+  for (size_t i = 0; i < n; ++i) {
+    if (!band[i] || depth[i] == 0) continue;
+    const float off = m.depth_offset_m[i];
+    if (off >= 0 && (off - depth[i] * 0.001f) * p.inv_sd <= p.edge_cap) continue;
+    UnaryAt(p, m, rgb, depth, W, H, inv_table, i, L, luma, /*force_cap=*/true);
+  }
 }
 
 }  // namespace
