@@ -157,7 +157,8 @@ int main(int argc, char** argv) {
   app.add_option("--prerender", prerender,
                  "synthetic source: render this many frame sets into memory first and loop them forward and back "
                  "forever (-n counts on), so acquisition costs a copy as with cameras, not the studio's rendering "
-                 "(0: render while running)")
+                 "(with --depth stereo: and its PatchMatch, as pods that match their own pairs; 0: render while "
+                 "running)")
       ->check(CLI::Range(0, 3000));
   int depth_filter_radius = holo::DepthFilterOptions{}.radius;
   app.add_option("--depth-filter", depth_filter_radius,
@@ -543,9 +544,9 @@ int main(int argc, char** argv) {
     if (!e.ok()) return Fail(e.status());
     empty_room = std::move(*e);
     source = studio.get();
-    if (prerender > 0) {
-      if (options.masks == holo::MaskSource::kTruth)
-        return Fail(holo::InvalidArgument("--prerender cannot be combined with --masks truth (the studio renders the masks)"));
+    if (prerender > 0 && options.masks == holo::MaskSource::kTruth)
+      return Fail(holo::InvalidArgument("--prerender cannot be combined with --masks truth (the studio renders the masks)"));
+    if (prerender > 0 && depth_mode != "stereo") {  // stereo: pre-rendered through PatchMatch below
       if (!quiet) spdlog::info("holoport-server: pre-rendering {} frame sets of {}...", prerender, workload->name);
       auto pr = holo::PrerenderedSource::Render(*studio, prerender, /*loop=*/true, quiet);
       if (!pr.ok()) return Fail(pr.status());
@@ -596,6 +597,22 @@ int main(int argc, char** argv) {
     if (!st.ok()) return Fail(st.status());
     stereo_source = std::move(*st);
     source = stereo_source.get();
+    if (prerender > 0) {
+      // As with direct depth: frame sets made before the run and looped, so
+      // the run costs a copy per frame, as with pods that match their own
+      // pairs. Frames 0, 1, ... in order, so regions and last planes work as
+      // live; each is a studio frame and its stereo depth.
+      if (!quiet)
+        spdlog::info("holoport-server: pre-rendering {} frame sets with stereo depth (~0.3 s each)...", prerender);
+      auto frames = std::make_shared<std::vector<holo::RgbdFrameSet>>(static_cast<size_t>(prerender));
+      for (int k = 0; k < prerender; ++k) {
+        if (holo::Status s = stereo_source->Next(&(*frames)[static_cast<size_t>(k)]); !s.ok())
+          return Fail(s.WithContext("pre-rendering stereo frame " + std::to_string(k)));
+        if (!quiet && (k + 1) % 10 == 0) spdlog::info("holoport-server: {} / {} stereo frame sets", k + 1, prerender);
+      }
+      prerendered = std::make_unique<holo::PrerenderedSource>(stereo_source->rig(), frames, /*loop=*/true);
+      source = prerendered.get();
+    }
   }
   // Pods over the network replace the local source (the rig stays: pods must match it).
   std::unique_ptr<holo::pods::PodHub> pod_hub;
