@@ -32,10 +32,10 @@ struct Kept {
 // Our mask against the truth's: white both, red ours only, blue the truth's only.
 ImageRgb8 MaskErrors(const ImageGray8& ours, const ImageGray8& truth) {
   ImageRgb8 out(ours.width(), ours.height());
+  const bool same_size = truth.width() == ours.width() && truth.height() == ours.height();
   for (int y = 0; y < ours.height(); ++y)
     for (int x = 0; x < ours.width(); ++x) {
-      const bool a = ours.at(x, y) != 0, b = truth.width() == ours.width() && truth.height() == ours.height() &&
-                                              truth.at(x, y) != 0;
+      const bool a = ours.at(x, y) != 0, b = same_size && truth.at(x, y) != 0;
       uint8_t* px = &out.at(x, y);
       px[0] = a ? 255 : 0;
       px[1] = a && b ? 255 : 0;

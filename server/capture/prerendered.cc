@@ -21,14 +21,20 @@ PrerenderedSource::PrerenderedSource(const Rig& rig, std::shared_ptr<const std::
 
 StatusOr<std::unique_ptr<PrerenderedSource>> PrerenderedSource::Render(SyntheticStudio& studio, int count, bool loop,
                                                                        bool quiet) {
+  HOLO_RETURN_IF_ERROR(studio.Seek(0));
+  return Record(studio, count, loop, quiet);
+}
+
+StatusOr<std::unique_ptr<PrerenderedSource>> PrerenderedSource::Record(FrameSource& source, int count, bool loop,
+                                                                       bool quiet) {
   if (count < 1 || count > 3000) return InvalidArgument("prerendered frame count must be in [1, 3000], got " + std::to_string(count));
   auto frames = std::make_shared<std::vector<RgbdFrameSet>>(static_cast<size_t>(count));
   for (int k = 0; k < count; ++k) {
-    studio.RenderFrame(k, &(*frames)[static_cast<size_t>(k)], nullptr);
-    (*frames)[static_cast<size_t>(k)].frame_index = k;
+    HOLO_RETURN_IF_ERROR(source.Next(&(*frames)[static_cast<size_t>(k)]).WithContext("pre-rendering frame set " +
+                                                                                    std::to_string(k)));
     if (!quiet && ((k + 1) % 10 == 0 || k + 1 == count)) spdlog::info("  pre-rendered {}/{} frame sets", k + 1, count);
   }
-  return std::make_unique<PrerenderedSource>(studio.rig(), std::move(frames), loop);
+  return std::make_unique<PrerenderedSource>(source.rig(), std::move(frames), loop);
 }
 
 int64_t PrerenderedSource::ContentFrame(int64_t k) const {

@@ -31,6 +31,10 @@ class PrerenderedSource final : public FrameSource {
   // Renders frames 0 … count−1 of `studio` (progress on stderr unless quiet).
   static StatusOr<std::unique_ptr<PrerenderedSource>> Render(SyntheticStudio& studio, int count, bool loop,
                                                              bool quiet = true);
+  // The next `count` frame sets of `source` (any source: the studio, or the
+  // studio through stereo matching), with their frame indices.
+  static StatusOr<std::unique_ptr<PrerenderedSource>> Record(FrameSource& source, int count, bool loop,
+                                                             bool quiet = true);
 
   const Rig& rig() const override { return rig_; }
   Status Next(RgbdFrameSet* out) override;

@@ -468,6 +468,13 @@ struct UnaryParams {
   float edge_cap, colour_scale, colour_threshold, prior;
 };
 
+// The depth term of pixel i (valid depth only): in front of the background
+// is foreground evidence; where the background had no depth, `appeared`.
+inline float DepthLogOdds(const UnaryParams& p, const BgModel& m, const uint16_t* depth, size_t i) {
+  const float off = m.depth_offset_m[i];
+  return off < 0 ? p.appeared : std::clamp((off - depth[i] * 0.001f) * p.inv_sd, -p.dmax, p.dmax);
+}
+
 // Unary log-odds and luma of pixel i: colour distance to the background
 // model plus the depth evidence (in front of the background: foreground);
 // at a depth edge (a neighbour more than depth_edge_m away) the depth term
@@ -482,8 +489,7 @@ inline void UnaryAt(const UnaryParams& p, const BgModel& m, const uint8_t* rgb, 
   const float lc = std::clamp(p.colour_scale * (dist - p.colour_threshold), p.cmin, p.cmax);
   float ld = 0.0f;
   if (depth[i] > 0) {
-    const float off = m.depth_offset_m[i];
-    ld = off < 0 ? p.appeared : std::clamp((off - depth[i] * 0.001f) * p.inv_sd, -p.dmax, p.dmax);
+    ld = DepthLogOdds(p, m, depth, i);
     if (ld > p.edge_cap && force_cap) {
       ld = p.edge_cap;
     } else if (ld > p.edge_cap) {
@@ -638,15 +644,11 @@ void CapDepthInEdgeBand(const UnaryParams& p, PodState* s, const uint8_t* rgb, c
       for (int x = 0; x < W; ++x) o[x] |= e[x];
     }
   }
-  // Only where the depth term can exceed the cap: depth nearer than the
-  // background by more than cap·σ (or where the background had none).
+  // Only where the depth term exceeds the cap is there anything to redo.
   const BgModel& m = s->model;
-  for (size_t i = 0; i < n; ++i) {
-    if (!band[i] || depth[i] == 0) continue;
-    const float off = m.depth_offset_m[i];
-    if (off >= 0 && (off - depth[i] * 0.001f) * p.inv_sd <= p.edge_cap) continue;
-    UnaryAt(p, m, rgb, depth, W, H, inv_table, i, L, luma, /*force_cap=*/true);
-  }
+  for (size_t i = 0; i < n; ++i)
+    if (band[i] && depth[i] > 0 && DepthLogOdds(p, m, depth, i) > p.edge_cap)
+      UnaryAt(p, m, rgb, depth, W, H, inv_table, i, L, luma, /*force_cap=*/true);
 }
 
 }  // namespace

@@ -252,9 +252,11 @@ __attribute__((target("avx2,fma"))) inline float HorizontalSum(__m256 v) {
   return _mm_cvtss_f32(_mm_add_ss(h2, _mm_shuffle_ps(h2, h2, 1)));
 }
 
+// `centre_value`: the intensity the support weights compare with (the
+// window's centre, or for the edge pass's shifted windows the pixel's own).
 __attribute__((target("avx2,fma"))) void PrepareWindowAvx2(const View& self, int x, int y, const CostParams& cp,
-                                                             SelfWindow* sw) {
-  const __m256 centre = _mm256_set1_ps(self.IRow(y)[x]);
+                                                             float centre_value, SelfWindow* sw) {
+  const __m256 centre = _mm256_set1_ps(centre_value);
   const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
                                       _mm256_set1_epi32(x - (7 * cp.step) / 2));
@@ -269,16 +271,10 @@ __attribute__((target("avx2,fma"))) void PrepareWindowAvx2(const View& self, int
   }
 }
 
-// The prepared window's weights again, comparing with `centre`; returns their total.
-__attribute__((target("avx2,fma"))) float RecentreWindowAvx2(const CostParams& cp, float centre, SelfWindow* sw) {
-  const __m256 c = _mm256_set1_ps(centre), one = _mm256_set1_ps(1.0f), inv_g2 = _mm256_set1_ps(cp.inv_gamma2);
+// The total of a prepared window's support weights.
+__attribute__((target("avx2,fma"))) float WindowTotalAvx2(const CostParams& cp, const SelfWindow& sw) {
   __m256 total = _mm256_setzero_ps();
-  for (int r = 0; r < cp.rows; ++r) {
-    const __m256 dI = _mm256_sub_ps(_mm256_load_ps(sw->sv + 8 * r), c);
-    const __m256 w = _mm256_div_ps(one, _mm256_fmadd_ps(_mm256_mul_ps(dI, dI), inv_g2, one));
-    _mm256_store_ps(sw->w + 8 * r, w);
-    total = _mm256_add_ps(total, w);
-  }
+  for (int r = 0; r < cp.rows; ++r) total = _mm256_add_ps(total, _mm256_load_ps(sw.w + 8 * r));
   return HorizontalSum(total);
 }
 
@@ -498,19 +494,25 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   // Both with the window `w` (the sweeps' `cp`, or the dense last pass's).
   auto prepare_with = [&](const CostParams& w, const View& self, int x, int y, SelfWindow* sw) {
 #ifdef HOLO_PM_X86
-    if (avx2) PrepareWindowAvx2(self, x, y, w, sw);
+    if (avx2) PrepareWindowAvx2(self, x, y, w, self.IRow(y)[x], sw);
 #endif
     (void)w, (void)self, (void)x, (void)y, (void)sw;
   };
-  auto cost_with = [&](const CostParams& w, const View& self, const View& other, int x, int y, const Plane& p,
-                       const SelfWindow& sw, float bound) {
-    const float wt = self.wtot[static_cast<size_t>(y) * W + x];
+  // The cost with the weights compared with `centre` and totalling `wt`
+  // (prepared with the same centre on the AVX2 path).
+  auto cost_weighted = [&](const CostParams& w, const View& self, const View& other, int x, int y, const Plane& p,
+                           const SelfWindow& sw, float bound, float centre, float wt) {
 #ifdef HOLO_PM_X86
     if (avx2) return gradient ? CostAvx2<true>(self, other, x, y, p, w, sw, bound, wt)
                               : CostAvx2<false>(self, other, x, y, p, w, sw, bound, wt);
 #endif
     (void)sw;
-    return CostScalar(self, other, x, y, p, w, bound, self.IRow(y)[x], wt);
+    return CostScalar(self, other, x, y, p, w, bound, centre, wt);
+  };
+  auto cost_with = [&](const CostParams& w, const View& self, const View& other, int x, int y, const Plane& p,
+                       const SelfWindow& sw, float bound) {
+    return cost_weighted(w, self, other, x, y, p, sw, bound, self.IRow(y)[x],
+                         self.wtot[static_cast<size_t>(y) * W + x]);
   };
   auto prepare = [&](const View& self, int x, int y, SelfWindow* sw) { prepare_with(cp, self, x, y, sw); };
   auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, const SelfWindow& sw,
@@ -854,9 +856,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       for (int x = g.x0; x < g.x1; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         const float xf = static_cast<float>(x);
-        // The probes: the planes r pixels away (inside the region).
-        Plane cand[5];
-        int nc = 0;
+        // The pixel's own plane, then the probes: the planes r pixels away
+        // (inside the region).
+        Plane cand[5] = {before[i]};
+        int nc = 1;
         float dlo = before[i].At(xf, yf), dhi = dlo;
         auto probe = [&](int px, int py) {
           if (px < g.x0 || px >= g.x1 || py < g.y0 || py >= g.y1) return;
@@ -871,48 +874,33 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         probe(x, y - r / 2);
         probe(x, y + r / 2);
         if (!(dhi - dlo > o.edge_min_jump * dhi)) continue;
-        // The pixel's own plane first: another must beat it by the margin.
-        std::swap(cand[0], cand[nc]);
-        cand[0] = before[i];
-        ++nc;
-        Plane best = before[i];
-        float best_cost = kNoBound;
-        float own_cost = kNoBound;
+        // Another plane must beat the own plane's best window by the margin.
+        float own_cost = kNoBound, best_cost = kNoBound;
         Plane best_other = before[i];
-        const float keep = 1.0f - o.edge_margin;
         const float own = L.IRow(y)[x];  // the shifted windows weigh by the pixel's own intensity
         for (int s = -sh; s <= sh; s += sh) {
           const int xs = std::clamp(x + s, 0, W - 1);
-          float wt = 0;
+          float wt;
 #ifdef HOLO_PM_X86
           if (avx2) {
-            PrepareWindowAvx2(L, xs, y, fcp, &sw);
-            wt = RecentreWindowAvx2(fcp, own, &sw);
+            PrepareWindowAvx2(L, xs, y, fcp, own, &sw);
+            wt = WindowTotalAvx2(fcp, sw);
+          } else
+#endif
+          {
+            wt = WindowWeight(L, xs, y, fcp, own);
           }
-#endif
-          if (!avx2) wt = WindowWeight(L, xs, y, fcp, own);
-          for (int k = 0; k < nc; ++k) {
-            if (k > 0 && !valid_at(cand[k], xf, yf)) continue;
-            float c;
-#ifdef HOLO_PM_X86
-            if (avx2) {
-              const float bound = k == 0 ? kNoBound : best_cost;
-              c = gradient ? CostAvx2<true>(L, R, xs, y, cand[k], fcp, sw, bound, wt)
-                           : CostAvx2<false>(L, R, xs, y, cand[k], fcp, sw, bound, wt);
-            } else
-#endif
-            {
-              c = CostScalar(L, R, xs, y, cand[k], fcp, k == 0 ? kNoBound : best_cost, own, wt);
-            }
-            if (k == 0) {
-              own_cost = std::min(own_cost, c);
-            } else if (c < best_cost) {
+          own_cost = std::min(own_cost, cost_weighted(fcp, L, R, xs, y, cand[0], sw, kNoBound, own, wt));
+          for (int k = 1; k < nc; ++k) {
+            if (!valid_at(cand[k], xf, yf)) continue;
+            const float c = cost_weighted(fcp, L, R, xs, y, cand[k], sw, best_cost, own, wt);
+            if (c < best_cost) {
               best_cost = c;
               best_other = cand[k];
             }
           }
         }
-        L.plane[i] = best_cost < keep * own_cost ? best_other : best;
+        if (best_cost < (1.0f - o.edge_margin) * own_cost) L.plane[i] = best_other;
       }
     });
   }

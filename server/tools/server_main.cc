@@ -546,13 +546,6 @@ int main(int argc, char** argv) {
     source = studio.get();
     if (prerender > 0 && options.masks == holo::MaskSource::kTruth)
       return Fail(holo::InvalidArgument("--prerender cannot be combined with --masks truth (the studio renders the masks)"));
-    if (prerender > 0 && depth_mode != "stereo") {  // stereo: pre-rendered through PatchMatch below
-      if (!quiet) spdlog::info("holoport-server: pre-rendering {} frame sets of {}...", prerender, workload->name);
-      auto pr = holo::PrerenderedSource::Render(*studio, prerender, /*loop=*/true, quiet);
-      if (!pr.ok()) return Fail(pr.status());
-      prerendered = std::move(*pr);
-      source = prerendered.get();
-    }
     background = empty_room.get();
     options.tsdf.voxel_size = voxel_mm > 0 ? static_cast<float>(voxel_mm * 1e-3) : workload->voxel_size_m;
     source_name = workload->name;
@@ -597,22 +590,19 @@ int main(int argc, char** argv) {
     if (!st.ok()) return Fail(st.status());
     stereo_source = std::move(*st);
     source = stereo_source.get();
-    if (prerender > 0) {
-      // As with direct depth: frame sets made before the run and looped, so
-      // the run costs a copy per frame, as with pods that match their own
-      // pairs. Frames 0, 1, ... in order, so regions and last planes work as
-      // live; each is a studio frame and its stereo depth.
-      if (!quiet)
-        spdlog::info("holoport-server: pre-rendering {} frame sets with stereo depth (~0.3 s each)...", prerender);
-      auto frames = std::make_shared<std::vector<holo::RgbdFrameSet>>(static_cast<size_t>(prerender));
-      for (int k = 0; k < prerender; ++k) {
-        if (holo::Status s = stereo_source->Next(&(*frames)[static_cast<size_t>(k)]); !s.ok())
-          return Fail(s.WithContext("pre-rendering stereo frame " + std::to_string(k)));
-        if (!quiet && (k + 1) % 10 == 0) spdlog::info("holoport-server: {} / {} stereo frame sets", k + 1, prerender);
-      }
-      prerendered = std::make_unique<holo::PrerenderedSource>(stereo_source->rig(), frames, /*loop=*/true);
-      source = prerendered.get();
-    }
+  }
+  // Frame sets made before the run and looped: the run costs a copy per
+  // frame, as with cameras (with --depth stereo: as with pods that match
+  // their own pairs; frames 0, 1, ... in order, so regions and last planes
+  // work as live, ~0.3 s each).
+  if (prerender > 0 && studio) {
+    if (!quiet)
+      spdlog::info("holoport-server: pre-rendering {} frame sets of {}{}...", prerender, source_name,
+                   depth_mode == "stereo" ? " with stereo depth" : "");
+    auto pr = holo::PrerenderedSource::Record(*source, prerender, /*loop=*/true, quiet);
+    if (!pr.ok()) return Fail(pr.status());
+    prerendered = std::move(*pr);
+    source = prerendered.get();
   }
   // Pods over the network replace the local source (the rig stays: pods must match it).
   std::unique_ptr<holo::pods::PodHub> pod_hub;

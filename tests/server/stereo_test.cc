@@ -343,17 +343,28 @@ TEST(StereoStudioTest, RendererRefusesNonStereoRig) {
   EXPECT_NE(r.status().message().find("not a stereo pod"), std::string::npos) << r.status().message();
 }
 
+// The shipped studio-4 rig scaled by `scale`, its studio and a stereo source
+// on it with the default options and `threads` PatchMatch threads.
+struct Studio4Stereo {
+  std::unique_ptr<SyntheticStudio> studio;
+  std::unique_ptr<StereoStudioSource> source;
+  Studio4Stereo(double scale, int threads) {
+    auto base = LoadRig(ShippedRigPath("studio-4"));
+    HOLO_CHECK_MSG(base.ok(), base.status().ToString());
+    studio = MakeStudio(base->Scaled(scale));
+    StereoDepthOptions o;
+    o.patchmatch.threads = threads;
+    auto src = StereoStudioSource::Create(studio.get(), o);
+    HOLO_CHECK_MSG(src.ok(), src.status().ToString());
+    source = std::move(src).value();
+  }
+};
+
 TEST(StereoDepthTest, StudioSourceGivesDepthCloseToTruth) {
-  auto base = LoadRig(ShippedRigPath("studio-4"));
-  ASSERT_TRUE(base.ok());
-  auto studio = MakeStudio(base->Scaled(0.5));
-  StereoDepthOptions o;
-  o.patchmatch.threads = 2;
-  auto src = StereoStudioSource::Create(studio.get(), o);
-  ASSERT_TRUE(src.ok()) << src.status().ToString();
+  Studio4Stereo site(0.5, 2);
   RgbdFrameSet frames;
   std::vector<StereoPair> pairs;
-  ASSERT_TRUE((*src)->RenderFrame(4, &frames, &pairs).ok());
+  ASSERT_TRUE(site.source->RenderFrame(4, &frames, &pairs).ok());
   ASSERT_EQ(frames.frames.size(), 4u);
   for (size_t i = 0; i < frames.frames.size(); ++i) {
     const ImageDepth16& d = frames.frames[i].depth;
@@ -381,23 +392,17 @@ TEST(StereoDepthTest, StudioSourceGivesDepthCloseToTruth) {
 // skipped frames must not be rendered and matched (that took ~0.4 s each
 // and the site never caught up), and the next one is the right frame.
 TEST(StereoDepthTest, SkipPassesOverFramesWithoutMatchingThem) {
-  auto base = LoadRig(ShippedRigPath("studio-4"));
-  ASSERT_TRUE(base.ok());
-  auto studio = MakeStudio(base->Scaled(0.25));
-  StereoDepthOptions o;
-  o.patchmatch.threads = 1;
-  auto src = StereoStudioSource::Create(studio.get(), o);
-  ASSERT_TRUE(src.ok()) << src.status().ToString();
-  ASSERT_TRUE((*src)->Skip(3).ok());
-  EXPECT_EQ((*src)->last_match_ms(), 0.0) << "Skip matched the frames it passed over";
+  Studio4Stereo site(0.25, 1);
+  ASSERT_TRUE(site.source->Skip(3).ok());
+  EXPECT_EQ(site.source->last_match_ms(), 0.0) << "Skip matched the frames it passed over";
   RgbdFrameSet frames;
-  ASSERT_TRUE((*src)->Next(&frames).ok());
+  ASSERT_TRUE(site.source->Next(&frames).ok());
   EXPECT_EQ(frames.frame_index, 3);
-  EXPECT_GT((*src)->last_match_ms(), 0.0);
-  EXPECT_FALSE((*src)->Skip(-1).ok());
+  EXPECT_GT(site.source->last_match_ms(), 0.0);
+  EXPECT_FALSE(site.source->Skip(-1).ok());
   // The studio itself likewise.
-  ASSERT_TRUE(studio->Skip(5).ok());
-  ASSERT_TRUE(studio->Next(&frames).ok());
+  ASSERT_TRUE(site.studio->Skip(5).ok());
+  ASSERT_TRUE(site.studio->Next(&frames).ok());
   EXPECT_EQ(frames.frame_index, 5);
 }
 
