@@ -102,6 +102,20 @@ TEST(PatchMatchTest, LeftRightCheckDropsOccludedPixels) { ExpectOcclusionDropped
 TEST(PatchMatchTest, LightRightViewDropsOccludedPixels) { ExpectOcclusionDropped(true, false); }
 TEST(PatchMatchTest, LightRightViewFromLastPlanesDropsOccludedPixels) { ExpectOcclusionDropped(true, true); }
 
+// `pair` matched whole with disparities up to 40 px on 2 threads, the
+// options otherwise the defaults with `set` applied.
+template <typename Set>
+ImageFloat MatchWith(const SyntheticPair& pair, Set set) {
+  PatchMatchOptions o;
+  o.max_disparity = 40;
+  o.threads = 2;
+  set(&o);
+  PatchMatchStereo pm(o);
+  ImageFloat disp;
+  EXPECT_TRUE(pm.Compute(pair.left, pair.right, &disp).ok());
+  return disp;
+}
+
 // A strongly textured box before a faint wall (the studio's person before
 // its walls: the projector's speckle fades with distance): windows that
 // straddle the box's edge are won by the box, which spreads its disparity
@@ -112,13 +126,7 @@ double SpreadPastEdge(int edge_shift_px, int width) {
   const int W = 160, H = 120, x0 = 50, y0 = 30, x1 = 100, y1 = 95;
   const float d_box = 24.0f, d_wall = 10.0f;
   const SyntheticPair pair = BoxBeforeWall(W, H, x0, y0, x1, y1, d_box, d_wall, 0.05f);
-  PatchMatchOptions o;
-  o.max_disparity = 40;
-  o.threads = 2;
-  o.edge_shift_px = edge_shift_px;
-  PatchMatchStereo pm(o);
-  ImageFloat disp;
-  EXPECT_TRUE(pm.Compute(pair.left, pair.right, &disp).ok());
+  const ImageFloat disp = MatchWith(pair, [&](PatchMatchOptions* o) { o->edge_shift_px = edge_shift_px; });
   int n = 0, spread = 0;
   for (int y = y0 + 4; y < y1 - 4; ++y)
     for (int x = x1; x < x1 + width; ++x) {
@@ -149,13 +157,7 @@ float CylinderBias(int final_window_step) {
     return base + (std::abs(u) < 1.0f ? bulge * (1.0f - u * u) : 0.0f);
   };
   const SyntheticPair pair = CurvedSurface(W, H, 40.0f, d);
-  PatchMatchOptions o;
-  o.max_disparity = 40;
-  o.threads = 2;
-  o.final_window_step = final_window_step;
-  PatchMatchStereo pm(o);
-  ImageFloat disp;
-  EXPECT_TRUE(pm.Compute(pair.left, pair.right, &disp).ok());
+  const ImageFloat disp = MatchWith(pair, [&](PatchMatchOptions* o) { o->final_window_step = final_window_step; });
   std::vector<float> err;
   for (int y = 10; y < H - 10; ++y)
     for (int x = static_cast<int>(x0 - 0.6f * half_width); x < static_cast<int>(x0 + 0.6f * half_width); ++x)
