@@ -258,6 +258,11 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
   app.add_option("--stereo-edge-shift", p.stereo_edge_shift,
                  "--pipeline-source stereo: PatchMatch's edge pass, window shift px (0: off; default: its default)")
       ->check(CLI::Range(0, 8));
+  app.add_option("--stereo-roi-shape", p.stereo_roi_spans,
+                 "--pipeline-source stereo: the matched regions as row spans around the person or their bounding "
+                 "boxes (spans|box)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"spans", true}, {"box", false}}))
+      ->capture_default_str();
   app.add_option("--seg-edge-band", p.seg_edge_band,
                  "segmentation: pixels beside a depth edge where colour decides (default: 3 with --pipeline-source "
                  "stereo, else 0)")

@@ -95,6 +95,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   stereo_options.roi.enabled = true;
   stereo_options.patchmatch.temporal = true;
   if (options.stereo_edge_shift >= 0) stereo_options.patchmatch.edge_shift_px = options.stereo_edge_shift;
+  stereo_options.roi.row_spans = options.stereo_roi_spans;
   // Frames for the prerendered source, rendered once (untimed).
   auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();
   if (src == "prerendered") {

@@ -31,6 +31,8 @@
 // --light-right-view on|off (PatchMatchOptions::light_right_view, on),
 // --final-window-step N (PatchMatchOptions::final_window_step; 0: no dense last pass),
 // --edge-shift N (PatchMatchOptions::edge_shift_px; 0: no edge pass),
+// --roi-shape spans|box (StereoRoiOptions::row_spans: the regions as row
+// spans around the person, the default, or their bounding boxes),
 // --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
 // fused mesh comes after a run of 10 frames), --contact-sheet PNG.
 #include <algorithm>
@@ -209,6 +211,7 @@ struct StereoBenchOptions {
   bool light_right_view = true;  // PatchMatchOptions::light_right_view
   int final_window_step = -1;    // PatchMatchOptions::final_window_step (-1: its default)
   int edge_shift = -1;           // PatchMatchOptions::edge_shift_px (-1: its default)
+  bool roi_spans = true;         // StereoRoiOptions::row_spans
   double baseline = kDefaultStereoBaselineM;
 };
 
@@ -251,6 +254,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   StereoDepthOptions sdo_roi = sdo;
   sdo_roi.roi.enabled = true;
   sdo_roi.roi.fps = (*studio)->options().fps;
+  sdo_roi.roi.row_spans = o.roi_spans;
   auto renderer = StereoStudioRenderer::Create(studio->get(), rig, sdo.render);
   if (!renderer.ok()) return Fail(renderer.status().ToString());
   PatchMatchOptions pmo = sdo.patchmatch;
@@ -301,10 +305,11 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       if (Status s = pm.Compute(previous[p].left, previous[p].right, prev_region, &d_roi); !s.ok())
         return Fail(s.ToString());
       policy.Update(frame - 1, prev_region, d_roi);
-      const ImageRect region = policy.Next(frame);
+      policy.Next(frame);
+      const RowSpans region = policy.spans();
       roi_area += region.area();
       image_area += static_cast<int64_t>(sp.left.width()) * sp.left.height();
-      roi_full_pairs += region == ImageRect::Full(sp.left.width(), sp.left.height());
+      roi_full_pairs += region.IsFull(sp.left.width());
       for (int r = 0; r < std::max(1, args.repeats); ++r) {
         Timer v;
         if (Status s = pm.Compute(sp.left, sp.right, region, policy.max_disparity(), &d_roi); !s.ok())
@@ -360,6 +365,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   {
     auto q = studio_q;
     q["full_every"] = std::to_string(sdo_roi.roi.full_every);
+    q["roi_shape"] = sdo_roi.roi.row_spans ? "spans" : "box";
     const double roi_set = Median(roi_run.set_ms), full_set = Median(pm_run.set_ms);
     EmitMethod(wl, "patchmatch_roi", "studio", roi_run, q, /*all_pixels=*/false);
     q["method"] = "patchmatch_roi";
@@ -372,6 +378,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * roi_set) / n, "ms", q);
     auto qt = studio_q;
     qt["full_every"] = q["full_every"];
+    qt["roi_shape"] = q["roi_shape"];
     EmitMethod(wl, "patchmatch_temporal", "studio", tmp_run, qt, /*all_pixels=*/false);
     qt["method"] = "patchmatch_temporal";
     qt["data"] = "studio";
@@ -564,6 +571,11 @@ BenchFn SetupStereo(CLI::App& app) {
   app.add_option("--final-window-step", o->final_window_step,
                  "PatchMatch: the dense last pass's window step (0: none; -1: its default)")
       ->check(CLI::Range(-1, 4))
+      ->capture_default_str();
+  app.add_option("--roi-shape", o->roi_spans,
+                 "patchmatch_roi and patchmatch_temporal: the region as row spans around the person or its "
+                 "bounding box (spans|box)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"spans", true}, {"box", false}}))
       ->capture_default_str();
   app.add_option("--edge-shift", o->edge_shift,
                  "PatchMatch: the edge pass's window shift, px (0: no edge pass; -1: its default)")

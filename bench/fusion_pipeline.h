@@ -33,6 +33,9 @@ struct PipelineBenchOptions {
   double seg_grid_px = -1;
   // --pipeline-source stereo: PatchMatchOptions::edge_shift_px (< 0: its default).
   int stereo_edge_shift = -1;
+  // --pipeline-source stereo: StereoRoiOptions::row_spans (the regions as
+  // row spans around the person, or their bounding boxes).
+  bool stereo_roi_spans = true;
   // TsdfOptions::behind_band override (< 0: the default).
   double behind_band = -1;
   // TsdfOptions::behind_noise_sigmas override (< 0: the default).

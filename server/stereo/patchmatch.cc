@@ -71,6 +71,46 @@ ImageRect ImageRect::Clipped(int width, int height) const {
   return r;
 }
 
+RowSpans RowSpans::FromRect(const ImageRect& rect, int width, int height) {
+  const ImageRect r = rect.Clipped(width, height);
+  RowSpans s;
+  s.x0.assign(static_cast<size_t>(std::max(height, 0)), 0);
+  s.x1.assign(s.x0.size(), 0);
+  for (int y = r.y0; y < r.y1; ++y) {
+    s.x0[static_cast<size_t>(y)] = r.x0;
+    s.x1[static_cast<size_t>(y)] = r.x1;
+  }
+  return s;
+}
+
+ImageRect RowSpans::Bounds() const {
+  ImageRect b;
+  bool any = false;
+  for (int y = 0; y < rows(); ++y) {
+    const int a = x0[static_cast<size_t>(y)], e = x1[static_cast<size_t>(y)];
+    if (e <= a) continue;
+    if (!any) b = ImageRect{a, y, e, y + 1};
+    any = true;
+    b.x0 = std::min(b.x0, a);
+    b.x1 = std::max(b.x1, e);
+    b.y1 = y + 1;
+  }
+  return b;
+}
+
+int64_t RowSpans::area() const {
+  int64_t n = 0;
+  for (int y = 0; y < rows(); ++y) n += std::max(0, x1[static_cast<size_t>(y)] - x0[static_cast<size_t>(y)]);
+  return n;
+}
+
+bool RowSpans::IsFull(int width) const {
+  if (rows() == 0) return false;
+  for (int y = 0; y < rows(); ++y)
+    if (x0[static_cast<size_t>(y)] > 0 || x1[static_cast<size_t>(y)] < width) return false;
+  return true;
+}
+
 namespace {
 
 struct Plane {
@@ -99,7 +139,8 @@ constexpr int kTail = 32;
 struct View {
   int W = 0, H = 0, stride = 0;
   float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
-  ImageRect region;         // the pixels whose planes this Compute works on
+  ImageRect region;         // the bounds of the pixels whose planes this Compute works on
+  std::vector<int> sx0, sx1;  // ... and those pixels: [sx0[y], sx1[y]) on row y (empty: sx0 == sx1 == 0)
   std::vector<float> I, G;  // intensity and x gradient, padded rows
   // The same padded rows packed for the AVX2 path's reads of the other
   // view: per position x, int16 {I(x), I(x+1)} in `pair_i` and
@@ -114,6 +155,9 @@ struct View {
   std::vector<Plane> proposal;
   std::vector<uint8_t> has_proposal;
 
+  bool In(int x, int y) const {
+    return x >= sx0[static_cast<size_t>(y)] && x < sx1[static_cast<size_t>(y)];
+  }
   const float* IRow(int y) const { return I.data() + static_cast<size_t>(y) * stride + kPad; }
   const float* GRow(int y) const { return G.data() + static_cast<size_t>(y) * stride + kPad; }
   const uint32_t* PairIRow(int y) const { return pair_i.data() + static_cast<size_t>(y) * stride + kPad; }
@@ -393,7 +437,8 @@ struct PatchMatchStereo::Impl {
   // right: PatchMatchOptions::temporal starts from them).
   bool have_last = false;
   int last_w = 0, last_h = 0;
-  ImageRect last_left, last_right;
+  ImageRect last_left, last_right;    // their bounds
+  RowSpans last_lspans, last_rspans;  // and their spans
   uint64_t temporal_calls = 0;  // varies the refinement's random numbers from frame to frame
   bool last_temporal = false;
   std::vector<Plane> edge_planes;  // the edge pass's copy of the left planes
@@ -452,6 +497,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
 
 Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region,
                                  float max_disparity, ImageFloat* disparity) {
+  return Compute(left, right, RowSpans::FromRect(region, left.width(), left.height()), max_disparity, disparity);
+}
+
+Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right, const RowSpans& spans,
+                                 float max_disparity, ImageFloat* disparity) {
   if (std::isnan(max_disparity)) return InvalidArgument("max_disparity is NaN");
   if (left.width() != right.width() || left.height() != right.height())
     return InvalidArgument("stereo pair sizes differ: left " + std::to_string(left.width()) + "x" +
@@ -465,7 +515,20 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   View& L = im.left;
   View& R = im.right;
   const int W = left.width(), H = left.height();
-  const ImageRect lreg = region.Clipped(W, H);
+  if (spans.rows() != H)
+    return InvalidArgument("row spans: " + std::to_string(spans.rows()) + " rows for a " + std::to_string(H) +
+                           "-row image");
+  // The left view's spans, clipped to the image.
+  L.sx0.assign(static_cast<size_t>(H), 0);
+  L.sx1.assign(static_cast<size_t>(H), 0);
+  for (int y = 0; y < H; ++y) {
+    const int a = std::max(spans.x0[static_cast<size_t>(y)], 0), e = std::min(spans.x1[static_cast<size_t>(y)], W);
+    if (e > a) {
+      L.sx0[static_cast<size_t>(y)] = a;
+      L.sx1[static_cast<size_t>(y)] = e;
+    }
+  }
+  const ImageRect lreg = RowSpans{L.sx0, L.sx1}.Bounds();
   if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
   if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
   if (lreg.empty()) {
@@ -479,7 +542,17 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   L.region = lreg;
   // This call's search range: [min_disparity, dmax].
   const float dmax = std::clamp(max_disparity, std::min(o.min_disparity + 2.0f, o.max_disparity), o.max_disparity);
-  R.region = RightRegion(lreg, W, H, dmax);
+  // The right view's spans: each left span widened to the left by the range
+  // (as RightRegion does for a rectangle).
+  R.sx0.assign(static_cast<size_t>(H), 0);
+  R.sx1.assign(static_cast<size_t>(H), 0);
+  for (int y = 0; y < H; ++y) {
+    const size_t r = static_cast<size_t>(y);
+    if (L.sx1[r] <= L.sx0[r]) continue;
+    R.sx0[r] = std::max(0, L.sx0[r] - static_cast<int>(std::ceil(dmax)));
+    R.sx1[r] = L.sx1[r];
+  }
+  R.region = RowSpans{R.sx0, R.sx1}.Bounds();
   CostParams cp;
   cp.rows = o.window_rows;
   cp.step = o.window_step;
@@ -515,6 +588,20 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
                          self.wtot[static_cast<size_t>(y) * W + x]);
   };
   auto prepare = [&](const View& self, int x, int y, SelfWindow* sw) { prepare_with(cp, self, x, y, sw); };
+  // prepare_with, and the pixel's total support weight (wtot) in window `w`:
+  // from the prepared weights on the AVX2 path.
+  auto prepare_total = [&](const CostParams& w, View& v, int x, int y, SelfWindow* sw) {
+    const size_t i = static_cast<size_t>(y) * W + x;
+#ifdef HOLO_PM_X86
+    if (avx2) {
+      PrepareWindowAvx2(v, x, y, w, v.IRow(y)[x], sw);
+      v.wtot[i] = WindowTotalAvx2(w, *sw);
+      return;
+    }
+#endif
+    (void)sw;
+    v.wtot[i] = WindowWeight(v, x, y, w);
+  };
   auto cost = [&](const View& self, const View& other, int x, int y, const Plane& p, const SelfWindow& sw,
                   float bound) { return cost_with(cp, self, other, x, y, p, sw, bound); };
   constexpr float kNoBound = 3.0e38f;
@@ -540,14 +627,21 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return d >= dmin && d <= dmax;
   };
   // Start from the last Compute's planes (PatchMatchOptions::temporal)?
-  const auto overlap = [](const ImageRect& a, const ImageRect& b) {
-    const ImageRect c{std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
-    return c.area();
+  // (The pixels of this call's spans inside the last call's.)
+  const auto overlap = [&](const RowSpans& last) {
+    int64_t n = 0;
+    for (int y = 0; y < H; ++y) {
+      const size_t r = static_cast<size_t>(y);
+      n += std::max(0, std::min(L.sx1[r], last.x1[r]) - std::max(L.sx0[r], last.x0[r]));
+    }
+    return n;
   };
+  int64_t larea = 0;
+  for (int y = 0; y < H; ++y) larea += L.sx1[static_cast<size_t>(y)] - L.sx0[static_cast<size_t>(y)];
   const bool temporal = o.temporal && im.have_last && im.last_w == W && im.last_h == H &&
-                        !(lreg == ImageRect::Full(W, H)) &&
-                        static_cast<double>(overlap(im.last_left, lreg)) >=
-                            o.temporal_min_overlap * static_cast<double>(lreg.area());
+                        larea < static_cast<int64_t>(W) * H &&
+                        static_cast<double>(overlap(im.last_lspans)) >=
+                            o.temporal_min_overlap * static_cast<double>(larea);
   // A temporal start varies the refinement's random numbers from call to
   // call (the same perturbations every frame would retry the same planes);
   // any other call gives a fresh matcher's result bit for bit.
@@ -562,15 +656,14 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = g.x0; x < g.x1; ++x) {
+      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
         const uint64_t h = rng(tag, x, y, 0);
         const float d = dmin + range * 0.5f * (Sym(h, 0) + 1.0f);
         float nx = 0.5f * Sym(h, 21), ny = 0.5f * Sym(h, 42);
         float nz = std::sqrt(std::max(0.0f, 1.0f - nx * nx - ny * ny));
         const size_t i = static_cast<size_t>(y) * W + x;
         v.plane[i] = make_plane(static_cast<float>(x), static_cast<float>(y), d, nx, ny, nz);
-        v.wtot[i] = WindowWeight(v, x, y, cp);
-        prepare(v, x, y, &sw);
+        prepare_total(cp, v, x, y, &sw);
         v.cost[i] = cost(v, other, x, y, v.plane[i], sw, kNoBound);
       }
     });
@@ -597,17 +690,21 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   auto init_from_coarse = [&](View& v, const View& other, const View& cv) {
     const int cw = cv.W;
     const ImageRect& g = v.region;
-    const ImageRect& cg = cv.region;  // contains every (x / 2, y / 2) of g (the coarse region is one pixel wider)
+    // The coarse spans contain every (x / 2, y / 2) of v's (they are one
+    // coarse pixel wider).
+    const ImageRect& cg = cv.region;
     auto upsample = [&](const Plane& q) { return Plane{q.a, q.b, 2.0f * q.c - 0.5f * (q.a + q.b)}; };
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
       const int cy = std::clamp(y / 2, cg.y0, cg.y1 - 1);
-      for (int x = g.x0; x < g.x1; ++x) {
+      const bool has_span = cv.sx1[static_cast<size_t>(cy)] > cv.sx0[static_cast<size_t>(cy)];
+      const int cx0 = has_span ? cv.sx0[static_cast<size_t>(cy)] : cg.x0;
+      const int cx1 = has_span ? cv.sx1[static_cast<size_t>(cy)] : cg.x1;
+      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
-        const int cx = std::clamp(x / 2, cg.x0, cg.x1 - 1);
-        v.wtot[i] = WindowWeight(v, x, y, cp);
-        prepare(v, x, y, &sw);
+        const int cx = std::clamp(x / 2, cx0, cx1 - 1);
+        prepare_total(cp, v, x, y, &sw);
         v.plane[i] = upsample(cv.plane[static_cast<size_t>(cy) * cw + cx]);
         if (!valid_at(v.plane[i], static_cast<float>(x), static_cast<float>(y))) {
           const float d = std::clamp(v.plane[i].At(static_cast<float>(x), static_cast<float>(y)), dmin, dmax);
@@ -618,29 +715,40 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     });
   };
   // The last Compute's planes (PatchMatchOptions::temporal): kept where the
-  // last region had them, else the nearest pixel's of it. Two passes, so
-  // that no row reads a plane another row is changing.
-  auto init_from_last = [&](View& v, const View& other, const ImageRect& last) {
+  // last spans had them, else the nearest pixel's of them (on the nearest
+  // row with a span). Two passes, so that no row reads a plane another row
+  // is changing. `last` has at least one span.
+  std::vector<int> near_row(static_cast<size_t>(H));
+  auto init_from_last = [&](View& v, const View& other, const RowSpans& last) {
     const ImageRect& g = v.region;
+    for (int y = 0, prev = -1; y < H; ++y) {  // the nearest row with a span, per row
+      if (last.x1[static_cast<size_t>(y)] > last.x0[static_cast<size_t>(y)]) prev = y;
+      near_row[static_cast<size_t>(y)] = prev;
+    }
+    for (int y = H - 1, next = -1; y >= 0; --y) {
+      if (last.x1[static_cast<size_t>(y)] > last.x0[static_cast<size_t>(y)]) next = y;
+      const int prev = near_row[static_cast<size_t>(y)];
+      near_row[static_cast<size_t>(y)] = prev < 0 || (next >= 0 && next - y < y - prev) ? next : prev;
+    }
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
-      const int ly = std::clamp(y, last.y0, last.y1 - 1);
+      const int ly = near_row[static_cast<size_t>(y)];
       const Plane* from = v.plane.data() + static_cast<size_t>(ly) * W;
-      for (int x = g.x0; x < g.x1; ++x) {
-        if (!last.Contains(x, y)) v.plane[static_cast<size_t>(y) * W + x] = from[std::clamp(x, last.x0, last.x1 - 1)];
+      const int lx0 = last.x0[static_cast<size_t>(ly)], lx1 = last.x1[static_cast<size_t>(ly)];
+      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+        if (!last.Contains(x, y)) v.plane[static_cast<size_t>(y) * W + x] = from[std::clamp(x, lx0, lx1 - 1)];
       }
     });
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = g.x0; x < g.x1; ++x) {
+      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         if (!valid_at(v.plane[i], static_cast<float>(x), static_cast<float>(y))) {
           const float d = std::clamp(v.plane[i].At(static_cast<float>(x), static_cast<float>(y)), dmin, dmax);
           v.plane[i] = Plane{0.0f, 0.0f, d};
         }
-        v.wtot[i] = WindowWeight(v, x, y, cp);
-        prepare(v, x, y, &sw);
+        prepare_total(cp, v, x, y, &sw);
         v.cost[i] = cost(v, other, x, y, v.plane[i], sw, kNoBound);
       }
     });
@@ -652,9 +760,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   // from the coarse level's or the last Compute's.
   bool light_right = false;
   if (temporal) {
-    init_from_last(L, R, im.last_left);
+    init_from_last(L, R, im.last_lspans);
     if (!im.last_right.empty()) {
-      init_from_last(R, L, im.last_right);
+      init_from_last(R, L, im.last_rspans);
     } else {
       init(R, L, 2);
     }
@@ -678,8 +786,21 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     // full-resolution pixel of both views finds its coarse pixel inside the
     // coarse views' regions.
     const int cw = im.coarse_left.width(), ch = im.coarse_left.height();
-    const ImageRect creg =
-        ImageRect{lreg.x0 / 2 - 1, lreg.y0 / 2 - 1, (lreg.x1 + 1) / 2 + 1, (lreg.y1 + 1) / 2 + 1}.Clipped(cw, ch);
+    RowSpans creg;  // coarse row cy: the full rows 2·cy − 2 … 2·cy + 3, halved, one coarse pixel wider
+    creg.x0.assign(static_cast<size_t>(ch), 0);
+    creg.x1.assign(static_cast<size_t>(ch), 0);
+    for (int cy = 0; cy < ch; ++cy) {
+      int a = cw, e = 0;
+      for (int y = std::max(0, 2 * cy - 2); y <= std::min(H - 1, 2 * cy + 3); ++y) {
+        if (L.sx1[static_cast<size_t>(y)] <= L.sx0[static_cast<size_t>(y)]) continue;
+        a = std::min(a, std::max(0, L.sx0[static_cast<size_t>(y)] / 2 - 1));
+        e = std::max(e, std::min(cw, (L.sx1[static_cast<size_t>(y)] + 1) / 2 + 1));
+      }
+      if (e > a) {
+        creg.x0[static_cast<size_t>(cy)] = a;
+        creg.x1[static_cast<size_t>(cy)] = e;
+      }
+    }
     const PatchMatchOptions& co = im.coarse->options();
     const float cmax = dmax >= o.max_disparity ? co.max_disparity : std::max(dmax * 0.5f, co.min_disparity + 2.0f);
     HOLO_RETURN_IF_ERROR(im.coarse->Compute(im.coarse_left, im.coarse_right, creg, cmax, &im.coarse_disparity));
@@ -713,17 +834,17 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   // The other view's planes, converted and offered to the pixels they land on
   // (rows are independent in a rectified pair: parallel over rows).
   auto scatter = [&](View& v, const View& other) {
-    const ImageRect& g = v.region;
-    const ImageRect& og = other.region;  // the same rows
+    const ImageRect& g = v.region;  // the other view's spans are on the same rows
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       const size_t ro = static_cast<size_t>(y) * W;
-      std::fill(v.has_proposal.begin() + ro + g.x0, v.has_proposal.begin() + ro + g.x1, 0);
-      for (int x = og.x0; x < og.x1; ++x) {
+      const int x0 = v.sx0[static_cast<size_t>(y)], x1 = v.sx1[static_cast<size_t>(y)];
+      std::fill(v.has_proposal.begin() + ro + x0, v.has_proposal.begin() + ro + x1, 0);
+      for (int x = other.sx0[static_cast<size_t>(y)]; x < other.sx1[static_cast<size_t>(y)]; ++x) {
         const Plane& p = other.plane[ro + x];
         const float d = p.At(static_cast<float>(x), static_cast<float>(y));
         const int tx = static_cast<int>(std::lround(static_cast<float>(x) + other.sign * d));
-        if (tx < g.x0 || tx >= g.x1) continue;
+        if (tx < x0 || tx >= x1) continue;
         const float den = 1.0f + other.sign * p.a;
         if (std::abs(den) < 1e-3f) continue;
         const Plane q{p.a / den, p.b / den, p.c / den};
@@ -744,8 +865,8 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       View& v = vi == 0 ? L : R;
       const View& other = vi == 0 ? R : L;
       const ImageRect& g = v.region;
-      const int gw = g.width(), gh = g.height();
-      const int column_blocks = (gw + kColumnBlock - 1) / kColumnBlock;
+      const int gh = g.height();
+      const int column_blocks = (g.width() + kColumnBlock - 1) / kColumnBlock;
       const uint64_t pass = static_cast<uint64_t>(it) * 8 + static_cast<uint64_t>(vi) * 4 + 16;
       scatter(v, other);
       const int per_sweep = std::max(1, refine_per_sweep);
@@ -757,9 +878,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       im.pool.Run(gh, [&](int row, int) {
         const int y = g.y0 + row;
         const size_t ro = static_cast<size_t>(y) * W;
+        const int x0 = v.sx0[static_cast<size_t>(y)], x1 = v.sx1[static_cast<size_t>(y)];
         SelfWindow sw;
-        for (int k = 0; k < gw; ++k) {
-          const int x = forward ? g.x0 + k : g.x1 - 1 - k;
+        for (int k = 0; k < x1 - x0; ++k) {
+          const int x = forward ? x0 + k : x1 - 1 - k;
           prepare(v, x, y, &sw);
           if (v.has_proposal[ro + x]) try_plane(v, other, x, y, v.proposal[ro + x], sw);
           if (k > 0) try_plane(v, other, x, y, v.plane[ro + (forward ? x - 1 : x + 1)], sw);
@@ -774,9 +896,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         for (int k = 1; k < gh; ++k) {
           const int y = forward ? g.y0 + k : g.y1 - 1 - k;
           const int yn = forward ? y - 1 : y + 1;
-          for (int x = x0; x < x1; ++x) {
+          const int xa = std::max(x0, v.sx0[static_cast<size_t>(y)]), xe = std::min(x1, v.sx1[static_cast<size_t>(y)]);
+          for (int x = xa; x < xe; ++x) {
             prepare(v, x, y, &sw);
-            try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x], sw);
+            if (v.In(x, yn)) try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x], sw);
             refine(v, other, x, y, pass + 1, scale_v, sw);
           }
         }
@@ -796,10 +919,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = g.x0; x < g.x1; ++x) {
+      for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
-        L.wtot[i] = WindowWeight(L, x, y, fcp);  // the next Compute recomputes it for its window
-        prepare_with(fcp, L, x, y, &sw);
+        prepare_total(fcp, L, x, y, &sw);  // (the next Compute recomputes wtot for its window)
         auto fcost = [&](const Plane& p, float bound) { return cost_with(fcp, L, R, x, y, p, sw, bound); };
         const float xf = static_cast<float>(x), yf = static_cast<float>(y);
         const float h = o.final_step_px;
@@ -853,16 +975,16 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int y = g.y0 + row;
       SelfWindow sw;
       const float yf = static_cast<float>(y);
-      for (int x = g.x0; x < g.x1; ++x) {
+      for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         const float xf = static_cast<float>(x);
         // The pixel's own plane, then the probes: the planes r pixels away
-        // (inside the region).
+        // (inside the spans).
         Plane cand[5] = {before[i]};
         int nc = 1;
         float dlo = before[i].At(xf, yf), dhi = dlo;
         auto probe = [&](int px, int py) {
-          if (px < g.x0 || px >= g.x1 || py < g.y0 || py >= g.y1) return;
+          if (py < 0 || py >= H || !L.In(px, py)) return;
           const Plane& q = before[static_cast<size_t>(py) * W + px];
           const float d = q.At(static_cast<float>(px), static_cast<float>(py));
           dlo = std::min(dlo, d);
@@ -905,22 +1027,21 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     });
   }
 
-  // Disparities and the left-right check (0 outside the regions).
-  const ImageRect& rreg = R.region;
+  // Disparities and the left-right check (0 outside the spans).
   im.pool.Run(H, [&](int y, int) {
     const size_t ro = static_cast<size_t>(y) * W;
     float* rd = im.right_disparity.row(y);
     float* out = disparity->row(y);
     std::fill(rd, rd + W, 0.0f);
     std::fill(out, out + W, 0.0f);
-    if (y < lreg.y0 || y >= lreg.y1) return;
-    for (int x = rreg.x0; x < rreg.x1; ++x) rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
-    for (int x = lreg.x0; x < lreg.x1; ++x) {
+    for (int x = R.sx0[static_cast<size_t>(y)]; x < R.sx1[static_cast<size_t>(y)]; ++x)
+      rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
+    for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
       const float d = L.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
       bool ok = d >= dmin && d <= dmax && d > 0.0f;
       if (ok && o.lr_max_diff >= 0.0f) {
         const int xr = static_cast<int>(std::lround(static_cast<float>(x) - d));
-        ok = xr >= rreg.x0 && xr < rreg.x1 && std::abs(rd[xr] - d) <= o.lr_max_diff;
+        ok = R.In(xr, y) && std::abs(rd[xr] - d) <= o.lr_max_diff;
       }
       out[x] = ok ? d : 0.0f;
     }
@@ -931,6 +1052,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   im.last_h = H;
   im.last_left = lreg;
   im.last_right = R.region;
+  im.last_lspans.x0 = L.sx0;
+  im.last_lspans.x1 = L.sx1;
+  im.last_rspans.x0 = R.sx0;
+  im.last_rspans.x1 = R.sx1;
   return OkStatus();
 }
 

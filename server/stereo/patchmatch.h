@@ -39,11 +39,17 @@
 // given plane is the full run's; the results differ from a full run's only
 // because propagation starts at the rectangle's edges instead of the
 // image's (figures in docs/stereo.md). The whole image as the rectangle
-// gives the full run's result bit for bit.
+// gives the full run's result bit for bit. The region can also be row spans
+// (RowSpans: per row, one run of pixels), shaped to the person rather than
+// boxed: every step then runs on each row's span (the right view's widened
+// to the left by the disparity range), the coarse level on the halved
+// spans, and vertical propagation only between pixels both inside them; a
+// rectangle is the special case (the rectangle overloads go through it).
 #pragma once
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "common/image.h"
 #include "common/status.h"
@@ -177,6 +183,25 @@ struct ImageRect {
   bool operator==(const ImageRect& o) const { return x0 == o.x0 && y0 == o.y0 && x1 == o.x1 && y1 == o.y1; }
 };
 
+// Per image row y, the pixels [x0[y], x1[y]) (none where x0[y] >= x1[y]): a
+// region shaped to what it covers (the region policy's person with a margin
+// around it, row by row) rather than its bounding box.
+struct RowSpans {
+  std::vector<int> x0, x1;
+  // `rect` (clipped to width × height) as spans of a `height`-row image.
+  static RowSpans FromRect(const ImageRect& rect, int width, int height);
+  int rows() const { return static_cast<int>(x0.size()); }
+  bool Contains(int x, int y) const {
+    return y >= 0 && y < rows() && x >= x0[static_cast<size_t>(y)] && x < x1[static_cast<size_t>(y)];
+  }
+  // The smallest rectangle holding every span (empty if none).
+  ImageRect Bounds() const;
+  int64_t area() const;
+  // Every row the whole of a width-pixel row.
+  bool IsFull(int width) const;
+  bool operator==(const RowSpans& o) const { return x0 == o.x0 && x1 == o.x1; }
+};
+
 class PatchMatchStereo {
  public:
   // `options` must pass Check() (HOLO_CHECK otherwise; use Create for untrusted values).
@@ -202,6 +227,13 @@ class PatchMatchStereo {
   // nearest foreground and the motion since), the right view need not reach
   // as far. Pixels whose true disparity is larger get none or a wrong one.
   Status Compute(const ImageGray8& left, const ImageGray8& right, const ImageRect& region, float max_disparity,
+                 ImageFloat* disparity);
+  // The same in row spans of the left image (`spans.rows()` must be the
+  // image's height; spans are clipped to its width): every step runs only on
+  // the spans' pixels (the right view's on each row's span widened to the
+  // left by the disparity range), 0 elsewhere. Spans of a rectangle give the
+  // rectangle's result bit for bit.
+  Status Compute(const ImageGray8& left, const ImageGray8& right, const RowSpans& spans, float max_disparity,
                  ImageFloat* disparity);
   // The right view's region for a left region: widened to the left by the
   // largest disparity, [x0 − ⌈max_disparity⌉, x1), clipped to the image

@@ -44,12 +44,16 @@ StereoRoiPolicy::StereoRoiPolicy(const PodCalibration& pod, StereoRoiOptions opt
 ImageRect StereoRoiPolicy::Next(int64_t frame_index) {
   const ImageRect full = ImageRect::Full(width_, height_);
   max_disparity_ = 3.0e38f;
-  if (!options_.enabled || !have_previous_ || full_due_ || box_.empty()) return full;
-  if (frame_index <= previous_frame_) return full;  // a step back (seek): the previous frame says nothing
+  const auto whole = [&] {
+    spans_ = RowSpans::FromRect(full, width_, height_);
+    return full;
+  };
+  if (!options_.enabled || !have_previous_ || full_due_ || box_.empty()) return whole();
+  if (frame_index <= previous_frame_) return whole();  // a step back (seek): the previous frame says nothing
   const double dt = static_cast<double>(frame_index - previous_frame_) / options_.fps;
-  if (dt > options_.max_gap_s) return full;
-  if (frame_index - last_full_frame_ >= options_.full_every) return full;
-  if ((frame_index + options_.full_phase) % options_.full_every == 0) return full;
+  if (dt > options_.max_gap_s) return whole();
+  if (frame_index - last_full_frame_ >= options_.full_every) return whole();
+  if ((frame_index + options_.full_phase) % options_.full_every == 0) return whole();
   // The motion since the previous frame, in pixels at the nearest foreground.
   const double move_m = options_.max_speed_mps * dt;
   const double z = std::max(0.05, static_cast<double>(nearest_fg_m_));
@@ -58,18 +62,41 @@ ImageRect StereoRoiPolicy::Next(int64_t frame_index) {
   if (options_.disparity_margin_px >= 0.0f)
     max_disparity_ = static_cast<float>(pod_.stereo.ir.fx * pod_.stereo.baseline_m / std::max(0.05, z - move_m)) +
                      options_.disparity_margin_px;
-  return ImageRect{box_.x0 - mx, box_.y0 - my, box_.x1 + mx, box_.y1 + my}.Clipped(width_, height_);
+  const ImageRect box = ImageRect{box_.x0 - mx, box_.y0 - my, box_.x1 + mx, box_.y1 + my}.Clipped(width_, height_);
+  spans_ = RowSpans::FromRect(box, width_, height_);
+  if (!options_.row_spans) return box;
+  // Row y: the extent of the foreground's samples on the rows within `my`
+  // of it, widened by `mx`, inside the box.
+  const int step = options_.sample_step;
+  const int gh = static_cast<int>(ext0_.size());
+  for (int y = box.y0; y < box.y1; ++y) {
+    const int lo = y - my - step + 1;  // sample row gy covers pixel rows [gy·step, gy·step + step)
+    const int g0 = lo <= 0 ? 0 : (lo + step - 1) / step, g1 = std::min(gh - 1, (y + my) / step);
+    int a = width_, e = 0;
+    for (int gy = g0; gy <= g1; ++gy) {
+      if (ext1_[static_cast<size_t>(gy)] <= ext0_[static_cast<size_t>(gy)]) continue;
+      a = std::min(a, ext0_[static_cast<size_t>(gy)]);
+      e = std::max(e, ext1_[static_cast<size_t>(gy)]);
+    }
+    a = std::max(box.x0, a - mx);
+    e = std::min(box.x1, e + mx);
+    spans_.x0[static_cast<size_t>(y)] = e > a ? a : 0;
+    spans_.x1[static_cast<size_t>(y)] = e > a ? e : 0;
+  }
+  return spans_.Bounds();
 }
 
-void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity) {
-  const ImageRect reg = region.Clipped(width_, height_);
+void StereoRoiPolicy::Update(int64_t frame_index, const RowSpans& region, const ImageFloat& disparity) {
+  const ImageRect reg = region.Bounds().Clipped(width_, height_);
   have_previous_ = true;
   previous_frame_ = frame_index;
-  if (reg == ImageRect::Full(width_, height_)) last_full_frame_ = frame_index;
+  if (region.rows() == height_ && region.IsFull(width_)) last_full_frame_ = frame_index;
   box_ = ImageRect{};
   full_due_ = true;
   nearest_fg_m_ = 0;
-  if (reg.empty() || disparity.width() != width_ || disparity.height() != height_) return;
+  ext0_.clear();
+  ext1_.clear();
+  if (reg.empty() || region.rows() != height_ || disparity.width() != width_ || disparity.height() != height_) return;
 
   // Foreground samples: pixels whose point lies in the capture volume. On a
   // grid aligned to the image (not the region), so a region does not move
@@ -129,6 +156,8 @@ void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const
   // `min_group_samples` are dropped: stacks of streaks on the floor pass the
   // tests above in places, but as small groups apart from the person.
   std::vector<int> col(static_cast<size_t>(gw), 0), row(static_cast<size_t>(gh), 0);
+  ext0_.assign(static_cast<size_t>(gh), width_);
+  ext1_.assign(static_cast<size_t>(gh), 0);
   float nearest = 1e30f;
   std::vector<size_t>& stack = stack_;
   std::vector<size_t>& group = group_;
@@ -154,9 +183,13 @@ void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const
     }
     if (static_cast<int>(group.size()) < options_.min_group_samples) continue;
     for (const size_t i : group) {
-      ++col[i % static_cast<size_t>(gw)];
-      ++row[i / static_cast<size_t>(gw)];
+      core_[i] = 3;  // kept
+      const size_t gx = i % static_cast<size_t>(gw), gy = i / static_cast<size_t>(gw);
+      ++col[gx];
+      ++row[gy];
       nearest = std::min(nearest, zs_[i]);
+      ext0_[gy] = std::min(ext0_[gy], static_cast<int>(gx) * step);
+      ext1_[gy] = std::max(ext1_[gy], std::min(width_, (static_cast<int>(gx) + 1) * step));
     }
   }
   const int need = options_.min_line_samples;
@@ -175,20 +208,22 @@ void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const
   box_ = box;
   nearest_fg_m_ = nearest;
   // Touching an edge of the region that is not the image's: the person may
-  // reach beyond what was matched. The box, or any foreground sample in a
-  // vertical run of `touch_min_run` (not only core samples: a person
-  // entering across the edge shows first as a sliver too thin for the
-  // neighbour test; stacked floor streaks make runs of 4–5 samples).
+  // reach beyond what was matched. A kept sample, or any foreground sample in
+  // a vertical run of `touch_min_run` (not only kept ones: a person entering
+  // across the edge shows first as a sliver too thin for the neighbour test;
+  // stacked floor streaks make runs of 4–5 samples), with a pixel t + 1
+  // left, right, above or below it (clamped to the image) outside the region.
   const int t = options_.touch_px;
-  bool touch = (reg.x0 > 0 && box.x0 - reg.x0 <= t) || (reg.y0 > 0 && box.y0 - reg.y0 <= t) ||
-               (reg.x1 < width_ && reg.x1 - box.x1 <= t) || (reg.y1 < height_ && reg.y1 - box.y1 <= t);
+  const auto touches = [&](int x, int y) {
+    return !region.Contains(std::max(0, x - t - 1), y) || !region.Contains(std::min(width_ - 1, x + t + 1), y) ||
+           !region.Contains(x, std::max(0, y - t - 1)) || !region.Contains(x, std::min(height_ - 1, y + t + 1));
+  };
+  bool touch = false;
   for (int gy = 0; gy < gh && !touch; ++gy)
     for (int gx = 0; gx < gw; ++gx) {
       const size_t i = static_cast<size_t>(gy) * gw + gx;
-      if (!fg_[i] || run_[i] < options_.touch_min_run) continue;
-      const int x = gx * step, y = gy * step;
-      if ((reg.x0 > 0 && x - reg.x0 <= t) || (reg.x1 < width_ && reg.x1 - 1 - x <= t) ||
-          (reg.y0 > 0 && y - reg.y0 <= t) || (reg.y1 < height_ && reg.y1 - 1 - y <= t)) {
+      if (core_[i] != 3 && (!fg_[i] || run_[i] < options_.touch_min_run)) continue;
+      if (touches(gx * step, gy * step)) {
         touch = true;
         break;
       }
@@ -196,9 +231,10 @@ void StereoRoiPolicy::Update(int64_t frame_index, const ImageRect& region, const
   full_due_ = touch;
 }
 
-StatusOr<ImageRect> StereoRoiPolicy::Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
-                                           const ImageGray8& right, ImageFloat* disparity) {
-  const ImageRect region = Next(frame_index);
+StatusOr<RowSpans> StereoRoiPolicy::Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
+                                          const ImageGray8& right, ImageFloat* disparity) {
+  Next(frame_index);
+  const RowSpans region = spans_;
   HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
   Update(frame_index, region, *disparity);
   return region;

@@ -17,9 +17,14 @@
 //    volume, a vertical cylinder around the world's z axis above the floor
 //    (the floor, the walls and the ceiling are outside it). No background
 //    model, no colour.
-// The region is the foreground's bounding box widened by a margin that
-// covers the motion since that frame (max_speed_mps × elapsed time, in
-// pixels at the nearest foreground depth) plus a fixed margin. The whole
+// The region is the foreground widened by a margin that covers the motion
+// since that frame (max_speed_mps × elapsed time, in pixels at the nearest
+// foreground depth) plus a fixed margin: row by row (each row the span of
+// the foreground's samples on the rows within the margin, widened by it;
+// RowSpans), or its bounding box (StereoRoiOptions::row_spans off). Spans
+// hold the same motion as the box (every sample moved by up to the margin
+// in x and y stays inside) on ~0.6 of the box's pixels for the studio's
+// person, whose arms and legs leave most of the box empty. The whole
 // image is matched instead on the first frame, every `full_every` frames,
 // after a gap longer than `max_gap_s` or a step back in time, when the
 // previous result had no foreground, and when its foreground touched an edge
@@ -57,6 +62,9 @@ struct StereoRoiOptions {
   // plus `margin_px`.
   float max_speed_mps = 3.0f;
   int margin_px = 4;
+  // The region as row spans around the foreground (true) or its bounding
+  // box (false).
+  bool row_spans = true;
   // Frame rate of the frame indices (elapsed time = index difference / fps).
   double fps = 30.0;
   // The whole image on frames where (frame index + full_phase) % full_every
@@ -95,8 +103,11 @@ class StereoRoiPolicy {
   StereoRoiPolicy(const PodCalibration& pod, StereoRoiOptions options);
 
   // The region of the left IR image to match for frame `frame_index`
-  // (the whole image when a full match is due, see above).
+  // (the whole image when a full match is due, see above): its bounds; the
+  // region itself is spans().
   ImageRect Next(int64_t frame_index);
+  // The last Next's region.
+  const RowSpans& spans() const { return spans_; }
   // The largest disparity the last Next's region can hold, to pass to
   // PatchMatchStereo::Compute: the previous frame's nearest foreground
   // brought nearer by the motion since (max_speed_mps × elapsed time) and
@@ -106,11 +117,14 @@ class StereoRoiPolicy {
   float max_disparity() const { return max_disparity_; }
   // The disparity (left IR pixels, 0 = none) matched for `frame_index` in
   // `region`: its foreground becomes the next frame's region.
-  void Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity);
+  void Update(int64_t frame_index, const RowSpans& region, const ImageFloat& disparity);
+  void Update(int64_t frame_index, const ImageRect& region, const ImageFloat& disparity) {
+    Update(frame_index, RowSpans::FromRect(region, width_, height_), disparity);
+  }
   // Next, then `matcher` on that region with max_disparity(), then Update:
   // frame `frame_index`'s disparity in `disparity`; returns the region.
-  StatusOr<ImageRect> Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
-                            const ImageGray8& right, ImageFloat* disparity);
+  StatusOr<RowSpans> Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
+                           const ImageGray8& right, ImageFloat* disparity);
   // The full_phase of pod `pod` of `num_pods`: the rig's pods take turns for
   // their periodic full match.
   static int FullPhase(size_t pod, size_t num_pods, int full_every) {
@@ -131,6 +145,8 @@ class StereoRoiPolicy {
   bool full_due_ = true;
   int64_t previous_frame_ = 0, last_full_frame_ = 0;
   ImageRect box_;
+  RowSpans spans_;
+  std::vector<int> ext0_, ext1_;  // per sample row: the x extent of the last Update's foreground (pixels)
   float nearest_fg_m_ = 0;  // nearest foreground depth of the last Update
   float max_disparity_ = 3.0e38f;
   std::vector<uint8_t> fg_;  // scratch: foreground samples

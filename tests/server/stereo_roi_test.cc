@@ -3,6 +3,7 @@
 // against a full run, nothing outside it, regions at the border and empty,
 // and a person entering the view found within the stated number of frames.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <utility>
 #include <vector>
@@ -28,11 +29,39 @@ void SlantedPlane(int W, int H, float a, float b, float c, ImageGray8* left, Ima
   *truth = std::move(p.truth);
 }
 
-int CountNonZeroOutside(const ImageFloat& d, const ImageRect& r) {
+int CountNonZeroOutside(const ImageFloat& d, const RowSpans& s) {
   int n = 0;
   for (int y = 0; y < d.height(); ++y)
-    for (int x = 0; x < d.width(); ++x) n += !r.Contains(x, y) && d.at(x, y) != 0.0f;
+    for (int x = 0; x < d.width(); ++x) n += !s.Contains(x, y) && d.at(x, y) != 0.0f;
   return n;
+}
+
+int CountNonZeroOutside(const ImageFloat& d, const ImageRect& r) {
+  return CountNonZeroOutside(d, RowSpans::FromRect(r, d.width(), d.height()));
+}
+
+// Errors against the truth over the spans' pixels: (valid share, median, p90).
+std::array<double, 3> SpanErrors(const ImageFloat& d, const ImageFloat& truth, const RowSpans& s) {
+  std::vector<float> err;
+  int total = 0;
+  for (int y = 0; y < d.height(); ++y)
+    for (int x = s.x0[static_cast<size_t>(y)]; x < s.x1[static_cast<size_t>(y)]; ++x) {
+      ++total;
+      if (d.at(x, y) > 0.0f) err.push_back(std::abs(d.at(x, y) - truth.at(x, y)));
+    }
+  if (err.empty()) return {0.0, 1e9, 1e9};
+  std::sort(err.begin(), err.end());
+  return {static_cast<double>(err.size()) / std::max(total, 1), err[err.size() / 2], err[err.size() * 9 / 10]};
+}
+
+// The slanted-plane tests' matcher options: disparities 0-40, 2 threads.
+PatchMatchOptions PlaneOptions(bool force_scalar = false) {
+  PatchMatchOptions o;
+  o.min_disparity = 0;
+  o.max_disparity = 40;
+  o.threads = 2;
+  o.force_scalar = force_scalar;
+  return o;
 }
 
 TEST(PatchMatchRegionTest, WholeImageRegionEqualsFullRunBitForBit) {
@@ -61,28 +90,16 @@ void ExpectRegionRecoversPlane(bool force_scalar) {
   ImageGray8 l, r;
   ImageFloat truth;
   SlantedPlane(W, H, 0.06f, -0.04f, 14.0f, &l, &r, &truth);  // d ~9.2 .. ~23.6 px
-  PatchMatchOptions o;
-  o.min_disparity = 0;
-  o.max_disparity = 40;
-  o.threads = 2;
-  o.force_scalar = force_scalar;
-  PatchMatchStereo pm(o);
+  PatchMatchStereo pm(PlaneOptions(force_scalar));
   for (const ImageRect& region : {ImageRect{60, 30, 110, 90}, ImageRect{110, 80, 160, 120}, ImageRect{40, 0, 44, 120}}) {
     ImageFloat d;
     ASSERT_TRUE(pm.Compute(l, r, region, &d).ok());
     EXPECT_EQ(CountNonZeroOutside(d, region), 0);
     EXPECT_EQ(CountNonZeroOutside(pm.right_disparity(), pm.RightRegion(region, W, H)), 0);
-    std::vector<float> err;
-    int total = 0;
-    for (int y = region.y0; y < region.y1; ++y)
-      for (int x = region.x0; x < region.x1; ++x) {
-        ++total;
-        if (d.at(x, y) > 0.0f) err.push_back(std::abs(d.at(x, y) - truth.at(x, y)));
-      }
-    ASSERT_GT(static_cast<int>(err.size()), total * 8 / 10) << "region " << region.x0 << "," << region.y0;
-    std::sort(err.begin(), err.end());
-    EXPECT_LT(err[err.size() / 2], 0.1f);
-    EXPECT_LT(err[err.size() * 9 / 10], 0.3f);
+    const auto e = SpanErrors(d, truth, RowSpans::FromRect(region, W, H));
+    EXPECT_GT(e[0], 0.8) << "region " << region.x0 << "," << region.y0 << ": valid share";
+    EXPECT_LT(e[1], 0.1);
+    EXPECT_LT(e[2], 0.3);
   }
 }
 TEST(PatchMatchRegionTest, RegionRecoversSlantedPlane) { ExpectRegionRecoversPlane(false); }
@@ -94,10 +111,7 @@ TEST(PatchMatchRegionTest, ScalarPathRegionRecoversSlantedPlane) { ExpectRegionR
 // last one run the full algorithm (a fresh matcher's result, bit for bit).
 TEST(PatchMatchTemporalTest, ARegionStartsFromTheLastPlanesAndFollowsTheMotion) {
   const int W = 160, H = 120;
-  PatchMatchOptions o;
-  o.min_disparity = 0;
-  o.max_disparity = 40;
-  o.threads = 2;
+  const PatchMatchOptions o = PlaneOptions();
   PatchMatchOptions t = o;
   t.temporal = true;
   PatchMatchStereo pm(t);
@@ -112,17 +126,10 @@ TEST(PatchMatchTemporalTest, ARegionStartsFromTheLastPlanesAndFollowsTheMotion) 
     EXPECT_EQ(pm.last_was_temporal(), f > 0) << "frame " << f;
   }
   EXPECT_EQ(CountNonZeroOutside(d, region), 0);
-  std::vector<float> err;
-  int total = 0;
-  for (int y = region.y0; y < region.y1; ++y)
-    for (int x = region.x0; x < region.x1; ++x) {
-      ++total;
-      if (d.at(x, y) > 0.0f) err.push_back(std::abs(d.at(x, y) - truth.at(x, y)));
-    }
-  ASSERT_GT(static_cast<int>(err.size()), total * 9 / 10);
-  std::sort(err.begin(), err.end());
-  EXPECT_LT(err[err.size() / 2], 0.1f);
-  EXPECT_LT(err[err.size() * 9 / 10], 0.3f);
+  const auto e = SpanErrors(d, truth, RowSpans::FromRect(region, W, H));
+  EXPECT_GT(e[0], 0.9) << "valid share";
+  EXPECT_LT(e[1], 0.1);
+  EXPECT_LT(e[2], 0.3);
 
   // The whole image, and a region mostly outside the last one: the full
   // algorithm, as a fresh matcher gives it.
@@ -194,6 +201,98 @@ TEST(PatchMatchRegionTest, EmptyAndTinyRegions) {
     EXPECT_EQ(CountNonZeroOutside(d, t), 0);
   }
   EXPECT_NEAR(d.at(40, 31), 8.0f, 0.5f);
+  // Row spans of the wrong height are refused; spans beyond the image are
+  // clipped to it.
+  const Status s = pm.Compute(l, r, RowSpans::FromRect(ImageRect{0, 0, 64, 31}, 64, 31), 16.0f, &d);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("row spans: 31 rows for a 32-row image"), std::string::npos) << s.message();
+  RowSpans wide = RowSpans::FromRect(ImageRect{0, 0, 64, 32}, 64, 32);
+  wide.x0[3] = -10;
+  wide.x1[3] = 100;
+  ASSERT_TRUE(pm.Compute(l, r, wide, 16.0f, &d).ok());
+  EXPECT_EQ(d.width(), 64);
+}
+
+// ---- Regions as row spans ---------------------------------------------------
+
+// A disc of radius r around (cx, cy), and optionally a second one, as row
+// spans of a width × height image (rows between them empty).
+RowSpans Discs(int width, int height, std::vector<std::array<int, 3>> discs) {
+  RowSpans s;
+  s.x0.assign(static_cast<size_t>(height), 0);
+  s.x1.assign(static_cast<size_t>(height), 0);
+  for (const auto& [cx, cy, r] : discs)
+    for (int y = std::max(0, cy - r); y <= std::min(height - 1, cy + r); ++y) {
+      const int h = static_cast<int>(std::sqrt(static_cast<double>(r * r - (y - cy) * (y - cy))));
+      s.x0[static_cast<size_t>(y)] = std::max(0, cx - h);
+      s.x1[static_cast<size_t>(y)] = std::min(width, cx + h + 1);
+    }
+  return s;
+}
+
+// The right view's spans for left spans: each widened to the left by the
+// largest disparity.
+RowSpans RightSpans(const RowSpans& left, float max_disparity) {
+  RowSpans r = left;
+  for (int y = 0; y < r.rows(); ++y)
+    if (r.x1[static_cast<size_t>(y)] > r.x0[static_cast<size_t>(y)])
+      r.x0[static_cast<size_t>(y)] = std::max(0, r.x0[static_cast<size_t>(y)] - static_cast<int>(std::ceil(max_disparity)));
+  return r;
+}
+
+// Two discs with empty rows between them, one at the image's edge: the
+// slanted plane is recovered there as in a rectangle (median < 0.1 px, 90th
+// percentile < 0.3 px), on the AVX2 and the scalar path, nothing outside
+// the spans in either view; the result does not depend on the thread count.
+void ExpectSpansRecoverPlane(bool force_scalar) {
+  const int W = 160, H = 120;
+  ImageGray8 l, r;
+  ImageFloat truth;
+  SlantedPlane(W, H, 0.06f, -0.04f, 14.0f, &l, &r, &truth);
+  PatchMatchOptions o = PlaneOptions(force_scalar);
+  PatchMatchStereo pm(o);
+  const RowSpans spans = Discs(W, H, {{{70, 35, 25}}, {{150, 95, 20}}});
+  ASSERT_GT(spans.x1[58], 0);  // the first disc reaches row 60, the second starts at 75
+  ASSERT_EQ(spans.x1[68], 0);
+  ImageFloat d;
+  ASSERT_TRUE(pm.Compute(l, r, spans, o.max_disparity, &d).ok());
+  EXPECT_EQ(CountNonZeroOutside(d, spans), 0);
+  EXPECT_EQ(CountNonZeroOutside(pm.right_disparity(), RightSpans(spans, o.max_disparity)), 0);
+  const auto e = SpanErrors(d, truth, spans);
+  EXPECT_GT(e[0], 0.8) << "valid share";
+  EXPECT_LT(e[1], 0.1);
+  EXPECT_LT(e[2], 0.3);
+  o.threads = 3;
+  PatchMatchStereo three(o);
+  ImageFloat d3;
+  ASSERT_TRUE(three.Compute(l, r, spans, o.max_disparity, &d3).ok());
+  EXPECT_TRUE(d == d3);
+}
+TEST(PatchMatchSpansTest, SpansRecoverSlantedPlane) { ExpectSpansRecoverPlane(false); }
+TEST(PatchMatchSpansTest, ScalarPathSpansRecoverSlantedPlane) { ExpectSpansRecoverPlane(true); }
+
+// Frames in sequence (PatchMatchOptions::temporal): a disc that moves a pixel
+// per frame is matched from the last frame's planes, and pixels new to the
+// spans (outside the last ones) start from their row's nearest old plane.
+TEST(PatchMatchSpansTest, TemporalSpansFollowAMovingDisc) {
+  const int W = 160, H = 120;
+  PatchMatchOptions o = PlaneOptions();
+  o.temporal = true;
+  PatchMatchStereo pm(o);
+  ImageGray8 l, r;
+  ImageFloat truth, d;
+  RowSpans spans;
+  for (int f = 0; f < 10; ++f) {
+    SlantedPlane(W, H, 0.06f + 0.002f * f, -0.04f, 14.0f + 0.3f * f, &l, &r, &truth);
+    spans = f == 0 ? RowSpans::FromRect(ImageRect::Full(W, H), W, H) : Discs(W, H, {{{60 + 2 * f, 60 + f, 30}}});
+    ASSERT_TRUE(pm.Compute(l, r, spans, o.max_disparity, &d).ok());
+    EXPECT_EQ(pm.last_was_temporal(), f > 0) << "frame " << f;
+  }
+  EXPECT_EQ(CountNonZeroOutside(d, spans), 0);
+  const auto e = SpanErrors(d, truth, spans);
+  EXPECT_GT(e[0], 0.9) << "valid share";
+  EXPECT_LT(e[1], 0.1);
+  EXPECT_LT(e[2], 0.3);
 }
 
 // ---- The studio: the region's result against the full run -----------------
@@ -356,15 +455,24 @@ struct PolicyScene {
     return d;
   }
   static ImageFloat Matched(const ImageFloat& truth, const ImageRect& region) {
+    return Matched(truth, RowSpans::FromRect(region, truth.width(), truth.height()));
+  }
+  static ImageFloat Matched(const ImageFloat& truth, const RowSpans& region) {
     ImageFloat d(truth.width(), truth.height(), 0.0f);
-    for (int y = region.y0; y < region.y1; ++y)
-      for (int x = region.x0; x < region.x1; ++x) d.at(x, y) = truth.at(x, y);
+    for (int y = 0; y < d.height(); ++y)
+      for (int x = 0; x < d.width(); ++x)
+        if (region.Contains(x, y)) d.at(x, y) = truth.at(x, y);
     return d;
   }
 };
 
 bool Covers(const ImageRect& outer, const ImageRect& inner) {
   return outer.x0 <= inner.x0 && outer.y0 <= inner.y0 && outer.x1 >= inner.x1 && outer.y1 >= inner.y1;
+}
+bool Covers(const RowSpans& outer, const ImageRect& inner) {
+  for (int y = inner.y0; y < inner.y1; ++y)
+    if (!outer.Contains(inner.x0, y) || !outer.Contains(inner.x1 - 1, y)) return false;
+  return true;
 }
 
 TEST(StereoRoiPolicyTest, FollowsThePersonAndMatchesWholeWhenDue) {
@@ -394,11 +502,12 @@ TEST(StereoRoiPolicyTest, FollowsThePersonAndMatchesWholeWhenDue) {
       EXPECT_GT(policy.max_disparity(), scene.person_disparity + 1.0f) << "frame " << f;
       EXPECT_LT(policy.max_disparity(), scene.person_disparity + 6.0f) << "frame " << f;
     }
-    EXPECT_TRUE(Covers(region, person)) << "frame " << f;
+    EXPECT_TRUE(region == policy.spans().Bounds());
+    EXPECT_TRUE(Covers(policy.spans(), person)) << "frame " << f;
     if (f > 0 && f % 15 != 0) {
       EXPECT_LT(region.area(), full.area() / 2) << "frame " << f;
     }
-    policy.Update(f, region, PolicyScene::Matched(scene.Truth({person}), region));
+    policy.Update(f, policy.spans(), PolicyScene::Matched(scene.Truth({person}), policy.spans()));
   }
   EXPECT_EQ(full_frames, 2);  // frames 0 and 15
   // Off: always the whole image.
@@ -478,9 +587,9 @@ TEST(StereoRoiPolicyTest, PersonEnteringIsFoundWithinStatedFrames) {
     for (int f = 0; f < appear + o.full_every + 1 && found < 0; ++f) {
       std::vector<ImageRect> people = {first};
       if (f >= appear) people.push_back(second);
-      const ImageRect region = policy.Next(f);
-      if (f >= appear && Covers(region, second)) found = f;
-      policy.Update(f, region, PolicyScene::Matched(scene.Truth(people), region));
+      policy.Next(f);
+      if (f >= appear && Covers(policy.spans(), second)) found = f;
+      policy.Update(f, policy.spans(), PolicyScene::Matched(scene.Truth(people), policy.spans()));
     }
     ASSERT_GE(found, appear) << "appearing at frame " << appear;
     EXPECT_LE(found - appear, o.full_every - 1) << "appearing at frame " << appear;
@@ -490,9 +599,56 @@ TEST(StereoRoiPolicyTest, PersonEnteringIsFoundWithinStatedFrames) {
   policy.Update(0, ImageRect::Full(320, 240), scene.Truth({first}));
   const ImageRect region = policy.Next(1);
   const ImageRect beside{region.x1 - 3, 60, region.x1 + 40, 180};
-  policy.Update(1, region, PolicyScene::Matched(scene.Truth({first, beside}), region));
+  policy.Update(1, policy.spans(), PolicyScene::Matched(scene.Truth({first, beside}), policy.spans()));
   EXPECT_TRUE(policy.full_due());
   EXPECT_TRUE(policy.Next(2) == ImageRect::Full(320, 240));
+}
+
+// A person with arms out (a T: most of their box is empty): the spans
+// follow them as they walk, covering every pixel of them, on under two
+// thirds of the box (StereoRoiOptions::row_spans off: the box). A foot
+// stepping out sideways past its rows' spans, still inside the box, asks
+// for a full match on the next frame.
+TEST(StereoRoiPolicyTest, RowSpansFollowThePersonOnLessThanTheBox) {
+  const Rig rig = SmallStereoRig();
+  PolicyScene scene(rig);
+  StereoRoiOptions o;
+  StereoRoiPolicy policy(scene.pod, o);
+  StereoRoiOptions box_o = o;
+  box_o.row_spans = false;
+  StereoRoiPolicy box_policy(scene.pod, box_o);
+  const ImageRect full = ImageRect::Full(320, 240);
+  int full_frames = 0;
+  for (int f = 0; f < 25; ++f) {
+    const std::vector<ImageRect> person = {ImageRect{150 + 2 * f, 40, 170 + 2 * f, 200},   // body and legs
+                                           ImageRect{100 + 2 * f, 80, 220 + 2 * f, 92}};   // arms
+    const ImageRect region = policy.Next(f);
+    const ImageRect box_region = box_policy.Next(f);
+    if (region == full) {
+      ++full_frames;
+    } else {
+      EXPECT_TRUE(box_policy.spans() == RowSpans::FromRect(box_region, 320, 240));
+      EXPECT_TRUE(region == box_region) << "frame " << f;  // the spans' bounds are the box
+      EXPECT_LT(policy.spans().area(), box_region.area() * 2 / 3) << "frame " << f;
+    }
+    for (const ImageRect& part : person) EXPECT_TRUE(Covers(policy.spans(), part)) << "frame " << f;
+    policy.Update(f, policy.spans(), PolicyScene::Matched(scene.Truth(person), policy.spans()));
+    box_policy.Update(f, box_policy.spans(), PolicyScene::Matched(scene.Truth(person), box_policy.spans()));
+    EXPECT_FALSE(policy.full_due()) << "frame " << f;
+  }
+  EXPECT_EQ(full_frames, 2);  // frames 0 and 15
+  // A foot out sideways at the bottom (rows 180-200) to where the arms' rows
+  // reach, beyond the legs' spans.
+  const ImageRect region = policy.Next(25);
+  ASSERT_FALSE(region == full);
+  const ImageRect foot{200 + 50, 182, 200 + 60, 200};
+  ASSERT_FALSE(policy.spans().Contains(foot.x0, 190));
+  ASSERT_TRUE(Covers(region, ImageRect{foot.x0 - 8, 182, foot.x0, 200}));  // inside the box
+  const std::vector<ImageRect> person = {ImageRect{200, 40, 220, 200}, ImageRect{150, 80, 270, 92},
+                                         ImageRect{220, 182, foot.x1, 200}};
+  policy.Update(25, policy.spans(), PolicyScene::Matched(scene.Truth(person), policy.spans()));
+  EXPECT_TRUE(policy.full_due());
+  EXPECT_TRUE(policy.Next(26) == full);
 }
 
 TEST(StereoRoiPolicyTest, RefusesBadOptions) {
