@@ -57,6 +57,8 @@ Status PatchMatchOptions::Check() const {
     return InvalidArgument("temporal_iterations must be in [1, 16], got " + FormatNumber(temporal_iterations));
   if (temporal_refine_start < 0 || temporal_refine_start > 20)
     return InvalidArgument("temporal_refine_start must be in [0, 20], got " + FormatNumber(temporal_refine_start));
+  if (!(temporal_settled >= 0.0f && temporal_settled <= 100.0f))
+    return InvalidArgument("temporal_settled must be in [0, 100], got " + FormatNumber(temporal_settled));
   if (temporal_refine_per_sweep < 0 || temporal_refine_per_sweep > 8)
     return InvalidArgument("temporal_refine_per_sweep must be in [0, 8], got " +
                            FormatNumber(temporal_refine_per_sweep));
@@ -154,6 +156,7 @@ struct View {
   std::vector<float> cost;
   std::vector<Plane> proposal;
   std::vector<uint8_t> has_proposal;
+  std::vector<uint8_t> settled;  // PatchMatchOptions::temporal_settled: left alone this Compute
 
   bool In(int x, int y) const {
     return x >= sx0[static_cast<size_t>(y)] && x < sx1[static_cast<size_t>(y)];
@@ -196,6 +199,7 @@ struct View {
     cost.resize(n);
     proposal.resize(n);
     has_proposal.resize(n);
+    settled.assign(n, 0);
   }
 };
 
@@ -439,7 +443,11 @@ struct PatchMatchStereo::Impl {
   int last_w = 0, last_h = 0;
   ImageRect last_left, last_right;    // their bounds
   RowSpans last_lspans, last_rspans;  // and their spans
-  uint64_t temporal_calls = 0;  // varies the refinement's random numbers from frame to frame
+  uint64_t temporal_calls = 0;
+  // The median left cost after the sweeps of the last Compute that ran the
+  // full algorithm (0: none yet), and its scratch.
+  float full_median_cost = 0;
+  std::vector<float> median_scratch;  // varies the refinement's random numbers from frame to frame
   bool last_temporal = false;
   std::vector<Plane> edge_planes;  // the edge pass's copy of the left planes
 };
@@ -650,6 +658,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return Mix(seed ^ Mix((pass << 40) ^ (k << 32) ^ (static_cast<uint64_t>(y) << 16) ^ static_cast<uint64_t>(x)));
   };
 
+  // PatchMatchOptions::temporal_settled: the cost under which a pixel of the
+  // last region keeps its plane (0: none).
+  const float settle_below = temporal ? o.temporal_settled * im.full_median_cost : 0.0f;
+
   // Random initialisation.
   auto init = [&](View& v, const View& other, uint64_t tag) {
     const ImageRect& g = v.region;
@@ -750,6 +762,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         }
         prepare_total(cp, v, x, y, &sw);
         v.cost[i] = cost(v, other, x, y, v.plane[i], sw, kNoBound);
+        v.settled[i] = settle_below > 0.0f && last.Contains(x, y) && v.cost[i] <= settle_below;
       }
     });
   };
@@ -882,6 +895,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         SelfWindow sw;
         for (int k = 0; k < x1 - x0; ++k) {
           const int x = forward ? x0 + k : x1 - 1 - k;
+          if (v.settled[ro + x]) continue;
           prepare(v, x, y, &sw);
           if (v.has_proposal[ro + x]) try_plane(v, other, x, y, v.proposal[ro + x], sw);
           if (k > 0) try_plane(v, other, x, y, v.plane[ro + (forward ? x - 1 : x + 1)], sw);
@@ -898,6 +912,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
           const int yn = forward ? y - 1 : y + 1;
           const int xa = std::max(x0, v.sx0[static_cast<size_t>(y)]), xe = std::min(x1, v.sx1[static_cast<size_t>(y)]);
           for (int x = xa; x < xe; ++x) {
+            if (v.settled[static_cast<size_t>(y) * W + x]) continue;
             prepare(v, x, y, &sw);
             if (v.In(x, yn)) try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x], sw);
             refine(v, other, x, y, pass + 1, scale_v, sw);
@@ -906,6 +921,18 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       });
     }
     step_index += 2 * std::max(1, refine_per_sweep);
+  }
+
+  // The median cost of a full algorithm's left view, for the next temporal
+  // Computes' settled pixels (PatchMatchOptions::temporal_settled).
+  if (!temporal && o.temporal_settled > 0.0f) {
+    std::vector<float>& c = im.median_scratch;
+    c.clear();
+    for (int y = lreg.y0; y < lreg.y1; ++y)
+      c.insert(c.end(), L.cost.begin() + static_cast<std::ptrdiff_t>(y) * W + L.sx0[static_cast<size_t>(y)],
+               L.cost.begin() + static_cast<std::ptrdiff_t>(y) * W + L.sx1[static_cast<size_t>(y)]);
+    std::nth_element(c.begin(), c.begin() + static_cast<std::ptrdiff_t>(c.size() / 2), c.end());
+    im.full_median_cost = c[c.size() / 2];
   }
 
   // The dense last pass (PatchMatchOptions::final_window_step): each left
@@ -921,6 +948,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       SelfWindow sw;
       for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
+        if (L.settled[i]) continue;  // its plane had the dense pass last time
         prepare_total(fcp, L, x, y, &sw);  // (the next Compute recomputes wtot for its window)
         auto fcost = [&](const Plane& p, float bound) { return cost_with(fcp, L, R, x, y, p, sw, bound); };
         const float xf = static_cast<float>(x), yf = static_cast<float>(y);

@@ -100,6 +100,15 @@ struct PatchMatchOptions {
   int temporal_iterations = 2;
   int temporal_refine_start = 2;
   int temporal_refine_per_sweep = 1;
+  // A temporal Compute leaves alone the pixels (of both views) that were
+  // inside the last Compute's region and whose last plane still costs at
+  // most `temporal_settled` times the median cost of the left view in the
+  // last Compute that ran the full algorithm (a whole pair, every so often:
+  // the level of a good match for this camera's noise and this scene): no
+  // sweep, refinement or dense pass visits them, and they still offer their
+  // planes to their neighbours (a wall beside the person has not moved since
+  // the last frame). 0: every pixel is visited.
+  float temporal_settled = 0.0f;
   // Where the planes start from the coarse level's or the last Compute's (not
   // random ones), the right view takes only the left's planes (view
   // propagation) and its row neighbour's: no random refinement, no vertical

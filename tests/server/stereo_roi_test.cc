@@ -148,6 +148,40 @@ TEST(PatchMatchTemporalTest, ARegionStartsFromTheLastPlanesAndFollowsTheMotion) 
   EXPECT_TRUE(a == b);
 }
 
+// PatchMatchOptions::temporal_settled: on a scene that has not changed,
+// pixels whose last plane still costs little keep it (the region's
+// disparities are the last call's, bit for bit, on most of it); on a plane
+// that moves, costs rise and the pixels are matched again: the moved plane
+// is recovered as without the option.
+TEST(PatchMatchTemporalTest, SettledPixelsKeepTheirPlanesUntilTheSceneChanges) {
+  const int W = 160, H = 120;
+  PatchMatchOptions o = PlaneOptions();
+  o.temporal = true;
+  o.temporal_settled = 1.3f;
+  PatchMatchStereo pm(o);
+  const ImageRect region{50, 20, 130, 100};
+  ImageGray8 l, r;
+  ImageFloat truth, first, still;
+  SlantedPlane(W, H, 0.06f, -0.04f, 14.0f, &l, &r, &truth);
+  ASSERT_TRUE(pm.Compute(l, r, ImageRect::Full(W, H), &first).ok());
+  ASSERT_TRUE(pm.Compute(l, r, region, &still).ok());
+  ASSERT_TRUE(pm.last_was_temporal());
+  int same = 0;
+  for (int y = region.y0; y < region.y1; ++y)
+    for (int x = region.x0; x < region.x1; ++x) same += still.at(x, y) == first.at(x, y);
+  EXPECT_GT(same, static_cast<int>(region.area()) / 2) << "pixels left alone on a still scene";
+  // The plane tilts and comes nearer, frame by frame.
+  ImageFloat d;
+  for (int f = 1; f < 10; ++f) {
+    SlantedPlane(W, H, 0.06f + 0.002f * f, -0.04f, 14.0f + 0.3f * f, &l, &r, &truth);
+    ASSERT_TRUE(pm.Compute(l, r, region, &d).ok());
+  }
+  const auto e = SpanErrors(d, truth, RowSpans::FromRect(region, W, H));
+  EXPECT_GT(e[0], 0.9) << "valid share";
+  EXPECT_LT(e[1], 0.1);
+  EXPECT_LT(e[2], 0.3);
+}
+
 TEST(PatchMatchTemporalTest, OptionsAreChecked) {
   PatchMatchOptions o;
   o.temporal_min_overlap = 0.0f;
@@ -161,6 +195,9 @@ TEST(PatchMatchTemporalTest, OptionsAreChecked) {
   o = PatchMatchOptions{};
   o.temporal_refine_per_sweep = 9;
   EXPECT_NE(o.Check().message().find("temporal_refine_per_sweep"), std::string::npos);
+  o = PatchMatchOptions{};
+  o.temporal_settled = -1.0f;
+  EXPECT_NE(o.Check().message().find("temporal_settled"), std::string::npos);
 }
 
 TEST(PatchMatchRegionTest, RegionResultDoesNotDependOnThreadCount) {
