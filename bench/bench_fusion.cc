@@ -263,9 +263,9 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
                  "boxes (spans|box)")
       ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"spans", true}, {"box", false}}))
       ->capture_default_str();
-  app.add_option("--stereo-settled", p.stereo_settled,
-                 "--pipeline-source stereo: PatchMatch leaves alone pixels whose last plane costs at most this times "
-                 "the last whole pair's median cost (0: none; default: its default)")
+  app.add_option("--stereo-still", p.stereo_still,
+                 "--pipeline-source stereo: PatchMatch leaves alone pixels whose window changed since the last frame "
+                 "by at most this times the noise level (0: none; default: its default)")
       ->check(CLI::Range(0.0, 100.0));
   app.add_option("--seg-edge-band", p.seg_edge_band,
                  "segmentation: pixels beside a depth edge where colour decides (default: 3 with --pipeline-source "

@@ -96,7 +96,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   stereo_options.patchmatch.temporal = true;
   if (options.stereo_edge_shift >= 0) stereo_options.patchmatch.edge_shift_px = options.stereo_edge_shift;
   stereo_options.roi.row_spans = options.stereo_roi_spans;
-  if (options.stereo_settled >= 0) stereo_options.patchmatch.temporal_settled = static_cast<float>(options.stereo_settled);
+  if (options.stereo_still >= 0) stereo_options.patchmatch.temporal_still = static_cast<float>(options.stereo_still);
   // Frames for the prerendered source, rendered once (untimed).
   auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();
   if (src == "prerendered") {

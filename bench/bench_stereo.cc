@@ -207,7 +207,7 @@ struct StereoBenchOptions {
   int coarse_levels = -1, fine_iterations = -1;  // PatchMatch coarse to fine (-1: its defaults)
   // patchmatch_temporal's PatchMatchOptions (-1: their defaults)
   int temporal_iterations = -1, temporal_refine_start = -1, temporal_refine_per_sweep = -1;
-  double temporal_settled = -1;
+  double temporal_still = -1;
   int fuse_frames = 2;  // frames fused from stereo vs direct depth (0: skip)
   bool light_right_view = true;  // PatchMatchOptions::light_right_view
   int final_window_step = -1;    // PatchMatchOptions::final_window_step (-1: its default)
@@ -222,7 +222,7 @@ void SetTemporal(const StereoBenchOptions& o, PatchMatchOptions* pm) {
   if (o.temporal_iterations > 0) pm->temporal_iterations = o.temporal_iterations;
   if (o.temporal_refine_start >= 0) pm->temporal_refine_start = o.temporal_refine_start;
   if (o.temporal_refine_per_sweep >= 0) pm->temporal_refine_per_sweep = o.temporal_refine_per_sweep;
-  if (o.temporal_settled >= 0) pm->temporal_settled = static_cast<float>(o.temporal_settled);
+  if (o.temporal_still >= 0) pm->temporal_still = static_cast<float>(o.temporal_still);
 }
 
 int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
@@ -562,9 +562,9 @@ BenchFn SetupStereo(CLI::App& app) {
   app.add_option("--temporal-refine-start", o->temporal_refine_start,
                  "patchmatch_temporal: the refinement's range starts at 2^-N (-1: its default)")
       ->capture_default_str();
-  app.add_option("--temporal-settled", o->temporal_settled,
-                 "patchmatch_temporal: pixels whose last plane costs at most this times the last whole pair's median "
-                 "cost are left alone (0: none; -1: its default)")
+  app.add_option("--temporal-still", o->temporal_still,
+                 "patchmatch_temporal: pixels whose window changed since the last frame by at most this times the "
+                 "noise level are left alone (0: none; -1: its default)")
       ->check(CLI::Range(-1.0, 100.0))
       ->capture_default_str();
   app.add_option("--temporal-refine-per-sweep", o->temporal_refine_per_sweep,

@@ -44,8 +44,8 @@ Status PodRunOptions::Check() const {
     return InvalidArgument("--stereo-roi must be on or off, got '" + stereo_roi + "'");
   if (stereo_temporal != "on" && stereo_temporal != "off")
     return InvalidArgument("--stereo-temporal must be on or off, got '" + stereo_temporal + "'");
-  if (!(stereo_settled >= 0 && stereo_settled <= 100))
-    return InvalidArgument("--stereo-settled must be in [0, 100], got " + FormatNumber(stereo_settled));
+  if (!(stereo_still >= 0 && stereo_still <= 100))
+    return InvalidArgument("--stereo-still must be in [0, 100], got " + FormatNumber(stereo_still));
   if (stereo_dense_pass != "on" && stereo_dense_pass != "off")
     return InvalidArgument("--stereo-dense-pass must be on or off, got '" + stereo_dense_pass + "'");
   if (std::abs(clock_drift_ppm) > 1000) return InvalidArgument("--clock-drift-ppm must be within ±1000");
@@ -178,7 +178,7 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
     StereoSearchRange(stereo.renderer->rig().pods[index], sd.near_m, sd.far_m, &pm);
     pm.threads = o.stereo_threads;
     pm.temporal = o.stereo_temporal == "on";
-    pm.temporal_settled = static_cast<float>(o.stereo_settled);
+    pm.temporal_still = static_cast<float>(o.stereo_still);
     if (o.stereo_dense_pass == "off") pm.final_window_step = 0;
     HOLO_ASSIGN_OR_RETURN(stereo.matcher, PatchMatchStereo::Create(pm));
     stereo.far_m = sd.far_m;

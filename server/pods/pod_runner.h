@@ -25,6 +25,7 @@
 #include "common/rgbd.h"
 #include "common/rig.h"
 #include "common/status.h"
+#include "server/stereo/patchmatch.h"
 
 namespace holo::pods {
 
@@ -42,7 +43,7 @@ struct PodRunOptions {
   int stereo_threads = 1;               // depth stereo: PatchMatch threads (0: every core)
   std::string stereo_roi = "on";        // depth stereo: "on" (match around the person, stereo_roi.h) or "off"
   std::string stereo_temporal = "on";   // depth stereo: "on" (regions start from the last planes) or "off"
-  double stereo_settled = 0;            // depth stereo: PatchMatchOptions::temporal_settled (0: off)
+  double stereo_still = PatchMatchOptions{}.temporal_still;  // depth stereo: PatchMatchOptions::temporal_still (0: off)
   std::string stereo_dense_pass = "on";  // depth stereo: "on" (PatchMatchOptions::final_window_step) or "off"
   double clock_offset_ms = 0;           // simulated pod clock: offset against the system clock
   double clock_drift_ppm = 0;           // ... and drift (parts per million)

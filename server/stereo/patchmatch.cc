@@ -57,8 +57,8 @@ Status PatchMatchOptions::Check() const {
     return InvalidArgument("temporal_iterations must be in [1, 16], got " + FormatNumber(temporal_iterations));
   if (temporal_refine_start < 0 || temporal_refine_start > 20)
     return InvalidArgument("temporal_refine_start must be in [0, 20], got " + FormatNumber(temporal_refine_start));
-  if (!(temporal_settled >= 0.0f && temporal_settled <= 100.0f))
-    return InvalidArgument("temporal_settled must be in [0, 100], got " + FormatNumber(temporal_settled));
+  if (!(temporal_still >= 0.0f && temporal_still <= 100.0f))
+    return InvalidArgument("temporal_still must be in [0, 100], got " + FormatNumber(temporal_still));
   if (temporal_refine_per_sweep < 0 || temporal_refine_per_sweep > 8)
     return InvalidArgument("temporal_refine_per_sweep must be in [0, 8], got " +
                            FormatNumber(temporal_refine_per_sweep));
@@ -156,7 +156,12 @@ struct View {
   std::vector<float> cost;
   std::vector<Plane> proposal;
   std::vector<uint8_t> has_proposal;
-  std::vector<uint8_t> settled;  // PatchMatchOptions::temporal_settled: left alone this Compute
+  // PatchMatchOptions::temporal_still: the last Compute's intensities (the
+  // same padded rows as I), per pixel the mean |I − last_I| over its window,
+  // and the pixels left alone in this Compute.
+  std::vector<float> last_I;
+  std::vector<float> change;
+  std::vector<uint8_t> settled;
 
   bool In(int x, int y) const {
     return x >= sx0[static_cast<size_t>(y)] && x < sx1[static_cast<size_t>(y)];
@@ -172,6 +177,7 @@ struct View {
     stride = W + 2 * kPad;
     sign = s;
     const size_t n = static_cast<size_t>(W) * H;
+    last_I.swap(I);  // the last Compute's intensities (PatchMatchOptions::temporal_still)
     I.resize(static_cast<size_t>(stride) * H + 8);
     G.resize(I.size());
     pair_i.resize(I.size() + kTail);
@@ -200,6 +206,7 @@ struct View {
     proposal.resize(n);
     has_proposal.resize(n);
     settled.assign(n, 0);
+    change.resize(n);
   }
 };
 
@@ -228,6 +235,19 @@ float WindowWeight(const View& v, int x, int y, const CostParams& cp, float cent
 
 float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
   return WindowWeight(v, x, y, cp, v.IRow(y)[x]);
+}
+
+// The mean |I − last_I| over the window at (x, y) (PatchMatchOptions::temporal_still).
+float WindowChange(const View& v, int x, int y, const CostParams& cp) {
+  float c = 0;
+  for (int r = 0; r < cp.rows; ++r) {
+    const size_t ro = static_cast<size_t>(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1)) * v.stride + kPad;
+    for (int l = 0; l < 8; ++l) {
+      const size_t j = ro + static_cast<size_t>(x + ColumnOffset(l, cp.step));
+      c += std::abs(v.I[j] - v.last_I[j]);
+    }
+  }
+  return c / static_cast<float>(8 * cp.rows);
 }
 
 // Mean weighted cost of plane `p` in the window at (x, y), or a value ≥
@@ -324,6 +344,22 @@ __attribute__((target("avx2,fma"))) float WindowTotalAvx2(const CostParams& cp, 
   __m256 total = _mm256_setzero_ps();
   for (int r = 0; r < cp.rows; ++r) total = _mm256_add_ps(total, _mm256_load_ps(sw.w + 8 * r));
   return HorizontalSum(total);
+}
+
+// The mean |I − last_I| over the window at (x, y) of view `v` (x in [0, W)).
+__attribute__((target("avx2,fma"))) float WindowChangeAvx2(const View& v, int x, int y, const CostParams& cp) {
+  const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
+                                      _mm256_set1_epi32(x - (7 * cp.step) / 2));
+  const __m256 sign = _mm256_set1_ps(-0.0f);
+  __m256 total = _mm256_setzero_ps();
+  for (int r = 0; r < cp.rows; ++r) {
+    const size_t ro = static_cast<size_t>(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1)) * v.stride + kPad;
+    const __m256 now = LoadColumns(v.I.data() + ro, x, cp.step, xx);
+    const __m256 last = LoadColumns(v.last_I.data() + ro, x, cp.step, xx);
+    total = _mm256_add_ps(total, _mm256_andnot_ps(sign, _mm256_sub_ps(now, last)));
+  }
+  return HorizontalSum(total) / static_cast<float>(8 * cp.rows);
 }
 
 // Lanes idx (0 ≤ idx < 8·regs) of the 8·regs consecutive elements at `p`:
@@ -444,10 +480,10 @@ struct PatchMatchStereo::Impl {
   ImageRect last_left, last_right;    // their bounds
   RowSpans last_lspans, last_rspans;  // and their spans
   uint64_t temporal_calls = 0;
-  // The median left cost after the sweeps of the last Compute that ran the
-  // full algorithm (0: none yet), and its scratch.
-  float full_median_cost = 0;
-  std::vector<float> median_scratch;  // varies the refinement's random numbers from frame to frame
+  // PatchMatchOptions::temporal_still: each view's noise level (< 0: none
+  // yet), and scratch.
+  float still_level[2] = {-1, -1};
+  std::vector<float> change_scratch;  // varies the refinement's random numbers from frame to frame
   bool last_temporal = false;
   std::vector<Plane> edge_planes;  // the edge pass's copy of the left planes
 };
@@ -658,9 +694,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return Mix(seed ^ Mix((pass << 40) ^ (k << 32) ^ (static_cast<uint64_t>(y) << 16) ^ static_cast<uint64_t>(x)));
   };
 
-  // PatchMatchOptions::temporal_settled: the cost under which a pixel of the
-  // last region keeps its plane (0: none).
-  const float settle_below = temporal ? o.temporal_settled * im.full_median_cost : 0.0f;
+  // PatchMatchOptions::temporal_still: leave alone the pixels whose window
+  // has not changed since the last Compute.
+  const bool still = temporal && o.temporal_still > 0.0f;
 
   // Random initialisation.
   auto init = [&](View& v, const View& other, uint64_t tag) {
@@ -762,9 +798,47 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         }
         prepare_total(cp, v, x, y, &sw);
         v.cost[i] = cost(v, other, x, y, v.plane[i], sw, kNoBound);
-        v.settled[i] = settle_below > 0.0f && last.Contains(x, y) && v.cost[i] <= settle_below;
+        if (!still) continue;
+        if (!last.Contains(x, y)) {
+          v.change[i] = 3.0e38f;  // new to the region: always visited
+          continue;
+        }
+        // The pixel's window and its match's in the other view (the cost's
+        // inputs): both unchanged, so is the best plane.
+        const int xo = std::clamp(
+            static_cast<int>(std::lround(static_cast<float>(x) + v.sign * v.plane[i].At(static_cast<float>(x), static_cast<float>(y)))),
+            0, W - 1);
+#ifdef HOLO_PM_X86
+        if (avx2) {
+          v.change[i] = 0.5f * (WindowChangeAvx2(v, x, y, cp) + WindowChangeAvx2(other, xo, y, cp));
+          continue;
+        }
+#endif
+        v.change[i] = 0.5f * (WindowChange(v, x, y, cp) + WindowChange(other, xo, y, cp));
       }
     });
+    if (!still) return;
+    // The view's noise level: the median change of its pixels outside the
+    // region's bounds (every 4th of every 4th row: what is not the person
+    // has not moved), allowed to rise by at most 20 % (+ 0.25 grey levels)
+    // per Compute, so that a change over the whole view (a light switched
+    // on) does not lift the threshold with it. Too little outside (under
+    // 1/16 of the image): nothing is left alone.
+    std::vector<float>& cs = im.change_scratch;
+    cs.clear();
+    for (int y = 2; y < H; y += 4)
+      for (int x = 2; x < W; x += 4)
+        if (!g.Contains(x, y)) cs.push_back(WindowChange(v, x, y, cp));
+    if (cs.size() * 16 < static_cast<size_t>(W / 4) * static_cast<size_t>(H / 4)) return;
+    std::nth_element(cs.begin(), cs.begin() + static_cast<std::ptrdiff_t>(cs.size() / 2), cs.end());
+    float& level = im.still_level[v.sign < 0 ? 0 : 1];
+    level = level >= 0.0f ? std::min(cs[cs.size() / 2], 1.2f * level + 0.25f) : cs[cs.size() / 2];
+    const float below = o.temporal_still * level;
+    for (int y = g.y0; y < g.y1; ++y)
+      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+        const size_t i = static_cast<size_t>(y) * W + x;
+        v.settled[i] = v.change[i] <= below;
+      }
   };
   int iterations = o.iterations;
   int step_index = 0;
@@ -923,18 +997,6 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     step_index += 2 * std::max(1, refine_per_sweep);
   }
 
-  // The median cost of a full algorithm's left view, for the next temporal
-  // Computes' settled pixels (PatchMatchOptions::temporal_settled).
-  if (!temporal && o.temporal_settled > 0.0f) {
-    std::vector<float>& c = im.median_scratch;
-    c.clear();
-    for (int y = lreg.y0; y < lreg.y1; ++y)
-      c.insert(c.end(), L.cost.begin() + static_cast<std::ptrdiff_t>(y) * W + L.sx0[static_cast<size_t>(y)],
-               L.cost.begin() + static_cast<std::ptrdiff_t>(y) * W + L.sx1[static_cast<size_t>(y)]);
-    std::nth_element(c.begin(), c.begin() + static_cast<std::ptrdiff_t>(c.size() / 2), c.end());
-    im.full_median_cost = c[c.size() / 2];
-  }
-
   // The dense last pass (PatchMatchOptions::final_window_step): each left
   // pixel's plane moved along d only, to the minimum of a V through its costs
   // in the denser window at d and d ± final_step_px; the best of the four
@@ -1076,6 +1138,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   });
   im.have_last = true;
   im.last_temporal = temporal;
+  if (im.last_w != W || im.last_h != H) im.still_level[0] = im.still_level[1] = -1.0f;  // another camera
   im.last_w = W;
   im.last_h = H;
   im.last_left = lreg;

@@ -47,8 +47,8 @@ int main(int argc, char** argv) {
                  "~1.2x the matching CPU; docs/stereo.md) or off")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
-  app.add_option("--stereo-settled", o.stereo_settled,
-                 "--depth stereo: a region's pixels whose plane of the previous frame still costs at most K times the last whole pair's median cost keep it unvisited (0: off; 1.15: ~0.7x the matching CPU per pair, the site's mask IoU -0.004 and mesh +0.07 mm; docs/stereo.md)")
+  app.add_option("--stereo-still", o.stereo_still,
+                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 0.9: ~0.9x the matching CPU, no measurable loss; 1.1: ~0.5x per pair, the site's mask IoU -0.016; docs/stereo.md)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   app.add_option("--stereo-temporal", o.stereo_temporal,

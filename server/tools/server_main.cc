@@ -125,9 +125,9 @@ int main(int argc, char** argv) {
                  "algorithm; docs/stereo.md) or off")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
-  double stereo_settled = 0;
-  app.add_option("--stereo-settled", stereo_settled,
-                 "--depth stereo: a region's pixels whose plane of the previous frame still costs at most K times the last whole pair's median cost keep it unvisited (0: off; 1.15: ~0.7x the matching CPU per pair, the site's mask IoU -0.004 and mesh +0.07 mm; docs/stereo.md)")
+  double stereo_still = holo::PatchMatchOptions{}.temporal_still;
+  app.add_option("--stereo-still", stereo_still,
+                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 0.9: ~0.9x the matching CPU, no measurable loss; 1.1: ~0.5x per pair, the site's mask IoU -0.016; docs/stereo.md)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   std::string stereo_dense_pass = "on";
@@ -590,7 +590,7 @@ int main(int argc, char** argv) {
     holo::StereoDepthOptions sdo;
     sdo.roi.enabled = stereo_roi == "on";
     sdo.patchmatch.temporal = stereo_temporal == "on";
-    sdo.patchmatch.temporal_settled = static_cast<float>(stereo_settled);
+    sdo.patchmatch.temporal_still = static_cast<float>(stereo_still);
     if (stereo_dense_pass == "off") sdo.patchmatch.final_window_step = 0;
     auto st = holo::StereoStudioSource::Create(studio.get(), sdo);
     if (!st.ok()) return Fail(st.status());
