@@ -45,6 +45,7 @@ TEST(NetTls, SelfSignedSessionCarriesFramesAndRejectsOthers) {
   o.tls.enabled = true;
   o.tls.ca_file = dir + "/site.pem";
   o.reconnect = false;
+  o.max_pending_frames = 64;  // the 5 frames below arrive before the test pulls them (the default queue holds 4)
   auto c = SiteClient::Start(o);
   ASSERT_TRUE(c.ok()) << c.status().ToString();
   ASSERT_TRUE((*c)->WaitConnected(5.0)) << (*c)->status().ToString();
