@@ -237,17 +237,17 @@ float WindowWeight(const View& v, int x, int y, const CostParams& cp) {
   return WindowWeight(v, x, y, cp, v.IRow(y)[x]);
 }
 
-// The mean |I − last_I| over the window at (x, y) (PatchMatchOptions::temporal_still).
+// The largest |I − last_I| over the window at (x, y) (PatchMatchOptions::temporal_still).
 float WindowChange(const View& v, int x, int y, const CostParams& cp) {
   float c = 0;
   for (int r = 0; r < cp.rows; ++r) {
     const size_t ro = static_cast<size_t>(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1)) * v.stride + kPad;
     for (int l = 0; l < 8; ++l) {
       const size_t j = ro + static_cast<size_t>(x + ColumnOffset(l, cp.step));
-      c += std::abs(v.I[j] - v.last_I[j]);
+      c = std::max(c, std::abs(v.I[j] - v.last_I[j]));
     }
   }
-  return c / static_cast<float>(8 * cp.rows);
+  return c;
 }
 
 // Mean weighted cost of plane `p` in the window at (x, y), or a value ≥
@@ -346,7 +346,7 @@ __attribute__((target("avx2,fma"))) float WindowTotalAvx2(const CostParams& cp, 
   return HorizontalSum(total);
 }
 
-// The mean |I − last_I| over the window at (x, y) of view `v` (x in [0, W)).
+// The largest |I − last_I| over the window at (x, y) of view `v` (x in [0, W)).
 __attribute__((target("avx2,fma"))) float WindowChangeAvx2(const View& v, int x, int y, const CostParams& cp) {
   const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i xx = _mm256_add_epi32(_mm256_mullo_epi32(lanes, _mm256_set1_epi32(cp.step)),
@@ -357,9 +357,11 @@ __attribute__((target("avx2,fma"))) float WindowChangeAvx2(const View& v, int x,
     const size_t ro = static_cast<size_t>(std::clamp(y + (r - cp.rows / 2) * cp.step, 0, v.H - 1)) * v.stride + kPad;
     const __m256 now = LoadColumns(v.I.data() + ro, x, cp.step, xx);
     const __m256 last = LoadColumns(v.last_I.data() + ro, x, cp.step, xx);
-    total = _mm256_add_ps(total, _mm256_andnot_ps(sign, _mm256_sub_ps(now, last)));
+    total = _mm256_max_ps(total, _mm256_andnot_ps(sign, _mm256_sub_ps(now, last)));
   }
-  return HorizontalSum(total) / static_cast<float>(8 * cp.rows);
+  alignas(32) float t[8];
+  _mm256_store_ps(t, total);
+  return *std::max_element(t, t + 8);
 }
 
 // Lanes idx (0 ≤ idx < 8·regs) of the 8·regs consecutive elements at `p`:
@@ -480,9 +482,8 @@ struct PatchMatchStereo::Impl {
   ImageRect last_left, last_right;    // their bounds
   RowSpans last_lspans, last_rspans;  // and their spans
   uint64_t temporal_calls = 0;
-  // PatchMatchOptions::temporal_still: each view's noise level (< 0: none
-  // yet), and scratch.
-  float still_level[2] = {-1, -1};
+  // PatchMatchOptions::temporal_still: each view's noise level, and scratch.
+  float still_level[2] = {0, 0};
   std::vector<float> change_scratch;  // varies the refinement's random numbers from frame to frame
   bool last_temporal = false;
   std::vector<Plane> edge_planes;  // the edge pass's copy of the left planes
@@ -804,7 +805,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
           continue;
         }
         // The pixel's window and its match's in the other view (the cost's
-        // inputs): both unchanged, so is the best plane.
+        // inputs): both unchanged, so is the best plane. Each window's
+        // largest change of a sample, not the mean: an edge moving a pixel
+        // changes a few samples a lot (with means, 1.1 lost the site's
+        // masks 0.016 of IoU; docs/stereo.md). The two averaged.
         const int xo = std::clamp(
             static_cast<int>(std::lround(static_cast<float>(x) + v.sign * v.plane[i].At(static_cast<float>(x), static_cast<float>(y)))),
             0, W - 1);
@@ -820,10 +824,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     if (!still) return;
     // The view's noise level: the median change of its pixels outside the
     // region's bounds (every 4th of every 4th row: what is not the person
-    // has not moved), allowed to rise by at most 20 % (+ 0.25 grey levels)
-    // per Compute, so that a change over the whole view (a light switched
-    // on) does not lift the threshold with it. Too little outside (under
-    // 1/16 of the image): nothing is left alone.
+    // has not moved). It starts at 0 and rises by at most 20 % + 0.25 grey
+    // levels per Compute (reaching a camera's noise in ~10 frames), so that
+    // a view that moves as a whole (from the start, or a light switched on)
+    // does not lift the threshold with it. Too little outside (under 1/16
+    // of the image): nothing is left alone.
     std::vector<float>& cs = im.change_scratch;
     cs.clear();
     for (int y = 2; y < H; y += 4)
@@ -832,7 +837,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     if (cs.size() * 16 < static_cast<size_t>(W / 4) * static_cast<size_t>(H / 4)) return;
     std::nth_element(cs.begin(), cs.begin() + static_cast<std::ptrdiff_t>(cs.size() / 2), cs.end());
     float& level = im.still_level[v.sign < 0 ? 0 : 1];
-    level = level >= 0.0f ? std::min(cs[cs.size() / 2], 1.2f * level + 0.25f) : cs[cs.size() / 2];
+    level = std::min(cs[cs.size() / 2], 1.2f * level + 0.25f);
     const float below = o.temporal_still * level;
     for (int y = g.y0; y < g.y1; ++y)
       for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
@@ -1138,7 +1143,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   });
   im.have_last = true;
   im.last_temporal = temporal;
-  if (im.last_w != W || im.last_h != H) im.still_level[0] = im.still_level[1] = -1.0f;  // another camera
+  if (im.last_w != W || im.last_h != H) im.still_level[0] = im.still_level[1] = 0.0f;  // another camera
   im.last_w = W;
   im.last_h = H;
   im.last_left = lreg;

@@ -48,7 +48,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
   app.add_option("--stereo-still", o.stereo_still,
-                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 0.9: ~0.9x the matching CPU, no measurable loss; 1.1: ~0.5x per pair, the site's mask IoU -0.016; docs/stereo.md)")
+                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 1.0: the site's masks, mesh and view as good, its CPU not measurably lower yet; docs/stereo.md)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   app.add_option("--stereo-temporal", o.stereo_temporal,

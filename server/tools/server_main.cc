@@ -127,7 +127,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   double stereo_still = holo::PatchMatchOptions{}.temporal_still;
   app.add_option("--stereo-still", stereo_still,
-                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 0.9: ~0.9x the matching CPU, no measurable loss; 1.1: ~0.5x per pair, the site's mask IoU -0.016; docs/stereo.md)")
+                 "--depth stereo: a region's pixels whose window (and their match's) changed since the previous frame by at most K times the camera's noise level keep their planes unvisited (0: off; 1.0: the site's masks, mesh and view as good, its CPU not measurably lower yet; docs/stereo.md)")
       ->check(CLI::Range(0.0, 100.0))
       ->capture_default_str();
   std::string stereo_dense_pass = "on";
