@@ -142,7 +142,7 @@ struct View {
   int W = 0, H = 0, stride = 0;
   float sign = -1.0f;       // the matching pixel in the other view is at x + sign·d
   ImageRect region;         // the bounds of the pixels whose planes this Compute works on
-  std::vector<int> sx0, sx1;  // ... and those pixels: [sx0[y], sx1[y]) on row y (empty: sx0 == sx1 == 0)
+  RowSpans spans;            // ... and those pixels, row by row (an empty row: x0 == x1 == 0)
   std::vector<float> I, G;  // intensity and x gradient, padded rows
   // The same padded rows packed for the AVX2 path's reads of the other
   // view: per position x, int16 {I(x), I(x+1)} in `pair_i` and
@@ -163,9 +163,6 @@ struct View {
   std::vector<float> change;
   std::vector<uint8_t> settled;
 
-  bool In(int x, int y) const {
-    return x >= sx0[static_cast<size_t>(y)] && x < sx1[static_cast<size_t>(y)];
-  }
   const float* IRow(int y) const { return I.data() + static_cast<size_t>(y) * stride + kPad; }
   const float* GRow(int y) const { return G.data() + static_cast<size_t>(y) * stride + kPad; }
   const uint32_t* PairIRow(int y) const { return pair_i.data() + static_cast<size_t>(y) * stride + kPad; }
@@ -564,16 +561,16 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     return InvalidArgument("row spans: " + std::to_string(spans.rows()) + " rows for a " + std::to_string(H) +
                            "-row image");
   // The left view's spans, clipped to the image.
-  L.sx0.assign(static_cast<size_t>(H), 0);
-  L.sx1.assign(static_cast<size_t>(H), 0);
+  L.spans.x0.assign(static_cast<size_t>(H), 0);
+  L.spans.x1.assign(static_cast<size_t>(H), 0);
   for (int y = 0; y < H; ++y) {
     const int a = std::max(spans.x0[static_cast<size_t>(y)], 0), e = std::min(spans.x1[static_cast<size_t>(y)], W);
     if (e > a) {
-      L.sx0[static_cast<size_t>(y)] = a;
-      L.sx1[static_cast<size_t>(y)] = e;
+      L.spans.x0[static_cast<size_t>(y)] = a;
+      L.spans.x1[static_cast<size_t>(y)] = e;
     }
   }
-  const ImageRect lreg = RowSpans{L.sx0, L.sx1}.Bounds();
+  const ImageRect lreg = L.spans.Bounds();
   if (disparity->width() != W || disparity->height() != H) disparity->Resize(W, H);
   if (im.right_disparity.width() != W || im.right_disparity.height() != H) im.right_disparity.Resize(W, H);
   if (lreg.empty()) {
@@ -589,15 +586,15 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   const float dmax = std::clamp(max_disparity, std::min(o.min_disparity + 2.0f, o.max_disparity), o.max_disparity);
   // The right view's spans: each left span widened to the left by the range
   // (as RightRegion does for a rectangle).
-  R.sx0.assign(static_cast<size_t>(H), 0);
-  R.sx1.assign(static_cast<size_t>(H), 0);
+  R.spans.x0.assign(static_cast<size_t>(H), 0);
+  R.spans.x1.assign(static_cast<size_t>(H), 0);
   for (int y = 0; y < H; ++y) {
     const size_t r = static_cast<size_t>(y);
-    if (L.sx1[r] <= L.sx0[r]) continue;
-    R.sx0[r] = std::max(0, L.sx0[r] - static_cast<int>(std::ceil(dmax)));
-    R.sx1[r] = L.sx1[r];
+    if (L.spans.x1[r] <= L.spans.x0[r]) continue;
+    R.spans.x0[r] = std::max(0, L.spans.x0[r] - static_cast<int>(std::ceil(dmax)));
+    R.spans.x1[r] = L.spans.x1[r];
   }
-  R.region = RowSpans{R.sx0, R.sx1}.Bounds();
+  R.region = R.spans.Bounds();
   CostParams cp;
   cp.rows = o.window_rows;
   cp.step = o.window_step;
@@ -677,12 +674,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     int64_t n = 0;
     for (int y = 0; y < H; ++y) {
       const size_t r = static_cast<size_t>(y);
-      n += std::max(0, std::min(L.sx1[r], last.x1[r]) - std::max(L.sx0[r], last.x0[r]));
+      n += std::max(0, std::min(L.spans.x1[r], last.x1[r]) - std::max(L.spans.x0[r], last.x0[r]));
     }
     return n;
   };
-  int64_t larea = 0;
-  for (int y = 0; y < H; ++y) larea += L.sx1[static_cast<size_t>(y)] - L.sx0[static_cast<size_t>(y)];
+  const int64_t larea = L.spans.area();
   const bool temporal = o.temporal && im.have_last && im.last_w == W && im.last_h == H &&
                         larea < static_cast<int64_t>(W) * H &&
                         static_cast<double>(overlap(im.last_lspans)) >=
@@ -705,7 +701,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = v.spans.x0[static_cast<size_t>(y)]; x < v.spans.x1[static_cast<size_t>(y)]; ++x) {
         const uint64_t h = rng(tag, x, y, 0);
         const float d = dmin + range * 0.5f * (Sym(h, 0) + 1.0f);
         float nx = 0.5f * Sym(h, 21), ny = 0.5f * Sym(h, 42);
@@ -747,10 +743,10 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int y = g.y0 + row;
       SelfWindow sw;
       const int cy = std::clamp(y / 2, cg.y0, cg.y1 - 1);
-      const bool has_span = cv.sx1[static_cast<size_t>(cy)] > cv.sx0[static_cast<size_t>(cy)];
-      const int cx0 = has_span ? cv.sx0[static_cast<size_t>(cy)] : cg.x0;
-      const int cx1 = has_span ? cv.sx1[static_cast<size_t>(cy)] : cg.x1;
-      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+      const bool has_span = cv.spans.x1[static_cast<size_t>(cy)] > cv.spans.x0[static_cast<size_t>(cy)];
+      const int cx0 = has_span ? cv.spans.x0[static_cast<size_t>(cy)] : cg.x0;
+      const int cx1 = has_span ? cv.spans.x1[static_cast<size_t>(cy)] : cg.x1;
+      for (int x = v.spans.x0[static_cast<size_t>(y)]; x < v.spans.x1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         const int cx = std::clamp(x / 2, cx0, cx1 - 1);
         prepare_total(cp, v, x, y, &sw);
@@ -784,14 +780,14 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int ly = near_row[static_cast<size_t>(y)];
       const Plane* from = v.plane.data() + static_cast<size_t>(ly) * W;
       const int lx0 = last.x0[static_cast<size_t>(ly)], lx1 = last.x1[static_cast<size_t>(ly)];
-      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = v.spans.x0[static_cast<size_t>(y)]; x < v.spans.x1[static_cast<size_t>(y)]; ++x) {
         if (!last.Contains(x, y)) v.plane[static_cast<size_t>(y) * W + x] = from[std::clamp(x, lx0, lx1 - 1)];
       }
     });
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = v.spans.x0[static_cast<size_t>(y)]; x < v.spans.x1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         if (!valid_at(v.plane[i], static_cast<float>(x), static_cast<float>(y))) {
           const float d = std::clamp(v.plane[i].At(static_cast<float>(x), static_cast<float>(y)), dmin, dmax);
@@ -840,7 +836,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     level = std::min(cs[cs.size() / 2], 1.2f * level + 0.25f);
     const float below = o.temporal_still * level;
     for (int y = g.y0; y < g.y1; ++y)
-      for (int x = v.sx0[static_cast<size_t>(y)]; x < v.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = v.spans.x0[static_cast<size_t>(y)]; x < v.spans.x1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         v.settled[i] = v.change[i] <= below;
       }
@@ -884,9 +880,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     for (int cy = 0; cy < ch; ++cy) {
       int a = cw, e = 0;
       for (int y = std::max(0, 2 * cy - 2); y <= std::min(H - 1, 2 * cy + 3); ++y) {
-        if (L.sx1[static_cast<size_t>(y)] <= L.sx0[static_cast<size_t>(y)]) continue;
-        a = std::min(a, std::max(0, L.sx0[static_cast<size_t>(y)] / 2 - 1));
-        e = std::max(e, std::min(cw, (L.sx1[static_cast<size_t>(y)] + 1) / 2 + 1));
+        if (L.spans.x1[static_cast<size_t>(y)] <= L.spans.x0[static_cast<size_t>(y)]) continue;
+        a = std::min(a, std::max(0, L.spans.x0[static_cast<size_t>(y)] / 2 - 1));
+        e = std::max(e, std::min(cw, (L.spans.x1[static_cast<size_t>(y)] + 1) / 2 + 1));
       }
       if (e > a) {
         creg.x0[static_cast<size_t>(cy)] = a;
@@ -930,9 +926,9 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       const size_t ro = static_cast<size_t>(y) * W;
-      const int x0 = v.sx0[static_cast<size_t>(y)], x1 = v.sx1[static_cast<size_t>(y)];
+      const int x0 = v.spans.x0[static_cast<size_t>(y)], x1 = v.spans.x1[static_cast<size_t>(y)];
       std::fill(v.has_proposal.begin() + ro + x0, v.has_proposal.begin() + ro + x1, 0);
-      for (int x = other.sx0[static_cast<size_t>(y)]; x < other.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = other.spans.x0[static_cast<size_t>(y)]; x < other.spans.x1[static_cast<size_t>(y)]; ++x) {
         const Plane& p = other.plane[ro + x];
         const float d = p.At(static_cast<float>(x), static_cast<float>(y));
         const int tx = static_cast<int>(std::lround(static_cast<float>(x) + other.sign * d));
@@ -970,7 +966,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       im.pool.Run(gh, [&](int row, int) {
         const int y = g.y0 + row;
         const size_t ro = static_cast<size_t>(y) * W;
-        const int x0 = v.sx0[static_cast<size_t>(y)], x1 = v.sx1[static_cast<size_t>(y)];
+        const int x0 = v.spans.x0[static_cast<size_t>(y)], x1 = v.spans.x1[static_cast<size_t>(y)];
         SelfWindow sw;
         for (int k = 0; k < x1 - x0; ++k) {
           const int x = forward ? x0 + k : x1 - 1 - k;
@@ -989,11 +985,11 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         for (int k = 1; k < gh; ++k) {
           const int y = forward ? g.y0 + k : g.y1 - 1 - k;
           const int yn = forward ? y - 1 : y + 1;
-          const int xa = std::max(x0, v.sx0[static_cast<size_t>(y)]), xe = std::min(x1, v.sx1[static_cast<size_t>(y)]);
+          const int xa = std::max(x0, v.spans.x0[static_cast<size_t>(y)]), xe = std::min(x1, v.spans.x1[static_cast<size_t>(y)]);
           for (int x = xa; x < xe; ++x) {
             if (v.settled[static_cast<size_t>(y) * W + x]) continue;
             prepare(v, x, y, &sw);
-            if (v.In(x, yn)) try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x], sw);
+            if (v.spans.Contains(x, yn)) try_plane(v, other, x, y, v.plane[static_cast<size_t>(yn) * W + x], sw);
             refine(v, other, x, y, pass + 1, scale_v, sw);
           }
         }
@@ -1013,7 +1009,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     im.pool.Run(g.height(), [&](int row, int) {
       const int y = g.y0 + row;
       SelfWindow sw;
-      for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = L.spans.x0[static_cast<size_t>(y)]; x < L.spans.x1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         if (L.settled[i]) continue;  // its plane had the dense pass last time
         prepare_total(fcp, L, x, y, &sw);  // (the next Compute recomputes wtot for its window)
@@ -1070,7 +1066,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
       const int y = g.y0 + row;
       SelfWindow sw;
       const float yf = static_cast<float>(y);
-      for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
+      for (int x = L.spans.x0[static_cast<size_t>(y)]; x < L.spans.x1[static_cast<size_t>(y)]; ++x) {
         const size_t i = static_cast<size_t>(y) * W + x;
         const float xf = static_cast<float>(x);
         // The pixel's own plane, then the probes: the planes r pixels away
@@ -1079,7 +1075,7 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
         int nc = 1;
         float dlo = before[i].At(xf, yf), dhi = dlo;
         auto probe = [&](int px, int py) {
-          if (py < 0 || py >= H || !L.In(px, py)) return;
+          if (!L.spans.Contains(px, py)) return;
           const Plane& q = before[static_cast<size_t>(py) * W + px];
           const float d = q.At(static_cast<float>(px), static_cast<float>(py));
           dlo = std::min(dlo, d);
@@ -1129,14 +1125,14 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
     float* out = disparity->row(y);
     std::fill(rd, rd + W, 0.0f);
     std::fill(out, out + W, 0.0f);
-    for (int x = R.sx0[static_cast<size_t>(y)]; x < R.sx1[static_cast<size_t>(y)]; ++x)
+    for (int x = R.spans.x0[static_cast<size_t>(y)]; x < R.spans.x1[static_cast<size_t>(y)]; ++x)
       rd[x] = R.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
-    for (int x = L.sx0[static_cast<size_t>(y)]; x < L.sx1[static_cast<size_t>(y)]; ++x) {
+    for (int x = L.spans.x0[static_cast<size_t>(y)]; x < L.spans.x1[static_cast<size_t>(y)]; ++x) {
       const float d = L.plane[ro + x].At(static_cast<float>(x), static_cast<float>(y));
       bool ok = d >= dmin && d <= dmax && d > 0.0f;
       if (ok && o.lr_max_diff >= 0.0f) {
         const int xr = static_cast<int>(std::lround(static_cast<float>(x) - d));
-        ok = R.In(xr, y) && std::abs(rd[xr] - d) <= o.lr_max_diff;
+        ok = R.spans.Contains(xr, y) && std::abs(rd[xr] - d) <= o.lr_max_diff;
       }
       out[x] = ok ? d : 0.0f;
     }
@@ -1148,10 +1144,8 @@ Status PatchMatchStereo::Compute(const ImageGray8& left, const ImageGray8& right
   im.last_h = H;
   im.last_left = lreg;
   im.last_right = R.region;
-  im.last_lspans.x0 = L.sx0;
-  im.last_lspans.x1 = L.sx1;
-  im.last_rspans.x0 = R.sx0;
-  im.last_rspans.x1 = R.sx1;
+  im.last_lspans = L.spans;
+  im.last_rspans = R.spans;
   return OkStatus();
 }
 
