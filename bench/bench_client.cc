@@ -60,8 +60,8 @@ struct ClientBenchOptions {
   std::string png_dir;                           // write the novel views as PNGs here
   std::string legacy = "0";                      // 1: RenderSettings::Legacy(), no mask-edge texturing
   int64_t frame = 40;                            // studio frame of the content
-  size_t reduce = 20000;                         // triangle budget of the site's stream mesh (fused)
-  int stream_step = 2;                           // the stream mesh's grid step (fused; holoport-server --stream-step)
+  size_t reduce = 0;                             // triangle budget of the site's stream mesh (fused; 0: the workload's)
+  int stream_step = holo::StreamMeshOptions{}.step;                           // the stream mesh's grid step (fused; holoport-server --stream-step)
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
@@ -170,7 +170,7 @@ holo::Status MakeFusedContent(const holo::Workload& workload, int64_t frame, siz
   // What holoport-server --listen publishes: the compact stream mesh; the
   // full-resolution mesh beside it.
   o.stream_mesh = true;
-  o.stream.max_triangles = reduced_triangles;
+  o.stream.max_triangles = reduced_triangles > 0 ? reduced_triangles : workload.stream_triangles;
   o.stream.step = stream_step;
   o.stream_field = true;
   o.full_mesh = true;
@@ -395,6 +395,20 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
                                         sequence_frames, options.content == "temporal", &(*contents)[0],
                                         &(*contents)[1]));
   if (!args.json) spdlog::info("client: site done in {:.1f} s", sw.ElapsedMs() / 1000);
+  // The render part also draws the stream mesh as a G3 viewer has it (the
+  // grid through the codec and marching cubes: more and thinner triangles
+  // than the simplified mesh, no vertex colours), to compare what each
+  // geometry codec's mesh costs the viewer per new frame.
+  if (options.parts.empty() || options.parts.find("render") != std::string::npos) {
+    ViewerContent g3 = (*contents)[1];
+    std::vector<uint8_t> blob;
+    HOLO_RETURN_IF_ERROR(holo::protocol::EncodeSurface(g3.field, holo::protocol::SurfaceEncodeOptions{}, &blob));
+    HOLO_RETURN_IF_ERROR(holo::protocol::DecodeGeometry(blob, &g3.mesh));
+    g3.mesh_name = "fused_stream_g3";
+    g3.sequence_images.clear();
+    g3.sequence_masks.clear();
+    contents->push_back(std::move(g3));
+  }
   return holo::OkStatus();
 }
 
@@ -669,7 +683,7 @@ int RunClientStreamPart(const holo::bench::BenchArgs& args, const ClientBenchOpt
   const std::unique_ptr<holo::SyntheticStudio>* studio = &input.studio;
   std::vector<ViewerContent>& contents = input.contents;
   // The mesh a viewer gets: the truth, or the fused stream-size mesh.
-  ViewerContent& c = contents.back();
+  ViewerContent& c = contents.size() > 1 ? contents[1] : contents[0];
   if (c.raw_images.empty()) {  // truth: the pods' whole images are the reference
     c.raw_images = c.images;
     c.raw_masks.assign(c.images.size(), holo::ImageGray8());
@@ -916,7 +930,7 @@ holo::bench::BenchFn SetupClient(CLI::App& app) {
   app.add_option("--frame", o->frame, "studio frame of the content")
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
-  app.add_option("--reduce", o->reduce, "fused: triangle budget of the site's stream mesh (StreamMeshOptions)")->capture_default_str();
+  app.add_option("--reduce", o->reduce, "fused: triangle budget of the site's stream mesh (default: the workload's, as holoport-server)");
   app.add_option("--stream-step", o->stream_step, "fused: the stream mesh's grid step in voxels (holoport-server --stream-step)")
       ->capture_default_str()
       ->check(CLI::Range(2, 4));

@@ -16,7 +16,8 @@
 // in-process (CaptureSite, MaskSource::kSegment, background learned from the
 // empty room, the workload's voxel size): the site's fused, textured mesh —
 // the compact stream mesh the live server sends (StreamMeshOptions defaults:
-// every 2nd voxel, ≤ 20 k triangles; qualifier mesh "site-stream"), or with
+// every 2nd voxel, the workload's triangle budget, 10 k per person;
+// qualifier mesh "site-stream"), or with
 // --full-mesh the full-resolution one ("site-fused") — and the pods' images
 // with the site's own segmentation masks. Default frames:
 // 4 on truth, 60 on fused (a video codec needs a sequence; --frames N).
@@ -128,7 +129,7 @@ double NowMs() {
 struct CodecsOptions {
   bool synthetic = false, hash = false;
   bool full_mesh = false;  // fused: the full-resolution mesh, not the stream mesh the live server sends
-  int stream_step = 2;     // fused: the stream mesh's grid step in voxels (holoport-server --stream-step)
+  int stream_step = holo::StreamMeshOptions{}.step;     // fused: the stream mesh's grid step in voxels (holoport-server --stream-step)
   std::string only;                         // "G1,C1": only these codecs
   std::string content = "truth";            // truth | fused
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...
@@ -497,10 +498,11 @@ int FusedInputs(const Workload& wl, int frames, bool stream_mesh, int stream_ste
   o.masks = MaskSource::kSegment;
   o.tsdf.voxel_size = wl.voxel_size_m;
   o.pipeline.max_frames = frames;
-  // The live server's default (holoport-server --stream-step 2 --stream-triangles 20000).
+  // The live server's default (holoport-server --stream-step 2, the workload's --stream-triangles).
   o.stream_mesh = stream_mesh;
   o.stream_field = stream_mesh;
   o.stream.step = stream_step;
+  o.stream.max_triangles = wl.stream_triangles;
   // --content temporal: the site's temporal fusion (docs/temporal.md: the
   // previous volume tracked non-rigidly and fused into), not a fresh volume per frame.
   o.temporal = temporal;

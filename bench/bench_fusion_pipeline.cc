@@ -274,6 +274,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
     site_options.pipeline.pace_fps = 0;
     site_options.pipeline.max_frames = std::min(options.frames, options.stream_frames);
     site_options.stream_mesh = true;
+    site_options.stream.max_triangles = workload->stream_triangles;
     site_options.full_mesh = true;
     site_options.texture = false;  // geometry only; the live site colours from the pods' images
     std::vector<double> to_full, from_full, stream_chamfer, full_chamfer, stream_tris, full_tris;

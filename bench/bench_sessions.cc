@@ -146,6 +146,7 @@ StatusOr<Content> PrepareFusedContent(const Workload& wl, int frames) {
   // What holoport-server --listen publishes by default: the compact stream
   // mesh, without vertex colours (the viewer colours it from the images).
   o.stream_mesh = true;
+  o.stream.max_triangles = wl.stream_triangles;
   o.texture = false;
   o.tsdf.integrate_color = false;
   HOLO_ASSIGN_OR_RETURN(auto site, CaptureSite::Create(studio.get(), nullptr, studio.get(), o));

@@ -45,6 +45,7 @@ StatusOr<Workload> GetWorkload(const std::string& name) {
     w.studio.fps = 30.0;
     w.voxel_size_m = s.voxel;
     w.num_frames = s.frames;
+    w.stream_triangles = static_cast<size_t>(10000 * s.figures);
     return w;
   }
   std::string known;

@@ -37,7 +37,14 @@ struct StreamMeshOptions {
   // Sampling step of the fused volume for marching cubes (1 = every voxel).
   int step = 2;
   // Triangle budget; above it the mesh is simplified to it. 0 = no budget.
-  size_t max_triangles = 20000;
+  // 10 k, one person's (holoport-server takes the synthetic workload's,
+  // Workload::stream_triangles, 10 k per person): at S8-QVGA (16 mm samples,
+  // ~22 k triangles from marching cubes) the mesh stays within 1.3 mm (mean)
+  // of the full-resolution one and as close to the truth as at 20 k, and the
+  // rendering viewer of a live call on one 2-core machine, whose per-mesh
+  // work grows with the triangles, shows 29 instead of 22 fps (docs/live.md,
+  // "Half the triangles").
+  size_t max_triangles = 10000;
   // Connected fragments with fewer triangles are dropped. 0 = keep all.
   size_t min_component_triangles = 50;
   // Above the budget, edges shorter than this many (coarse) voxels are

@@ -96,9 +96,9 @@ int main(int argc, char** argv) {
   size_t decimate = 0, min_component = 200;
   int background_frames = 30, queue = 2;
   bool serial = false, no_texture = false, no_color_calibration = false, quiet = false, temporal = false;
-  int prerender = 0, stream_step = 2, max_in_flight = 2;
+  int prerender = 0, stream_step = holo::StreamMeshOptions{}.step, max_in_flight = 2;
   bool keep_late = false;
-  size_t stream_triangles = 20000;
+  size_t stream_triangles = holo::StreamMeshOptions{}.max_triangles;
   app.add_option("--source", source_spec, "synthetic (the studio) or dataset:PATH")->capture_default_str();
   app.add_option("-w,--workload", workload_name, "synthetic source: S8-QVGA or S8-VGA")->capture_default_str();
   app.add_option("--rig", rig_path, "synthetic source: render this rig instead of the workload's");
@@ -195,9 +195,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 4));
   app.add_option("--stream-triangles", stream_triangles,
-                 "the published mesh: simplify to at most this many triangles (0: no budget); --stream-step 1 "
-                 "--stream-triangles 0 publishes the full mesh")
-      ->capture_default_str();
+                 "the published mesh: simplify to at most this many triangles (0: no budget; default: the "
+                 "synthetic workload's, 10000 per person, else 10000); --stream-step 1 --stream-triangles 0 "
+                 "publishes the full mesh");
   app.add_option("--export", export_dir,
                  "write every frame's full-resolution textured mesh to DIR/mesh_NNNNNN.ply");
   app.add_option("--snapshot", snapshot_path,
@@ -251,7 +251,7 @@ int main(int argc, char** argv) {
   app.add_option("--geometry-codec", geometry_codec,
                  "codec of the streamed mesh: g1 (the mesh: connectivity and quantized positions) or g3 (the "
                  "distance samples the stream mesh is extracted from; the viewer runs marching cubes: about a "
-                 "third of G1's bytes, no vertex colours; needs the stream mesh, native viewers only)")
+                 "third of G1's bytes, no vertex colours; needs the stream mesh)")
       ->capture_default_str()
       ->check(CLI::IsMember({"g1", "g3"}));
   app.add_option("--g3-step-mm", g3_step_mm, "g3: quantization of a vertex along its grid edge, mm (error <= step / 2)")
@@ -500,6 +500,11 @@ int main(int argc, char** argv) {
   // A live site runs for hours: the summary's medians are over the newest
   // 9000–18000 frames (5–10 minutes at 30 fps) instead of keeping every frame.
   options.pipeline.keep_frame_timings = 9000;
+  if (source_spec == "synthetic" && app.count("--stream-triangles") == 0) {
+    auto workload = holo::GetWorkload(workload_name);
+    if (!workload.ok()) return Fail(workload.status());
+    stream_triangles = workload->stream_triangles;
+  }
   options.stream_mesh = stream_step > 1 || stream_triangles > 0;
   options.stream.step = stream_step;
   options.stream.max_triangles = stream_triangles;

@@ -125,7 +125,7 @@ TEST(LiveFused, ViewerDecodesEveryReconstructedFrameAsCloseToTruthAsTheSite) {
     const SiteFrame& s = sent.at(f.frame_index);
     EXPECT_EQ(f.capture_time_us, s.capture_us);
     EXPECT_EQ(f.mesh.num_triangles(), s.triangles);
-    EXPECT_LE(s.triangles, 20000u);
+    EXPECT_LE(s.triangles, StreamMeshOptions{}.max_triangles);
     auto d = metrics::ComputeMeshDistance(f.mesh, (*studio)->ForegroundMesh(f.frame_index));
     ASSERT_TRUE(d.ok());
     // Stated bound: G1's 1 mm quantisation moves the Chamfer distance by < 0.3 mm.

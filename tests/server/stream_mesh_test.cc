@@ -455,7 +455,7 @@ TEST(StreamMesh, FusedStudioFrameMeetsBudgetAndErrorBound) {
   StreamMeshStats st;
   ASSERT_TRUE((*mesher)->Make(volume, &stream, &st).ok());
   ExpectNoDegenerateTriangles(stream);
-  EXPECT_LE(stream.num_triangles(), 20000u);
+  EXPECT_LE(stream.num_triangles(), StreamMeshOptions{}.max_triangles);
   EXPECT_GT(stream.num_triangles(), 5000u);
   // Within 1.5 mm of the full mesh, both ways (1.2 and 1.0 mm measured).
   // Against the unsmoothed volume's mesh it would be 1.8 mm: what is left
@@ -517,7 +517,7 @@ TEST(StreamMesh, G3GridGivesTheSitesMeshBack) {
   EXPECT_LT(MeanDistanceMm(coarse, decoded), 0.2);
 
   // Defaults: 2 mm steps, small fragments dropped, against what the site
-  // publishes (simplified to 20 000 triangles) and its G1 bytes.
+  // publishes (simplified to its 10 000 triangles) and its G1 bytes.
   auto mesher = StreamMesher::Create(o, StreamMeshOptions{});
   ASSERT_TRUE(mesher.ok());
   Mesh stream;
@@ -533,7 +533,10 @@ TEST(StreamMesh, G3GridGivesTheSitesMeshBack) {
   g1.colors = false;  // as the site sends it (the viewer colours from the pods' images)
   std::vector<uint8_t> g1_blob;
   ASSERT_TRUE(protocol::EncodeGeometry(stream, g1, &g1_blob).ok());
-  EXPECT_LT(blob.size(), g1_blob.size() / 2) << "G3 " << blob.size() << " B, G1 " << g1_blob.size() << " B";
+  // G3 carries the whole unsimplified surface (26 k triangles here) in fewer
+  // bytes than G1 needs for the 10 k it is simplified to (7.6 against 12.2 KB
+  // measured).
+  EXPECT_LT(blob.size(), g1_blob.size() * 3 / 4) << "G3 " << blob.size() << " B, G1 " << g1_blob.size() << " B";
   std::printf("G3 %zu B (bricks %zu, labels %zu, crossings %zu; %zu triangles), G1 2 mm %zu B (%zu triangles)\n",
               blob.size(), st.brick_bytes, st.label_bytes, st.crossing_bytes, decoded.num_triangles(), g1_blob.size(),
               stream.num_triangles());

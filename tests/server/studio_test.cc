@@ -411,6 +411,9 @@ TEST(StudioTest, FrameSourceAndWorkloads) {
   EXPECT_EQ(v->rig.pods[0].color.height, 480);
   EXPECT_EQ(v->studio.num_figures, 2);
   EXPECT_EQ(v->studio.seed, 2u);
+  // The stream mesh's budget: 10 k triangles per person.
+  EXPECT_EQ(q->stream_triangles, 10000u);
+  EXPECT_EQ(v->stream_triangles, 20000u);
   EXPECT_EQ(GetWorkload("nope").status().code(), StatusCode::kNotFound);
   for (const auto& name : WorkloadNames()) EXPECT_TRUE(GetWorkload(name).ok()) << name;
 }
