@@ -236,6 +236,9 @@ class Renderer {
     double select_cpu_ms = 0;      // CPU time of the calling thread in it (pods run on a pool: not all CPU)
   };
   const SelectionStats& selection_stats() const { return selection_stats_; }
+  // Per triangle of the last selection: the pods it is textured from (bit i =
+  // pod i; empty before a selection or with pods_per_vertex 0).
+  const std::vector<uint16_t>& triangle_pods() const { return triangle_pods_; }
 
   // What the last atlas bake produced (ProjectiveOptions::bake).
   struct AtlasStats {
