@@ -65,7 +65,7 @@ struct ClientBenchOptions {
   std::string legacy = "0";                      // 1: RenderSettings::Legacy(), no mask-edge texturing
   int64_t frame = 40;                            // studio frame of the content
   size_t reduce = 0;                             // triangle budget of the site's stream mesh (fused; 0: the workload's)
-  int stream_step = holo::StreamMeshOptions{}.step;                           // the stream mesh's grid step (fused; holoport-server --stream-step)
+  int stream_step = holo::StreamMeshOptions{}.step;  // the stream mesh's grid step (fused; holoport-server --stream-step)
   std::string cull = "1";                        // 0: no back-face culling
   std::string prepass;                           // 0 | 1: depth pre-pass (default: the renderer's)
   int pods_per_vertex = -1;                      // ProjectiveOptions::pods_per_vertex (-1: the renderer's)
@@ -476,7 +476,7 @@ holo::Status MakeContents(const holo::bench::BenchArgs& args, const ClientBenchO
   // grid through the codec and marching cubes: more and thinner triangles
   // than the simplified mesh, no vertex colours), to compare what each
   // geometry codec's mesh costs the viewer per new frame.
-  if (options.parts.empty() || options.parts.find("render") != std::string::npos) {
+  if ((options.parts.empty() || options.parts.find("render") != std::string::npos) && (*contents)[1].field.size() > 0) {
     ViewerContent g3 = (*contents)[1];
     std::vector<uint8_t> blob;
     HOLO_RETURN_IF_ERROR(holo::protocol::EncodeSurface(g3.field, holo::protocol::SurfaceEncodeOptions{}, &blob));

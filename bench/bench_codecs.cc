@@ -129,7 +129,7 @@ double NowMs() {
 struct CodecsOptions {
   bool synthetic = false, hash = false;
   bool full_mesh = false;  // fused: the full-resolution mesh, not the stream mesh the live server sends
-  int stream_step = holo::StreamMeshOptions{}.step;     // fused: the stream mesh's grid step in voxels (holoport-server --stream-step)
+  int stream_step = holo::StreamMeshOptions{}.step;  // fused: the stream mesh's grid step in voxels (holoport-server --stream-step)
   std::string only;                         // "G1,C1": only these codecs
   std::string content = "truth";            // truth | fused
   std::string video = "x264-444,x264-420";  // V1 runs, LABEL[@CRF],...

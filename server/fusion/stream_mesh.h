@@ -43,7 +43,7 @@ struct StreamMeshOptions {
   // of the full-resolution one and as close to the truth as at 20 k, and the
   // rendering viewer of a live call on one 2-core machine, whose per-mesh
   // work grows with the triangles, shows 29 instead of 22 fps (docs/live.md,
-  // "Half the triangles").
+  // "Twenty-fifth session").
   size_t max_triangles = 10000;
   // Connected fragments with fewer triangles are dropped. 0 = keep all.
   size_t min_component_triangles = 50;
