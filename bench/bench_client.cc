@@ -48,6 +48,7 @@
 #include "server/pipeline/capture_site.h"
 #include "studio/studio.h"
 #include "studio/workloads.h"
+#include "texture/mesh_renderer.h"
 #include "texture/texturer.h"
 
 namespace {
@@ -269,8 +270,8 @@ struct Quality {
   double psnr = 0, ssim = 0, psnr_union = 0, psnr_overlap = 0, coverage = 0;
 };
 // The share of the pods' foreground (mask) pixels the viewer's texturing
-// reads: a pixel counts when the front-most triangle there (a z-buffer of
-// the mesh in that pod's colour camera) is textured from that pod
+// reads: a pixel counts when the front-most triangle there (the mesh
+// rasterized in that pod's colour camera) is textured from that pod
 // (`triangle_pods`, the renderer's selection), or when such a pixel is its
 // neighbour (bilinear fetches). Issue 18's question: how many of the pixels
 // a colour codec sends does the picture use?
@@ -278,58 +279,21 @@ double UsedPixelShare(const holo::Rig& rig, const holo::Mesh& mesh, const std::v
                       const std::vector<holo::ImageGray8>& masks) {
   if (triangle_pods.size() != mesh.num_triangles() || masks.size() != rig.pods.size()) return -1;
   size_t used = 0, foreground = 0;
+  holo::MeshRasterizer raster;
   for (size_t i = 0; i < rig.pods.size(); ++i) {
     const holo::ImageGray8& mask = masks[i];
     if (mask.empty()) return -1;
-    const holo::CameraModel cam = rig.pods[i].ColorCamera();
+    raster.Rasterize(mesh.positions, mesh.triangles, rig.pods[i].ColorCamera(), /*want_attributes=*/true);
+    const std::vector<int32_t>& id = raster.triangle_ids();
     const int w = mask.width(), h = mask.height();
-    const holo::Pose camera_from_world = cam.world_from_camera.inverse();
-    std::vector<float> zbuf(static_cast<size_t>(w) * h, 1e30f);
-    std::vector<int32_t> id(zbuf.size(), -1);
-    for (size_t t = 0; t < mesh.num_triangles(); ++t) {
-      Eigen::Vector2f px[3];
-      float z[3];
-      bool ok = true;
-      for (int k = 0; k < 3 && ok; ++k) {
-        const Eigen::Vector3f pc = camera_from_world * mesh.positions[mesh.triangles[t][k]];
-        z[k] = pc.z();
-        ok = pc.z() > 0.05f && cam.ProjectCamera(pc, &px[k]);
-      }
-      if (!ok) continue;
-      const float area = (px[1] - px[0]).x() * (px[2] - px[0]).y() - (px[1] - px[0]).y() * (px[2] - px[0]).x();
-      if (std::abs(area) < 1e-9f) continue;
-      const int x0 = std::max(0, static_cast<int>(std::floor(std::min({px[0].x(), px[1].x(), px[2].x()}))));
-      const int x1 = std::min(w - 1, static_cast<int>(std::ceil(std::max({px[0].x(), px[1].x(), px[2].x()}))));
-      const int y0 = std::max(0, static_cast<int>(std::floor(std::min({px[0].y(), px[1].y(), px[2].y()}))));
-      const int y1 = std::min(h - 1, static_cast<int>(std::ceil(std::max({px[0].y(), px[1].y(), px[2].y()}))));
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const Eigen::Vector2f p(static_cast<float>(x), static_cast<float>(y));  // pixel centre (pixel coordinates)
-          float b[3];
-          for (int k = 0; k < 3; ++k) {
-            const Eigen::Vector2f& a = px[(k + 1) % 3];
-            const Eigen::Vector2f& c = px[(k + 2) % 3];
-            b[k] = ((c - a).x() * (p - a).y() - (c - a).y() * (p - a).x()) / area;
-          }
-          if (b[0] < 0 || b[1] < 0 || b[2] < 0) continue;
-          const float zz = b[0] * z[0] + b[1] * z[1] + b[2] * z[2];
-          const size_t o = static_cast<size_t>(y) * w + x;
-          if (zz < zbuf[o]) {
-            zbuf[o] = zz;
-            id[o] = static_cast<int32_t>(t);
-          }
-        }
-      }
-    }
+    if (raster.width() != w || raster.height() != h) return -1;
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
         if (mask.row(y)[x] < 128) continue;
         ++foreground;
         bool hit = false;
-        for (int dy = -1; dy <= 1 && !hit; ++dy) {
-          for (int dx = -1; dx <= 1 && !hit; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+        for (int yy = std::max(0, y - 1); yy <= std::min(h - 1, y + 1) && !hit; ++yy) {
+          for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1) && !hit; ++xx) {
             const int32_t t = id[static_cast<size_t>(yy) * w + xx];
             hit = t >= 0 && (triangle_pods[static_cast<size_t>(t)] >> i & 1u);
           }

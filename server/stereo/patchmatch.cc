@@ -157,8 +157,9 @@ struct View {
   std::vector<Plane> proposal;
   std::vector<uint8_t> has_proposal;
   // PatchMatchOptions::temporal_still: the last Compute's intensities (the
-  // same padded rows as I), per pixel the mean |I − last_I| over its window,
-  // and the pixels left alone in this Compute.
+  // same padded rows as I), per pixel the change of its cost's inputs (the
+  // largest |I − last_I| over its window and its match's, averaged), and the
+  // pixels left alone in this Compute.
   std::vector<float> last_I;
   std::vector<float> change;
   std::vector<uint8_t> settled;

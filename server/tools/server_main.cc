@@ -14,6 +14,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -500,10 +501,13 @@ int main(int argc, char** argv) {
   // A live site runs for hours: the summary's medians are over the newest
   // 9000–18000 frames (5–10 minutes at 30 fps) instead of keeping every frame.
   options.pipeline.keep_frame_timings = 9000;
-  if (source_spec == "synthetic" && app.count("--stream-triangles") == 0) {
-    auto workload = holo::GetWorkload(workload_name);
-    if (!workload.ok()) return Fail(workload.status());
-    stream_triangles = workload->stream_triangles;
+  // The synthetic source's workload: its rig, studio, voxel and stream budget.
+  std::optional<holo::Workload> workload;
+  if (source_spec == "synthetic") {
+    auto w = holo::GetWorkload(workload_name);
+    if (!w.ok()) return Fail(w.status());
+    workload = std::move(*w);
+    if (app.count("--stream-triangles") == 0) stream_triangles = workload->stream_triangles;
   }
   options.stream_mesh = stream_step > 1 || stream_triangles > 0;
   options.stream.step = stream_step;
@@ -536,9 +540,7 @@ int main(int argc, char** argv) {
   holo::FrameSource* source = nullptr;
   holo::FrameSource* background = nullptr;
   std::string source_name;
-  if (source_spec == "synthetic") {
-    auto workload = holo::GetWorkload(workload_name);
-    if (!workload.ok()) return Fail(workload.status());
+  if (workload) {
     holo::Rig rig = workload->rig;
     if (!rig_path.empty()) {
       auto loaded = holo::LoadRig(rig_path);
