@@ -263,6 +263,11 @@ void DeclareOptions(CLI::App& app, ExtraArgs* a) {
                  "boxes (spans|box)")
       ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"spans", true}, {"box", false}}))
       ->capture_default_str();
+  app.add_option("--stereo-search", p.stereo_search_sgbm,
+                 "--pipeline-source stereo: whole pairs due searched with SGBM, then PatchMatch around the person "
+                 "(sgbm), or through PatchMatch whole (patchmatch)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, bool>{{"sgbm", true}, {"patchmatch", false}}))
+      ->capture_default_str();
   app.add_option("--stereo-still", p.stereo_still,
                  "--pipeline-source stereo: PatchMatch leaves alone pixels whose window changed since the last frame "
                  "by at most this times the noise level (0: none; default: its default)")

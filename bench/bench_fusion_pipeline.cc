@@ -96,6 +96,7 @@ int RunPipelineFigures(const BenchArgs& args, const PipelineBenchOptions& option
   stereo_options.patchmatch.temporal = true;
   if (options.stereo_edge_shift >= 0) stereo_options.patchmatch.edge_shift_px = options.stereo_edge_shift;
   stereo_options.roi.row_spans = options.stereo_roi_spans;
+  stereo_options.roi.search_with_sgbm = options.stereo_search_sgbm;
   if (options.stereo_still >= 0) stereo_options.patchmatch.temporal_still = static_cast<float>(options.stereo_still);
   // Frames for the prerendered source, rendered once (untimed).
   auto prerendered = std::make_shared<std::vector<RgbdFrameSet>>();

@@ -20,8 +20,14 @@
 // full_every, from this run's medians. patchmatch_temporal: the same
 // region, one matcher per pod started from its own planes of the previous
 // frame (PatchMatchOptions::temporal; the previous frame matched untimed
-// before each timed run). The studio's frames are 10·k + 1 (frame 10·k is
-// the region's previous frame).
+// before each timed run). patchmatch_search: a whole pair as the site's
+// policy treats it when one is due (StereoRoiOptions::search_with_sgbm): a
+// fresh policy's Match, i.e. SGBM over the whole pair, then PatchMatch
+// (afresh) around the foreground it found; its ms and cpu_ms include both,
+// and ms_per_frame_set_amortized with "whole":"sgbm_search" is
+// (search + (full_every − 1) · temporal) / full_every, the site's default.
+// The studio's frames are 10·k + 1 (frame 10·k is the region's previous
+// frame).
 //
 // Options: --middlebury DIR (default ../shared/data/stereo next to the
 // repository: a folder holding aloeL.jpg, aloeR.jpg, aloeGT.png, or a parent
@@ -46,7 +52,6 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
-#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -57,6 +62,7 @@
 #include "common/visualize.h"
 #include "server/fusion/tsdf.h"
 #include "server/stereo/patchmatch.h"
+#include "server/stereo/sgbm.h"
 #include "server/stereo/stereo_depth.h"
 #include "server/stereo/stereo_roi.h"
 #include "studio/stereo_render.h"
@@ -94,34 +100,6 @@ struct Timer {
   double cpu0 = ProcessCpuMs();
   double Ms() const { return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(); }
   double CpuMs() const { return ProcessCpuMs() - cpu0; }
-};
-
-// OpenCV's semi-global matcher with the settings its documentation suggests
-// for 8-bit grey images; disparity in pixels, 0 where it gives none.
-class Sgbm {
- public:
-  Sgbm(float min_d, float max_d) : min_d_(static_cast<int>(std::floor(min_d))) {
-    const int num = std::max(16, static_cast<int>(std::ceil((max_d - min_d_) / 16.0)) * 16);
-    const int bs = 5;
-    sgbm_ = cv::StereoSGBM::create(min_d_, num, bs, 8 * bs * bs, 32 * bs * bs, 1, 0, 10, 100, 2,
-                                   cv::StereoSGBM::MODE_SGBM_3WAY);
-  }
-  void Compute(const ImageGray8& l, const ImageGray8& r, ImageFloat* out) {
-    const cv::Mat lm(l.height(), l.width(), CV_8UC1, const_cast<uint8_t*>(l.data()));
-    const cv::Mat rm(r.height(), r.width(), CV_8UC1, const_cast<uint8_t*>(r.data()));
-    sgbm_->compute(lm, rm, disp_);
-    out->Resize(l.width(), l.height());
-    for (int y = 0; y < l.height(); ++y) {
-      const int16_t* s = disp_.ptr<int16_t>(y);
-      float* o = out->row(y);
-      for (int x = 0; x < l.width(); ++x) o[x] = s[x] < min_d_ * 16 ? 0.0f : std::max(0.0f, s[x] / 16.0f);
-    }
-  }
-
- private:
-  int min_d_;
-  cv::Ptr<cv::StereoSGBM> sgbm_;
-  cv::Mat disp_;
 };
 
 struct MethodRun {
@@ -268,7 +246,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     pmo.max_disparity = std::max(pmo.max_disparity, r.max_disparity);
   }
   PatchMatchStereo pm(pmo);
-  Sgbm sgbm(pmo.min_disparity, pmo.max_disparity);
+  SgbmStereo sgbm(pmo.min_disparity, pmo.max_disparity);
   const int frames = args.frames > 0 ? args.frames : 3;
   const std::map<std::string, std::string> studio_q = {
       {"pods", std::to_string(rig.pods.size())},
@@ -279,7 +257,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   if (!args.json)
     spdlog::info("studio: {}, {} stereo pods, baseline {:.3f} m, disparity [{:g}, {:g}], {} frames", wl,
                  rig.pods.size(), baseline, pmo.min_disparity, pmo.max_disparity, frames);
-  MethodRun pm_run, sgbm_run, roi_run, tmp_run;
+  MethodRun pm_run, sgbm_run, roi_run, tmp_run, search_run;
   // patchmatch_temporal: one matcher per pod (PatchMatchOptions::temporal),
   // in the same region as patchmatch_roi, started from its planes of the
   // previous frame (matched untimed before every timed run).
@@ -291,13 +269,14 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   std::vector<StereoPair> pairs, previous;
   ImageFloat d_pm, d_sgbm, d_roi;
   std::vector<ImageRgb8> sheet;
-  int64_t roi_area = 0, image_area = 0;
+  int64_t roi_area = 0, image_area = 0, search_area = 0;
   int roi_full_pairs = 0;
+  ImageFloat d_search;
   for (int f = 0; f < frames; ++f) {
     const int64_t frame = static_cast<int64_t>(f) * 10 + 1;
     (*renderer)->Render(frame - 1, &previous);
     (*renderer)->Render(frame, &pairs);
-    double set_pm = 0, set_sgbm = 0, set_roi = 0, set_tmp = 0;
+    double set_pm = 0, set_sgbm = 0, set_roi = 0, set_tmp = 0, set_search = 0;
     for (size_t p = 0; p < pairs.size(); ++p) {
       const StereoPair& sp = pairs[p];
       const double fb_mm = sp.fx * sp.baseline_m * 1000.0;
@@ -327,6 +306,18 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         tmp_run.ms.push_back(w.Ms());
         tmp_run.cpu_ms.push_back(w.CpuMs());
         if (r == 0) set_tmp += tmp_run.ms.back();
+        {  // patchmatch_search: a whole pair due, searched with SGBM, PatchMatch around the person found
+          StereoRoiPolicy fresh(rig.pods[p], sdo_roi.roi);
+          Timer x;
+          auto searched = fresh.Match(&pm, frame, sp.left, sp.right, &d_search);
+          if (!searched.ok()) return Fail(searched.status().ToString());
+          search_run.ms.push_back(x.Ms());
+          search_run.cpu_ms.push_back(x.CpuMs());
+          if (r == 0) {
+            set_search += search_run.ms.back();
+            search_area += searched->area();
+          }
+        }
         Timer t;
         if (Status s = pm.Compute(sp.left, sp.right, &d_pm); !s.ok()) return Fail(s.ToString());
         pm_run.ms.push_back(t.Ms());
@@ -346,6 +337,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         sgbm_run.person.Add(d_sgbm.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
         roi_run.person.Add(d_roi.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
         tmp_run.person.Add(d_tmp.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
+        search_run.person.Add(d_search.data()[i], sp.disparity.data()[i], fb_mm, 0.0);
       }
       if (!sheet_path.empty() && f == 0 && p < 4) {
         const uint16_t near_mm = 1000, far_mm = 6000;
@@ -361,6 +353,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     sgbm_run.set_ms.push_back(set_sgbm);
     roi_run.set_ms.push_back(set_roi);
     tmp_run.set_ms.push_back(set_tmp);
+    search_run.set_ms.push_back(set_search);
   }
   EmitMethod(wl, "patchmatch", "studio", pm_run, studio_q);
   EmitMethod(wl, "sgbm", "studio", sgbm_run, studio_q);
@@ -387,6 +380,20 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     qt["content"] = "truth";
     EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * Median(tmp_run.set_ms)) / n, "ms",
                qt);
+    // The site's default: whole pairs due are searched (patchmatch_search),
+    // the frames between are patchmatch_temporal.
+    qt["whole"] = "sgbm_search";
+    EmitFigure("stereo", wl, "ms_per_frame_set_amortized",
+               (Median(search_run.set_ms) + (n - 1) * Median(tmp_run.set_ms)) / n, "ms", qt);
+    auto qs = studio_q;
+    qs["full_every"] = q["full_every"];
+    qs["roi_shape"] = q["roi_shape"];
+    EmitMethod(wl, "patchmatch_search", "studio", search_run, qs, /*all_pixels=*/false);
+    qs["method"] = "patchmatch_search";
+    qs["data"] = "studio";
+    qs["content"] = "truth";
+    EmitFigure("stereo", wl, "matched_pct", 100.0 * static_cast<double>(search_area) / std::max<int64_t>(1, image_area),
+               "%", qs);
   }
   if (!sheet_path.empty()) {
     std::vector<const ImageRgb8*> tiles;
@@ -426,7 +433,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     mo.min_disparity = 0;
     mo.max_disparity = 256;
     PatchMatchStereo pm_m(mo);
-    Sgbm sgbm_m(0, 256);
+    SgbmStereo sgbm_m(0, 256);
     MethodRun a, b;
     // Published geometry of the 2006 full-size sets: f = 3740 px, B = 160 mm;
     // the disparity offset (dmin) of Aloe is not in the shipped data, taken as 0.

@@ -36,6 +36,8 @@ struct PipelineBenchOptions {
   // --pipeline-source stereo: StereoRoiOptions::row_spans (the regions as
   // row spans around the person, or their bounding boxes).
   bool stereo_roi_spans = true;
+  // --pipeline-source stereo: StereoRoiOptions::search_with_sgbm.
+  bool stereo_search_sgbm = true;
   // --pipeline-source stereo: PatchMatchOptions::temporal_still (< 0: its default).
   double stereo_still = -1;
   // TsdfOptions::behind_band override (< 0: the default).

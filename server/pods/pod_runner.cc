@@ -42,6 +42,8 @@ Status PodRunOptions::Check() const {
   if (stereo_threads < 0 || stereo_threads > 256) return InvalidArgument("--stereo-threads must be in 0..256");
   if (stereo_roi != "on" && stereo_roi != "off")
     return InvalidArgument("--stereo-roi must be on or off, got '" + stereo_roi + "'");
+  if (stereo_search != "sgbm" && stereo_search != "patchmatch")
+    return InvalidArgument("--stereo-search must be sgbm or patchmatch, got '" + stereo_search + "'");
   if (stereo_temporal != "on" && stereo_temporal != "off")
     return InvalidArgument("--stereo-temporal must be on or off, got '" + stereo_temporal + "'");
   if (!(stereo_still >= 0 && stereo_still <= 100))
@@ -184,6 +186,7 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
     stereo.far_m = sd.far_m;
     StereoRoiOptions roi = sd.roi;
     roi.enabled = o.stereo_roi == "on";
+    roi.search_with_sgbm = o.stereo_search == "sgbm";
     roi.fps = so.fps;
     // The rig's pods take turns for their periodic full match (as in the site's stereo source).
     roi.full_phase = StereoRoiPolicy::FullPhase(index, rig.pods.size(), roi.full_every);
@@ -194,7 +197,7 @@ StatusOr<std::unique_ptr<PodFrames>> OpenPodFrames(const PodRunOptions& o,
                                                std::move(stereo));
   if (o.prerender > 0) {
     say("pre-rendering " + std::to_string(o.prerender) + " frames of " + w.name +
-        (o.depth == "stereo" ? " with stereo depth (PatchMatch: ~0.5 s per QVGA frame and core)" : ""));
+        (o.depth == "stereo" ? " with stereo depth (IR rendering and PatchMatch: ~0.1 s per QVGA frame and core)" : ""));
     HOLO_RETURN_IF_ERROR(frames->Prerender(o.prerender));
   }
   return std::unique_ptr<PodFrames>(std::move(frames));
@@ -209,7 +212,7 @@ Status RunPod(const PodRunOptions& o, const std::atomic<bool>& stop) {
   HOLO_ASSIGN_OR_RETURN(std::unique_ptr<PodFrames> frames, OpenPodFrames(o, say));
   const PodCalibration calibration = frames->calibration();
   if (o.depth == "stereo" && o.prerender == 0)
-    say("stereo depth live: PatchMatch takes ~0.5 s per QVGA frame and core, slots in between are skipped "
+    say("stereo depth live: IR rendering and PatchMatch take ~0.1 s per QVGA frame and core, slots in between are skipped "
         "(--prerender N matches N frames first and loops them)");
 
   // The pod's clock: the system clock plus the simulated offset and drift.

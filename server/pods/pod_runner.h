@@ -42,6 +42,7 @@ struct PodRunOptions {
   std::string depth = "direct";         // studio: "direct" (its depth-sensor model) or "stereo" (PatchMatch on the IR pair)
   int stereo_threads = 1;               // depth stereo: PatchMatch threads (0: every core)
   std::string stereo_roi = "on";        // depth stereo: "on" (match around the person, stereo_roi.h) or "off"
+  std::string stereo_search = "sgbm";    // depth stereo: whole pairs due searched with "sgbm" first, or "patchmatch" whole
   std::string stereo_temporal = "on";   // depth stereo: "on" (regions start from the last planes) or "off"
   double stereo_still = PatchMatchOptions{}.temporal_still;  // depth stereo: PatchMatchOptions::temporal_still (0: off)
   std::string stereo_dense_pass = "on";  // depth stereo: "on" (PatchMatchOptions::final_window_step) or "off"

@@ -518,6 +518,7 @@ StatusOr<std::unique_ptr<PatchMatchStereo>> PatchMatchStereo::Create(PatchMatchO
 const ImageFloat& PatchMatchStereo::right_disparity() const { return impl_->right_disparity; }
 bool PatchMatchStereo::uses_avx2() const { return impl_->avx2; }
 bool PatchMatchStereo::last_was_temporal() const { return impl_->last_temporal; }
+void PatchMatchStereo::ForgetLast() { impl_->have_last = false; }
 
 ImageRect PatchMatchStereo::RightRegion(const ImageRect& left_region, int width, int height,
                                         float max_disparity) const {

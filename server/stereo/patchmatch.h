@@ -267,6 +267,10 @@ class PatchMatchStereo {
   // True when the last Compute started from the planes of the one before
   // (PatchMatchOptions::temporal).
   bool last_was_temporal() const;
+  // The next Compute starts afresh (the coarse level or random planes), not
+  // from the last one's planes, whatever its region: the region policy's
+  // search of a whole pair (stereo_roi.h) refreshes the planes this way.
+  void ForgetLast();
   const PatchMatchOptions& options() const { return options_; }
 
  private:

@@ -111,7 +111,7 @@ Status StereoStudioSource::RenderFrame(int64_t frame_index, RgbdFrameSet* out, s
     PatchMatchStereo* matcher = matchers_[std::min(i, matchers_.size() - 1)].get();
     HOLO_ASSIGN_OR_RETURN(const RowSpans region,
                           roi_[i].Match(matcher, frame_index, p[i].left, p[i].right, &disparity_));
-    last_full_pods_ += region.IsFull(p[i].left.width());
+    last_full_pods_ += region.IsFull(p[i].left.width()) || roi_[i].searched();
     matched += region.area();
     total += static_cast<int64_t>(p[i].left.width()) * p[i].left.height();
     HOLO_RETURN_IF_ERROR(DisparityToDepth(rig.pods[i], disparity_, options_.far_m, &out->frames[i].depth));

@@ -73,8 +73,9 @@ class StereoStudioSource final : public FrameSource {
   Status RenderFrame(int64_t frame_index, RgbdFrameSet* out, std::vector<StereoPair>* pairs);
   // Wall time of the stereo matching of the last frame (all pods), ms.
   double last_match_ms() const { return last_match_ms_; }
-  // Pods matched whole in the last frame, and the share of the left images
-  // matched (1 = all of every pod's).
+  // Pods whose whole pair was matched, or searched with SGBM
+  // (StereoRoiOptions::search_with_sgbm), in the last frame; and the share
+  // of the left images PatchMatch matched (1 = all of every pod's).
   int last_full_pods() const { return last_full_pods_; }
   double last_matched_fraction() const { return last_matched_fraction_; }
 

@@ -54,6 +54,11 @@ ImageRect StereoRoiPolicy::Next(int64_t frame_index) {
   if (dt > options_.max_gap_s) return whole();
   if (frame_index - last_full_frame_ >= options_.full_every) return whole();
   if ((frame_index + options_.full_phase) % options_.full_every == 0) return whole();
+  return RegionAround(dt);
+}
+
+ImageRect StereoRoiPolicy::RegionAround(double dt) {
+  max_disparity_ = 3.0e38f;
   // The motion since the previous frame, in pixels at the nearest foreground.
   const double move_m = options_.max_speed_mps * dt;
   const double z = std::max(0.05, static_cast<double>(nearest_fg_m_));
@@ -234,6 +239,30 @@ void StereoRoiPolicy::Update(int64_t frame_index, const RowSpans& region, const 
 StatusOr<RowSpans> StereoRoiPolicy::Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
                                           const ImageGray8& right, ImageFloat* disparity) {
   Next(frame_index);
+  searched_ = false;
+  if (options_.enabled && options_.search_with_sgbm && spans_.IsFull(width_) && left.width() == width_ &&
+      left.height() == height_ && right.width() == width_ && right.height() == height_) {
+    // The whole pair is due: find the foreground with SGBM, then PatchMatch
+    // around it only, from fresh planes (they refresh the temporal chain as
+    // a whole pair did).
+    searched_ = true;
+    const PatchMatchOptions& mo = matcher->options();
+    if (!sgbm_.matcher) sgbm_.matcher = std::make_unique<SgbmStereo>(mo.min_disparity, mo.max_disparity);
+    sgbm_.matcher->Compute(left, right, &search_);
+    Update(frame_index, spans_, search_);
+    RowSpans region = RowSpans::FromRect(ImageRect{}, width_, height_);
+    if (box_.empty()) {  // nobody there: no PatchMatch
+      if (disparity->width() != width_ || disparity->height() != height_) disparity->Resize(width_, height_);
+      disparity->Fill(0.0f);
+      return region;
+    }
+    RegionAround(2.0 / options_.fps);
+    region = spans_;
+    matcher->ForgetLast();
+    HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
+    Update(frame_index, region, *disparity);
+    return region;
+  }
   const RowSpans region = spans_;
   HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
   Update(frame_index, region, *disparity);

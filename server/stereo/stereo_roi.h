@@ -32,16 +32,21 @@
 // it). Pods take turns for the periodic full match (full_phase). So a person who enters the view is found on the next frame when the
 // view was empty or when they enter touching the current region, and
 // otherwise (a second person entering away from the first) at the next
-// periodic full match: at most `full_every` − 1 frames late.
+// periodic full match: at most `full_every` − 1 frames late. A "full match"
+// is by default a search (StereoRoiOptions::search_with_sgbm): OpenCV's SGBM
+// over the whole pair finds the foreground, and PatchMatch runs only around
+// it (docs/stereo.md, "Searching whole pairs with SGBM").
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "common/image.h"
 #include "common/rig.h"
 #include "common/status.h"
 #include "server/stereo/patchmatch.h"
+#include "server/stereo/sgbm.h"
 
 namespace holo {
 
@@ -92,6 +97,15 @@ struct StereoRoiOptions {
   int touch_min_run = 8;
   // See StereoRoiPolicy::max_disparity; < 0: no limit in regions either.
   float disparity_margin_px = 2.0f;
+  // When the whole pair is due, Match searches it with OpenCV's SGBM
+  // (sgbm.h, ~1/20 of PatchMatch's CPU for a whole pair) for the
+  // foreground, then runs PatchMatch only around what it found (the region
+  // a frame later would get: the margin for one frame's motion), starting
+  // afresh there (not from the last planes), and gives 0 elsewhere; with
+  // nothing found, no PatchMatch at all and 0 everywhere. false: the whole
+  // pair through PatchMatch, as before (2026-12-08), giving depth for the
+  // whole image on those frames.
+  bool search_with_sgbm = true;
   Status Check() const;
 };
 
@@ -122,7 +136,11 @@ class StereoRoiPolicy {
     Update(frame_index, RowSpans::FromRect(region, width_, height_), disparity);
   }
   // Next, then `matcher` on that region with max_disparity(), then Update:
-  // frame `frame_index`'s disparity in `disparity`; returns the region.
+  // frame `frame_index`'s disparity in `disparity`; returns the region
+  // PatchMatch matched. Where Next gives the whole pair and
+  // options().search_with_sgbm is set, the pair is searched with SGBM
+  // first and PatchMatch runs only around the foreground found (the
+  // returned region; empty when none was found, `disparity` then all 0).
   StatusOr<RowSpans> Match(PatchMatchStereo* matcher, int64_t frame_index, const ImageGray8& left,
                            const ImageGray8& right, ImageFloat* disparity);
   // The full_phase of pod `pod` of `num_pods`: the rig's pods take turns for
@@ -135,6 +153,8 @@ class StereoRoiPolicy {
   // for a full match (empty, touching, ...).
   const ImageRect& foreground_box() const { return box_; }
   bool full_due() const { return full_due_; }
+  // Whether the last Match searched the whole pair with SGBM.
+  bool searched() const { return searched_; }
   const StereoRoiOptions& options() const { return options_; }
 
  private:
@@ -149,11 +169,32 @@ class StereoRoiPolicy {
   std::vector<int> ext0_, ext1_;  // per sample row: the x extent of the last Update's foreground (pixels)
   float nearest_fg_m_ = 0;  // nearest foreground depth of the last Update
   float max_disparity_ = 3.0e38f;
+  bool searched_ = false;
+  // search_with_sgbm: the matcher, made on a policy's first search (a copy
+  // of the policy makes its own: the matcher keeps scratch buffers), and
+  // its disparity.
+  struct LazySgbm {
+    std::unique_ptr<SgbmStereo> matcher;
+    LazySgbm() = default;
+    LazySgbm(const LazySgbm&) {}
+    LazySgbm& operator=(const LazySgbm&) {
+      matcher.reset();
+      return *this;
+    }
+    LazySgbm(LazySgbm&&) = default;
+    LazySgbm& operator=(LazySgbm&&) = default;
+  };
+  LazySgbm sgbm_;
+  ImageFloat search_;
   std::vector<uint8_t> fg_;  // scratch: foreground samples
   std::vector<float> zs_;    // ... and their depth
   std::vector<uint16_t> run_;  // ... and the length of their vertical run
   std::vector<uint8_t> core_;  // ... and which are core samples (2: grouped)
   std::vector<size_t> stack_, group_;
+
+  // The region around the last Update's foreground for a frame `dt` seconds
+  // later (Next's regions): spans_, max_disparity_; returns their bounds.
+  ImageRect RegionAround(double dt);
 };
 
 }  // namespace holo

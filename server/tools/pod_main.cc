@@ -57,10 +57,14 @@ int main(int argc, char** argv) {
                  "or off")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
+  app.add_option("--stereo-search", o.stereo_search,
+                 "--depth stereo: where a pod's whole pair is due (every 15 frames, the first, when the person reaches the region's edge, nobody found): sgbm (search it with OpenCV's SGBM, ~1/20 of PatchMatch's CPU, then PatchMatch only around the person found; no depth elsewhere on those frames) or patchmatch (the whole pair through PatchMatch); docs/stereo.md")
+      ->check(CLI::IsMember({"sgbm", "patchmatch"}))
+      ->capture_default_str();
   app.add_option("--stereo-roi", o.stereo_roi,
                  "--depth stereo: on (match the IR pair only around the person, from the previous frame's stereo "
-                 "depth, the whole pair every 15 frames and when the person reaches the region's edge; "
-                 "docs/stereo.md) or off (every pair whole)")
+                 "depth, the whole pair every 15 frames and when the person reaches the region's edge "
+                 "(see --stereo-search); docs/stereo.md) or off (every pair whole)")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
   app.add_option("--clock-offset-ms", o.clock_offset_ms, "simulate a pod clock offset from the system clock, ms")

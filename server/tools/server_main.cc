@@ -115,9 +115,14 @@ int main(int argc, char** argv) {
   std::string stereo_roi = "on";
   app.add_option("--stereo-roi", stereo_roi,
                  "--depth stereo: on (match each pod's pair only around the person, from the previous frame's "
-                 "stereo depth, the whole pair every 15 frames and when the person reaches the region's edge; "
-                 "docs/stereo.md) or off (every pair whole)")
+                 "stereo depth, the whole pair every 15 frames and when the person reaches the region's edge "
+                 "(see --stereo-search); docs/stereo.md) or off (every pair whole)")
       ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
+  std::string stereo_search = "sgbm";
+  app.add_option("--stereo-search", stereo_search,
+                 "--depth stereo: where a pod's whole pair is due (every 15 frames, the first, when the person reaches the region's edge, nobody found): sgbm (search it with OpenCV's SGBM, ~1/20 of PatchMatch's CPU, then PatchMatch only around the person found; no depth elsewhere on those frames) or patchmatch (the whole pair through PatchMatch); docs/stereo.md")
+      ->check(CLI::IsMember({"sgbm", "patchmatch"}))
       ->capture_default_str();
   std::string stereo_temporal = "on";
   app.add_option("--stereo-temporal", stereo_temporal,
@@ -596,6 +601,7 @@ int main(int argc, char** argv) {
     if (!studio) return Fail(holo::InvalidArgument("--depth stereo needs --source synthetic"));
     holo::StereoDepthOptions sdo;
     sdo.roi.enabled = stereo_roi == "on";
+    sdo.roi.search_with_sgbm = stereo_search == "sgbm";
     sdo.patchmatch.temporal = stereo_temporal == "on";
     sdo.patchmatch.temporal_still = static_cast<float>(stereo_still);
     if (stereo_dense_pass == "off") sdo.patchmatch.final_window_step = 0;

@@ -385,6 +385,29 @@ Rig SmallStereoRig() {
   return WithStereoPods(rig->Scaled(0.5), 0.15);  // 320x240
 }
 
+// The small rig's studio and its IR renderer (2 threads), and PatchMatch
+// options for its pods (0.5-6 m, 2 threads).
+struct StereoStudio {
+  std::unique_ptr<SyntheticStudio> studio;
+  std::unique_ptr<StereoStudioRenderer> renderer;
+  const Rig& rig;
+  explicit StereoStudio(const Rig& r) : rig(r) {
+    StudioOptions so;
+    so.threads = 2;
+    auto s = SyntheticStudio::Create(rig, so);
+    if (!s.ok()) return;
+    studio = std::move(*s);
+    auto rr = StereoStudioRenderer::Create(studio.get(), rig, StereoRenderOptions{});
+    if (rr.ok()) renderer = std::move(*rr);
+  }
+  PatchMatchOptions Options() const {
+    PatchMatchOptions o;
+    StereoSearchRange(rig.pods[0], 0.5f, 6.0f, &o);
+    o.threads = 2;
+    return o;
+  }
+};
+
 ImageRect MaskBox(const ImageGray8& mask) {
   ImageRect b{mask.width(), mask.height(), 0, 0};
   for (int y = 0; y < mask.height(); ++y)
@@ -408,19 +431,14 @@ ImageRect MaskBox(const ImageGray8& mask) {
 // point worse.
 TEST(PatchMatchRegionTest, StudioPersonRegionMatchesFullRun) {
   const Rig rig = SmallStereoRig();
-  StudioOptions so;
-  so.threads = 2;
-  auto studio = SyntheticStudio::Create(rig, so);
-  ASSERT_TRUE(studio.ok());
-  auto renderer = StereoStudioRenderer::Create(studio->get(), rig, StereoRenderOptions{});
-  ASSERT_TRUE(renderer.ok());
-  PatchMatchOptions o;
-  StereoSearchRange(rig.pods[0], 0.5f, 6.0f, &o);
-  o.threads = 2;
+  const StereoStudio st(rig);
+  ASSERT_TRUE(st.renderer != nullptr);
+  StereoStudioRenderer* const renderer = st.renderer.get();
+  PatchMatchOptions o = st.Options();
   PatchMatchStereo pm(o);
   for (int pod : {0, 2}) {
     StereoPair pair;
-    (*renderer)->RenderPod(6, pod, &pair);
+    renderer->RenderPod(6, pod, &pair);
     const ImageRect box = MaskBox(pair.mask);
     ASSERT_FALSE(box.empty());
     const ImageRect region = ImageRect{box.x0 - 16, box.y0 - 16, box.x1 + 16, box.y1 + 16}.Clipped(320, 240);
@@ -461,6 +479,94 @@ TEST(PatchMatchRegionTest, StudioPersonRegionMatchesFullRun) {
     EXPECT_LT(bad_roi_pct, bad_full_pct + 1.0) << "pod " << pod;
     EXPECT_LT(bad_c_pct, bad_full_pct + 1.0) << "pod " << pod;
   }
+}
+
+// A whole pair due (the first frame here) is searched with SGBM and matched
+// with PatchMatch only around what SGBM found (StereoRoiOptions::
+// search_with_sgbm): the region holds the person, nothing outside it gets
+// depth, the person's depth is as good as a whole PatchMatch run's, and the
+// next frame is a region frame again. With the search off the whole pair
+// goes through PatchMatch as before.
+TEST(StereoRoiPolicyTest, WholePairIsSearchedWithSgbmThenMatchedAroundThePerson) {
+  const Rig rig = SmallStereoRig();
+  const StereoStudio st(rig);
+  ASSERT_TRUE(st.renderer != nullptr);
+  StereoStudioRenderer* const renderer = st.renderer.get();
+  PatchMatchOptions o = st.Options();
+  o.temporal = true;
+  for (int pod : {0, 2}) {
+    StereoPair pair, next;
+    renderer->RenderPod(6, pod, &pair);
+    renderer->RenderPod(7, pod, &next);
+    PatchMatchStereo pm(o), whole_pm(o);
+    StereoRoiPolicy policy(rig.pods[static_cast<size_t>(pod)], StereoRoiOptions{});
+    ASSERT_TRUE(policy.options().search_with_sgbm);
+    ImageFloat d, whole;
+    auto region = policy.Match(&pm, 6, pair.left, pair.right, &d);
+    ASSERT_TRUE(region.ok()) << region.status().ToString();
+    EXPECT_TRUE(policy.searched()) << "pod " << pod;
+    EXPECT_FALSE(pm.last_was_temporal());
+    EXPECT_GT(region->area(), 0);
+    EXPECT_LT(region->area(), 320 * 240 * 6 / 10) << "pod " << pod;
+    EXPECT_EQ(CountNonZeroOutside(d, *region), 0);
+    ASSERT_TRUE(whole_pm.Compute(pair.left, pair.right, &whole).ok());
+    int person = 0, inside = 0, bad = 0, bad_whole = 0;
+    for (int y = 0; y < 240; ++y)
+      for (int x = 0; x < 320; ++x) {
+        const float t = pair.disparity.at(x, y);
+        if (!pair.mask.at(x, y) || !(t > 0.0f)) continue;
+        ++person;
+        inside += region->Contains(x, y);
+        bad += !(d.at(x, y) > 0.0f) || std::abs(d.at(x, y) - t) > 2.0f;
+        bad_whole += !(whole.at(x, y) > 0.0f) || std::abs(whole.at(x, y) - t) > 2.0f;
+      }
+    ASSERT_GT(person, 1000);
+    EXPECT_GT(inside, person * 995 / 1000) << "pod " << pod << ": the person inside the searched region";
+    EXPECT_LT(100.0 * bad / person, 100.0 * bad_whole / person + 1.0) << "pod " << pod << ": bad-2px against a whole run";
+    // The next frame: a region frame from the last planes.
+    ASSERT_TRUE(policy.Match(&pm, 7, next.left, next.right, &d).ok());
+    EXPECT_FALSE(policy.searched()) << "pod " << pod;
+    EXPECT_TRUE(pm.last_was_temporal()) << "pod " << pod;
+  }
+  StereoRoiOptions off;
+  off.search_with_sgbm = false;
+  StereoRoiPolicy policy(rig.pods[0], off);
+  PatchMatchStereo pm(o);
+  StereoPair pair;
+  renderer->RenderPod(6, 0, &pair);
+  ImageFloat d;
+  auto region = policy.Match(&pm, 6, pair.left, pair.right, &d);
+  ASSERT_TRUE(region.ok());
+  EXPECT_FALSE(policy.searched());
+  EXPECT_TRUE(region->IsFull(320));
+}
+
+// Nothing in the capture volume (a textured wall 5 m away): the search finds
+// no one, PatchMatch does not run, every disparity is 0, and the next frame
+// is searched again.
+TEST(StereoRoiPolicyTest, EmptyViewIsSearchedWithoutPatchMatch) {
+  const Rig rig = SmallStereoRig();
+  const PodCalibration& pod = rig.pods[0];
+  const float d_wall = static_cast<float>(pod.stereo.ir.fx * pod.stereo.baseline_m / 5.0);
+  ImageGray8 left, right;
+  ImageFloat truth;
+  SlantedPlane(pod.stereo.ir.width, pod.stereo.ir.height, 0.0f, 0.0f, d_wall, &left, &right, &truth);
+  PatchMatchOptions o;
+  StereoSearchRange(pod, 0.5f, 6.0f, &o);
+  o.threads = 2;
+  PatchMatchStereo pm(o);
+  StereoRoiPolicy policy(pod, StereoRoiOptions{});
+  for (int64_t f = 0; f < 3; ++f) {
+    ImageFloat d(4, 4, 1.0f);  // stale contents and size: replaced
+    auto region = policy.Match(&pm, f, left, right, &d);
+    ASSERT_TRUE(region.ok());
+    EXPECT_TRUE(policy.searched()) << "frame " << f;
+    EXPECT_EQ(region->area(), 0) << "frame " << f;
+    ASSERT_EQ(d.width(), pod.stereo.ir.width);
+    ASSERT_EQ(d.height(), pod.stereo.ir.height);
+    EXPECT_EQ(CountNonZeroOutside(d, RowSpans::FromRect(ImageRect{}, d.width(), d.height())), 0);
+  }
+  EXPECT_EQ(pm.right_disparity().width(), 0) << "PatchMatch ran";
 }
 
 // The site's stereo source with regions (the default): after a first frame
