@@ -103,7 +103,7 @@ struct StereoRoiOptions {
   // a frame later would get: the margin for one frame's motion), starting
   // afresh there (not from the last planes), and gives 0 elsewhere; with
   // nothing found, no PatchMatch at all and 0 everywhere. false: the whole
-  // pair through PatchMatch, as before (2026-12-08), giving depth for the
+  // pair through PatchMatch, as before (2026-12-07), giving depth for the
   // whole image on those frames.
   bool search_with_sgbm = true;
   Status Check() const;
