@@ -1,5 +1,6 @@
 // holoport-bench stereo: slanted-plane PatchMatch against OpenCV's StereoSGBM
-// (the peer, same run, same threads) on the studio's active-stereo pairs and
+// (the peer, same run, same threads; server/stereo/sgbm.h, padded so that
+// it gives the image's left columns a disparity too) on the studio's active-stereo pairs and
 // on the Middlebury 2006 "Aloe" pair; and the fused mesh from stereo depth
 // against the fused mesh from the studio's direct depth.
 //
@@ -40,7 +41,8 @@
 // --roi-shape spans|box (StereoRoiOptions::row_spans: the regions as row
 // spans around the person, the default, or their bounding boxes),
 // --fuse-frames N (2; 0 skips the fused-mesh comparison; patchmatch_temporal's
-// fused mesh comes after a run of 10 frames), --contact-sheet PNG.
+// fused mesh comes after a run of 10 frames; method sgbm: the peer's depth
+// of the same pairs fused alike), --contact-sheet PNG.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -468,7 +470,10 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     if (!vol.ok()) return Fail(vol.status().ToString());
     std::vector<double> chamfer_vs_direct, chamfer_stereo_truth, chamfer_direct_truth;
     std::vector<double> chamfer_roi_vs_direct, chamfer_roi_truth, chamfer_tmp_vs_direct, chamfer_tmp_truth;
-    RgbdFrameSet direct, stereo, stereo_roi, stereo_tmp;
+    RgbdFrameSet direct, stereo, stereo_roi, stereo_tmp, stereo_sgbm;
+    std::vector<double> chamfer_sgbm_vs_direct, chamfer_sgbm_truth;
+    std::vector<StereoPair> fuse_pairs;
+    ImageFloat d_fuse_sgbm;
     // patchmatch_temporal: regions started from the last planes, over a run
     // of kChain consecutive frames ending at the fused one (the errors of a
     // chain of temporal starts, with the policy's whole pairs in between).
@@ -479,7 +484,15 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     for (int f = 0; f < fuse_frames; ++f) {
       const int64_t frame = static_cast<int64_t>(f) * 10 + 5;
       (*studio)->RenderFrame(frame, &direct, &gt);
-      if (Status s = (*source)->RenderFrame(frame, &stereo, nullptr); !s.ok()) return Fail(s.ToString());
+      if (Status s = (*source)->RenderFrame(frame, &stereo, &fuse_pairs); !s.ok()) return Fail(s.ToString());
+      // The peer: SGBM's depth of the same pairs.
+      stereo_sgbm = stereo;
+      for (size_t p = 0; p < fuse_pairs.size(); ++p) {
+        sgbm.Compute(fuse_pairs[p].left, fuse_pairs[p].right, &d_fuse_sgbm);
+        if (Status s = DisparityToDepth((*source)->rig().pods[p], d_fuse_sgbm, sdo.far_m, &stereo_sgbm.frames[p].depth);
+            !s.ok())
+          return Fail(s.ToString());
+      }
       // The region policy in steady state: a fresh source matches frame − 1 whole, then `frame` in the regions.
       auto roi_source = StereoStudioSource::Create(studio->get(), sdo_roi);
       if (!roi_source.ok()) return Fail(roi_source.status().ToString());
@@ -494,6 +507,7 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         stereo.frames[p].mask = gt.mask[p];
         stereo_roi.frames[p].mask = gt.mask[p];
         stereo_tmp.frames[p].mask = gt.mask[p];
+        stereo_sgbm.frames[p].mask = gt.mask[p];
       }
       // Each frame set fused alone.
       auto fuse = [&](const RgbdFrameSet& set, Mesh* mesh) {
@@ -502,9 +516,10 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
         (*vol)->ExtractMesh(mesh);
         return OkStatus();
       };
-      Mesh m_direct, m_stereo, m_roi, m_tmp;
+      Mesh m_direct, m_stereo, m_roi, m_tmp, m_sgbm;
       for (auto [set, mesh] : {std::pair{&direct, &m_direct}, std::pair{&stereo, &m_stereo},
-                               std::pair{&stereo_roi, &m_roi}, std::pair{&stereo_tmp, &m_tmp}})
+                               std::pair{&stereo_roi, &m_roi}, std::pair{&stereo_tmp, &m_tmp},
+                               std::pair{&stereo_sgbm, &m_sgbm}})
         if (Status s = fuse(*set, mesh); !s.ok()) return Fail(s.ToString());
       metrics::MeshDistanceOptions mo;
       mo.num_threads = threads;
@@ -515,8 +530,12 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
       auto rt = metrics::ComputeMeshDistance(m_roi, gt.foreground_mesh, mo);
       auto tv = metrics::ComputeMeshDistance(m_tmp, m_direct, mo);
       auto tt = metrics::ComputeMeshDistance(m_tmp, gt.foreground_mesh, mo);
-      if (!vs.ok() || !st.ok() || !dt.ok() || !rv.ok() || !rt.ok() || !tv.ok() || !tt.ok())
+      auto gv = metrics::ComputeMeshDistance(m_sgbm, m_direct, mo);
+      auto gt_ = metrics::ComputeMeshDistance(m_sgbm, gt.foreground_mesh, mo);
+      if (!vs.ok() || !st.ok() || !dt.ok() || !rv.ok() || !rt.ok() || !tv.ok() || !tt.ok() || !gv.ok() || !gt_.ok())
         return Fail("mesh distance failed (empty fused mesh?)");
+      chamfer_sgbm_vs_direct.push_back(gv->chamfer_mm);
+      chamfer_sgbm_truth.push_back(gt_->chamfer_mm);
       chamfer_tmp_vs_direct.push_back(tv->chamfer_mm);
       chamfer_tmp_truth.push_back(tt->chamfer_mm);
       chamfer_roi_vs_direct.push_back(rv->chamfer_mm);
@@ -544,6 +563,12 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_tmp_truth), "mm",
                {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
                 {"method", "patchmatch_temporal"}, {"chain", std::to_string(kChain)}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_sgbm_vs_direct), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_direct"}, {"frames", n}, {"masks", "truth"},
+                {"method", "sgbm"}});
+    EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_sgbm_truth), "mm",
+               {{"content", "fused"}, {"compare", "stereo_vs_truth"}, {"frames", n}, {"masks", "truth"},
+                {"method", "sgbm"}});
     EmitFigure("stereo", wl, "chamfer_mm", Mean(chamfer_direct_truth), "mm",
                {{"content", "fused"}, {"compare", "direct_vs_truth"}, {"frames", n}, {"masks", "truth"}});
   }

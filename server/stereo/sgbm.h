@@ -25,7 +25,12 @@ class SgbmStereo {
 
   // Disparity of every left pixel (pixels, 1/16 px steps), 0 where SGBM
   // gives none. The two images must have the same size (checked: an empty
-  // result otherwise).
+  // result otherwise). OpenCV's matcher leaves the first min + range
+  // columns without disparity (it takes only matches that stay inside the
+  // right image over the whole range); both images are padded on the left
+  // with that many black columns so that those columns get one too (on the
+  // studio's S8-QVGA pairs that took SGBM's bad-2px from 24.8 to 5.0 %, on
+  // Middlebury Aloe from 32.3 to 16.8 %; docs/stereo.md).
   void Compute(const ImageGray8& left, const ImageGray8& right, ImageFloat* disparity);
 
  private:

@@ -9,6 +9,7 @@
 
 #include "common/rig.h"
 #include "server/stereo/patchmatch.h"
+#include "server/stereo/sgbm.h"
 #include "server/stereo/stereo_depth.h"
 #include "studio/stereo_render.h"
 #include "studio/studio.h"
@@ -177,6 +178,41 @@ TEST(PatchMatchTest, DenseLastPassRemovesMuchOfTheCurvatureBias) {
   EXPECT_LT(sparse, -0.04f) << "the curvature bias the pass is for (without it)";
   EXPECT_LT(std::abs(dense), 0.6f * std::abs(sparse)) << "sparse " << sparse << " px, dense " << dense << " px";
   EXPECT_LT(std::abs(dense), 0.04f);
+}
+
+// OpenCV's SGBM (the bench's peer, and the region policy's search) gives
+// disparities across the whole image, also in the first min + range
+// columns it leaves empty unpadded, where a match exists.
+TEST(SgbmStereoTest, GivesTheLeftColumnsADisparityToo) {
+  const int W = 160, H = 120;
+  const SyntheticPair pair = SlantedPlane(W, H, 0.06f, -0.04f, 14.0f);  // d from ~9.2 to ~23.6 px
+  SgbmStereo sgbm(0.0f, 40.0f);  // 48 disparities searched
+  ImageFloat d;
+  sgbm.Compute(pair.left, pair.right, &d);
+  ASSERT_EQ(d.width(), W);
+  ASSERT_EQ(d.height(), H);
+  int band = 0, band_valid = 0, band_good = 0, rest = 0, rest_good = 0;
+  for (int y = 8; y < H - 8; ++y)
+    for (int x = 26; x < W - 4; ++x) {  // x ≥ 26: the match is inside the right image
+      const bool in_band = x < 48;
+      const float v = d.at(x, y), t = pair.truth.at(x, y);
+      const bool good = v > 0.0f && std::abs(v - t) <= 1.0f;
+      if (in_band) {
+        ++band;
+        band_valid += v > 0.0f;
+        band_good += good;
+      } else {
+        ++rest;
+        rest_good += good;
+      }
+    }
+  EXPECT_GT(band_valid, band * 9 / 10) << "SGBM's left band without disparity";
+  EXPECT_GT(band_good, band * 85 / 100);
+  EXPECT_GT(rest_good, rest * 9 / 10);
+  ImageFloat none;
+  ImageGray8 small(W / 2, H);
+  sgbm.Compute(pair.left, small, &none);  // sizes differ: an empty result, no crash
+  EXPECT_EQ(none.width(), 0);
 }
 
 TEST(PatchMatchTest, ResultDoesNotDependOnThreadCount) {
