@@ -99,9 +99,11 @@ struct StereoRoiOptions {
   float disparity_margin_px = 2.0f;
   // When the whole pair is due, Match searches it with OpenCV's SGBM
   // (sgbm.h, ~1/20 of PatchMatch's CPU for a whole pair) for the
-  // foreground, then runs PatchMatch only around what it found (the region
-  // a frame later would get: the margin for one frame's motion), starting
-  // afresh there (not from the last planes), and gives 0 elsewhere; with
+  // foreground, then runs PatchMatch only around what it found (with the
+  // margin for two frames' motion: SGBM's outline is a few pixels off
+  // PatchMatch's, and with one frame's a studio pod's person touched the
+  // region's edge), starting afresh there (not from the last planes; SGBM
+  // searches the matcher's disparity range), and gives 0 elsewhere; with
   // nothing found, no PatchMatch at all and 0 everywhere. false: the whole
   // pair through PatchMatch, as before (2026-12-07), giving depth for the
   // whole image on those frames.
