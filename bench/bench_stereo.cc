@@ -360,42 +360,37 @@ int RunStereoBench(const BenchArgs& args, const StereoBenchOptions& o) {
   EmitMethod(wl, "patchmatch", "studio", pm_run, studio_q);
   EmitMethod(wl, "sgbm", "studio", sgbm_run, studio_q);
   {
-    auto q = studio_q;
-    q["full_every"] = std::to_string(sdo_roi.roi.full_every);
-    q["roi_shape"] = sdo_roi.roi.row_spans ? "spans" : "box";
+    // A region method's figures; returns its qualifiers for the figures
+    // that follow it.
+    auto emit_region_method = [&](const std::string& method, MethodRun& run) {
+      auto q = studio_q;
+      q["full_every"] = std::to_string(sdo_roi.roi.full_every);
+      q["roi_shape"] = sdo_roi.roi.row_spans ? "spans" : "box";
+      EmitMethod(wl, method, "studio", run, q, /*all_pixels=*/false);
+      q["method"] = method;
+      q["data"] = "studio";
+      q["content"] = "truth";
+      return q;
+    };
     const double roi_set = Median(roi_run.set_ms), full_set = Median(pm_run.set_ms);
-    EmitMethod(wl, "patchmatch_roi", "studio", roi_run, q, /*all_pixels=*/false);
-    q["method"] = "patchmatch_roi";
-    q["data"] = "studio";
-    q["content"] = "truth";
-    EmitFigure("stereo", wl, "matched_pct", 100.0 * static_cast<double>(roi_area) / std::max<int64_t>(1, image_area),
-               "%", q);
-    EmitFigure("stereo", wl, "full_pairs", roi_full_pairs, "1", q);
+    const double tmp_set = Median(tmp_run.set_ms);
     const int n = sdo_roi.roi.full_every;
+    const auto image_pct = [&](int64_t area) {
+      return 100.0 * static_cast<double>(area) / static_cast<double>(std::max<int64_t>(1, image_area));
+    };
+    auto q = emit_region_method("patchmatch_roi", roi_run);
+    EmitFigure("stereo", wl, "matched_pct", image_pct(roi_area), "%", q);
+    EmitFigure("stereo", wl, "full_pairs", roi_full_pairs, "1", q);
     EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * roi_set) / n, "ms", q);
-    auto qt = studio_q;
-    qt["full_every"] = q["full_every"];
-    qt["roi_shape"] = q["roi_shape"];
-    EmitMethod(wl, "patchmatch_temporal", "studio", tmp_run, qt, /*all_pixels=*/false);
-    qt["method"] = "patchmatch_temporal";
-    qt["data"] = "studio";
-    qt["content"] = "truth";
-    EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * Median(tmp_run.set_ms)) / n, "ms",
-               qt);
+    q = emit_region_method("patchmatch_temporal", tmp_run);
+    EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (full_set + (n - 1) * tmp_set) / n, "ms", q);
     // The site's default: whole pairs due are searched (patchmatch_search),
     // the frames between are patchmatch_temporal.
-    qt["whole"] = "sgbm_search";
-    EmitFigure("stereo", wl, "ms_per_frame_set_amortized",
-               (Median(search_run.set_ms) + (n - 1) * Median(tmp_run.set_ms)) / n, "ms", qt);
-    auto qs = studio_q;
-    qs["full_every"] = q["full_every"];
-    qs["roi_shape"] = q["roi_shape"];
-    EmitMethod(wl, "patchmatch_search", "studio", search_run, qs, /*all_pixels=*/false);
-    qs["method"] = "patchmatch_search";
-    qs["data"] = "studio";
-    qs["content"] = "truth";
-    EmitFigure("stereo", wl, "matched_pct", 100.0 * static_cast<double>(search_area) / std::max<int64_t>(1, image_area),
-               "%", qs);
+    q["whole"] = "sgbm_search";
+    EmitFigure("stereo", wl, "ms_per_frame_set_amortized", (Median(search_run.set_ms) + (n - 1) * tmp_set) / n,
+               "ms", q);
+    q = emit_region_method("patchmatch_search", search_run);
+    EmitFigure("stereo", wl, "matched_pct", image_pct(search_area), "%", q);
   }
   if (!sheet_path.empty()) {
     std::vector<const ImageRgb8*> tiles;

@@ -250,18 +250,12 @@ StatusOr<RowSpans> StereoRoiPolicy::Match(PatchMatchStereo* matcher, int64_t fra
     if (!sgbm_.matcher) sgbm_.matcher = std::make_unique<SgbmStereo>(mo.min_disparity, mo.max_disparity);
     sgbm_.matcher->Compute(left, right, &search_);
     Update(frame_index, spans_, search_);
-    RowSpans region = RowSpans::FromRect(ImageRect{}, width_, height_);
     if (box_.empty()) {  // nobody there: no PatchMatch
-      if (disparity->width() != width_ || disparity->height() != height_) disparity->Resize(width_, height_);
-      disparity->Fill(0.0f);
-      return region;
+      disparity->Resize(width_, height_, 0.0f);
+      return RowSpans::FromRect(ImageRect{}, width_, height_);
     }
     RegionAround(2.0 / options_.fps);
-    region = spans_;
     matcher->ForgetLast();
-    HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
-    Update(frame_index, region, *disparity);
-    return region;
   }
   const RowSpans region = spans_;
   HOLO_RETURN_IF_ERROR(matcher->Compute(left, right, region, max_disparity(), disparity));
